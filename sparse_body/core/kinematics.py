@@ -1,0 +1,36 @@
+"""Forward kinematics of the 22-joint body in numpy (the torch twin is train/torch_body.py)."""
+from __future__ import annotations
+
+import numpy as np
+
+from .skeleton import NUM_JOINTS, PARENTS
+
+
+def forward_kinematics(local_rot: np.ndarray, root_pos: np.ndarray, offsets: np.ndarray):
+    """Global joint rotations and positions.
+
+    local_rot: (..., 22, 3, 3) rotation of each joint relative to its parent (the root's is
+    global); root_pos: (..., 3); offsets: (22, 3) or (..., 22, 3).
+    Returns (global_rot (..., 22, 3, 3), positions (..., 22, 3)).
+    """
+    local_rot = np.asarray(local_rot, dtype=np.float64)
+    lead = local_rot.shape[:-3]
+    offsets = np.broadcast_to(np.asarray(offsets, dtype=np.float64), lead + (NUM_JOINTS, 3))
+    glob = np.empty_like(local_rot)
+    pos = np.empty(lead + (NUM_JOINTS, 3))
+    glob[..., 0, :, :] = local_rot[..., 0, :, :]
+    pos[..., 0, :] = root_pos
+    for j in range(1, NUM_JOINTS):
+        p = PARENTS[j]
+        glob[..., j, :, :] = glob[..., p, :, :] @ local_rot[..., j, :, :]
+        pos[..., j, :] = pos[..., p, :] + np.einsum("...ab,...b->...a", glob[..., p, :, :], offsets[..., j, :])
+    return glob, pos
+
+
+def global_to_local(global_rot: np.ndarray) -> np.ndarray:
+    """Local rotations (..., 22, 3, 3) from global ones."""
+    local = np.empty_like(global_rot)
+    local[..., 0, :, :] = global_rot[..., 0, :, :]
+    for j in range(1, NUM_JOINTS):
+        local[..., j, :, :] = np.swapaxes(global_rot[..., PARENTS[j], :, :], -1, -2) @ global_rot[..., j, :, :]
+    return local

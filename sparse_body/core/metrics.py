@@ -1,0 +1,103 @@
+"""The papers' metrics, on arrays of one sequence.
+
+Positions are (T, 22, 3) metres, rotations (T, 22, 3, 3). Units follow the papers' tables:
+centimetres, degrees, cm/s, and Jitter in 100 m/s^3 (AvatarPoser, AvatarJLM).
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from .contacts import FOOT_JOINTS
+from .rotations import angle_between
+from .skeleton import HANDS, LOWER_BODY, UPPER_BODY, joint_indices
+
+LOWER = joint_indices(LOWER_BODY)
+UPPER = joint_indices(UPPER_BODY)
+HAND = joint_indices(HANDS)
+
+
+def _sel(x: np.ndarray, joints) -> np.ndarray:
+    return x if joints is None else x[:, list(joints)]
+
+
+def mpjpe(pred_pos, gt_pos, joints=None) -> float:
+    """Mean per-joint position error, cm."""
+    return float(np.linalg.norm(_sel(pred_pos, joints) - _sel(gt_pos, joints), axis=-1).mean() * 100)
+
+
+def mpjre(pred_rot, gt_rot, joints=None) -> float:
+    """Mean per-joint rotation error (geodesic angle), degrees."""
+    return float(np.rad2deg(angle_between(_sel(pred_rot, joints), _sel(gt_rot, joints))).mean())
+
+
+def mpjve(pred_pos, gt_pos, fps: float, joints=None) -> float:
+    """Mean per-joint velocity error, cm/s."""
+    if len(pred_pos) < 2:
+        return float("nan")
+    dv = np.diff(_sel(pred_pos, joints), axis=0) - np.diff(_sel(gt_pos, joints), axis=0)
+    return float(np.linalg.norm(dv, axis=-1).mean() * fps * 100)
+
+
+def jitter(pos, fps: float, joints=None) -> float:
+    """Mean jerk (third derivative of position) magnitude, 100 m/s^3."""
+    if len(pos) < 4:
+        return float("nan")
+    jerk = np.diff(_sel(pos, joints), n=3, axis=0) * fps ** 3
+    return float(np.linalg.norm(jerk, axis=-1).mean() / 100)
+
+
+def ground_penetration(pos, floor: float) -> float:
+    """Mean depth (cm) of the lower toe below the floor, 0 for frames above it."""
+    lowest = pos[:, FOOT_JOINTS, 2].min(axis=1)
+    return float(np.maximum(floor - lowest, 0.0).mean() * 100)
+
+
+def foot_skate(pos, contacts, fps: float) -> float:
+    """Mean horizontal toe speed (cm/s) over the frames where that foot is in contact.
+
+    contacts: (T, 2) booleans (ground-truth labels, so every method is judged on the same
+    frames). NaN when no frame is in contact."""
+    if len(pos) < 2:
+        return float("nan")
+    toes = pos[:, FOOT_JOINTS, :2]
+    speed = np.linalg.norm(np.diff(toes, axis=0), axis=-1) * fps
+    mask = contacts[1:] & contacts[:-1]
+    return float(speed[mask].mean() * 100) if mask.any() else float("nan")
+
+
+def contact_accuracy(pred_contacts, gt_contacts) -> float:
+    """Share of (frame, foot) contact states predicted right, percent."""
+    return float((np.asarray(pred_contacts) == np.asarray(gt_contacts)).mean() * 100)
+
+
+def sequence_metrics(pred_pos, pred_glob, pred_local, gt_pos, gt_glob, gt_local, fps: float,
+                     floor: float, gt_contacts, pred_contacts=None, tracked_joints=()) -> dict[str, float]:
+    """Every metric of one sequence, keyed by the names used in the tables."""
+    out = {
+        "MPJPE [cm]": mpjpe(pred_pos, gt_pos),
+        "MPJRE [deg]": mpjre(pred_local, gt_local),
+        "MPJVE [cm/s]": mpjve(pred_pos, gt_pos, fps),
+        "Jitter [100m/s3]": jitter(pred_pos, fps),
+        "Hand PE [cm]": mpjpe(pred_pos, gt_pos, HAND),
+        "Upper PE [cm]": mpjpe(pred_pos, gt_pos, UPPER),
+        "Lower PE [cm]": mpjpe(pred_pos, gt_pos, LOWER),
+        "Root PE [cm]": mpjpe(pred_pos, gt_pos, [0]),
+        "Lower RE [deg]": mpjre(pred_local, gt_local, LOWER),
+        "Toe PE [cm]": mpjpe(pred_pos, gt_pos, FOOT_JOINTS),
+        "End-effector PE [cm]": mpjpe(pred_pos, gt_pos, tracked_joints) if len(tracked_joints) else float("nan"),
+        "Ground [cm]": ground_penetration(pred_pos, floor),
+        "Skate [cm/s]": foot_skate(pred_pos, gt_contacts, fps),
+        "Contact acc [%]": contact_accuracy(pred_contacts, gt_contacts) if pred_contacts is not None else float("nan"),
+    }
+    return out
+
+
+def weighted_mean(rows: list[dict[str, float]], weights: list[float]) -> dict[str, float]:
+    """Frame-weighted mean of per-sequence metrics, ignoring NaN entries."""
+    out = {}
+    for key in rows[0]:
+        vals = np.array([r[key] for r in rows], dtype=float)
+        w = np.array(weights, dtype=float)
+        ok = np.isfinite(vals)
+        out[key] = float(np.sum(vals[ok] * w[ok]) / np.sum(w[ok])) if ok.any() else float("nan")
+    return out

@@ -1,0 +1,65 @@
+"""What flows between tracker sources, estimators and outputs (no ROS types here)."""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .skeleton import NUM_JOINTS
+
+
+@dataclass
+class TrackerFrame:
+    """The trackers' latest poses at one instant, in the fixed frame (REP-103, metres).
+
+    valid[s] is False when site s has no usable sample (dropped, stale, non-finite); an
+    orientation-only tracker has NaN position, a position-only tracker NaN orientation.
+    """
+
+    stamp: float                   # seconds
+    sites: tuple[str, ...]
+    positions: np.ndarray          # (S, 3)
+    orientations: np.ndarray       # (S, 4) x y z w
+    valid: np.ndarray              # (S,) bool
+
+    def index(self, site: str) -> int:
+        return self.sites.index(site)
+
+
+@dataclass
+class TrackerStream:
+    """A recorded sequence of tracker frames (virtual trackers, a bag)."""
+
+    sites: tuple[str, ...]
+    times: np.ndarray              # (T,) seconds
+    positions: np.ndarray          # (T, S, 3)
+    orientations: np.ndarray       # (T, S, 4)
+    valid: np.ndarray              # (T, S)
+
+    def __len__(self) -> int:
+        return len(self.times)
+
+    def frame(self, i: int) -> TrackerFrame:
+        return TrackerFrame(float(self.times[i]), self.sites, self.positions[i], self.orientations[i], self.valid[i])
+
+    def __iter__(self):
+        return (self.frame(i) for i in range(len(self)))
+
+
+@dataclass
+class BodyPose:
+    """One estimate of the 22-joint body."""
+
+    stamp: float
+    local_quats: np.ndarray        # (22, 4) x y z w; the root's is global
+    root_position: np.ndarray      # (3,)
+    contact_probability: np.ndarray = field(default_factory=lambda: np.full(2, np.nan))  # left, right
+    contact: np.ndarray = field(default_factory=lambda: np.zeros(2, dtype=bool))
+    valid: bool = True             # False: the estimator had too little input; values hold the last pose
+
+    def __post_init__(self) -> None:
+        if self.local_quats.shape != (NUM_JOINTS, 4) or self.root_position.shape != (3,):
+            raise ValueError("a body pose needs (22, 4) quaternions and a (3,) root position")
+
+    def is_finite(self) -> bool:
+        return bool(np.all(np.isfinite(self.local_quats)) and np.all(np.isfinite(self.root_position)))

@@ -1,0 +1,207 @@
+"""Acclaim ASF (skeleton) and AMC (motion) files, as in the CMU database.
+
+Conventions (CMU's, as their viewer applies them): a bone's axis gives its rest frame C; the
+motion angles (degrees) compose as R = Rz @ Ry @ Rx over the bone's dof; the bone's global
+rotation is R_parent @ C @ R @ C^T and its end is start + rotation @ direction * length.
+Lengths are in units of `:units length` inches/100, converted to metres.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from . import MotionFileError
+from .source import SourceMotion, read_text, stem
+
+INCH = 0.0254
+
+
+@dataclass
+class Bone:
+    name: str
+    direction: np.ndarray
+    length: float
+    axis: np.ndarray  # C, 3x3
+    dof: list[str] = field(default_factory=list)
+
+
+@dataclass
+class AsfSkeleton:
+    path: Path
+    length_unit: float            # metres per ASF length unit
+    root_order: list[str]
+    root_axis: np.ndarray
+    root_position: np.ndarray
+    bones: dict[str, Bone]
+    children: dict[str, list[str]]
+
+    def order(self) -> list[str]:
+        """Bones with every parent before its children, starting at root."""
+        out, stack = [], ["root"]
+        while stack:
+            name = stack.pop(0)
+            out.append(name)
+            stack[0:0] = self.children.get(name, [])
+        return out
+
+    def parent_of(self) -> dict[str, str]:
+        return {c: p for p, cs in self.children.items() for c in cs}
+
+
+def _axis_matrix(values: list[str], order: str) -> np.ndarray:
+    angles = np.deg2rad([float(v) for v in values])
+    return Rotation.from_euler(order.lower(), angles).as_matrix()
+
+
+def load_asf(path: Path) -> AsfSkeleton:
+    path = Path(path)
+    lines = [ln.split("#")[0].strip() for ln in read_text(path).splitlines()]
+    section, bones, children = None, {}, {}
+    length = 0.45
+    root_order, root_axis, root_position = ["TX", "TY", "TZ", "RX", "RY", "RZ"], np.eye(3), np.zeros(3)
+    current: dict | None = None
+    try:
+        for lineno, line in enumerate(lines, 1):
+            if not line:
+                continue
+            tok = line.split()
+            if tok[0].startswith(":"):
+                section = tok[0]
+                continue
+            if section == ":units" and tok[0] == "length":
+                length = float(tok[1])
+            elif section == ":root":
+                if tok[0] == "order":
+                    root_order = [t.upper() for t in tok[1:]]
+                elif tok[0] == "axis":
+                    root_axis = _axis_matrix(["0", "0", "0"], tok[1])
+                elif tok[0] == "position":
+                    root_position = np.array([float(v) for v in tok[1:4]])
+            elif section == ":bonedata":
+                if tok[0] == "begin":
+                    current = {"dof": []}
+                elif tok[0] == "end":
+                    if current is None or not {"name", "direction", "length", "axis"} <= current.keys():
+                        raise MotionFileError(path, f"line {lineno}: incomplete bone definition")
+                    bones[current["name"]] = Bone(current["name"], current["direction"], current["length"],
+                                                  current["axis"], current["dof"])
+                    current = None
+                elif current is not None:
+                    if tok[0] == "name":
+                        current["name"] = tok[1]
+                    elif tok[0] == "direction":
+                        current["direction"] = np.array([float(v) for v in tok[1:4]])
+                    elif tok[0] == "length":
+                        current["length"] = float(tok[1])
+                    elif tok[0] == "axis":
+                        current["axis"] = _axis_matrix(tok[1:4], tok[4] if len(tok) > 4 else "XYZ")
+                    elif tok[0] == "dof":
+                        current["dof"] = [t.lower() for t in tok[1:]]
+            elif section == ":hierarchy" and tok[0] not in ("begin", "end"):
+                children.setdefault(tok[0], []).extend(tok[1:])
+    except (ValueError, IndexError) as err:
+        raise MotionFileError(path, f"malformed ASF ({err})") from None
+    if not bones:
+        raise MotionFileError(path, "no :bonedata section with bones")
+    unknown = [n for p, cs in children.items() for n in [p, *cs] if n != "root" and n not in bones]
+    if unknown:
+        raise MotionFileError(path, f"hierarchy names undefined bones: {', '.join(sorted(set(unknown)))}")
+    metres = INCH / length
+    for bone in bones.values():
+        bone.length *= metres
+    return AsfSkeleton(path, metres, root_order, root_axis, root_position * metres, bones, children)
+
+
+def _read_amc_frames(path: Path, skeleton: AsfSkeleton) -> dict[str, np.ndarray]:
+    """Per-bone (T, n_values) arrays; every frame must list every moving bone once."""
+    expected = {"root": len(skeleton.root_order)}
+    expected.update({n: len(b.dof) for n, b in skeleton.bones.items() if b.dof})
+    values: dict[str, list[list[float]]] = {n: [] for n in expected}
+    frame_no, seen, frames = None, set(), 0
+
+    def close_frame():
+        missing = set(expected) - seen
+        if missing:
+            raise MotionFileError(path, f"frame {frame_no} is missing bone(s) {', '.join(sorted(missing))}")
+
+    for lineno, line in enumerate(read_text(path).splitlines(), 1):
+        line = line.strip()
+        if not line or line[0] in "#:":
+            continue
+        tok = line.split()
+        if len(tok) == 1 and tok[0].isdigit():
+            if frame_no is not None:
+                close_frame()
+            frame_no, seen, frames = int(tok[0]), set(), frames + 1
+            continue
+        if frame_no is None:
+            raise MotionFileError(path, f"line {lineno}: bone values before the first frame number")
+        name = tok[0]
+        if name not in expected:
+            raise MotionFileError(path, f"line {lineno}: bone {name!r} is not a moving bone of {skeleton.path.name}")
+        if name in seen:
+            raise MotionFileError(path, f"line {lineno}: bone {name!r} twice in frame {frame_no}")
+        if len(tok) - 1 != expected[name]:
+            raise MotionFileError(path, f"line {lineno}: bone {name!r} has {len(tok) - 1} values, "
+                                        f"its dof needs {expected[name]}")
+        try:
+            values[name].append([float(v) for v in tok[1:]])
+        except ValueError:
+            raise MotionFileError(path, f"line {lineno}: non-numeric value for bone {name!r}") from None
+        seen.add(name)
+    if frame_no is None:
+        raise MotionFileError(path, "no frames")
+    close_frame()
+    return {n: np.asarray(v, dtype=np.float64).reshape(frames, expected[n]) for n, v in values.items()}
+
+
+def load_amc(amc_path: Path, skeleton: AsfSkeleton, fps: float = 120.0) -> SourceMotion:
+    amc_path = Path(amc_path)
+    frames = _read_amc_frames(amc_path, skeleton)
+    order = skeleton.order()
+    parent = skeleton.parent_of()
+    index = {n: i for i, n in enumerate(order)}
+    T = len(frames["root"])
+    J = len(order)
+    rot = np.empty((T, J, 3, 3))
+    pos = np.empty((T, J, 3))
+    rest = np.zeros((J, 3))
+    end = np.empty((T, J, 3))   # where each bone ends: its children start there
+    rest_end = np.zeros((J, 3))
+
+    root_vals = frames["root"]
+    trans = np.zeros((T, 3))
+    angles = {}
+    for k, ch in enumerate(skeleton.root_order):
+        if ch.startswith("T"):
+            trans[:, "XYZ".index(ch[1])] = root_vals[:, k] * skeleton.length_unit
+        else:
+            angles[ch[1].lower()] = np.deg2rad(root_vals[:, k])
+    axes = "".join(a for a in "xyz" if a in angles)
+    m = Rotation.from_euler(axes, np.stack([angles[a] for a in axes], -1)).as_matrix() if axes else np.eye(3)
+    rot[:, 0] = skeleton.root_axis @ m @ skeleton.root_axis.T
+    pos[:, 0] = end[:, 0] = trans + skeleton.root_position
+    rest_end[0] = rest[0] = 0.0
+
+    for name in order[1:]:
+        i, p = index[name], index[parent[name]]
+        bone = skeleton.bones[name]
+        if bone.dof:
+            vals = np.deg2rad(frames[name])
+            axes = "".join(d[1] for d in bone.dof)  # "rx rz" -> "xz": extrinsic, R = Rz @ Rx
+            local = Rotation.from_euler(axes, vals).as_matrix()
+            rot[:, i] = rot[:, p] @ (bone.axis @ local @ bone.axis.T)
+        else:
+            rot[:, i] = rot[:, p]
+        vec = bone.direction * bone.length
+        pos[:, i] = end[:, p]
+        end[:, i] = end[:, p] + rot[:, i] @ vec
+        rest[i] = rest_end[p]
+        rest_end[i] = rest_end[p] + vec
+    if not np.all(np.isfinite(pos)):
+        raise MotionFileError(amc_path, "non-finite values")
+    return SourceMotion(stem(amc_path), "cmu_asf", order, [index[parent[n]] if n != "root" else -1 for n in order],
+                        rest, pos, rot, fps)

@@ -1,0 +1,135 @@
+"""BVH files: a HIERARCHY of offsets and channels, then a MOTION block of channel values.
+
+Rotation channels compose in the listed order about the joint's own (moving) axes, so
+"Zrotation Xrotation Yrotation" is R = Rz @ Rx @ Ry. End Sites carry no channels and are
+dropped. Offsets are converted to metres with `length_unit`.
+"""
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from . import MotionFileError
+from .source import SourceMotion, read_text, stem
+
+# Length units of the CMU BVH conversions (see ../shared/mocap/README.md): MotionBuilder and
+# 3ds Max releases keep the ASF units (1/0.45 inch), Daz releases use centimetres.
+CMU_ASF_UNIT = 0.0254 / 0.45
+
+
+def _layout(names: list[str]) -> str:
+    if "LeftUpLeg" in names and "LowerBack" in names:
+        return "cmu_bvh_mb2"
+    if "LeftHip" in names and "Chest2" in names:
+        return "cmu_bvh_max"
+    if "lThigh" in names and "abdomen" in names:
+        return "cmu_bvh_daz"
+    return "unknown"
+
+
+def default_unit(layout: str) -> float:
+    return 0.01 if layout == "cmu_bvh_daz" else CMU_ASF_UNIT
+
+
+def load_bvh(path: Path, length_unit: float | None = None) -> SourceMotion:
+    path = Path(path)
+    text = read_text(path)
+    head, sep, motion = text.partition("MOTION")
+    if not head.lstrip().startswith("HIERARCHY"):
+        raise MotionFileError(path, "does not start with HIERARCHY")
+    if not sep:
+        raise MotionFileError(path, "no MOTION section (file truncated?)")
+
+    names, parents, offsets, channels = [], [], [], []
+    stack: list[int] = []
+    tokens = head.split()
+    i = 1
+    try:
+        while i < len(tokens):
+            tok = tokens[i]
+            if tok in ("ROOT", "JOINT"):
+                names.append(tokens[i + 1])
+                parents.append(stack[-1] if stack else -1)
+                offsets.append(None)
+                channels.append([])
+                i += 2
+            elif tok == "End":
+                # Kept as a joint without channels: its position is a useful end point
+                # (the toe of a Daz foot, the top of the head).
+                names.append(f"{names[stack[-1]]}_End")
+                parents.append(stack[-1])
+                offsets.append(None)
+                channels.append([])
+                i += 2
+            elif tok == "{":
+                stack.append(len(names) - 1)
+                i += 1
+            elif tok == "}":
+                stack.pop()
+                i += 1
+            elif tok == "OFFSET":
+                offsets[-1] = [float(v) for v in tokens[i + 1:i + 4]]
+                i += 4
+            elif tok == "CHANNELS":
+                n = int(tokens[i + 1])
+                channels[-1] = tokens[i + 2:i + 2 + n]
+                i += 2 + n
+            else:
+                raise MotionFileError(path, f"unexpected token {tok!r} in HIERARCHY")
+    except (ValueError, IndexError):
+        raise MotionFileError(path, "malformed HIERARCHY") from None
+    if not names or any(o is None for o in offsets) or stack:
+        raise MotionFileError(path, "malformed HIERARCHY (unbalanced braces or a joint without OFFSET)")
+
+    header, _, data = motion.partition("Frame Time:")
+    try:
+        frames = int(header.split("Frames:")[1].split()[0])
+        frame_time, *values = data.split()
+        fps = 1.0 / float(frame_time)
+        values = np.asarray(values, dtype=np.float64)
+    except (IndexError, ValueError):
+        raise MotionFileError(path, "malformed MOTION header or non-numeric motion data") from None
+    n_channels = sum(len(c) for c in channels)
+    if frames <= 0 or values.size != frames * n_channels:
+        have = values.size / n_channels if n_channels else 0
+        raise MotionFileError(path, f"MOTION declares {frames} frames of {n_channels} channels "
+                                    f"but holds {have:g} frames (truncated?)")
+    values = values.reshape(frames, n_channels)
+
+    layout = _layout(names)
+    unit = default_unit(layout) if length_unit is None else length_unit
+    offsets = np.asarray(offsets) * unit
+    J = len(names)
+    rot = np.empty((frames, J, 3, 3))
+    pos = np.empty((frames, J, 3))
+    rest = np.zeros((J, 3))
+    col = 0
+    for j in range(J):
+        local = np.broadcast_to(np.eye(3), (frames, 3, 3))
+        trans = np.zeros((frames, 3))
+        rot_axes, rot_cols = "", []
+        for ch in channels[j]:
+            kind = ch[1:].lower()
+            if kind == "position":
+                trans[:, "XYZ".index(ch[0].upper())] = values[:, col] * unit
+            elif kind == "rotation":
+                rot_axes += ch[0].upper()
+                rot_cols.append(col)
+            else:
+                raise MotionFileError(path, f"joint {names[j]!r} has unknown channel {ch!r}")
+            col += 1
+        if rot_axes:
+            local = Rotation.from_euler(rot_axes, np.deg2rad(values[:, rot_cols])).as_matrix()
+        p = parents[j]
+        if p < 0:
+            rot[:, j] = local
+            pos[:, j] = offsets[j] + trans
+        else:
+            rot[:, j] = rot[:, p] @ local
+            pos[:, j] = pos[:, p] + np.einsum("tab,tb->ta", rot[:, p], offsets[j] + trans)
+            rest[j] = rest[p] + offsets[j]
+    if not np.all(np.isfinite(pos)):
+        raise MotionFileError(path, "non-finite values")
+    return SourceMotion(stem(path), layout, names, parents, rest, pos, rot, fps)

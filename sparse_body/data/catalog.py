@@ -1,0 +1,153 @@
+"""The CMU collection in ../shared/mocap: its clip index, the train/validation/test split,
+and a cache of retargeted clips so that only the first load parses the text files."""
+from __future__ import annotations
+
+import csv
+import hashlib
+import os
+from dataclasses import dataclass
+from pathlib import Path
+
+import yaml
+
+from ..resources import config_dir
+from . import MotionFileError
+from .asf_amc import load_amc, load_asf
+from .bvh import load_bvh
+from .motion import Motion
+from .retarget import retarget
+
+DEFAULT_FPS = 60.0
+# Bump when loading or retargeting changes, so stale cache entries are not used.
+CACHE_VERSION = 2
+SPLITS = ("train", "validation", "test")
+
+
+@dataclass(frozen=True)
+class Clip:
+    clip_id: str
+    path: Path          # the motion file
+    format: str         # "asf/amc", or "bvh-mb2", "bvh-daz", "bvh-max"
+    fps: float
+    category: str
+    description: str
+
+    @property
+    def skeleton_path(self) -> Path | None:
+        if self.format != "asf/amc":
+            return None
+        subject = self.path.parent
+        return subject / f"{subject.name}.asf"
+
+
+def find_mocap_root(explicit: str | os.PathLike | None = None) -> Path | None:
+    """The shared CMU folder: explicit path, $SPARSE_BODY_MOCAP, or ../shared/mocap/cmu
+    beside the checkout or the working directory. None when none exists."""
+    if explicit:
+        candidates = [explicit]
+    else:
+        here = Path(__file__).resolve().parents[2]
+        candidates = [os.environ.get("SPARSE_BODY_MOCAP"), here.parent / "shared" / "mocap" / "cmu",
+                      Path.cwd().parent / "shared" / "mocap" / "cmu"]
+    for c in candidates:
+        if c and (Path(c) / "clips.tsv").is_file():
+            return Path(c)
+        if c and (Path(c) / "cmu" / "clips.tsv").is_file():
+            return Path(c) / "cmu"
+    if explicit:
+        raise FileNotFoundError(f"{explicit}: no clips.tsv there (expected the CMU folder of ../shared/mocap)")
+    return None
+
+
+def read_index(root: Path) -> list[Clip]:
+    path = Path(root) / "clips.tsv"
+    clips = []
+    with open(path, newline="") as f:
+        for n, row in enumerate(csv.DictReader(f, delimiter="\t"), 2):
+            try:
+                clips.append(Clip(row["clip"], Path(root) / row["file"], row["format"], float(row["fps"]),
+                                  row["category"], row["description"]))
+            except (KeyError, ValueError, TypeError) as err:
+                raise MotionFileError(path, f"line {n}: malformed row ({err})") from None
+    return clips
+
+
+def split_path() -> Path:
+    return config_dir() / "splits" / "cmu.yaml"
+
+
+def compute_split(clip_ids: list[str]) -> dict[str, list[str]]:
+    """Deterministic split by clip: a clip's SHA-1 picks its part (10 % test, 10 % validation)."""
+    parts = {s: [] for s in SPLITS}
+    for cid in sorted(clip_ids):
+        bucket = int(hashlib.sha1(cid.encode()).hexdigest(), 16) % 10
+        parts["test" if bucket == 0 else "validation" if bucket == 1 else "train"].append(cid)
+    return parts
+
+
+def load_split(path: Path | None = None) -> dict[str, list[str]]:
+    path = Path(path or split_path())
+    with open(path) as f:
+        data = yaml.safe_load(f)
+    if not isinstance(data, dict) or not all(isinstance(data.get(s), list) for s in SPLITS):
+        raise ValueError(f"{path}: a split file needs the lists {', '.join(SPLITS)}")
+    return {s: [str(c) for c in data[s]] for s in SPLITS}
+
+
+def cache_dir() -> Path:
+    return Path(os.environ.get("SPARSE_BODY_CACHE", Path.home() / ".cache" / "sparse_body"))
+
+
+def _cache_file(clip: Clip, fps: float) -> Path:
+    st = clip.path.stat()
+    key = f"{CACHE_VERSION}:{clip.path.resolve()}:{st.st_size}:{st.st_mtime_ns}:{fps}"
+    digest = hashlib.sha1(key.encode()).hexdigest()[:16]
+    return cache_dir() / "motions" / f"{clip.clip_id}-{digest}.npz"
+
+
+def load_clip(clip: Clip, fps: float = DEFAULT_FPS, use_cache: bool = True) -> Motion:
+    """A clip retargeted onto the 22-joint body at fps, from the cache when it is there."""
+    cached = _cache_file(clip, fps)
+    if use_cache and cached.is_file():
+        try:
+            return Motion.load(cached)
+        except MotionFileError:
+            cached.unlink(missing_ok=True)   # a half-written entry: parse again
+    if clip.format == "asf/amc":
+        source = load_amc(clip.path, load_asf(clip.skeleton_path), fps=clip.fps)
+    elif clip.format.startswith("bvh"):
+        source = load_bvh(clip.path)
+    else:
+        raise MotionFileError(clip.path, f"unknown format {clip.format!r}")
+    motion = retarget(source, fps)
+    motion.name = clip.clip_id
+    if use_cache:
+        cached.parent.mkdir(parents=True, exist_ok=True)
+        tmp = cached.with_suffix(".tmp.npz")
+        motion.save(tmp)
+        os.replace(tmp, cached)
+    return motion
+
+
+def load_motion_file(path: Path, fps: float = DEFAULT_FPS, skeleton: Path | None = None) -> Motion:
+    """Any supported motion file: .bvh, .amc (with its .asf, found beside it if not given),
+    AMASS .npz (needs an SMPL model, see amass.py) or a sparse_body motion .npz."""
+    path = Path(path)
+    name = path.name.removesuffix(".gz")
+    if name.endswith(".bvh"):
+        return retarget(load_bvh(path), fps)
+    if name.endswith(".amc"):
+        if skeleton is None:
+            found = sorted(path.parent.glob("*.asf"))
+            if len(found) != 1:
+                raise MotionFileError(path, "an AMC file needs its ASF skeleton: pass it explicitly")
+            skeleton = found[0]
+        return retarget(load_amc(path, load_asf(skeleton)), fps)
+    if name.endswith(".npz"):
+        import numpy as np
+        with np.load(path, allow_pickle=False) as z:
+            keys = set(z.files)
+        if {"local_quats", "root_positions"} <= keys:
+            return Motion.load(path).resampled(fps)
+        raise MotionFileError(path, "an AMASS .npz needs the SMPL model: use sparse_body.data.amass.load_amass")
+    raise MotionFileError(path, "unknown motion format (expected .bvh, .amc, .npz, optionally .gz)")

@@ -1,0 +1,90 @@
+"""What trackers would report for a motion: each site's joint pose composed with its
+mounting offset, with optional noise, dropped samples and occlusion."""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from ..core.sensors import SensorConfig
+from ..core.types import TrackerStream
+from .motion import Motion
+
+
+@dataclass(frozen=True)
+class TrackerNoise:
+    position_std: float = 0.0          # metres, Gaussian per axis
+    rotation_max_deg: float = 0.0      # uniform random axis, angle up to this
+    drop_probability: float = 0.0      # per sample: no sample at all (valid = False)
+    # Occlusion (DTP): a tracker keeps reporting, but garbage. Per frame, an unoccluded
+    # tracker on an occludable site becomes occluded with this probability, for
+    # occlusion_frames frames.
+    occlusion_probability: float = 0.0
+    occlusion_frames: int = 30
+    occlusion_sites: tuple[str, ...] = ("left_foot", "right_foot")
+    occlusion_mode: str = "origin"     # "origin": origin and identity; "bounded": noise within a leg length
+
+    def __post_init__(self) -> None:
+        if self.occlusion_mode not in ("origin", "bounded"):
+            raise ValueError(f"occlusion_mode must be 'origin' or 'bounded', got {self.occlusion_mode!r}")
+
+
+NO_NOISE = TrackerNoise()
+LOBSTR_NOISE = TrackerNoise(position_std=0.01, rotation_max_deg=1.5)
+
+
+def _random_rotations(rng: np.random.Generator, n: int, max_deg: float) -> Rotation:
+    axis = rng.normal(size=(n, 3))
+    axis /= np.linalg.norm(axis, axis=1, keepdims=True)
+    angle = rng.uniform(0.0, np.deg2rad(max_deg), size=(n, 1))
+    return Rotation.from_rotvec(axis * angle)
+
+
+def synthesize_trackers(motion: Motion, config: SensorConfig, noise: TrackerNoise = NO_NOISE,
+                        seed: int = 0) -> TrackerStream:
+    rng = np.random.default_rng(seed)
+    T, S = len(motion), len(config.sites)
+    positions = np.full((T, S, 3), np.nan)
+    orientations = np.full((T, S, 4), np.nan)
+    valid = np.ones((T, S), dtype=bool)
+    glob_rot, glob_pos = motion.global_rotations, motion.positions
+    leg = motion.skeleton.leg_length()
+    for s, site in enumerate(config.sites):
+        j = site.joint_index
+        rot = Rotation.from_matrix(glob_rot[:, j])
+        pos = glob_pos[:, j] + rot.apply(np.asarray(site.offset_translation))
+        rot = rot * Rotation.from_quat(site.offset_rotation)
+        if noise.position_std > 0:
+            pos = pos + rng.normal(0.0, noise.position_std, size=pos.shape)
+        if noise.rotation_max_deg > 0:
+            rot = _random_rotations(rng, T, noise.rotation_max_deg) * rot
+        pos, quat = pos.copy(), rot.as_quat()
+        if noise.occlusion_probability > 0 and site.site in noise.occlusion_sites:
+            occluded = np.zeros(T, dtype=bool)
+            t = 0
+            while t < T:
+                if rng.random() < noise.occlusion_probability:
+                    occluded[t:t + noise.occlusion_frames] = True
+                    t += noise.occlusion_frames
+                else:
+                    t += 1
+            n = int(occluded.sum())
+            if noise.occlusion_mode == "origin":
+                pos[occluded], quat[occluded] = 0.0, [0.0, 0.0, 0.0, 1.0]
+            else:
+                direction = rng.normal(size=(n, 3))
+                direction /= np.linalg.norm(direction, axis=1, keepdims=True)
+                pos[occluded] += direction * rng.uniform(0.0, leg, size=(n, 1))
+                quat[occluded] = Rotation.random(n, random_state=rng).as_quat()
+        if site.has_position:
+            positions[:, s] = pos
+        if site.has_orientation:
+            orientations[:, s] = quat
+        if noise.drop_probability > 0:
+            dropped = rng.random(T) < noise.drop_probability
+            valid[dropped, s] = False
+            positions[dropped, s] = np.nan
+            orientations[dropped, s] = np.nan
+    times = np.arange(T) / motion.fps
+    return TrackerStream(config.site_names, times, positions, orientations, valid)

@@ -1,0 +1,104 @@
+"""`sparse-body eval`: run an estimator over a split of the CMU clips and tabulate the metrics."""
+from __future__ import annotations
+
+import json
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from .core.contacts import contact_labels, estimate_floor
+from .core.kinematics import forward_kinematics
+from .core.metrics import sequence_metrics, weighted_mean
+from .core.rotations import quat_to_matrix
+from .core.sensors import SensorConfig
+from .data.catalog import DEFAULT_FPS, load_clip, load_split, read_index
+from .data.motion import Motion
+from .data.virtual_trackers import NO_NOISE, TrackerNoise, synthesize_trackers
+from .estimators import create_estimator
+
+
+@dataclass
+class EvalResult:
+    estimator: str
+    sensors: str
+    split: str
+    clips: list[str] = field(default_factory=list)
+    frames: list[int] = field(default_factory=list)
+    per_clip: list[dict[str, float]] = field(default_factory=list)
+    seconds: float = 0.0
+
+    @property
+    def summary(self) -> dict[str, float]:
+        return weighted_mean(self.per_clip, self.frames) if self.per_clip else {}
+
+    def to_json(self) -> dict:
+        return {"estimator": self.estimator, "sensors": self.sensors, "split": self.split,
+                "frames": int(sum(self.frames)), "seconds": self.seconds, "summary": self.summary,
+                "clips": [{"clip": c, "frames": n, **m} for c, n, m in zip(self.clips, self.frames, self.per_clip)]}
+
+
+def evaluate_motion(motion: Motion, estimator_name: str, sensors: SensorConfig,
+                    noise: TrackerNoise = NO_NOISE, seed: int = 0, **options) -> dict[str, float]:
+    """Metrics of one estimator on one motion, from the motion's own virtual trackers."""
+    stream = synthesize_trackers(motion, sensors, noise, seed)
+    estimator = create_estimator(estimator_name, sensors, motion.skeleton, fps=motion.fps, **options)
+    poses = estimator.process(stream)
+    local = quat_to_matrix(np.stack([p.local_quats for p in poses]))
+    root = np.stack([p.root_position for p in poses])
+    glob, pos = forward_kinematics(local, root, motion.skeleton.offsets)
+    pred_contacts = np.stack([p.contact for p in poses])
+    floor = estimate_floor(motion.positions)
+    gt_contacts = contact_labels(motion.positions, motion.fps, floor)
+    tracked = sorted({s.joint_index for s in sensors.sites})
+    return sequence_metrics(pos, glob, local, motion.positions, motion.global_rotations, motion.local_rotations,
+                            motion.fps, floor, gt_contacts, pred_contacts, tracked)
+
+
+def evaluate(estimator_name: str, sensors: SensorConfig, mocap_root: Path, split: str = "test",
+             fps: float = DEFAULT_FPS, noise: TrackerNoise = NO_NOISE, limit: int | None = None,
+             progress: bool = True, **options) -> EvalResult:
+    index = {c.clip_id: c for c in read_index(mocap_root)}
+    wanted = load_split()[split]
+    missing = [c for c in wanted if c not in index]
+    if missing:
+        raise FileNotFoundError(f"{mocap_root}: clips of the {split} split are missing: {', '.join(missing[:5])}")
+    clips = wanted[:limit] if limit else wanted
+    result = EvalResult(estimator_name, sensors.name, split)
+    start = time.perf_counter()
+    iterator = clips
+    if progress:
+        from tqdm import tqdm
+        iterator = tqdm(clips, desc=f"eval {estimator_name}/{sensors.name}", unit="clip")
+    for k, clip_id in enumerate(iterator):
+        motion = load_clip(index[clip_id], fps)
+        result.clips.append(clip_id)
+        result.frames.append(len(motion))
+        result.per_clip.append(evaluate_motion(motion, estimator_name, sensors, noise, seed=k, **options))
+    result.seconds = time.perf_counter() - start
+    return result
+
+
+def format_table(results: list[EvalResult], reference: dict[str, dict[str, float]] | None = None) -> str:
+    """Metrics as rows, one column per result (and per paper figure given in reference)."""
+    columns = [f"{r.estimator}/{r.sensors}" for r in results] + list(reference or {})
+    values = [r.summary for r in results] + list((reference or {}).values())
+    keys = list(results[0].summary)
+    width = max(len(k) for k in keys) + 2
+    colw = max(12, *(len(c) + 2 for c in columns))
+    lines = ["".ljust(width) + "".join(c.rjust(colw) for c in columns)]
+    for key in keys:
+        cells = []
+        for v in values:
+            x = v.get(key, float("nan"))
+            cells.append(("-" if not np.isfinite(x) else f"{x:.2f}").rjust(colw))
+        lines.append(key.ljust(width) + "".join(cells))
+    frames = sum(results[0].frames)
+    lines.append(f"({len(results[0].clips)} clips of the {results[0].split} split, {frames} frames)")
+    return "\n".join(lines)
+
+
+def write_json(results: list[EvalResult], path: Path) -> None:
+    Path(path).parent.mkdir(parents=True, exist_ok=True)
+    Path(path).write_text(json.dumps([r.to_json() for r in results], indent=1, allow_nan=True))

@@ -1,0 +1,26 @@
+"""Where the package's data files (config/) are, in a checkout, a pip install or a ROS install."""
+from __future__ import annotations
+
+import os
+import sys
+from pathlib import Path
+
+
+def share_dir() -> Path:
+    """The directory holding config/ and launch/ (share/sparse_body when installed)."""
+    env = os.environ.get("SPARSE_BODY_SHARE")
+    if env:
+        return Path(env)
+    checkout = Path(__file__).resolve().parent.parent
+    if (checkout / "config" / "sensors").is_dir():
+        return checkout
+    try:  # a colcon / apt install
+        from ament_index_python.packages import get_package_share_directory
+        return Path(get_package_share_directory("sparse_body"))
+    except Exception:  # noqa: BLE001 - not installed with ament, or no ament at all
+        pass
+    return Path(sys.prefix) / "share" / "sparse_body"   # pip install (data-files)
+
+
+def config_dir() -> Path:
+    return share_dir() / "config"

@@ -1,0 +1,1 @@
+"""Training code: everything here may import torch; nothing at runtime imports this package."""

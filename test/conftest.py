@@ -1,0 +1,31 @@
+import os
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from sparse_body.data.catalog import find_mocap_root, read_index
+
+
+@pytest.fixture(scope="session")
+def mocap_root() -> Path:
+    root = find_mocap_root()
+    if root is None:
+        pytest.skip("no ../shared/mocap (set SPARSE_BODY_MOCAP to run tests on real motion capture)")
+    return root
+
+
+@pytest.fixture(scope="session")
+def clip_index(mocap_root):
+    return {c.clip_id: c for c in read_index(mocap_root)}
+
+
+@pytest.fixture
+def rng():
+    return np.random.default_rng(1234)
+
+
+def random_rotations(rng, shape):
+    from scipy.spatial.transform import Rotation
+    n = int(np.prod(shape))
+    return Rotation.random(n, random_state=rng).as_matrix().reshape(tuple(shape) + (3, 3))

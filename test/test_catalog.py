@@ -1,0 +1,40 @@
+"""The CMU index, the committed split and the parse cache (needs ../shared/mocap)."""
+import time
+
+import numpy as np
+import pytest
+
+from sparse_body.data.catalog import SPLITS, compute_split, load_clip, load_split
+
+pytestmark = pytest.mark.mocap
+
+
+def test_index_lists_every_clip_with_its_file(clip_index):
+    assert len(clip_index) == 313
+    formats = {c.format for c in clip_index.values()}
+    assert formats == {"asf/amc", "bvh-mb2", "bvh-daz", "bvh-max"}
+    assert all(c.path.is_file() for c in clip_index.values())
+    assert all(c.skeleton_path.is_file() for c in clip_index.values() if c.format == "asf/amc")
+
+
+def test_committed_split_is_the_computed_one_and_partitions_the_clips(clip_index):
+    split = load_split()
+    assert split == compute_split(list(clip_index))
+    seen = [c for s in SPLITS for c in split[s]]
+    assert sorted(seen) == sorted(clip_index) and len(set(seen)) == len(seen)
+    assert 0.05 < len(split["test"]) / len(seen) < 0.2
+
+
+def test_second_load_comes_from_the_cache(clip_index, tmp_path, monkeypatch):
+    monkeypatch.setenv("SPARSE_BODY_CACHE", str(tmp_path))
+    clip = clip_index["02_05"]
+    start = time.perf_counter()
+    first = load_clip(clip)
+    parse = time.perf_counter() - start
+    start = time.perf_counter()
+    second = load_clip(clip)
+    cached = time.perf_counter() - start
+    assert len(list(tmp_path.rglob("*.npz"))) == 1
+    assert first.fps == second.fps == 60.0 and len(first) == len(second)
+    np.testing.assert_allclose(second.positions, first.positions, atol=1e-5)   # stored as float32 quaternions
+    assert cached < parse / 3

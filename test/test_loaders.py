@@ -1,0 +1,153 @@
+"""BVH and ASF/AMC loaders on small files written here, with hand-computed answers."""
+import gzip
+
+import numpy as np
+import pytest
+
+from sparse_body.data import MotionFileError
+from sparse_body.data.asf_amc import load_amc, load_asf
+from sparse_body.data.bvh import load_bvh
+
+BVH = """HIERARCHY
+ROOT Hips
+{
+  OFFSET 0 0 0
+  CHANNELS 6 Xposition Yposition Zposition Zrotation Xrotation Yrotation
+  JOINT Chest
+  {
+    OFFSET 0 10 0
+    CHANNELS 3 Zrotation Xrotation Yrotation
+    End Site
+    {
+      OFFSET 0 5 0
+    }
+  }
+}
+MOTION
+Frames: 2
+Frame Time: 0.5
+0 100 0 0 0 0 0 0 0
+20 100 0 0 0 0 90 0 0
+"""
+
+
+def test_bvh_positions_hand_computed(tmp_path):
+    path = tmp_path / "tiny.bvh.gz"
+    path.write_bytes(gzip.compress(BVH.encode()))
+    m = load_bvh(path, length_unit=0.01)
+    assert m.joint_names == ["Hips", "Chest", "Chest_End"] and m.parents == [-1, 0, 1]
+    assert m.fps == pytest.approx(2.0) and m.name == "tiny"
+    np.testing.assert_allclose(m.positions[0], [[0, 1, 0], [0, 1.1, 0], [0, 1.15, 0]], atol=1e-12)
+    # Frame 2: root moved 20 cm along x, chest turned 90 degrees about z: its child swings to -x.
+    np.testing.assert_allclose(m.positions[1], [[0.2, 1, 0], [0.2, 1.1, 0], [0.15, 1.1, 0]], atol=1e-12)
+    np.testing.assert_allclose(m.rest_positions, [[0, 0, 0], [0, 0.1, 0], [0, 0.15, 0]], atol=1e-12)
+
+
+def test_truncated_bvh_names_file_and_problem(tmp_path):
+    path = tmp_path / "cut.bvh"
+    path.write_text(BVH.rsplit("\n", 2)[0] + "\n")       # last frame lost
+    with pytest.raises(MotionFileError, match=r"cut\.bvh: MOTION declares 2 frames of 9 channels but holds 1"):
+        load_bvh(path)
+    path.write_text(BVH.split("MOTION")[0])
+    with pytest.raises(MotionFileError, match=r"cut\.bvh: no MOTION section"):
+        load_bvh(path)
+    path.write_text(BVH.replace("20 100", "20 abc"))
+    with pytest.raises(MotionFileError, match="non-numeric"):
+        load_bvh(path)
+    broken_gz = tmp_path / "broken.bvh.gz"
+    broken_gz.write_bytes(gzip.compress(BVH.encode())[:60])
+    with pytest.raises(MotionFileError, match=r"broken\.bvh\.gz: cannot be read"):
+        load_bvh(broken_gz)
+    with pytest.raises(MotionFileError, match="no such file"):
+        load_bvh(tmp_path / "absent.bvh")
+
+
+ASF = """:version 1.10
+:name tiny
+:units
+  mass 1.0
+  length 1.0
+  angle deg
+:root
+   order TX TY TZ RX RY RZ
+   axis XYZ
+   position 0 0 0
+   orientation 0 0 0
+:bonedata
+  begin
+     id 1
+     name a
+     direction 1 0 0
+     length 10
+     axis 0 0 0 XYZ
+    dof rz
+  end
+  begin
+     id 2
+     name b
+     direction 0 1 0
+     length 10
+     axis 0 0 90 XYZ
+    dof rx
+  end
+  begin
+     id 3
+     name c
+     direction 0 1 0
+     length 10
+     axis 0 0 0 XYZ
+  end
+:hierarchy
+  begin
+    root a
+    a b
+    b c
+  end
+"""
+
+AMC = """:FULLY-SPECIFIED
+:DEGREES
+1
+root 0 0 0 0 0 0
+a 0
+b 0
+2
+root 0 0 0 0 0 0
+a 90
+b 0
+3
+root 0 0 0 0 0 0
+a 0
+b 90
+"""
+
+
+def test_asf_amc_positions_hand_computed(tmp_path):
+    (tmp_path / "t.asf").write_text(ASF)
+    (tmp_path / "t_01.amc").write_text(AMC)
+    m = load_amc(tmp_path / "t_01.amc", load_asf(tmp_path / "t.asf"))
+    u = 0.254   # 10 units of 1/1.0 inch
+    assert m.joint_names == ["root", "a", "b", "c"]
+    a, b, c = 1, 2, 3
+    np.testing.assert_allclose(m.positions[0, [b, c]], [[u, 0, 0], [u, u, 0]], atol=1e-12)
+    # Frame 2: a turns 90 degrees about z; b and c follow it.
+    np.testing.assert_allclose(m.positions[1, [b, c]], [[0, u, 0], [-u, u, 0]], atol=1e-12)
+    # Frame 3: b's rx acts in b's axis frame C = Rz(90), i.e. about world y: b's vector
+    # (0, 1, 0) lies on that axis, so c stays put, but b's frame has turned.
+    np.testing.assert_allclose(m.positions[2, [b, c]], [[u, 0, 0], [u, u, 0]], atol=1e-12)
+    expected = np.array([[0, 0, 1], [0, 1, 0], [-1, 0, 0]], dtype=float)   # 90 degrees about y
+    np.testing.assert_allclose(m.rotations[2, b], expected, atol=1e-12)
+    np.testing.assert_allclose(m.rotations[2, a], np.eye(3), atol=1e-12)
+
+
+def test_amc_frame_missing_a_bone_is_named(tmp_path):
+    (tmp_path / "t.asf").write_text(ASF)
+    (tmp_path / "t_02.amc").write_text(AMC.replace("2\nroot 0 0 0 0 0 0\na 90\nb 0\n", "2\nroot 0 0 0 0 0 0\nb 0\n"))
+    with pytest.raises(MotionFileError, match=r"t_02\.amc: frame 2 is missing bone\(s\) a"):
+        load_amc(tmp_path / "t_02.amc", load_asf(tmp_path / "t.asf"))
+    (tmp_path / "t_03.amc").write_text(AMC.replace("a 90", "a 90 4"))
+    with pytest.raises(MotionFileError, match=r"bone 'a' has 2 values, its dof needs 1"):
+        load_amc(tmp_path / "t_03.amc", load_asf(tmp_path / "t.asf"))
+    (tmp_path / "bad.asf").write_text(ASF.replace("    b c\n", "    b zz\n"))
+    with pytest.raises(MotionFileError, match=r"bad\.asf: hierarchy names undefined bones: zz"):
+        load_asf(tmp_path / "bad.asf")

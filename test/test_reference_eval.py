@@ -1,0 +1,74 @@
+import json
+import os
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from sparse_body.core.sensors import load_sensor_config
+from sparse_body.core.skeleton import JOINT_INDEX as J
+from sparse_body.core.types import TrackerFrame
+from sparse_body.data.synthetic import synthetic_walk
+from sparse_body.data.virtual_trackers import synthesize_trackers
+from sparse_body.estimators import create_estimator
+from sparse_body.evaluation import evaluate_motion
+
+
+def test_reference_estimator_places_the_body_under_the_headset():
+    motion = synthetic_walk(3.0)
+    config = load_sensor_config("three_point")
+    estimator = create_estimator("reference", config, motion.skeleton)
+    poses = estimator.process(synthesize_trackers(motion, config))
+    assert len(poses) == len(motion) and all(p.valid and p.is_finite() for p in poses)
+    metrics = evaluate_motion(motion, "reference", config)
+    # Head and root follow the headset closely; the arms do not follow the controllers.
+    assert metrics["Root PE [cm]"] < 5.0
+    assert metrics["Hand PE [cm]"] > 3.0
+    assert set(metrics) >= {"MPJPE [cm]", "MPJRE [deg]", "Jitter [100m/s3]", "Skate [cm/s]", "Contact acc [%]"}
+
+
+def test_bad_tracker_samples_give_finite_invalid_poses():
+    motion = synthetic_walk(1.0)
+    config = load_sensor_config("three_point")
+    estimator = create_estimator("reference", config, motion.skeleton)
+    stream = synthesize_trackers(motion, config)
+    first = estimator.step(stream.frame(0))
+    nan_frame = TrackerFrame(0.1, config.site_names, np.full((3, 3), np.nan), np.full((3, 4), np.nan), np.ones(3, bool))
+    held = estimator.step(nan_frame)
+    assert not held.valid and held.is_finite()
+    np.testing.assert_allclose(held.root_position, first.root_position)
+    zero_quat = stream.frame(1)
+    zero_quat.orientations = np.zeros((3, 4))
+    assert not estimator.step(zero_quat).valid
+    estimator.reset()
+    assert estimator.step(nan_frame).is_finite()
+
+
+def test_unknown_estimator_and_missing_sites_are_clear_errors():
+    config = load_sensor_config("three_point")
+    with pytest.raises(ValueError, match="unknown estimator 'lobstr2'; available: reference"):
+        create_estimator("lobstr2", config, synthetic_walk(0.1).skeleton)
+    hands = config.subset(["left_hand", "right_hand"])
+    with pytest.raises(ValueError, match="needs a head or a pelvis tracker"):
+        create_estimator("reference", hands, synthetic_walk(0.1).skeleton)
+
+
+@pytest.mark.mocap
+def test_eval_command_prints_the_table_and_writes_json(mocap_root, tmp_path):
+    out = tmp_path / "eval.json"
+    proc = subprocess.run([sys.executable, "-m", "sparse_body.cli", "eval", "--estimator", "reference",
+                           "--sensors", "four_point", "--limit", "3", "--quiet", "--output", str(out)],
+                          capture_output=True, text=True, timeout=600, env={**os.environ, "SPARSE_BODY_MOCAP": str(mocap_root)})
+    assert proc.returncode == 0, proc.stderr
+    assert "reference/four_point" in proc.stdout and "MPJPE [cm]" in proc.stdout and "3 clips of the test split" in proc.stdout
+    result = json.loads(out.read_text())[0]
+    assert result["estimator"] == "reference" and len(result["clips"]) == 3
+    assert 2.0 < result["summary"]["MPJPE [cm]"] < 40.0
+    assert result["summary"]["Root PE [cm]"] < 10.0      # the pelvis tracker places the root
+
+
+def test_eval_without_mocap_says_where_to_point(tmp_path):
+    proc = subprocess.run([sys.executable, "-m", "sparse_body.cli", "eval", "--estimator", "reference",
+                           "--mocap", str(tmp_path)], capture_output=True, text=True, timeout=120)
+    assert proc.returncode != 0 and "no clips.tsv there" in proc.stderr

@@ -1,0 +1,92 @@
+import numpy as np
+import pytest
+from scipy.spatial.transform import Rotation
+
+from sparse_body.core.sensors import SensorConfigError, load_sensor_config, parse_sensor_config
+from sparse_body.core.skeleton import JOINT_INDEX as J
+from sparse_body.data.synthetic import synthetic_walk
+from sparse_body.data.virtual_trackers import LOBSTR_NOISE, TrackerNoise, synthesize_trackers
+
+
+@pytest.mark.parametrize("name,sites", [
+    ("three_point", ("head", "left_hand", "right_hand")),
+    ("four_point", ("head", "left_hand", "right_hand", "pelvis")),
+    ("six_point", ("head", "left_hand", "right_hand", "pelvis", "left_foot", "right_foot")),
+])
+def test_shipped_configurations(name, sites):
+    config = load_sensor_config(name)
+    assert config.name == name and config.site_names == sites
+    assert all(s.measures == "pose" for s in config.sites)
+    assert config.site("head").frame_id == "hmd"
+
+
+def test_unknown_site_is_named_with_the_file(tmp_path):
+    path = tmp_path / "mine.yaml"
+    path.write_text("sites:\n  head: {frame: hmd}\n  left_knee: {frame: k}\n")
+    with pytest.raises(SensorConfigError, match=r"mine\.yaml: unknown body site 'left_knee'; sites are head, "):
+        load_sensor_config(path)
+    path.write_text("sites:\n  head: {offset: {rotation: [0, 0, 0, 2]}}\n")
+    with pytest.raises(SensorConfigError, match="unit quaternion"):
+        load_sensor_config(path)
+    path.write_text("sites:\n  head: {measures: velocity}\n")
+    with pytest.raises(SensorConfigError, match="measures must be one of pose, orientation, position"):
+        load_sensor_config(path)
+    path.write_text("sites: [head\n")
+    with pytest.raises(SensorConfigError, match="not valid YAML"):
+        load_sensor_config(path)
+    with pytest.raises(SensorConfigError, match="no sensor configuration 'seven_point'; shipped ones are four_point"):
+        load_sensor_config("seven_point")
+
+
+def test_any_subset_can_be_written():
+    config = parse_sensor_config({"name": "hip_hands", "sites": {"pelvis": {}, "left_hand": {}, "right_hand": {}}})
+    assert config.site_names == ("pelvis", "left_hand", "right_hand")
+    assert load_sensor_config("six_point").subset(["left_foot"]).site_names == ("left_foot",)
+
+
+def test_clean_trackers_follow_joints_through_their_mounting():
+    motion = synthetic_walk(2.0)
+    config = load_sensor_config("six_point")
+    stream = synthesize_trackers(motion, config)
+    assert stream.positions.shape == (len(motion), 6, 3) and stream.valid.all()
+    for s, site in enumerate(config.sites):
+        j = site.joint_index
+        expected = motion.positions[:, j] + np.einsum("tab,b->ta", motion.global_rotations[:, j], site.offset_translation)
+        np.testing.assert_allclose(stream.positions[:, s], expected, atol=1e-9)
+        # Undoing the mounting recovers the joint.
+        pos, rot = site.joint_pose(stream.positions[10, s], stream.orientations[10, s])
+        np.testing.assert_allclose(pos, motion.positions[10, j], atol=1e-9)
+        np.testing.assert_allclose(rot, motion.global_rotations[10, j], atol=1e-9)
+
+
+def test_lobstr_noise_has_the_papers_scale():
+    motion = synthetic_walk(10.0)
+    config = load_sensor_config("four_point")
+    clean = synthesize_trackers(motion, config)
+    noisy = synthesize_trackers(motion, config, LOBSTR_NOISE, seed=3)
+    diff = noisy.positions - clean.positions
+    assert np.std(diff) == pytest.approx(0.01, rel=0.1)
+    angle = (Rotation.from_quat(noisy.orientations.reshape(-1, 4)).inv()
+             * Rotation.from_quat(clean.orientations.reshape(-1, 4))).magnitude()
+    assert np.degrees(angle).max() <= 1.5 + 1e-9 and np.degrees(angle).mean() > 0.5
+
+
+def test_drops_occlusion_and_orientation_only():
+    motion = synthetic_walk(10.0)
+    config = parse_sensor_config({"sites": {"head": {}, "left_foot": {}, "right_hand": {"measures": "orientation"}}})
+    noise = TrackerNoise(drop_probability=0.1, occlusion_probability=0.02, occlusion_frames=20)
+    stream = synthesize_trackers(motion, config, noise, seed=1)
+    dropped = ~stream.valid
+    assert 0.05 < dropped.mean() < 0.15
+    assert np.isnan(stream.positions[dropped]).all()
+    # Occluded feet read origin and identity while claiming to be valid.
+    foot = stream.sites.index("left_foot")
+    at_origin = stream.valid[:, foot] & np.all(stream.positions[:, foot] == 0.0, axis=-1)
+    assert at_origin.sum() >= 20
+    np.testing.assert_array_equal(stream.orientations[at_origin, foot], [[0, 0, 0, 1]] * int(at_origin.sum()))
+    assert not np.all(stream.positions[:, stream.sites.index("head")] == 0.0, axis=-1).any()
+    hand = stream.sites.index("right_hand")
+    assert np.isnan(stream.positions[:, hand]).all() and np.isfinite(stream.orientations[stream.valid[:, hand], hand]).all()
+    bounded = synthesize_trackers(motion, config, TrackerNoise(occlusion_probability=0.05, occlusion_mode="bounded"), seed=2)
+    err = np.linalg.norm(bounded.positions[:, foot] - motion.positions[:, J["left_ankle"]], axis=-1)
+    assert err.max() <= motion.skeleton.leg_length() + 0.1 and err.max() > 0.1

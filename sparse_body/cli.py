@@ -49,6 +49,43 @@ def cmd_split(args) -> int:
     return 0
 
 
+def _motion(args):
+    """The motion named by --clip, --motion or --synthetic (in that order of preference)."""
+    from .data.catalog import load_clip, load_motion_file, read_index
+    from .data.synthetic import synthetic_walk
+    if args.motion:
+        return load_motion_file(Path(args.motion), args.fps)
+    if args.clip:
+        index = {c.clip_id: c for c in read_index(_mocap(args))}
+        if args.clip not in index:
+            raise ValueError(f"no clip {args.clip!r} in {_mocap(args)}/clips.tsv")
+        return load_clip(index[args.clip], args.fps)
+    return synthetic_walk(args.seconds, args.fps)
+
+
+def cmd_make_bag(args) -> int:
+    from .core.sensors import load_sensor_config
+    from .data.virtual_trackers import LOBSTR_NOISE, NO_NOISE
+    from .offline import make_bag
+    motion = _motion(args)
+    if args.seconds and (args.clip or args.motion):
+        motion = motion.slice(0, int(args.seconds * motion.fps))
+    n = make_bag(motion, load_sensor_config(args.sensors), Path(args.out), LOBSTR_NOISE if args.noise else NO_NOISE)
+    print(f"written {args.out}: {n} frames of {motion.name} at {motion.fps:g} Hz")
+    return 0
+
+
+def cmd_process(args) -> int:
+    from .core.sensors import load_sensor_config
+    from .core.skeleton import Skeleton
+    from .offline import process_bag
+    poses = process_bag(Path(args.bag_in), Path(args.bag_out), args.estimator, load_sensor_config(args.sensors),
+                        Skeleton.canonical(args.height), args.fps, progress=not args.quiet)
+    invalid = sum(not p.valid for p in poses)
+    print(f"written {args.bag_out}: {len(poses)} estimates ({invalid} marked invalid)")
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="sparse-body", description=__doc__)
     sub = parser.add_subparsers(dest="command", required=True)
@@ -66,6 +103,28 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=cmd_eval)
 
+    p = sub.add_parser("make-bag", help="write a rosbag2 (MCAP) of tracker TF from a motion")
+    p.add_argument("out", help="the bag directory to create")
+    p.add_argument("--sensors", default="six_point", help="sensor configuration name or YAML path")
+    p.add_argument("--clip", help="a CMU clip id (e.g. 02_01)")
+    p.add_argument("--motion", help="a motion file (.bvh, .amc, .npz)")
+    p.add_argument("--seconds", type=float, default=0.0,
+                   help="length of the synthetic walk, or cut a clip to this length")
+    p.add_argument("--fps", type=float, default=60.0)
+    p.add_argument("--noise", action="store_true", help="add LoBSTr's tracker noise")
+    p.add_argument("--mocap", help="the CMU folder")
+    p.set_defaults(func=cmd_make_bag)
+
+    p = sub.add_parser("process", help="run an estimator over a tracker bag and write an estimate bag")
+    p.add_argument("bag_in")
+    p.add_argument("bag_out")
+    p.add_argument("--estimator", default="ik")
+    p.add_argument("--sensors", default="six_point")
+    p.add_argument("--height", type=float, default=1.75, help="the tracked person's height in metres")
+    p.add_argument("--fps", type=float, default=60.0, help="the trackers' nominal rate")
+    p.add_argument("--quiet", action="store_true", help="no progress bar")
+    p.set_defaults(func=cmd_process)
+
     p = sub.add_parser("split", help="compute the CMU train/validation/test split")
     p.add_argument("--write", action="store_true", help="write config/splits/cmu.yaml")
     p.add_argument("--mocap", help="the CMU folder")
@@ -77,7 +136,7 @@ def main(argv: list[str] | None = None) -> None:
     args = build_parser().parse_args(argv)
     try:
         sys.exit(args.func(args))
-    except (ValueError, FileNotFoundError) as err:
+    except (ValueError, FileNotFoundError) as err:   # includes MotionFileError, BagError, SensorConfigError
         sys.exit(f"sparse-body: {err}")
 
 

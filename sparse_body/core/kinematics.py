@@ -14,6 +14,8 @@ def forward_kinematics(local_rot: np.ndarray, root_pos: np.ndarray, offsets: np.
     Returns (global_rot (..., 22, 3, 3), positions (..., 22, 3)).
     """
     local_rot = np.asarray(local_rot, dtype=np.float64)
+    if local_rot.ndim == 3 and np.ndim(offsets) == 2:
+        return _forward_kinematics_one(local_rot, np.asarray(root_pos, dtype=np.float64), offsets)
     lead = local_rot.shape[:-3]
     offsets = np.broadcast_to(np.asarray(offsets, dtype=np.float64), lead + (NUM_JOINTS, 3))
     glob = np.empty_like(local_rot)
@@ -34,3 +36,16 @@ def global_to_local(global_rot: np.ndarray) -> np.ndarray:
     for j in range(1, NUM_JOINTS):
         local[..., j, :, :] = np.swapaxes(global_rot[..., PARENTS[j], :, :], -1, -2) @ global_rot[..., j, :, :]
     return local
+
+
+def _forward_kinematics_one(local_rot: np.ndarray, root_pos: np.ndarray, offsets: np.ndarray):
+    """One pose: plain matrix products (einsum's per-call cost dominates at this size,
+    and IK runs this many times a frame)."""
+    glob = np.empty_like(local_rot)
+    pos = np.empty((NUM_JOINTS, 3))
+    glob[0], pos[0] = local_rot[0], root_pos
+    for j in range(1, NUM_JOINTS):
+        p = PARENTS[j]
+        glob[j] = glob[p] @ local_rot[j]
+        pos[j] = pos[p] + glob[p] @ offsets[j]
+    return glob, pos

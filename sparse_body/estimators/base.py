@@ -13,6 +13,7 @@ from ..core.types import BodyPose, TrackerFrame, TrackerStream
 # dependencies (onnxruntime, a model file) are needed only when it is chosen.
 ESTIMATORS: dict[str, str] = {
     "reference": "sparse_body.estimators.reference:ReferenceEstimator",
+    "ik": "sparse_body.estimators.ik:IKEstimator",
 }
 
 

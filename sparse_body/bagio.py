@@ -1,0 +1,158 @@
+"""rosbag2 files without ROS (rosbags): tracker TF in, estimates out.
+
+Bags use the message definitions of Humble and later (sensor_msgs/JointState,
+tf2_msgs/TFMessage) plus this package's msg/ files, registered from their text, so
+`ros2 bag play` on a ROS machine plays them to the nodes.
+"""
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+from rosbags.rosbag2 import Reader, StoragePlugin, Writer
+from rosbags.typesys import Stores, get_types_from_msg, get_typestore
+
+from .core.sensors import SensorConfig
+from .core.skeleton import Skeleton
+from .core.types import BodyPose, TrackerStream
+from .output import FOOT_NAMES, body_transforms, contact_points, joint_state_names, joint_state_positions
+from .resources import share_dir
+from .tf_cache import Accepted, TfCache, sample_trackers
+
+TF_TOPIC, TF_STATIC_TOPIC = "/tf", "/tf_static"
+JOINT_STATES_TOPIC, CONTACTS_TOPIC, STATUS_TOPIC = "/joint_states", "/foot_contacts", "/estimate_status"
+TF_TYPE = "tf2_msgs/msg/TFMessage"
+
+
+class BagError(ValueError):
+    pass
+
+
+def typestore():
+    store = get_typestore(Stores.ROS2_HUMBLE)
+    types = {}
+    for path in sorted((share_dir() / "msg").glob("*.msg")):
+        types.update(get_types_from_msg(path.read_text(), f"sparse_body/msg/{path.stem}"))
+    store.register(types)
+    return store
+
+
+def _time(store, seconds: float):
+    sec = int(np.floor(seconds))
+    return store.types["builtin_interfaces/msg/Time"](sec=sec, nanosec=int(round((seconds - sec) * 1e9)) % 1_000_000_000)
+
+
+def _header(store, seconds: float, frame_id: str):
+    return store.types["std_msgs/msg/Header"](stamp=_time(store, seconds), frame_id=frame_id)
+
+
+def _transform_msg(store, seconds, parent, child, translation, rotation):
+    T = store.types
+    return T["geometry_msgs/msg/TransformStamped"](
+        header=_header(store, seconds, parent), child_frame_id=child,
+        transform=T["geometry_msgs/msg/Transform"](
+            translation=T["geometry_msgs/msg/Vector3"](*map(float, translation)),
+            rotation=T["geometry_msgs/msg/Quaternion"](*map(float, rotation))))
+
+
+def write_tracker_bag(path: Path, stream: TrackerStream, config: SensorConfig, start: float = 1_700_000_000.0) -> None:
+    """One /tf message per frame with every valid tracker; dropped samples are left out."""
+    store = typestore()
+    TFMessage = store.types[TF_TYPE]
+    with Writer(Path(path), version=8, storage_plugin=StoragePlugin.MCAP) as writer:
+        conn = writer.add_connection(TF_TOPIC, TF_TYPE, typestore=store)
+        for i in range(len(stream)):
+            t = start + float(stream.times[i])
+            transforms = []
+            for s, site in enumerate(config.sites):
+                if not stream.valid[i, s]:
+                    continue
+                pos = stream.positions[i, s] if site.has_position else np.zeros(3)
+                rot = stream.orientations[i, s] if site.has_orientation else np.array([0.0, 0.0, 0.0, 1.0])
+                transforms.append(_transform_msg(store, t, config.fixed_frame, site.frame_id, pos, rot))
+            data = store.serialize_cdr(TFMessage(transforms=transforms), TF_TYPE)
+            writer.write(conn, int(round(t * 1e9)), data)
+
+
+def read_tracker_stream(path: Path, config: SensorConfig, stale_after: float = 0.1) -> TrackerStream:
+    """The trackers at each input frame of a bag: every /tf message that moves a tracker
+    frame is one frame, sampled at the newest stamp it carries."""
+    path = Path(path)
+    if not path.exists():
+        raise BagError(f"{path}: no such bag")
+    store = typestore()
+    cache = TfCache()
+    tracker_frames = {s.frame_id for s in config.sites}
+    times, frames = [], []
+    try:
+        with Reader(path) as reader:
+            conns = [c for c in reader.connections if c.topic in (TF_TOPIC, TF_STATIC_TOPIC)]
+            if not any(c.topic == TF_TOPIC for c in conns):
+                raise BagError(f"{path}: no {TF_TOPIC} topic (topics: {', '.join(sorted({c.topic for c in reader.connections}))})")
+            for conn, _, raw in reader.messages(connections=conns):
+                msg = store.deserialize_cdr(raw, conn.msgtype)
+                static = conn.topic == TF_STATIC_TOPIC
+                newest, moved = -np.inf, False
+                for tf in msg.transforms:
+                    stamp = tf.header.stamp.sec + tf.header.stamp.nanosec * 1e-9
+                    tr, q = tf.transform.translation, tf.transform.rotation
+                    result = cache.set(tf.header.frame_id, tf.child_frame_id, stamp, (tr.x, tr.y, tr.z),
+                                       (q.x, q.y, q.z, q.w), static)
+                    if tf.child_frame_id in tracker_frames and not static:
+                        moved = True   # even a refused sample is an input frame: it gets an output
+                        if result in (Accepted.OK, Accepted.JUMPED_BACK):
+                            newest = max(newest, stamp)
+                if moved:
+                    stamp = newest if np.isfinite(newest) else (times[-1] if times else 0.0)
+                    frame, _ = sample_trackers(cache, config, stamp, stale_after)
+                    times.append(stamp)
+                    frames.append(frame)
+    except BagError:
+        raise
+    except Exception as err:  # noqa: BLE001 - rosbags raises many kinds for a broken file
+        raise BagError(f"{path}: cannot be read as a rosbag2 ({err})") from None
+    if not frames:
+        raise BagError(f"{path}: no transforms of the tracker frames {', '.join(sorted(tracker_frames))}")
+    return TrackerStream(config.site_names, np.array(times), np.stack([f.positions for f in frames]),
+                         np.stack([f.orientations for f in frames]), np.stack([f.valid for f in frames]))
+
+
+def write_estimate_bag(path: Path, poses: list[BodyPose], skeleton: Skeleton, fixed_frame: str = "world",
+                       prefix: str = "") -> None:
+    """Per pose: one JointState, one FootContacts, one EstimateStatus and one /tf message."""
+    store = typestore()
+    T = store.types
+    names = joint_state_names()
+    with Writer(Path(path), version=8, storage_plugin=StoragePlugin.MCAP) as writer:
+        c_js = writer.add_connection(JOINT_STATES_TOPIC, "sensor_msgs/msg/JointState", typestore=store)
+        c_fc = writer.add_connection(CONTACTS_TOPIC, "sparse_body/msg/FootContacts", typestore=store)
+        c_st = writer.add_connection(STATUS_TOPIC, "sparse_body/msg/EstimateStatus", typestore=store)
+        c_tf = writer.add_connection(TF_TOPIC, TF_TYPE, typestore=store)
+        for pose in poses:
+            ns = int(round(pose.stamp * 1e9))
+            header = _header(store, pose.stamp, fixed_frame)
+            js = T["sensor_msgs/msg/JointState"](header=_header(store, pose.stamp, ""), name=names,
+                                                 position=joint_state_positions(pose), velocity=np.zeros(0),
+                                                 effort=np.zeros(0))
+            writer.write(c_js, ns, store.serialize_cdr(js, "sensor_msgs/msg/JointState"))
+            points = contact_points(pose, skeleton)
+            contacts = [T["sparse_body/msg/FootContact"](
+                name=n, in_contact=bool(pose.contact[k]), probability=float(pose.contact_probability[k]),
+                contact_point=T["geometry_msgs/msg/Point"](*map(float, points[k])))
+                for k, n in enumerate(FOOT_NAMES)]
+            writer.write(c_fc, ns, store.serialize_cdr(T["sparse_body/msg/FootContacts"](header=header, contacts=contacts),
+                                                       "sparse_body/msg/FootContacts"))
+            status = T["sparse_body/msg/EstimateStatus"](header=header, valid=bool(pose.valid),
+                                                          message="" if pose.valid else "held: too little tracker input")
+            writer.write(c_st, ns, store.serialize_cdr(status, "sparse_body/msg/EstimateStatus"))
+            tfs = [_transform_msg(store, pose.stamp, t.parent, t.child, t.translation, t.rotation)
+                   for t in body_transforms(pose, skeleton, fixed_frame, prefix)]
+            writer.write(c_tf, ns, store.serialize_cdr(T[TF_TYPE](transforms=tfs), TF_TYPE))
+
+
+def read_topic(path: Path, topic: str) -> list:
+    """Every message of a topic, deserialised (for tests and tools)."""
+    store = typestore()
+    with Reader(Path(path)) as reader:
+        conns = [c for c in reader.connections if c.topic == topic]
+        return [store.deserialize_cdr(raw, c.msgtype) for c, _, raw in reader.messages(connections=conns)]

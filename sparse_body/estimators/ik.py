@@ -1,0 +1,128 @@
+"""Damped-least-squares IK: the "Final IK" baseline of the papers' tables, no training.
+
+The root comes from the pelvis tracker (four- and six-point) or hangs below the headset
+(three-point). Each tracked end joint pulls its chain: head <- spine1..neck, wrist <-
+shoulder + elbow hinge, ankle <- hip + knee hinge; then the end joint takes the tracker's
+orientation. Untracked legs keep a standing pose. Each frame starts from the last solution.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from ..core.contacts import FOOT_JOINTS
+from ..core.kinematics import forward_kinematics
+from ..core.rotations import axis_angle_to_matrix, heading, matrix_to_quat, yaw_matrix
+from ..core.skeleton import JOINT_INDEX as J
+from ..core.types import BodyPose, TrackerFrame
+from .base import Estimator
+from .reference import standing_pose
+
+X, Y, Z = np.eye(3)
+
+
+def _about(axis: np.ndarray, angle: float) -> np.ndarray:
+    """Rotation about a unit axis (Rodrigues); scipy's per-call overhead dominates here."""
+    k = np.array([[0, -axis[2], axis[1]], [axis[2], 0, -axis[0]], [-axis[1], axis[0], 0]])
+    return np.eye(3) + np.sin(angle) * k + (1 - np.cos(angle)) * (k @ k)
+# (end joint, its tracker site, degrees of freedom: (joint, local axis, (min, max) or None))
+_BALL = lambda j: [(J[j], X, None), (J[j], Y, None), (J[j], Z, None)]  # noqa: E731
+CHAINS = {
+    "head": ("head", _BALL("spine1") + _BALL("spine2") + _BALL("spine3") + _BALL("neck"), 3.0),
+    "left_hand": ("left_wrist", _BALL("left_shoulder") + [(J["left_elbow"], Z, (-2.7, 0.0))], 1.0),
+    "right_hand": ("right_wrist", _BALL("right_shoulder") + [(J["right_elbow"], Z, (0.0, 2.7))], 1.0),
+    "left_foot": ("left_ankle", _BALL("left_hip") + [(J["left_knee"], Y, (0.0, 2.6))], 1.0),
+    "right_foot": ("right_ankle", _BALL("right_hip") + [(J["right_knee"], Y, (0.0, 2.6))], 1.0),
+}
+
+
+class IKEstimator(Estimator):
+    name = "ik"
+
+    def __init__(self, sensors, skeleton, fps: float = 60.0, iterations: int = 10, damping: float = 0.05,
+                 floor_height: float = 0.0) -> None:
+        super().__init__(sensors, skeleton, fps)
+        if not {"head", "pelvis"} & set(sensors.site_names):
+            raise ValueError("the IK estimator needs a head or a pelvis tracker")
+        self.iterations, self.damping, self.floor = iterations, damping, floor_height
+        self._head_above_pelvis = skeleton.rest_positions()[J["head"]]
+        self.reset()
+
+    def reset(self) -> None:
+        self._local = standing_pose()
+        self._local[J["left_knee"]] = self._local[J["right_knee"]] = axis_angle_to_matrix(Y * 0.1)
+        self._last: BodyPose | None = None
+        self._last_toes: np.ndarray | None = None
+
+    def _target(self, frame: TrackerFrame, site: str):
+        if site not in frame.sites:
+            return None
+        i = frame.index(site)
+        pos, quat = frame.positions[i], frame.orientations[i]
+        spec = self.sensors.site(site)
+        if not frame.valid[i] or not np.all(np.isfinite(pos)):
+            return None
+        if spec.has_orientation and np.all(np.isfinite(quat)) and 0.9 < np.linalg.norm(quat) < 1.1:
+            return spec.joint_pose(pos, quat / np.linalg.norm(quat))
+        return pos - 0.0, None   # position-only: the mounting offset's rotation is unknown
+
+    def step(self, frame: TrackerFrame) -> BodyPose:
+        targets = {s: self._target(frame, s) for s in CHAINS if s in self.sensors.site_names}
+        pelvis = self._target(frame, "pelvis") if "pelvis" in self.sensors.site_names else None
+        local = self._local.copy()
+        if pelvis is not None and pelvis[1] is not None:
+            local[0], root = pelvis[1], pelvis[0]
+        elif targets.get("head") is not None and targets["head"][1] is not None:
+            local[0] = yaw_matrix(heading(targets["head"][1]))
+            root = targets["head"][0] - local[0] @ self._head_above_pelvis
+        else:
+            return self._hold(frame.stamp)
+        active = [(site, *CHAINS[site]) for site, tgt in targets.items() if tgt is not None]
+        if pelvis is None:   # the root already hangs from the head: leave the spine alone
+            active = [a for a in active if a[0] != "head"]
+        for _ in range(self.iterations):
+            glob, pos = forward_kinematics(local, root, self.skeleton.offsets)
+            moved = False
+            for site, end, dofs, weight in active:
+                err = targets[site][0] - pos[J[end]]
+                if np.linalg.norm(err) < 1e-4:
+                    continue
+                moved = True
+                axes = np.stack([glob[j] @ a for j, a, _ in dofs])
+                jac = np.cross(axes, pos[J[end]] - np.stack([pos[j] for j, _, _ in dofs])).T   # (3, n)
+                lam = self.damping * weight
+                step = jac.T @ np.linalg.solve(jac @ jac.T + lam ** 2 * np.eye(3), err)
+                for (j, a, limits), d in zip(dofs, step):
+                    local[j] = local[j] @ _about(a, d)
+                    if limits is not None:   # hinges: keep the angle about their axis in range
+                        angle = np.arctan2(local[j][(np.argmax(a) + 2) % 3, (np.argmax(a) + 1) % 3],
+                                           local[j][(np.argmax(a) + 1) % 3, (np.argmax(a) + 1) % 3])
+                        local[j] = _about(a, np.clip(angle, *limits))
+            if not moved:
+                break
+        glob, pos = forward_kinematics(local, root, self.skeleton.offsets)
+        for site, end, _, _ in active + ([("head", "head", None, None)] if pelvis is None and targets.get("head") else []):
+            rot = targets[site][1]
+            if rot is not None:   # the end joint takes the tracker's orientation
+                local[J[end]] = glob[self.skeleton.parents[J[end]]].T @ rot
+        if not (np.all(np.isfinite(local)) and np.all(np.isfinite(root))):
+            self.reset()
+            return self._hold(frame.stamp)
+        self._local = local
+        return self._finish(frame.stamp, local, root)
+
+    def _finish(self, stamp, local, root) -> BodyPose:
+        _, pos = forward_kinematics(local, root, self.skeleton.offsets)
+        toes = pos[list(FOOT_JOINTS)]
+        speed = np.zeros(2) if self._last_toes is None else np.linalg.norm((toes - self._last_toes)[:, :2], axis=1) * self.fps
+        self._last_toes = toes
+        contact = (toes[:, 2] - self.floor < 0.05) & (speed < 0.3)
+        pose = BodyPose(stamp, matrix_to_quat(local), np.asarray(root, float), contact.astype(float), contact)
+        self._last = pose
+        return pose
+
+    def _hold(self, stamp: float) -> BodyPose:
+        if self._last is None:
+            return BodyPose(stamp, matrix_to_quat(self._local), np.zeros(3), valid=False)
+        last = self._last
+        return BodyPose(stamp, last.local_quats.copy(), last.root_position.copy(), last.contact_probability.copy(),
+                        last.contact.copy(), valid=False)

@@ -1,0 +1,40 @@
+"""Offline processing without ROS: motion -> tracker bag, and tracker bag -> estimate bag."""
+from __future__ import annotations
+
+from pathlib import Path
+
+from .bagio import read_tracker_stream, write_estimate_bag, write_tracker_bag
+from .core.sensors import SensorConfig
+from .core.skeleton import Skeleton
+from .core.types import BodyPose
+from .data.motion import Motion
+from .data.virtual_trackers import NO_NOISE, TrackerNoise, synthesize_trackers
+from .estimators import create_estimator
+
+
+def make_bag(motion: Motion, sensors: SensorConfig, out: Path, noise: TrackerNoise = NO_NOISE, seed: int = 0,
+             start: float = 1_700_000_000.0) -> int:
+    """Write the virtual trackers of a motion as a rosbag2 (MCAP) of /tf; returns the frame count."""
+    stream = synthesize_trackers(motion, sensors, noise, seed)
+    write_tracker_bag(out, stream, sensors, start)
+    return len(stream)
+
+
+def process_bag(bag_in: Path, bag_out: Path, estimator: str, sensors: SensorConfig, skeleton: Skeleton,
+                fps: float = 60.0, stale_after: float = 0.1, progress: bool = True, **options) -> list[BodyPose]:
+    """Run an estimator over a tracker bag and write one estimate per input frame."""
+    stream = read_tracker_stream(bag_in, sensors, stale_after)
+    est = create_estimator(estimator, sensors, skeleton, fps=fps, **options)
+    est.reset()
+    frames = iter(stream)
+    if progress:
+        from tqdm import tqdm
+        frames = tqdm(frames, total=len(stream), desc=f"{estimator} {Path(bag_in).name}", unit="frame")
+    poses, last_stamp = [], None
+    for frame in frames:
+        if last_stamp is not None and frame.stamp < last_stamp - 1.0:
+            est.reset()   # the recording jumped back (a concatenated or looping take)
+        last_stamp = frame.stamp
+        poses.append(est.step(frame))
+    write_estimate_bag(bag_out, poses, skeleton, sensors.fixed_frame)
+    return poses

@@ -1,0 +1,58 @@
+"""A body pose as the ROS outputs carry it, without ROS types: JointState names and values,
+TF transforms and foot contacts. ros/ and bagio.py wrap these in rclpy or rosbags messages."""
+from __future__ import annotations
+
+import warnings
+from dataclasses import dataclass
+
+import numpy as np
+
+from .core.contacts import FOOT_JOINTS
+from .core.kinematics import forward_kinematics
+from .core.rotations import JOINT_EULER_ORDER, matrix_to_euler, quat_to_matrix
+from .core.skeleton import JOINT_NAMES, NUM_JOINTS, PARENTS, Skeleton
+from .core.types import BodyPose
+
+AXES = ("z", "y", "x")   # JOINT_EULER_ORDER, one revolute joint per axis, outermost first
+assert JOINT_EULER_ORDER == "ZYX"
+
+
+def joint_state_names() -> list[str]:
+    """Three revolute joints per body joint below the pelvis: <joint>_rz, _ry, _rx."""
+    return [f"{name}_r{axis}" for name in JOINT_NAMES[1:] for axis in AXES]
+
+
+def joint_state_positions(pose: BodyPose) -> np.ndarray:
+    """Angles (radians) in joint_state_names() order: local = Rz(a) @ Ry(b) @ Rx(c)."""
+    local = quat_to_matrix(pose.local_quats[1:])
+    with warnings.catch_warnings():   # gimbal lock still yields a valid decomposition
+        warnings.simplefilter("ignore", UserWarning)
+        return matrix_to_euler(local, JOINT_EULER_ORDER).reshape(-1)
+
+
+@dataclass(frozen=True)
+class Transform:
+    parent: str
+    child: str
+    translation: np.ndarray   # (3,)
+    rotation: np.ndarray      # (4,) x y z w
+
+
+def body_transforms(pose: BodyPose, skeleton: Skeleton, fixed_frame: str, prefix: str = "",
+                    links: bool = True) -> list[Transform]:
+    """fixed_frame -> pelvis, and (links=True) every parent link -> child link."""
+    out = [Transform(fixed_frame, prefix + JOINT_NAMES[0], pose.root_position, pose.local_quats[0])]
+    if links:
+        for j in range(1, NUM_JOINTS):
+            out.append(Transform(prefix + JOINT_NAMES[PARENTS[j]], prefix + JOINT_NAMES[j],
+                                 skeleton.offsets[j], pose.local_quats[j]))
+    return out
+
+
+def contact_points(pose: BodyPose, skeleton: Skeleton) -> np.ndarray:
+    """(2, 3) toe positions in the fixed frame, left then right."""
+    _, pos = forward_kinematics(quat_to_matrix(pose.local_quats), pose.root_position, skeleton.offsets)
+    return pos[list(FOOT_JOINTS)]
+
+
+FOOT_NAMES = ("left_foot", "right_foot")

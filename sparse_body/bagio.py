@@ -55,12 +55,23 @@ def _transform_msg(store, seconds, parent, child, translation, rotation):
             rotation=T["geometry_msgs/msg/Quaternion"](*map(float, rotation))))
 
 
+def _log_times(stamps) -> list[int]:
+    """Bag (receive) times in ns: the stamps, kept increasing. Readers return messages in
+    this order, so a header clock that jumps back must not reorder the recording."""
+    out, last = [], -1
+    for t in stamps:
+        last = max(last + 1, int(round(t * 1e9)))
+        out.append(last)
+    return out
+
+
 def write_tracker_bag(path: Path, stream: TrackerStream, config: SensorConfig, start: float = 1_700_000_000.0) -> None:
     """One /tf message per frame with every valid tracker; dropped samples are left out."""
     store = typestore()
     TFMessage = store.types[TF_TYPE]
     with Writer(Path(path), version=8, storage_plugin=StoragePlugin.MCAP) as writer:
         conn = writer.add_connection(TF_TOPIC, TF_TYPE, typestore=store)
+        log_ns = _log_times(start + np.asarray(stream.times, dtype=float))
         for i in range(len(stream)):
             t = start + float(stream.times[i])
             transforms = []
@@ -71,7 +82,7 @@ def write_tracker_bag(path: Path, stream: TrackerStream, config: SensorConfig, s
                 rot = stream.orientations[i, s] if site.has_orientation else np.array([0.0, 0.0, 0.0, 1.0])
                 transforms.append(_transform_msg(store, t, config.fixed_frame, site.frame_id, pos, rot))
             data = store.serialize_cdr(TFMessage(transforms=transforms), TF_TYPE)
-            writer.write(conn, int(round(t * 1e9)), data)
+            writer.write(conn, log_ns[i], data)
 
 
 def read_tracker_stream(path: Path, config: SensorConfig, stale_after: float = 0.1) -> TrackerStream:
@@ -128,8 +139,7 @@ def write_estimate_bag(path: Path, poses: list[BodyPose], skeleton: Skeleton, fi
         c_fc = writer.add_connection(CONTACTS_TOPIC, "sparse_body/msg/FootContacts", typestore=store)
         c_st = writer.add_connection(STATUS_TOPIC, "sparse_body/msg/EstimateStatus", typestore=store)
         c_tf = writer.add_connection(TF_TOPIC, TF_TYPE, typestore=store)
-        for pose in poses:
-            ns = int(round(pose.stamp * 1e9))
+        for pose, ns in zip(poses, _log_times([p.stamp for p in poses])):
             header = _header(store, pose.stamp, fixed_frame)
             js = T["sensor_msgs/msg/JointState"](header=_header(store, pose.stamp, ""), name=names,
                                                  position=joint_state_positions(pose), velocity=np.zeros(0),

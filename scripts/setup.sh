@@ -24,6 +24,20 @@ inputs_hash() { { cat "$@" 2>/dev/null || true; } | sha256sum | cut -d' ' -f1; }
 up_to_date() { [ -f "$STAMPS/$1" ] && [ "$(cat "$STAMPS/$1")" = "$2" ]; }
 mark_done() { mkdir -p "$STAMPS"; echo "$2" > "$STAMPS/$1"; }
 
+# Generate, build and install an interface package into the venv (the ROS prefix here).
+build_interfaces() {
+  local src="$1" build="$2"; shift 2
+  local log="$build.log"
+  rm -rf "$build"; mkdir -p "$build"
+  AMENT_PREFIX_PATH="$VENV" CMAKE_PREFIX_PATH="$VENV" PATH="$VENV/bin:$PATH" \
+    cmake -S "$src" -B "$build" -DCMAKE_BUILD_TYPE=Release -DBUILD_TESTING=OFF "$@" \
+      -DCMAKE_INSTALL_PREFIX="$VENV" -DPython3_EXECUTABLE="$VPY" -DPYTHON_EXECUTABLE="$VPY" >"$log" 2>&1 \
+    || { tail -30 "$log" >&2; die "configuring $src failed (log: $log)"; }
+  PATH="$VENV/bin:$PATH" cmake --build "$build" -j "$(nproc)" >>"$log" 2>&1 \
+    || { tail -30 "$log" >&2; die "building $src failed (log: $log)"; }
+  cmake --install "$build" >>"$log" 2>&1 || die "installing $src failed (log: $log)"
+}
+
 if [ ! -x "$VENV/bin/python" ]; then
   say "creating virtual environment $VENV"
   "$PYTHON" -m venv "$VENV"
@@ -62,16 +76,7 @@ fi
 msg_hash=$(inputs_hash "$ROOT/CMakeLists.txt" "$ROOT/package.xml" "$ROOT"/msg/*.msg "$ROOT"/srv/*.srv "$STAMPS/deps")
 if ! up_to_date interfaces "$msg_hash"; then
   say "generating the sparse_body interfaces from msg/"
-  BUILD="$ROOT/build/interfaces"
-  rm -rf "$BUILD"; mkdir -p "$BUILD"
-  AMENT_PREFIX_PATH="$VENV" CMAKE_PREFIX_PATH="$VENV" PATH="$VENV/bin:$PATH" \
-    cmake -S "$ROOT" -B "$BUILD" -DCMAKE_BUILD_TYPE=Release -DBUILD_TESTING=OFF \
-      -DSPARSE_BODY_INSTALL_PYTHON=OFF -DCMAKE_INSTALL_PREFIX="$VENV" \
-      -DPython3_EXECUTABLE="$VPY" -DPYTHON_EXECUTABLE="$VPY" >"$ROOT/build/interfaces.log" 2>&1 \
-    || { tail -30 "$ROOT/build/interfaces.log" >&2; die "configuring the interfaces failed (log: build/interfaces.log)"; }
-  PATH="$VENV/bin:$PATH" cmake --build "$BUILD" -j "$(nproc)" >>"$ROOT/build/interfaces.log" 2>&1 \
-    || { tail -30 "$ROOT/build/interfaces.log" >&2; die "building the interfaces failed (log: build/interfaces.log)"; }
-  cmake --install "$BUILD" >>"$ROOT/build/interfaces.log" 2>&1 || die "installing the interfaces failed"
+  build_interfaces "$ROOT" "$ROOT/build/interfaces" -DSPARSE_BODY_INSTALL_PYTHON=OFF
   # rosidl also installs an empty sparse_body/__init__.py and egg-info; both would shadow the
   # checkout's package (and pip would delete msg/ with the egg-info). Keep only msg/ and the
   # typesupport modules, which sparse_body/__init__.py merges in.
@@ -80,6 +85,17 @@ if ! up_to_date interfaces "$msg_hash"; then
   mark_done interfaces "$msg_hash"
 else
   say "interfaces up to date"
+fi
+
+# tf2_msgs is not among the PyPI wheels; the nodes read /tf with it. Build the one-message
+# stand-in in test/ros_env only where no real tf2_msgs can be imported.
+tf_hash=$(inputs_hash "$ROOT"/test/ros_env/tf2_msgs/CMakeLists.txt "$ROOT"/test/ros_env/tf2_msgs/msg/*.msg "$STAMPS/deps")
+if "$VPY" -c 'import tf2_msgs.msg' 2>/dev/null && ! [ -f "$STAMPS/tf2_msgs" ]; then
+  say "tf2_msgs provided by the environment"
+elif ! up_to_date tf2_msgs "$tf_hash"; then
+  say "generating tf2_msgs/TFMessage for the test environment"
+  build_interfaces "$ROOT/test/ros_env/tf2_msgs" "$ROOT/build/tf2_msgs"
+  mark_done tf2_msgs "$tf_hash"
 fi
 
 pkg_hash=$(inputs_hash "$ROOT/pyproject.toml" "$STAMPS/deps")

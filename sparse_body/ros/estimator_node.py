@@ -1,0 +1,240 @@
+"""The estimator as a lifecycle node.
+
+configure: read parameters, load the sensor configuration and the estimator, create the
+publishers and the TF input; activate: start the output timer; deactivate: stop it;
+cleanup: release everything. Bad tracker input never stops the node: it is reported on
+/diagnostics, and the outputs hold the last good pose, marked invalid on estimate_status.
+"""
+from __future__ import annotations
+
+import sys
+import time
+from collections import deque
+
+import numpy as np
+import rclpy
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from rcl_interfaces.msg import FloatingPointRange, ParameterDescriptor
+from rclpy.executors import ExternalShutdownException
+from rclpy.lifecycle import LifecycleNode, LifecycleState, TransitionCallbackReturn
+from rclpy.qos import DurabilityPolicy, QoSProfile
+from rclpy.qos_overriding_options import QoSOverridingOptions
+from sensor_msgs.msg import JointState
+from std_msgs.msg import String
+
+from sparse_body.msg import EstimateStatus, FootContacts
+
+from ..core.sensors import SensorConfigError, load_sensor_config
+from ..core.skeleton import Skeleton
+from ..core.types import BodyPose
+from ..estimators import create_estimator
+from ..urdf import body_urdf
+from . import messages
+from .tf_input import HAVE_TF2_ROS, Tf2Reader, TfReader
+
+PARAMETERS = {
+    # name: (default, description)
+    "sensors": ("six_point", "sensor configuration: a name under config/sensors or a YAML path"),
+    "estimator": ("ik", "estimation method (ik, reference, ...)"),
+    "model_path": ("", "model file for learned estimators; empty: the shipped model"),
+    "fixed_frame": ("", "frame the trackers are looked up in; empty: the sensor configuration's"),
+    "height": (1.75, "the tracked person's height in metres (scales the body)"),
+    "output_rate": (60.0, "estimates per second"),
+    "stale_timeout": (0.1, "seconds after which a tracker's newest pose no longer counts"),
+    "frame_prefix": ("", "prefix of the body's TF frames"),
+    "publish_link_tf": (True, "publish every body link on /tf (off when robot_state_publisher does)"),
+    "use_tf2_ros": (True, "read TF with tf2_ros when it is installed (else a /tf reader)"),
+    "autostart": (False, "configure and activate on start-up (without a lifecycle manager)"),
+}
+
+
+class EstimatorNode(LifecycleNode):
+    def __init__(self, **kwargs) -> None:
+        super().__init__("sparse_body_estimator", **kwargs)
+        for name, (default, text) in PARAMETERS.items():
+            descriptor = ParameterDescriptor(description=text)
+            if name == "height":
+                descriptor.floating_point_range = [FloatingPointRange(from_value=0.5, to_value=2.5)]
+            elif name in ("output_rate", "stale_timeout"):
+                descriptor.floating_point_range = [FloatingPointRange(from_value=0.001, to_value=1000.0)]
+            self.declare_parameter(name, default, descriptor)
+        self._release()
+
+    # -- lifecycle -------------------------------------------------------------------------
+    def on_configure(self, state: LifecycleState) -> TransitionCallbackReturn:
+        p = {name: self.get_parameter(name).value for name in PARAMETERS}
+        try:
+            sensors = load_sensor_config(p["sensors"])
+            if p["fixed_frame"]:
+                from dataclasses import replace
+                sensors = replace(sensors, fixed_frame=p["fixed_frame"])
+            self.skeleton = Skeleton.canonical(p["height"])
+            options = {"model_path": p["model_path"]} if p["model_path"] else {}
+            self.estimator = create_estimator(p["estimator"], sensors, self.skeleton, fps=p["output_rate"], **options)
+        except (SensorConfigError, ValueError, FileNotFoundError) as err:
+            self.get_logger().error(f"configure failed: {err}")
+            self._release()
+            return TransitionCallbackReturn.FAILURE
+        self.sensors, self.params = sensors, p
+        frames = {s.frame_id for s in sensors.sites}
+        self.tf_in = Tf2Reader(self, frames) if (HAVE_TF2_ROS and p["use_tf2_ros"]) else TfReader(self, frames)
+        qos = QoSProfile(depth=10)
+        overrides = QoSOverridingOptions.with_default_policies()
+        from tf2_msgs.msg import TFMessage
+        self.pub_joints = self.create_lifecycle_publisher(JointState, "joint_states", qos, qos_overriding_options=overrides)
+        self.pub_contacts = self.create_lifecycle_publisher(FootContacts, "foot_contacts", qos, qos_overriding_options=overrides)
+        self.pub_status = self.create_lifecycle_publisher(EstimateStatus, "estimate_status", qos, qos_overriding_options=overrides)
+        self.pub_tf = self.create_lifecycle_publisher(TFMessage, "/tf", QoSProfile(depth=100))
+        self.pub_diag = self.create_lifecycle_publisher(DiagnosticArray, "/diagnostics", QoSProfile(depth=10))
+        latched = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL)
+        self.pub_description = self.create_publisher(String, "robot_description", latched)
+        self.pub_description.publish(String(data=body_urdf(self.skeleton)))
+        self.get_logger().info(f"configured: {p['estimator']} on {sensors.name} ({', '.join(sensors.site_names)}) "
+                               f"in frame {sensors.fixed_frame!r}, TF via {'tf2_ros' if isinstance(self.tf_in, Tf2Reader) else '/tf reader'}")
+        return TransitionCallbackReturn.SUCCESS
+
+    def on_activate(self, state: LifecycleState) -> TransitionCallbackReturn:
+        self.estimator.reset()
+        self._stats = {"steps": deque(maxlen=600), "latency": deque(maxlen=600), "invalid": 0, "errors": 0,
+                       "resets": 0, "last_error": ""}
+        self._last_now = None
+        self.timer = self.create_timer(1.0 / self.params["output_rate"], self._tick)
+        self.diag_timer = self.create_timer(1.0, self._publish_diagnostics)
+        return super().on_activate(state)
+
+    def on_deactivate(self, state: LifecycleState) -> TransitionCallbackReturn:
+        self._stop_timers()
+        return super().on_deactivate(state)
+
+    def on_cleanup(self, state: LifecycleState) -> TransitionCallbackReturn:
+        self._stop_timers()
+        self._release()
+        return TransitionCallbackReturn.SUCCESS
+
+    def on_shutdown(self, state: LifecycleState) -> TransitionCallbackReturn:
+        self._stop_timers()
+        self._release()
+        return TransitionCallbackReturn.SUCCESS
+
+    def _stop_timers(self) -> None:
+        for name in ("timer", "diag_timer"):
+            timer = getattr(self, name, None)
+            if timer is not None:
+                self.destroy_timer(timer)
+                setattr(self, name, None)
+
+    def _release(self) -> None:
+        for name in ("pub_joints", "pub_contacts", "pub_status", "pub_tf", "pub_diag", "pub_description"):
+            pub = getattr(self, name, None)
+            if pub is not None:
+                self.destroy_publisher(pub)
+        if getattr(self, "tf_in", None) is not None:
+            self.tf_in.destroy()
+        self.tf_in = self.estimator = None
+        self.pub_joints = self.pub_contacts = self.pub_status = self.pub_tf = self.pub_diag = None
+        self.pub_description = self.timer = self.diag_timer = None
+        self._last_good: BodyPose | None = None
+        self._ages = None
+
+    # -- work --------------------------------------------------------------------------------
+    def _tick(self) -> None:
+        now = self.get_clock().now().nanoseconds * 1e-9
+        if (self._last_now is not None and now < self._last_now - 1.0) or self.tf_in.jumped_back:
+            # A clock jump back (a looping bag, a restarted simulation): start afresh.
+            self.tf_in.jumped_back = False
+            self.estimator.reset()
+            self._stats["resets"] += 1
+        self._last_now = now
+        frame, ages = self.tf_in.sample(self.sensors, now, self.params["stale_timeout"])
+        self._ages = ages
+        reason = ""
+        try:
+            pose = self.estimator.step(frame)
+            if not pose.is_finite():
+                raise FloatingPointError("estimator returned non-finite values")
+        except Exception as err:  # noqa: BLE001 - a failing step must not take the node down
+            self._stats["errors"] += 1
+            self._stats["last_error"] = f"{type(err).__name__}: {err}"
+            self.estimator.reset()
+            pose, reason = self._held(frame.stamp), "estimator error; held"
+        if pose.valid:
+            self._last_good = pose
+        elif not pose.is_finite():
+            pose = self._held(frame.stamp)
+        valid_ages = ages[frame.valid]
+        source_time = now - float(valid_ages.min()) if valid_ages.size else now
+        stamp = messages.to_time(source_time)
+        if not pose.valid:
+            self._stats["invalid"] += 1
+            if not reason:
+                missing = [s for s, ok in zip(self.sensors.site_names, frame.valid) if not ok]
+                reason = f"held: no usable pose from {', '.join(missing)}" if missing else "held"
+        frame_id = self.sensors.fixed_frame
+        self.pub_joints.publish(messages.joint_state(pose, stamp))
+        self.pub_contacts.publish(messages.foot_contacts(pose, self.skeleton, stamp, frame_id))
+        self.pub_status.publish(messages.estimate_status(pose, stamp, frame_id, reason))
+        from tf2_msgs.msg import TFMessage
+        self.pub_tf.publish(TFMessage(transforms=messages.transforms(
+            pose, self.skeleton, stamp, frame_id, self.params["frame_prefix"], self.params["publish_link_tf"])))
+        self._stats["steps"].append(time.monotonic())
+        self._stats["latency"].append(now - source_time)
+
+    def _held(self, stamp: float) -> BodyPose:
+        from ..estimators.reference import standing_pose
+        from ..core.rotations import matrix_to_quat
+        last = self._last_good
+        if last is None:
+            return BodyPose(stamp, matrix_to_quat(standing_pose()), np.zeros(3), valid=False)
+        return BodyPose(stamp, last.local_quats.copy(), last.root_position.copy(), last.contact_probability.copy(),
+                        last.contact.copy(), valid=False)
+
+    def _publish_diagnostics(self) -> None:
+        st = self._stats
+        steps = [t for t in st["steps"] if t > time.monotonic() - 2.0]
+        rate = (len(steps) - 1) / (steps[-1] - steps[0]) if len(steps) > 2 else 0.0
+        lat = np.array(st["latency"]) * 1000 if st["latency"] else np.zeros(1)
+        values = {"output rate [Hz]": f"{rate:.1f}", "latency p50 [ms]": f"{np.percentile(lat, 50):.1f}",
+                  "latency p99 [ms]": f"{np.percentile(lat, 99):.1f}", "invalid estimates": str(st["invalid"]),
+                  "estimator errors": str(st["errors"]), "clock jumps back": str(st["resets"])}
+        stale = []
+        for site, age in zip(self.sensors.site_names, self._ages if self._ages is not None else []):
+            values[f"{site} age [s]"] = "never seen" if not np.isfinite(age) else f"{age:.3f}"
+            if not age <= self.params["stale_timeout"]:
+                stale.append(site)
+        for reason, count in self.tf_in.rejected.items():
+            values[f"rejected samples: {reason.value}"] = str(count)
+        if st["errors"]:
+            values["last error"] = st["last_error"]
+        level, message = DiagnosticStatus.OK, "estimating"
+        if stale:
+            level, message = DiagnosticStatus.WARN, f"stale or missing trackers: {', '.join(stale)}"
+        if st["errors"] and st["last_error"]:
+            level, message = DiagnosticStatus.ERROR, f"estimator errors ({st['errors']}): {st['last_error']}"
+        status = DiagnosticStatus(level=level, name=f"{self.get_name()}: estimator", message=message,
+                                  hardware_id=self.params["estimator"],
+                                  values=[KeyValue(key=k, value=v) for k, v in values.items()])
+        msg = DiagnosticArray(status=[status])
+        msg.header.stamp = self.get_clock().now().to_msg()
+        self.pub_diag.publish(msg)
+
+
+def main(args=None) -> None:
+    rclpy.init(args=args)
+    node = EstimatorNode()
+    try:
+        if node.get_parameter("autostart").value:
+            if node.trigger_configure() != TransitionCallbackReturn.SUCCESS:
+                node.get_logger().fatal("configure failed; exiting")
+                sys.exit(1)
+            node.trigger_activate()
+        rclpy.spin(node)
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    finally:
+        node.destroy_node()
+        if rclpy.ok():
+            rclpy.shutdown()
+
+
+if __name__ == "__main__":
+    main()

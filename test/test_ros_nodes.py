@@ -1,0 +1,228 @@
+"""The estimator and tracker bridge nodes as real processes over real rclpy and Fast DDS."""
+import os
+import time
+
+import numpy as np
+import pytest
+
+rclpy = pytest.importorskip("rclpy", reason="rclpy is not installed (run the setup command)")
+pytest.importorskip("tf2_msgs.msg", reason="tf2_msgs is not available (run the setup command)")
+
+from diagnostic_msgs.msg import DiagnosticArray  # noqa: E402
+from lifecycle_msgs.msg import State, Transition  # noqa: E402
+from lifecycle_msgs.srv import ChangeState, GetState  # noqa: E402
+from rclpy.qos import DurabilityPolicy, QoSProfile  # noqa: E402
+from sensor_msgs.msg import JointState  # noqa: E402
+from std_msgs.msg import String  # noqa: E402
+from tf2_msgs.msg import TFMessage  # noqa: E402
+
+from ros_helpers import Listener, isolated_domain, start_node, stop  # noqa: E402
+from sparse_body.core.kinematics import forward_kinematics  # noqa: E402
+from sparse_body.core.rotations import euler_to_matrix, quat_to_matrix  # noqa: E402
+from sparse_body.core.sensors import load_sensor_config  # noqa: E402
+from sparse_body.core.skeleton import JOINT_INDEX as J, Skeleton  # noqa: E402
+from sparse_body.data.synthetic import synthetic_walk  # noqa: E402
+from sparse_body.msg import EstimateStatus, FootContacts  # noqa: E402
+from sparse_body.offline import make_bag  # noqa: E402
+from sparse_body.output import joint_state_names  # noqa: E402
+
+pytestmark = pytest.mark.ros
+ESTIMATOR = "sparse_body.ros.estimator_node"
+BRIDGE = "sparse_body.ros.tracker_bridge_node"
+
+
+@pytest.fixture
+def ros_env(monkeypatch):
+    monkeypatch.setenv("ROS_DOMAIN_ID", isolated_domain())
+    rclpy.init()
+    yield dict(os.environ)
+    rclpy.shutdown()
+
+
+def _call(node, client, request, timeout=10.0):
+    assert client.wait_for_service(timeout_sec=timeout), f"no service {client.srv_name}"
+    future = client.call_async(request)
+    rclpy.spin_until_future_complete(node, future, timeout_sec=timeout)
+    assert future.done(), f"{client.srv_name} did not answer"
+    return future.result()
+
+
+def test_lifecycle_transitions_gate_the_outputs(ros_env, tmp_path):
+    proc = start_node(ESTIMATOR, {"sensors": "three_point", "estimator": "reference"}, "sparse_body_estimator",
+                      tmp_path, ros_env)
+    listener = Listener(rclpy, {"joint_states": JointState})
+    try:
+        node = listener.node
+        change = node.create_client(ChangeState, "/sparse_body_estimator/change_state")
+        get = node.create_client(GetState, "/sparse_body_estimator/get_state")
+
+        def transition(tid):
+            return _call(node, change, ChangeState.Request(transition=Transition(id=tid))).success
+
+        def state():
+            return _call(node, get, GetState.Request()).current_state.id
+
+        assert state() == State.PRIMARY_STATE_UNCONFIGURED
+        assert transition(Transition.TRANSITION_CONFIGURE) and state() == State.PRIMARY_STATE_INACTIVE
+        listener.spin_for(1.0)
+        assert listener.received["joint_states"] == []          # inactive: nothing published
+        assert transition(Transition.TRANSITION_ACTIVATE) and state() == State.PRIMARY_STATE_ACTIVE
+        assert listener.spin_until(lambda: len(listener.received["joint_states"]) >= 10, 10.0)
+        # With no trackers at all the node still publishes: finite, held poses.
+        assert all(np.all(np.isfinite(m.position)) for m in listener.received["joint_states"])
+        assert transition(Transition.TRANSITION_DEACTIVATE)
+        listener.spin_for(0.5)
+        count = len(listener.received["joint_states"])
+        listener.spin_for(1.0)
+        assert len(listener.received["joint_states"]) == count   # deactivated: stopped
+        assert transition(Transition.TRANSITION_CLEANUP) and state() == State.PRIMARY_STATE_UNCONFIGURED
+        # Reconfigure with a bad parameter: configure fails, the node stays up and unconfigured.
+        from rcl_interfaces.msg import Parameter, ParameterType, ParameterValue
+        from rcl_interfaces.srv import SetParameters
+        setp = node.create_client(SetParameters, "/sparse_body_estimator/set_parameters")
+        bad = Parameter(name="sensors", value=ParameterValue(type=ParameterType.PARAMETER_STRING,
+                                                                string_value="seven_point"))
+        _call(node, setp, SetParameters.Request(parameters=[bad]))
+        assert not transition(Transition.TRANSITION_CONFIGURE)
+        assert state() == State.PRIMARY_STATE_UNCONFIGURED and proc.poll() is None
+    finally:
+        listener.destroy()
+        stop(proc)
+    assert "no sensor configuration 'seven_point'" in (tmp_path / "sparse_body_estimator.log").read_text()
+
+
+def _motion(request):
+    """A real CMU clip when ../shared/mocap is there, else the synthetic walk."""
+    from sparse_body.data.catalog import find_mocap_root, load_clip, read_index
+    root = find_mocap_root()
+    if root is None:
+        return synthetic_walk(6.0)
+    clip = {c.clip_id: c for c in read_index(root)}["02_01"]
+    return load_clip(clip).slice(0, 360)
+
+
+def test_replayed_bag_gives_joint_states_at_rate_with_small_end_effector_error(ros_env, tmp_path, request):
+    motion = _motion(request)
+    config = load_sensor_config("six_point")
+    make_bag(motion, config, tmp_path / "trackers")
+    height = motion.skeleton.height()
+    est = start_node(ESTIMATOR, {"sensors": "six_point", "estimator": "ik", "autostart": True, "height": height},
+                     "sparse_body_estimator", tmp_path, ros_env)
+    latched = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL)
+    listener = Listener(rclpy, {"joint_states": JointState, "foot_contacts": FootContacts, "/tf": TFMessage,
+                                "estimate_status": EstimateStatus, "robot_description": String},
+                        qos={"robot_description": latched, "/tf": 500})
+    bridge = None
+    try:
+        assert listener.spin_until(lambda: listener.received["robot_description"], 15.0), "estimator did not start"
+        bridge = start_node(BRIDGE, {"bag": str(tmp_path / "trackers"), "start_delay": 1.0}, "sparse_body_tracker_bridge",
+                            tmp_path, ros_env)
+        listener.spin_for(1.5 + len(motion) / motion.fps)
+    finally:
+        listener.destroy()
+        stop(est, *([bridge] if bridge else []))
+    states = listener.received["joint_states"]
+    assert states and list(states[0].name) == joint_state_names()
+    assert all(np.all(np.isfinite(m.position)) for m in states)
+    arrivals = np.array(listener.arrival["joint_states"])
+    rate = (len(arrivals) - 1) / (arrivals[-1] - arrivals[0])
+    assert 45.0 < rate < 75.0, f"JointState rate {rate:.1f} Hz"
+    contacts = listener.received["foot_contacts"]
+    assert contacts and [c.name for c in contacts[-1].contacts] == ["left_foot", "right_foot"]
+    urdf = listener.received["robot_description"][0].data
+    assert all(f'joint name="{n}"' in urdf for n in joint_state_names())
+
+    # End effectors: FK of each estimate against the joints the trackers were made from.
+    tracker_tf, root_tf = {}, {}
+    for msg in listener.received["/tf"]:
+        for tf in msg.transforms:
+            key = (tf.header.stamp.sec, tf.header.stamp.nanosec)
+            t, q = tf.transform.translation, tf.transform.rotation
+            pose = (np.array([t.x, t.y, t.z]), np.array([q.x, q.y, q.z, q.w]))
+            if tf.child_frame_id == "pelvis":
+                root_tf[key] = pose
+            elif tf.child_frame_id in {s.frame_id for s in config.sites}:
+                tracker_tf.setdefault(key, {})[tf.child_frame_id] = pose
+    skeleton = Skeleton.canonical(height)
+    errors = []
+    for msg, status in zip(states, listener.received["estimate_status"]):
+        key = (msg.header.stamp.sec, msg.header.stamp.nanosec)
+        if not status.valid or key not in tracker_tf or key not in root_tf or len(tracker_tf[key]) < 6:
+            continue
+        local = np.tile(np.eye(3), (22, 1, 1))
+        local[1:] = euler_to_matrix(np.array(msg.position).reshape(21, 3), "ZYX")
+        local[0] = quat_to_matrix(root_tf[key][1])
+        _, pos = forward_kinematics(local, root_tf[key][0], skeleton.offsets)
+        for site in ("left_hand", "right_hand", "left_foot", "right_foot"):
+            spec = config.site(site)
+            target, _ = spec.joint_pose(*tracker_tf[key][spec.frame_id])
+            errors.append(np.linalg.norm(pos[spec.joint_index] - target))
+    assert len(errors) > 4 * 100, "too few estimates matched their tracker frames"
+    assert np.mean(errors) < 0.02, f"mean end-effector error {np.mean(errors) * 100:.2f} cm"
+
+
+def test_bad_tracker_input_is_reported_and_never_gives_non_finite_output(ros_env, tmp_path):
+    """NaN poses, a tracker that stops, one never seen, out-of-order stamps, a clock jump back."""
+    from geometry_msgs.msg import TransformStamped
+    from sparse_body.ros.messages import to_time
+    from sparse_body.data.virtual_trackers import synthesize_trackers
+    config = load_sensor_config("four_point")
+    motion = synthetic_walk(8.0)
+    stream = synthesize_trackers(motion, config)
+    est = start_node(ESTIMATOR, {"sensors": "four_point", "estimator": "ik", "autostart": True},
+                     "sparse_body_estimator", tmp_path, ros_env)
+    listener = Listener(rclpy, {"joint_states": JointState, "estimate_status": EstimateStatus,
+                                "/diagnostics": DiagnosticArray})
+    pub = listener.node.create_publisher(TFMessage, "/tf", 100)
+    try:
+        assert listener.spin_until(lambda: listener.received["joint_states"], 15.0), "estimator did not start"
+        start = time.monotonic()
+        for i in range(len(motion)):
+            t = time.monotonic() - start
+            now = listener.node.get_clock().now().nanoseconds * 1e-9
+            stamp = now - 5.0 if t > 6.0 else now                   # from 6 s on: the clock jumps back 5 s
+            msgs = []
+            for s, site in enumerate(config.sites):
+                pos, rot = stream.positions[i, s].copy(), stream.orientations[i, s]
+                if site.site == "right_hand":
+                    continue                                        # never seen at all
+                if site.site == "head" and 1.0 < t < 1.5:
+                    pos[:] = np.nan                                 # NaN poses
+                if site.site == "pelvis" and 2.0 < t < 4.0:
+                    continue                                        # stops for 2 s
+                if site.site == "head" and 3.0 < t < 4.0:
+                    continue                                        # ...and the headset too for 1 s
+                site_stamp = stamp - 0.3 if (site.site == "left_hand" and 4.5 < t < 5.0) else stamp   # out of order
+                m = TransformStamped()
+                m.header.frame_id, m.child_frame_id, m.header.stamp = "world", site.frame_id, to_time(site_stamp)
+                m.transform.translation.x, m.transform.translation.y, m.transform.translation.z = map(float, pos)
+                (m.transform.rotation.x, m.transform.rotation.y, m.transform.rotation.z,
+                 m.transform.rotation.w) = map(float, rot)
+                msgs.append(m)
+            pub.publish(TFMessage(transforms=msgs))
+            listener.spin_for(1.0 / 60)
+            if t > 7.5:
+                break
+        listener.spin_for(1.5)
+        alive = est.poll() is None
+    finally:
+        listener.destroy()
+        stop(est)
+    assert alive, (tmp_path / "sparse_body_estimator.log").read_text()
+    states = listener.received["joint_states"]
+    assert len(states) > 300 and all(np.all(np.isfinite(m.position)) for m in states)
+    statuses = listener.received["estimate_status"]
+    invalid = [s for s in statuses if not s.valid]
+    assert invalid and any("head" in s.message and "pelvis" in s.message for s in invalid)
+    assert sum(s.valid for s in statuses) > len(statuses) / 2
+    values = {}
+    messages = []
+    for d in listener.received["/diagnostics"]:
+        for st in d.status:
+            messages.append(st.message)
+            values.update({kv.key: kv.value for kv in st.values})
+    assert int(values["rejected samples: non-finite"]) > 0
+    assert int(values["rejected samples: out of order"]) > 0
+    assert int(values["clock jumps back"]) >= 1
+    assert values["right_hand age [s]"] == "never seen"
+    assert any("stale or missing trackers" in m and "pelvis" in m for m in messages)

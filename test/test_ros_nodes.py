@@ -226,3 +226,21 @@ def test_bad_tracker_input_is_reported_and_never_gives_non_finite_output(ros_env
     assert int(values["clock jumps back"]) >= 1
     assert values["right_hand age [s]"] == "never seen"
     assert any("stale or missing trackers" in m and "pelvis" in m for m in messages)
+
+
+def test_plain_process_takes_the_shipped_parameter_file(ros_env, tmp_path):
+    """What the launch file gives the node, by hand: --params-file config/estimator.yaml -p ..."""
+    import subprocess
+    import sys
+    from sparse_body.resources import config_dir
+    log = open(tmp_path / "plain.log", "w")
+    proc = subprocess.Popen([sys.executable, "-m", ESTIMATOR, "--ros-args", "--params-file",
+                             str(config_dir() / "estimator.yaml"), "-p", "autostart:=true", "-p", "sensors:=three_point",
+                             "-p", "estimator:=reference"], stdout=log, stderr=subprocess.STDOUT, env=ros_env)
+    listener = Listener(rclpy, {"joint_states": JointState})
+    try:
+        assert listener.spin_until(lambda: len(listener.received["joint_states"]) >= 5, 15.0)
+    finally:
+        listener.destroy()
+        stop(proc)
+    assert "configured: reference on three_point" in (tmp_path / "plain.log").read_text()

@@ -1,0 +1,52 @@
+"""Trackers -> estimator -> JointState, contacts and TF, with robot_state_publisher for RViz.
+
+    ros2 launch sparse_body sparse_body.launch.py sensors:=four_point estimator:=ik bag:=/path/to/trackers
+
+Arguments: sensors, estimator, height, bag (the tracker source; empty: trackers come from
+elsewhere on /tf), rviz. The estimator is a lifecycle node; it is configured and activated
+here through its autostart parameter.
+"""
+import os
+
+from ament_index_python.packages import get_package_share_directory
+from launch import LaunchDescription
+from launch.actions import DeclareLaunchArgument, OpaqueFunction
+from launch.conditions import IfCondition
+from launch.substitutions import LaunchConfiguration
+from launch_ros.actions import LifecycleNode, Node
+
+
+def _nodes(context):
+    from sparse_body.core.skeleton import Skeleton
+    from sparse_body.urdf import body_urdf
+
+    share = get_package_share_directory("sparse_body")
+    arg = lambda name: LaunchConfiguration(name).perform(context)  # noqa: E731
+    height = float(arg("height"))
+    estimator_params = [os.path.join(share, "config", "estimator.yaml"),
+                        {"sensors": arg("sensors"), "estimator": arg("estimator"), "height": height,
+                         "publish_link_tf": False, "autostart": True}]
+    nodes = [
+        LifecycleNode(package="sparse_body", executable="estimator_node", name="sparse_body_estimator",
+                      namespace="", output="screen", parameters=estimator_params),
+        Node(package="robot_state_publisher", executable="robot_state_publisher", output="screen",
+             parameters=[{"robot_description": body_urdf(Skeleton.canonical(height))}]),
+    ]
+    if arg("bag"):
+        nodes.append(Node(package="sparse_body", executable="tracker_bridge", name="sparse_body_tracker_bridge",
+                          output="screen", parameters=[os.path.join(share, "config", "tracker_bridge.yaml"),
+                                                       {"bag": arg("bag")}]))
+    return nodes
+
+
+def generate_launch_description():
+    return LaunchDescription([
+        DeclareLaunchArgument("sensors", default_value="six_point", description="sensor configuration"),
+        DeclareLaunchArgument("estimator", default_value="ik", description="estimation method"),
+        DeclareLaunchArgument("height", default_value="1.75", description="the person's height in metres"),
+        DeclareLaunchArgument("bag", default_value="", description="rosbag2 of tracker TF to replay"),
+        DeclareLaunchArgument("rviz", default_value="false", description="start RViz"),
+        OpaqueFunction(function=_nodes),
+        Node(package="rviz2", executable="rviz2", output="screen", condition=IfCondition(LaunchConfiguration("rviz")),
+             arguments=["-d", os.path.join(get_package_share_directory("sparse_body"), "config", "sparse_body.rviz")]),
+    ])

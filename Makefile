@@ -2,7 +2,7 @@
 VENV ?= .venv
 PY := $(VENV)/bin/python
 
-.PHONY: setup test demo eval clean
+.PHONY: setup test demo eval bench clean
 
 setup:
 	bash scripts/setup.sh
@@ -11,9 +11,13 @@ test: setup
 	$(PY) -m pytest -q test
 
 demo: setup
-	$(VENV)/bin/sparse-body eval --estimator reference --sensors four_point
+	$(VENV)/bin/sparse-body demo
 
-eval: demo
+eval: setup
+	$(VENV)/bin/sparse-body eval --estimator reference --estimator ik --sensors six_point
+
+bench: setup
+	$(VENV)/bin/python scripts/bench.py
 
 clean:
 	rm -rf build $(VENV)

@@ -86,9 +86,28 @@ def cmd_process(args) -> int:
     return 0
 
 
+def cmd_demo(args) -> int:
+    from .core.sensors import load_sensor_config
+    from .data.catalog import find_mocap_root
+    from .demo import run_demo
+    run_demo(Path(args.out), load_sensor_config(args.sensors), args.estimator,
+             find_mocap_root(args.mocap), args.motion, args.seconds, gif=not args.no_gif)
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="sparse-body", description=__doc__)
     sub = parser.add_subparsers(dest="command", required=True)
+
+    p = sub.add_parser("demo", help="motion -> tracker bag -> estimator -> metrics and an animation")
+    p.add_argument("--out", default="sparse_body_demo", help="folder for the bags and demo.gif")
+    p.add_argument("--sensors", default="six_point")
+    p.add_argument("--estimator", default="ik")
+    p.add_argument("--motion", help="a motion file to use instead of the CMU demo clip")
+    p.add_argument("--mocap", help="the CMU folder")
+    p.add_argument("--seconds", type=float, default=6.0)
+    p.add_argument("--no-gif", action="store_true", help="skip the animation")
+    p.set_defaults(func=cmd_demo)
 
     p = sub.add_parser("eval", help="run estimators over a split of the CMU clips and print the metrics")
     p.add_argument("--estimator", action="append", required=True,

@@ -17,7 +17,7 @@ eval: setup
 	$(VENV)/bin/sparse-body eval --estimator reference --estimator ik --sensors six_point
 
 bench: setup
-	$(VENV)/bin/python scripts/bench.py
+	$(VENV)/bin/sparse-body bench
 
 clean:
 	rm -rf build $(VENV)

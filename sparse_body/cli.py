@@ -95,6 +95,12 @@ def cmd_demo(args) -> int:
     return 0
 
 
+def cmd_bench(args) -> int:
+    from .bench import run
+    run(args.estimator or ["reference", "ik"], args.sensors, latency=not args.no_latency)
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="sparse-body", description=__doc__)
     sub = parser.add_subparsers(dest="command", required=True)
@@ -143,6 +149,12 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--fps", type=float, default=60.0, help="the trackers' nominal rate")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=cmd_process)
+
+    p = sub.add_parser("bench", help="offline speed and end-to-end latency over DDS")
+    p.add_argument("--estimator", action="append", help="estimator(s) to measure (default: reference and ik)")
+    p.add_argument("--sensors", default="six_point")
+    p.add_argument("--no-latency", action="store_true", help="only the offline speed (no ROS needed)")
+    p.set_defaults(func=cmd_bench)
 
     p = sub.add_parser("split", help="compute the CMU train/validation/test split")
     p.add_argument("--write", action="store_true", help="write config/splits/cmu.yaml")

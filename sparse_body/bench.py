@@ -1,0 +1,111 @@
+"""`sparse-body bench`: offline processing speed and end-to-end latency over DDS.
+
+Latency is measured from a tracker pose being stamped and published on /tf to the
+JointState built from it arriving at a subscriber (header stamps are the tracker stamps),
+with the estimator node as a separate process. It includes the wait for the node's next
+output tick (up to 1 / output_rate)."""
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+from .core.sensors import load_sensor_config
+from .data.synthetic import synthetic_walk
+from .data.virtual_trackers import synthesize_trackers
+from .estimators import create_estimator
+
+
+def bench_offline(estimators, sensors_name: str, seconds: float = 20.0) -> None:
+    motion = synthetic_walk(seconds)
+    config = load_sensor_config(sensors_name)
+    stream = synthesize_trackers(motion, config)
+    print(f"offline: {len(stream)} frames of a synthetic walk, {sensors_name}")
+    for name in estimators:
+        est = create_estimator(name, config, motion.skeleton)
+        est.reset()
+        times = []
+        for frame in stream:
+            t0 = time.perf_counter()
+            est.step(frame)
+            times.append(time.perf_counter() - t0)
+        ms = np.array(times) * 1000
+        print(f"  {name:<10} {len(ms) / (ms.sum() / 1000):8.0f} frames/s   step p50 {np.percentile(ms, 50):6.2f} ms"
+              f"   p99 {np.percentile(ms, 99):6.2f} ms")
+
+
+def bench_latency(estimator: str, sensors_name: str, seconds: float = 10.0, rate: float = 60.0) -> None:
+    import rclpy
+    from geometry_msgs.msg import TransformStamped
+    from sensor_msgs.msg import JointState
+    from tf2_msgs.msg import TFMessage
+
+    from .ros.messages import to_seconds, to_time
+    config = load_sensor_config(sensors_name)
+    motion = synthetic_walk(seconds + 5)
+    stream = synthesize_trackers(motion, config)
+    env = {**os.environ, "ROS_DOMAIN_ID": str(150 + os.getpid() % 50)}
+    os.environ["ROS_DOMAIN_ID"] = env["ROS_DOMAIN_ID"]
+    with tempfile.TemporaryDirectory() as tmp:
+        log = open(Path(tmp) / "node.log", "w")
+        proc = subprocess.Popen([sys.executable, "-m", "sparse_body.ros.estimator_node", "--ros-args",
+                                 "-p", "autostart:=true", "-p", f"sensors:={sensors_name}", "-p", f"estimator:={estimator}",
+                                 "-p", f"output_rate:={rate}"], stdout=log, stderr=subprocess.STDOUT, env=env)
+        rclpy.init()
+        node = rclpy.create_node("sparse_body_bench")
+        latencies, sent = [], set()
+
+        def on_joints(msg):
+            stamp = to_seconds(msg.header.stamp)
+            key = round(stamp * 1e5)   # 10 us: the node recomputes the stamp, with float rounding
+            if key in sent:
+                latencies.append(node.get_clock().now().nanoseconds * 1e-9 - stamp)
+                sent.discard(key)   # count each tracker sample once: the first estimate using it
+
+        node.create_subscription(JointState, "joint_states", on_joints, 100)
+        pub = node.create_publisher(TFMessage, "/tf", 100)
+        try:
+            deadline = time.monotonic() + 20
+            while proc.poll() is None and pub.get_subscription_count() == 0 and time.monotonic() < deadline:
+                rclpy.spin_once(node, timeout_sec=0.05)
+            start = time.monotonic()
+            i = 0
+            while time.monotonic() - start < seconds and i < len(stream):
+                now = node.get_clock().now().nanoseconds * 1e-9
+                msgs = []
+                for s, site in enumerate(config.sites):
+                    m = TransformStamped()
+                    m.header.frame_id, m.child_frame_id, m.header.stamp = config.fixed_frame, site.frame_id, to_time(now)
+                    m.transform.translation.x, m.transform.translation.y, m.transform.translation.z = map(float, stream.positions[i, s])
+                    (m.transform.rotation.x, m.transform.rotation.y, m.transform.rotation.z,
+                     m.transform.rotation.w) = map(float, stream.orientations[i, s])
+                    msgs.append(m)
+                sent.add(round(to_seconds(to_time(now)) * 1e5))
+                pub.publish(TFMessage(transforms=msgs))
+                i += 1
+                next_t = start + i / rate
+                while time.monotonic() < next_t:
+                    rclpy.spin_once(node, timeout_sec=max(0.0, next_t - time.monotonic()))
+        finally:
+            node.destroy_node()
+            rclpy.shutdown()
+            proc.terminate()
+            proc.wait(timeout=10)
+    ms = np.array(latencies) * 1000
+    if not len(ms):
+        print("latency: no JointState arrived (see the node's log)")
+        return
+    print(f"latency TF in -> JointState out ({estimator}, {sensors_name}, trackers and output at {rate:g} Hz, "
+          f"{len(ms)} samples): p50 {np.percentile(ms, 50):.1f} ms, p99 {np.percentile(ms, 99):.1f} ms")
+
+
+def run(estimators, sensors_name: str, latency: bool = True) -> None:
+    bench_offline(estimators, sensors_name)
+    if latency:
+        for name in estimators:
+            bench_latency(name, sensors_name)

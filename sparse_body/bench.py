@@ -62,7 +62,7 @@ def bench_latency(estimator: str, sensors_name: str, seconds: float = 10.0, rate
 
         def on_joints(msg):
             stamp = to_seconds(msg.header.stamp)
-            key = round(stamp * 1e5)   # 10 us: the node recomputes the stamp, with float rounding
+            key = round(stamp * 1e6)
             if key in sent:
                 latencies.append(node.get_clock().now().nanoseconds * 1e-9 - stamp)
                 sent.discard(key)   # count each tracker sample once: the first estimate using it
@@ -85,7 +85,7 @@ def bench_latency(estimator: str, sensors_name: str, seconds: float = 10.0, rate
                     (m.transform.rotation.x, m.transform.rotation.y, m.transform.rotation.z,
                      m.transform.rotation.w) = map(float, stream.orientations[i, s])
                     msgs.append(m)
-                sent.add(round(to_seconds(to_time(now)) * 1e5))
+                sent.add(round(to_seconds(to_time(now)) * 1e6))
                 pub.publish(TFMessage(transforms=msgs))
                 i += 1
                 next_t = start + i / rate

@@ -86,26 +86,27 @@ class TfCache:
 def sample_trackers(cache: TfCache, config, stamp: float, stale_after: float):
     """The trackers of a sensor configuration at `stamp`, from the cache.
 
-    Returns (TrackerFrame, ages): a site is invalid when its frame is unknown or its newest
-    transform is older than stale_after seconds; ages[s] is that age (inf when unknown).
+    Returns (TrackerFrame, stamps): a site is invalid when its frame is unknown or its newest
+    transform is older than stale_after seconds; stamps[s] is that transform's stamp (-inf
+    when unknown, `stamp` when the chain is all static).
     Orientation-only sites get NaN positions, position-only sites NaN orientations."""
     from .core.types import TrackerFrame
     S = len(config.sites)
     positions = np.full((S, 3), np.nan)
     orientations = np.full((S, 4), np.nan)
     valid = np.zeros(S, dtype=bool)
-    ages = np.full(S, np.inf)
+    stamps = np.full(S, -np.inf)
     for s, site in enumerate(config.sites):
         found = cache.lookup(config.fixed_frame, site.frame_id)
         if found is None:
             continue
         t_stamp, t, q = found
-        ages[s] = max(0.0, stamp - t_stamp) if np.isfinite(t_stamp) else 0.0
-        if ages[s] > stale_after:
+        stamps[s] = t_stamp if np.isfinite(t_stamp) else stamp
+        if stamp - stamps[s] > stale_after:
             continue
         valid[s] = True
         if site.has_position:
             positions[s] = t
         if site.has_orientation:
             orientations[s] = q
-    return TrackerFrame(stamp, config.site_names, positions, orientations, valid), ages
+    return TrackerFrame(stamp, config.site_names, positions, orientations, valid), stamps

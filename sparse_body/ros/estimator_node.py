@@ -15,7 +15,6 @@ import numpy as np
 import rclpy
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rcl_interfaces.msg import FloatingPointRange, ParameterDescriptor
-from rclpy.executors import ExternalShutdownException
 from rclpy.lifecycle import LifecycleNode, LifecycleState, TransitionCallbackReturn
 from rclpy.qos import DurabilityPolicy, QoSProfile
 from rclpy.qos_overriding_options import QoSOverridingOptions
@@ -30,6 +29,7 @@ from ..core.types import BodyPose
 from ..estimators import create_estimator
 from ..urdf import body_urdf
 from . import messages
+from .spin import spin_until_shutdown
 from .tf_input import HAVE_TF2_ROS, Tf2Reader, TfReader
 
 PARAMETERS = {
@@ -145,8 +145,8 @@ class EstimatorNode(LifecycleNode):
             self.estimator.reset()
             self._stats["resets"] += 1
         self._last_now = now
-        frame, ages = self.tf_in.sample(self.sensors, now, self.params["stale_timeout"])
-        self._ages = ages
+        frame, stamps = self.tf_in.sample(self.sensors, now, self.params["stale_timeout"])
+        self._ages = now - stamps
         reason = ""
         try:
             pose = self.estimator.step(frame)
@@ -161,8 +161,8 @@ class EstimatorNode(LifecycleNode):
             self._last_good = pose
         elif not pose.is_finite():
             pose = self._held(frame.stamp)
-        valid_ages = ages[frame.valid]
-        source_time = now - float(valid_ages.min()) if valid_ages.size else now
+        # Stamp the outputs with the newest tracker stamp used, so latency can be measured.
+        source_time = float(stamps[frame.valid].max()) if frame.valid.any() else now
         stamp = messages.to_time(source_time)
         if not pose.valid:
             self._stats["invalid"] += 1
@@ -221,19 +221,14 @@ class EstimatorNode(LifecycleNode):
 def main(args=None) -> None:
     rclpy.init(args=args)
     node = EstimatorNode()
-    try:
-        if node.get_parameter("autostart").value:
-            if node.trigger_configure() != TransitionCallbackReturn.SUCCESS:
-                node.get_logger().fatal("configure failed; exiting")
-                sys.exit(1)
-            node.trigger_activate()
-        rclpy.spin(node)
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    finally:
-        node.destroy_node()
-        if rclpy.ok():
+    if node.get_parameter("autostart").value:
+        if node.trigger_configure() != TransitionCallbackReturn.SUCCESS:
+            node.get_logger().fatal("configure failed; exiting")
+            node.destroy_node()
             rclpy.shutdown()
+            sys.exit(1)
+        node.trigger_activate()
+    spin_until_shutdown(node)
 
 
 if __name__ == "__main__":

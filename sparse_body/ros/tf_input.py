@@ -69,7 +69,7 @@ class Tf2Reader:
         from ..core.types import TrackerFrame
         S = len(config.sites)
         positions, orientations = np.full((S, 3), np.nan), np.full((S, 4), np.nan)
-        valid, ages = np.zeros(S, dtype=bool), np.full(S, np.inf)
+        valid, stamps = np.zeros(S, dtype=bool), np.full(S, -np.inf)
         for s, site in enumerate(config.sites):
             try:
                 tf = self.buffer.lookup_transform(config.fixed_frame, site.frame_id, Time())
@@ -77,15 +77,15 @@ class Tf2Reader:
                 continue
             tr, q = tf.transform.translation, tf.transform.rotation
             pos, quat = np.array([tr.x, tr.y, tr.z]), np.array([q.x, q.y, q.z, q.w])
-            ages[s] = max(0.0, now - to_seconds(tf.header.stamp))
-            if ages[s] > stale_after or not (np.all(np.isfinite(pos)) and np.all(np.isfinite(quat))):
+            stamps[s] = to_seconds(tf.header.stamp)
+            if now - stamps[s] > stale_after or not (np.all(np.isfinite(pos)) and np.all(np.isfinite(quat))):
                 continue
             valid[s] = True
             if site.has_position:
                 positions[s] = pos
             if site.has_orientation:
                 orientations[s] = quat / np.linalg.norm(quat)
-        return TrackerFrame(now, config.site_names, positions, orientations, valid), ages
+        return TrackerFrame(now, config.site_names, positions, orientations, valid), stamps
 
     def destroy(self) -> None:
         self.listener.unregister()

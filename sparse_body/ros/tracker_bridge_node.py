@@ -13,12 +13,12 @@ import time
 import rclpy
 from geometry_msgs.msg import TransformStamped
 from rcl_interfaces.msg import ParameterDescriptor
-from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rclpy.qos import QoSProfile
 
 from ..bagio import TF_TOPIC, BagError, typestore
 from .messages import to_time
+from .spin import spin_until_shutdown
 
 PARAMETERS = {
     "bag": ("", "rosbag2 directory (or .mcap / .db3 file) holding tracker /tf"),
@@ -117,14 +117,7 @@ def main(args=None) -> None:
         print(f"sparse_body_tracker_bridge: {err}", flush=True)
         rclpy.shutdown()
         raise SystemExit(1)
-    try:
-        rclpy.spin(node)
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    finally:
-        node.destroy_node()
-        if rclpy.ok():
-            rclpy.shutdown()
+    spin_until_shutdown(node)
 
 
 if __name__ == "__main__":

@@ -117,7 +117,7 @@ def test_replayed_bag_gives_joint_states_at_rate_with_small_end_effector_error(r
     bridge = None
     try:
         assert listener.spin_until(lambda: listener.received["robot_description"], 15.0), "estimator did not start"
-        bridge = start_node(BRIDGE, {"bag": str(tmp_path / "trackers"), "start_delay": 1.0}, "sparse_body_tracker_bridge",
+        bridge = start_node(BRIDGE, {"bag": str(tmp_path / "trackers"), "min_subscribers": 2, "start_delay": 0.5}, "sparse_body_tracker_bridge",
                             tmp_path, ros_env)
         frames = {s.frame_id for s in config.sites}
 

@@ -25,7 +25,8 @@ PARAMETERS = {
     "rate": (1.0, "playback speed factor"),
     "loop": (False, "start again at the end"),
     "restamp": (True, "stamp transforms with the current time instead of the recorded one"),
-    "start_delay": (0.5, "seconds to wait before playing, so subscribers can connect"),
+    "min_subscribers": (1, "wait until this many /tf subscribers are matched before playing"),
+    "start_delay": (0.5, "seconds to wait after that, so late subscribers can connect too"),
 }
 
 
@@ -79,6 +80,10 @@ class TrackerBridge(Node):
         self._thread.start()
 
     def _play(self) -> None:
+        # /tf is volatile: what is published before a subscriber is matched is lost to it.
+        while self.pub.get_subscription_count() < self.params["min_subscribers"]:
+            if self._stop.wait(0.05):
+                return
         if self._stop.wait(self.params["start_delay"]):
             return
         while True:

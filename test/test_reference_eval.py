@@ -7,7 +7,6 @@ import numpy as np
 import pytest
 
 from sparse_body.core.sensors import load_sensor_config
-from sparse_body.core.skeleton import JOINT_INDEX as J
 from sparse_body.core.types import TrackerFrame
 from sparse_body.data.synthetic import synthetic_walk
 from sparse_body.data.virtual_trackers import synthesize_trackers

@@ -20,7 +20,7 @@ from ros_helpers import Listener, isolated_domain, start_node, stop  # noqa: E40
 from sparse_body.core.kinematics import forward_kinematics  # noqa: E402
 from sparse_body.core.rotations import euler_to_matrix, quat_to_matrix  # noqa: E402
 from sparse_body.core.sensors import load_sensor_config  # noqa: E402
-from sparse_body.core.skeleton import JOINT_INDEX as J, Skeleton  # noqa: E402
+from sparse_body.core.skeleton import Skeleton  # noqa: E402
 from sparse_body.data.synthetic import synthetic_walk  # noqa: E402
 from sparse_body.msg import EstimateStatus, FootContacts  # noqa: E402
 from sparse_body.offline import make_bag  # noqa: E402

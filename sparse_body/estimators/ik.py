@@ -24,6 +24,13 @@ def _about(axis: np.ndarray, angle: float) -> np.ndarray:
     """Rotation about a unit axis (Rodrigues); scipy's per-call overhead dominates here."""
     k = np.array([[0, -axis[2], axis[1]], [axis[2], 0, -axis[0]], [-axis[1], axis[0], 0]])
     return np.eye(3) + np.sin(angle) * k + (1 - np.cos(angle)) * (k @ k)
+
+
+def _hinge_angle(m: np.ndarray, axis: np.ndarray) -> float:
+    """The angle of m about a coordinate axis (exact when m is a rotation about it)."""
+    i = int(np.argmax(axis))
+    j, k = (i + 1) % 3, (i + 2) % 3
+    return float(np.arctan2(m[k, j], m[j, j]))
 # (end joint, its tracker site, degrees of freedom: (joint, local axis, (min, max) or None))
 _BALL = lambda j: [(J[j], X, None), (J[j], Y, None), (J[j], Z, None)]  # noqa: E731
 CHAINS = {
@@ -63,7 +70,9 @@ class IKEstimator(Estimator):
             return None
         if spec.has_orientation and np.all(np.isfinite(quat)) and 0.9 < np.linalg.norm(quat) < 1.1:
             return spec.joint_pose(pos, quat / np.linalg.norm(quat))
-        return pos - 0.0, None   # position-only: the mounting offset's rotation is unknown
+        # Position-only: without the tracker's orientation the mounting offset cannot be
+        # undone, so the joint is pulled to the tracker itself.
+        return np.asarray(pos, dtype=float), None
 
     def step(self, frame: TrackerFrame) -> BodyPose:
         targets = {s: self._target(frame, s) for s in CHAINS if s in self.sensors.site_names}
@@ -93,17 +102,15 @@ class IKEstimator(Estimator):
                 step = jac.T @ np.linalg.solve(jac @ jac.T + lam ** 2 * np.eye(3), err)
                 for (j, a, limits), d in zip(dofs, step):
                     local[j] = local[j] @ _about(a, d)
-                    if limits is not None:   # hinges: keep the angle about their axis in range
-                        angle = np.arctan2(local[j][(np.argmax(a) + 2) % 3, (np.argmax(a) + 1) % 3],
-                                           local[j][(np.argmax(a) + 1) % 3, (np.argmax(a) + 1) % 3])
-                        local[j] = _about(a, np.clip(angle, *limits))
+                    if limits is not None:   # hinges: stay a rotation about their axis, in range
+                        local[j] = _about(a, np.clip(_hinge_angle(local[j], a), *limits))
             if not moved:
                 break
-        glob, pos = forward_kinematics(local, root, self.skeleton.offsets)
-        for site, end, _, _ in active + ([("head", "head", None, None)] if pelvis is None and targets.get("head") else []):
-            rot = targets[site][1]
-            if rot is not None:   # the end joint takes the tracker's orientation
-                local[J[end]] = glob[self.skeleton.parents[J[end]]].T @ rot
+        glob, _ = forward_kinematics(local, root, self.skeleton.offsets)
+        for site, target in targets.items():
+            if target is not None and target[1] is not None:   # the end joint takes the tracker's orientation
+                end = J[CHAINS[site][0]]
+                local[end] = glob[self.skeleton.parents[end]].T @ target[1]
         if not (np.all(np.isfinite(local)) and np.all(np.isfinite(root))):
             self.reset()
             return self._hold(frame.stamp)

@@ -23,10 +23,12 @@ from std_msgs.msg import String
 
 from sparse_body.msg import EstimateStatus, FootContacts
 
+from ..core.rotations import matrix_to_quat
 from ..core.sensors import SensorConfigError, load_sensor_config
 from ..core.skeleton import Skeleton
 from ..core.types import BodyPose
 from ..estimators import create_estimator
+from ..estimators.reference import standing_pose
 from ..urdf import body_urdf
 from . import messages
 from .spin import spin_until_shutdown
@@ -180,8 +182,6 @@ class EstimatorNode(LifecycleNode):
         self._stats["latency"].append(now - source_time)
 
     def _held(self, stamp: float) -> BodyPose:
-        from ..estimators.reference import standing_pose
-        from ..core.rotations import matrix_to_quat
         last = self._last_good
         if last is None:
             return BodyPose(stamp, matrix_to_quat(standing_pose()), np.zeros(3), valid=False)

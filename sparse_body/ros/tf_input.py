@@ -10,11 +10,9 @@ from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPo
 from ..tf_cache import Accepted, TfCache, sample_trackers
 from .messages import to_seconds
 
-try:
-    import tf2_ros   # noqa: F401  (apt / colcon installs only)
-    HAVE_TF2_ROS = True
-except ImportError:
-    HAVE_TF2_ROS = False
+from importlib.util import find_spec
+
+HAVE_TF2_ROS = find_spec("tf2_ros") is not None   # apt / colcon installs only
 
 TF_QOS = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.VOLATILE,
                     history=HistoryPolicy.KEEP_LAST)

@@ -3,7 +3,7 @@
     ros2 launch sparse_body sparse_body.launch.py sensors:=four_point estimator:=ik bag:=/path/to/trackers
 
 Arguments: sensors, estimator, height, bag (the tracker source; empty: trackers come from
-elsewhere on /tf), rviz. The estimator is a lifecycle node; it is configured and activated
+elsewhere on /tf), rviz, robot_state_publisher. The estimator is a lifecycle node; it is configured and activated
 here through its autostart parameter.
 """
 import os
@@ -26,12 +26,13 @@ def _nodes(context):
     estimator_params = [os.path.join(share, "config", "estimator.yaml"),
                         {"sensors": arg("sensors"), "estimator": arg("estimator"), "height": height,
                          "publish_link_tf": False, "autostart": True}]
-    nodes = [
-        LifecycleNode(package="sparse_body", executable="estimator_node", name="sparse_body_estimator",
-                      namespace="", output="screen", parameters=estimator_params),
-        Node(package="robot_state_publisher", executable="robot_state_publisher", output="screen",
-             parameters=[{"robot_description": body_urdf(Skeleton.canonical(height))}]),
-    ]
+    with_rsp = arg("robot_state_publisher").lower() in ("true", "1")
+    estimator_params[1]["publish_link_tf"] = not with_rsp
+    nodes = [LifecycleNode(package="sparse_body", executable="estimator_node", name="sparse_body_estimator",
+                           namespace="", output="screen", parameters=estimator_params)]
+    if with_rsp:
+        nodes.append(Node(package="robot_state_publisher", executable="robot_state_publisher", output="screen",
+                          parameters=[{"robot_description": body_urdf(Skeleton.canonical(height))}]))
     if arg("bag"):
         nodes.append(Node(package="sparse_body", executable="tracker_bridge", name="sparse_body_tracker_bridge",
                           output="screen", parameters=[os.path.join(share, "config", "tracker_bridge.yaml"),
@@ -46,6 +47,8 @@ def generate_launch_description():
         DeclareLaunchArgument("height", default_value="1.75", description="the person's height in metres"),
         DeclareLaunchArgument("bag", default_value="", description="rosbag2 of tracker TF to replay"),
         DeclareLaunchArgument("rviz", default_value="false", description="start RViz"),
+        DeclareLaunchArgument("robot_state_publisher", default_value="true",
+                              description="start robot_state_publisher (else the estimator publishes link TF)"),
         OpaqueFunction(function=_nodes),
         Node(package="rviz2", executable="rviz2", output="screen", condition=IfCondition(LaunchConfiguration("rviz")),
              arguments=["-d", os.path.join(get_package_share_directory("sparse_body"), "config", "sparse_body.rviz")]),

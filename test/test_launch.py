@@ -27,8 +27,8 @@ from launch.launch_description_sources import PythonLaunchDescriptionSource  # n
 def generate_test_description():
     source = PythonLaunchDescriptionSource(os.path.join(SHARE, "launch", "sparse_body.launch.py"))
     return launch.LaunchDescription([
-        launch.actions.IncludeLaunchDescription(source, launch_arguments={"sensors": "three_point",
-                                                                          "estimator": "reference"}.items()),
+        launch.actions.IncludeLaunchDescription(source, launch_arguments={"sensors": "three_point", "estimator": "reference",
+                                                                          "robot_state_publisher": "false"}.items()),
         launch_testing.actions.ReadyToTest(),
     ])
 

@@ -10,6 +10,7 @@ from __future__ import annotations
 import sys
 import time
 from collections import deque
+from dataclasses import replace
 
 import numpy as np
 import rclpy
@@ -68,7 +69,6 @@ class EstimatorNode(LifecycleNode):
         try:
             sensors = load_sensor_config(p["sensors"])
             if p["fixed_frame"]:
-                from dataclasses import replace
                 sensors = replace(sensors, fixed_frame=p["fixed_frame"])
             self.skeleton = Skeleton.canonical(p["height"])
             options = {"model_path": p["model_path"]} if p["model_path"] else {}
@@ -82,7 +82,8 @@ class EstimatorNode(LifecycleNode):
         self.tf_in = Tf2Reader(self, frames) if (HAVE_TF2_ROS and p["use_tf2_ros"]) else TfReader(self, frames)
         qos = QoSProfile(depth=10)
         overrides = QoSOverridingOptions.with_default_policies()
-        from tf2_msgs.msg import TFMessage
+        from tf2_msgs.msg import TFMessage   # here, not at import: the stand-in exists only after setup
+        self._tf_message = TFMessage
         self.pub_joints = self.create_lifecycle_publisher(JointState, "joint_states", qos, qos_overriding_options=overrides)
         self.pub_contacts = self.create_lifecycle_publisher(FootContacts, "foot_contacts", qos, qos_overriding_options=overrides)
         self.pub_status = self.create_lifecycle_publisher(EstimateStatus, "estimate_status", qos, qos_overriding_options=overrides)
@@ -175,8 +176,7 @@ class EstimatorNode(LifecycleNode):
         self.pub_joints.publish(messages.joint_state(pose, stamp))
         self.pub_contacts.publish(messages.foot_contacts(pose, self.skeleton, stamp, frame_id))
         self.pub_status.publish(messages.estimate_status(pose, stamp, frame_id, reason))
-        from tf2_msgs.msg import TFMessage
-        self.pub_tf.publish(TFMessage(transforms=messages.transforms(
+        self.pub_tf.publish(self._tf_message(transforms=messages.transforms(
             pose, self.skeleton, stamp, frame_id, self.params["frame_prefix"], self.params["publish_link_tf"])))
         self._stats["steps"].append(time.monotonic())
         self._stats["latency"].append(now - source_time)

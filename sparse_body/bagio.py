@@ -115,7 +115,7 @@ def read_tracker_stream(path: Path, config: SensorConfig, stale_after: float = 0
                             newest = max(newest, stamp)
                 if moved:
                     stamp = newest if np.isfinite(newest) else (times[-1] if times else 0.0)
-                    frame, _ = sample_trackers(cache, config, stamp, stale_after)
+                    frame, _ = sample_trackers(cache.lookup, config, stamp, stale_after)
                     times.append(stamp)
                     frames.append(frame)
     except BagError:

@@ -83,10 +83,12 @@ class TfCache:
         return max(dynamic) if dynamic else -np.inf
 
 
-def sample_trackers(cache: TfCache, config, stamp: float, stale_after: float):
-    """The trackers of a sensor configuration at `stamp`, from the cache.
+def sample_trackers(lookup, config, stamp: float, stale_after: float):
+    """The trackers of a sensor configuration at `stamp`.
 
-    Returns (TrackerFrame, stamps): a site is invalid when its frame is unknown or its newest
+    lookup(fixed_frame, frame_id) gives (stamp, translation, rotation xyzw) or None: a
+    TfCache's lookup, or a tf2_ros buffer wrapped alike. Returns (TrackerFrame, stamps): a
+    site is invalid when its frame is unknown, its pose is not finite, or its newest
     transform is older than stale_after seconds; stamps[s] is that transform's stamp (-inf
     when unknown, `stamp` when the chain is all static).
     Orientation-only sites get NaN positions, position-only sites NaN orientations."""
@@ -97,16 +99,17 @@ def sample_trackers(cache: TfCache, config, stamp: float, stale_after: float):
     valid = np.zeros(S, dtype=bool)
     stamps = np.full(S, -np.inf)
     for s, site in enumerate(config.sites):
-        found = cache.lookup(config.fixed_frame, site.frame_id)
+        found = lookup(config.fixed_frame, site.frame_id)
         if found is None:
             continue
         t_stamp, t, q = found
         stamps[s] = t_stamp if np.isfinite(t_stamp) else stamp
-        if stamp - stamps[s] > stale_after:
+        norm = np.linalg.norm(q)
+        if stamp - stamps[s] > stale_after or not (np.all(np.isfinite(t)) and np.isfinite(norm) and norm > 0.5):
             continue
         valid[s] = True
         if site.has_position:
             positions[s] = t
         if site.has_orientation:
-            orientations[s] = q
+            orientations[s] = np.asarray(q) / norm
     return TrackerFrame(stamp, config.site_names, positions, orientations, valid), stamps

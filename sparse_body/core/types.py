@@ -61,5 +61,11 @@ class BodyPose:
         if self.local_quats.shape != (NUM_JOINTS, 4) or self.root_position.shape != (3,):
             raise ValueError("a body pose needs (22, 4) quaternions and a (3,) root position")
 
+    def held(self, stamp: float) -> "BodyPose":
+        """This pose again at a later stamp, marked invalid: what an estimator or node
+        outputs when it has too little input."""
+        return BodyPose(stamp, self.local_quats.copy(), self.root_position.copy(),
+                        self.contact_probability.copy(), self.contact.copy(), valid=False)
+
     def is_finite(self) -> bool:
         return bool(np.all(np.isfinite(self.local_quats)) and np.all(np.isfinite(self.root_position)))

@@ -5,6 +5,8 @@ import importlib
 from abc import ABC, abstractmethod
 from typing import ClassVar
 
+import numpy as np
+
 from ..core.sensors import SensorConfig
 from ..core.skeleton import Skeleton
 from ..core.types import BodyPose, TrackerFrame, TrackerStream
@@ -44,6 +46,21 @@ class Estimator(ABC):
     @abstractmethod
     def step(self, frame: TrackerFrame) -> BodyPose:
         """The body at frame.stamp."""
+
+    def joint_target(self, frame: TrackerFrame, site: str):
+        """The followed joint's (position, rotation matrix or None) from a site's sample, or
+        None when the sample is missing, invalid or non-finite. A tracker without a usable
+        orientation gives its own position: its mounting offset cannot be undone."""
+        if site not in frame.sites:
+            return None
+        i = frame.index(site)
+        pos, quat = frame.positions[i], frame.orientations[i]
+        if not frame.valid[i] or not np.all(np.isfinite(pos)):
+            return None
+        norm = np.linalg.norm(quat) if np.all(np.isfinite(quat)) else 0.0
+        if self.sensors.site(site).has_orientation and 0.9 < norm < 1.1:
+            return self.sensors.site(site).joint_pose(pos, quat / norm)
+        return np.asarray(pos, dtype=float), None
 
     def process(self, stream: TrackerStream) -> list[BodyPose]:
         self.reset()

@@ -60,23 +60,9 @@ class IKEstimator(Estimator):
         self._last: BodyPose | None = None
         self._last_toes: np.ndarray | None = None
 
-    def _target(self, frame: TrackerFrame, site: str):
-        if site not in frame.sites:
-            return None
-        i = frame.index(site)
-        pos, quat = frame.positions[i], frame.orientations[i]
-        spec = self.sensors.site(site)
-        if not frame.valid[i] or not np.all(np.isfinite(pos)):
-            return None
-        if spec.has_orientation and np.all(np.isfinite(quat)) and 0.9 < np.linalg.norm(quat) < 1.1:
-            return spec.joint_pose(pos, quat / np.linalg.norm(quat))
-        # Position-only: without the tracker's orientation the mounting offset cannot be
-        # undone, so the joint is pulled to the tracker itself.
-        return np.asarray(pos, dtype=float), None
-
     def step(self, frame: TrackerFrame) -> BodyPose:
-        targets = {s: self._target(frame, s) for s in CHAINS if s in self.sensors.site_names}
-        pelvis = self._target(frame, "pelvis") if "pelvis" in self.sensors.site_names else None
+        targets = {s: self.joint_target(frame, s) for s in CHAINS if s in self.sensors.site_names}
+        pelvis = self.joint_target(frame, "pelvis")
         local = self._local.copy()
         if pelvis is not None and pelvis[1] is not None:
             local[0], root = pelvis[1], pelvis[0]
@@ -130,6 +116,4 @@ class IKEstimator(Estimator):
     def _hold(self, stamp: float) -> BodyPose:
         if self._last is None:
             return BodyPose(stamp, matrix_to_quat(self._local), np.zeros(3), valid=False)
-        last = self._last
-        return BodyPose(stamp, last.local_quats.copy(), last.root_position.copy(), last.contact_probability.copy(),
-                        last.contact.copy(), valid=False)
+        return self._last.held(stamp)

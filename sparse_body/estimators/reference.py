@@ -39,20 +39,11 @@ class ReferenceEstimator(Estimator):
     def reset(self) -> None:
         self._last = None
 
-    def _anchor(self, frame: TrackerFrame, site: str):
-        if site not in frame.sites:
-            return None
-        i = frame.index(site)
-        pos, quat = frame.positions[i], frame.orientations[i]
-        if not frame.valid[i] or not (np.all(np.isfinite(pos)) and np.all(np.isfinite(quat))):
-            return None
-        if abs(np.linalg.norm(quat) - 1.0) > 0.1:
-            return None
-        return self.sensors.site(site).joint_pose(pos, quat / np.linalg.norm(quat))
-
     def step(self, frame: TrackerFrame) -> BodyPose:
-        pelvis = self._anchor(frame, "pelvis")
-        head = self._anchor(frame, "head")
+        pelvis = self.joint_target(frame, "pelvis")
+        head = self.joint_target(frame, "head")
+        pelvis = pelvis if pelvis is not None and pelvis[1] is not None else None   # needs a full pose
+        head = head if head is not None and head[1] is not None else None
         if pelvis is not None:
             root_pos, root_rot = pelvis[0], yaw_matrix(heading(pelvis[1]))
         elif head is not None:
@@ -69,7 +60,5 @@ class ReferenceEstimator(Estimator):
 
     def _hold(self, stamp: float) -> BodyPose:
         if self._last is None:
-            local = self._local.copy()
-            return BodyPose(stamp, matrix_to_quat(local), np.zeros(3), valid=False)
-        return BodyPose(stamp, self._last.local_quats.copy(), self._last.root_position.copy(),
-                        self._last.contact_probability.copy(), self._last.contact.copy(), valid=False)
+            return BodyPose(stamp, matrix_to_quat(self._local), np.zeros(3), valid=False)
+        return self._last.held(stamp)

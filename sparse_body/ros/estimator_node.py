@@ -182,11 +182,9 @@ class EstimatorNode(LifecycleNode):
         self._stats["latency"].append(now - source_time)
 
     def _held(self, stamp: float) -> BodyPose:
-        last = self._last_good
-        if last is None:
+        if self._last_good is None:
             return BodyPose(stamp, matrix_to_quat(standing_pose()), np.zeros(3), valid=False)
-        return BodyPose(stamp, last.local_quats.copy(), last.root_position.copy(), last.contact_probability.copy(),
-                        last.contact.copy(), valid=False)
+        return self._last_good.held(stamp)
 
     def _publish_diagnostics(self) -> None:
         st = self._stats

@@ -44,7 +44,7 @@ class TfReader:
                 self.rejected[result] += 1
 
     def sample(self, config, now: float, stale_after: float):
-        return sample_trackers(self.cache, config, now, stale_after)
+        return sample_trackers(self.cache.lookup, config, now, stale_after)
 
     def destroy(self) -> None:
         for sub in self._subs:
@@ -62,28 +62,17 @@ class Tf2Reader:
         self.rejected = {a: 0 for a in Accepted if a is not Accepted.OK}
         self.jumped_back = False
 
-    def sample(self, config, now: float, stale_after: float):
+    def _lookup(self, fixed_frame: str, frame_id: str):
         from rclpy.time import Time
-        from ..core.types import TrackerFrame
-        S = len(config.sites)
-        positions, orientations = np.full((S, 3), np.nan), np.full((S, 4), np.nan)
-        valid, stamps = np.zeros(S, dtype=bool), np.full(S, -np.inf)
-        for s, site in enumerate(config.sites):
-            try:
-                tf = self.buffer.lookup_transform(config.fixed_frame, site.frame_id, Time())
-            except Exception:  # noqa: BLE001 - tf2 raises several lookup errors; all mean "no pose"
-                continue
-            tr, q = tf.transform.translation, tf.transform.rotation
-            pos, quat = np.array([tr.x, tr.y, tr.z]), np.array([q.x, q.y, q.z, q.w])
-            stamps[s] = to_seconds(tf.header.stamp)
-            if now - stamps[s] > stale_after or not (np.all(np.isfinite(pos)) and np.all(np.isfinite(quat))):
-                continue
-            valid[s] = True
-            if site.has_position:
-                positions[s] = pos
-            if site.has_orientation:
-                orientations[s] = quat / np.linalg.norm(quat)
-        return TrackerFrame(now, config.site_names, positions, orientations, valid), stamps
+        try:
+            tf = self.buffer.lookup_transform(fixed_frame, frame_id, Time())
+        except Exception:  # noqa: BLE001 - tf2 raises several lookup errors; all mean "no pose"
+            return None
+        tr, q = tf.transform.translation, tf.transform.rotation
+        return to_seconds(tf.header.stamp), np.array([tr.x, tr.y, tr.z]), np.array([q.x, q.y, q.z, q.w])
+
+    def sample(self, config, now: float, stale_after: float):
+        return sample_trackers(self._lookup, config, now, stale_after)
 
     def destroy(self) -> None:
         self.listener.unregister()

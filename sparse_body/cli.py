@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import argparse
+import re
 import sys
 from pathlib import Path
 
@@ -18,15 +19,47 @@ def _mocap(args) -> Path:
 def cmd_eval(args) -> int:
     from .core.sensors import load_sensor_config
     from .data.virtual_trackers import LOBSTR_NOISE, NO_NOISE
-    from .evaluation import evaluate, format_table, write_json
+    from .evaluation import COMPARE_WITH, PAPER_FIGURES, evaluate, format_table, write_json
     sensors = load_sensor_config(args.sensors)
-    results = [evaluate(name, sensors, _mocap(args), args.split, args.fps,
+    specs, reference = list(args.estimator), {}
+    if not args.no_compare:
+        for name in args.estimator:
+            specs += [s for s in COMPARE_WITH.get(name, []) if s not in specs]
+            reference.update(PAPER_FIGURES.get(name, {}))
+    results = [evaluate(spec, sensors, _mocap(args), args.split, args.fps,
                         LOBSTR_NOISE if args.noise else NO_NOISE, args.limit, progress=not args.quiet)
-               for name in args.estimator]
-    print(format_table(results))
-    out = Path(args.output or f"sparse_body_eval_{'+'.join(args.estimator)}_{sensors.name}.json")
+               for spec in specs]
+    print(format_table(results, reference))
+    stem = re.sub(r"[^\w.+-]", "_", "+".join(args.estimator))
+    out = Path(args.output or f"sparse_body_eval_{stem}_{sensors.name}.json")
     write_json(results, out)
     print(f"written {out}")
+    return 0
+
+
+def cmd_train(args) -> int:
+    import json
+    import torch
+    from .resources import models_dir
+    from .train.lobstr_model import LobstrConfig
+    from .train.lobstr_train import train
+    out = Path(args.out or models_dir() / f"{args.method}.onnx")
+    report_path = out.with_suffix(".train.json")
+    if not args.card_only:
+        torch.set_num_threads(args.threads)
+        config = LobstrConfig.named(args.config)
+        if args.minutes is not None:
+            config.minutes = args.minutes
+        if args.steps is not None:
+            config.steps = args.steps
+        report = train(config, _mocap(args), out, seed=args.seed, limit=args.limit)
+        report["command"] = "sparse-body " + " ".join(sys.argv[1:])
+        report_path.write_text(json.dumps(report, indent=1))
+        print(f"written {out} and {report_path}")
+    if not args.no_card:
+        from .train.model_card import write_lobstr_card
+        card = write_lobstr_card(out, json.loads(report_path.read_text()), _mocap(args), limit=args.limit)
+        print(f"written {card}")
     return 0
 
 
@@ -117,7 +150,7 @@ def build_parser() -> argparse.ArgumentParser:
 
     p = sub.add_parser("eval", help="run estimators over a split of the CMU clips and print the metrics")
     p.add_argument("--estimator", action="append", required=True,
-                   help="estimator name (repeat to compare several)")
+                   help="estimator name, optionally with options: lobstr:contact_ik=false (repeat to compare several)")
     p.add_argument("--sensors", default="three_point", help="sensor configuration name or YAML path")
     p.add_argument("--split", default="test", choices=["train", "validation", "test"])
     p.add_argument("--fps", type=float, default=60.0, help="frame rate the clips are resampled to")
@@ -126,6 +159,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--mocap", help="the CMU folder (default: ../shared/mocap/cmu or $SPARSE_BODY_MOCAP)")
     p.add_argument("--output", help="where to write the JSON results")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
+    p.add_argument("--no-compare", action="store_true",
+                   help="only the named estimators: no baseline, ablation or paper figures beside them")
     p.set_defaults(func=cmd_eval)
 
     p = sub.add_parser("make-bag", help="write a rosbag2 (MCAP) of tracker TF from a motion")
@@ -155,6 +190,20 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--sensors", default="six_point")
     p.add_argument("--no-latency", action="store_true", help="only the offline speed (no ROS needed)")
     p.set_defaults(func=cmd_bench)
+
+    p = sub.add_parser("train", help="train a learned estimator on the CMU train split (ONNX + model card)")
+    p.add_argument("method", choices=["lobstr"])
+    p.add_argument("--config", default="small", help="paper, small (under an hour on 2 CPU cores) or tiny")
+    p.add_argument("--out", help="the .onnx file to write (default: the package's models/<method>.onnx)")
+    p.add_argument("--minutes", type=float, help="stop training after this long")
+    p.add_argument("--steps", type=int, help="stop training after this many steps")
+    p.add_argument("--threads", type=int, default=2, help="torch CPU threads")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--limit", type=int, help="only the first N clips of each split (smoke runs)")
+    p.add_argument("--mocap", help="the CMU folder")
+    p.add_argument("--no-card", action="store_true", help="skip the test-split evaluation and model card")
+    p.add_argument("--card-only", action="store_true", help="only rewrite the model card of an existing model")
+    p.set_defaults(func=cmd_train)
 
     p = sub.add_parser("split", help="compute the CMU train/validation/test split")
     p.add_argument("--write", action="store_true", help="write config/splits/cmu.yaml")

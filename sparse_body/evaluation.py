@@ -7,6 +7,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
+import yaml
 
 from .core.contacts import contact_labels, estimate_floor
 from .core.kinematics import forward_kinematics
@@ -41,7 +42,13 @@ class EvalResult:
 
 def evaluate_motion(motion: Motion, estimator_name: str, sensors: SensorConfig,
                     noise: TrackerNoise = NO_NOISE, seed: int = 0, **options) -> dict[str, float]:
-    """Metrics of one estimator on one motion, from the motion's own virtual trackers."""
+    """Metrics of one estimator on one motion, from the motion's own virtual trackers.
+
+    The motion is first moved so that its floor is z = 0, as in a calibrated VR play space:
+    estimators that need the floor (IK contacts, LoBSTr's reference height) find it there."""
+    floor = estimate_floor(motion.positions)
+    motion = Motion(motion.name, motion.fps, motion.skeleton, motion.local_quats,
+                    motion.root_positions - [0.0, 0.0, floor])
     stream = synthesize_trackers(motion, sensors, noise, seed)
     estimator = create_estimator(estimator_name, sensors, motion.skeleton, fps=motion.fps, **options)
     poses = estimator.process(stream)
@@ -49,28 +56,54 @@ def evaluate_motion(motion: Motion, estimator_name: str, sensors: SensorConfig,
     root = np.stack([p.root_position for p in poses])
     glob, pos = forward_kinematics(local, root, motion.skeleton.offsets)
     pred_contacts = np.stack([p.contact for p in poses])
-    floor = estimate_floor(motion.positions)
+    floor = 0.0
     gt_contacts = contact_labels(motion.positions, motion.fps, floor)
     tracked = sorted({s.joint_index for s in sensors.sites})
     return sequence_metrics(pos, glob, local, motion.positions, motion.global_rotations, motion.local_rotations,
                             motion.fps, floor, gt_contacts, pred_contacts, tracked)
 
 
-def evaluate(estimator_name: str, sensors: SensorConfig, mocap_root: Path, split: str = "test",
+# Published figures printed beside an estimator's results (the paper's own data and
+# protocol, so a guide rather than a like-for-like comparison).
+PAPER_FIGURES = {
+    "lobstr": {"LoBSTr paper": {"Contact acc [%]": 85.77, "Lower RE [deg]": 8.53, "Toe PE [cm]": 6.63}},
+}
+# What `sparse-body eval` runs beside a learned estimator unless told not to.
+COMPARE_WITH = {
+    "lobstr": ["lobstr:contact_ik=false", "ik"],
+}
+
+
+def parse_estimator_spec(spec: str) -> tuple[str, dict]:
+    """"name" or "name:key=value,key=value" (values read as YAML scalars) -> (name, options)."""
+    name, _, rest = spec.partition(":")
+    options = {}
+    for item in filter(None, rest.split(",")):
+        key, eq, value = item.partition("=")
+        if not eq or not key:
+            raise ValueError(f"estimator option {item!r} in {spec!r} is not key=value")
+        options[key.strip()] = yaml.safe_load(value)
+    return name.strip(), options
+
+
+def evaluate(estimator_spec: str, sensors: SensorConfig, mocap_root: Path, split: str = "test",
              fps: float = DEFAULT_FPS, noise: TrackerNoise = NO_NOISE, limit: int | None = None,
              progress: bool = True, **options) -> EvalResult:
+    """estimator_spec: a name, optionally with options ("lobstr:contact_ik=false")."""
+    estimator_name, spec_options = parse_estimator_spec(estimator_spec)
+    options = {**spec_options, **options}
     index = {c.clip_id: c for c in read_index(mocap_root)}
     wanted = load_split()[split]
     missing = [c for c in wanted if c not in index]
     if missing:
         raise FileNotFoundError(f"{mocap_root}: clips of the {split} split are missing: {', '.join(missing[:5])}")
     clips = wanted[:limit] if limit else wanted
-    result = EvalResult(estimator_name, sensors.name, split)
+    result = EvalResult(estimator_spec, sensors.name, split)
     start = time.perf_counter()
     iterator = clips
     if progress:
         from tqdm import tqdm
-        iterator = tqdm(clips, desc=f"eval {estimator_name}/{sensors.name}", unit="clip")
+        iterator = tqdm(clips, desc=f"eval {estimator_spec}/{sensors.name}", unit="clip")
     for k, clip_id in enumerate(iterator):
         motion = load_clip(index[clip_id], fps)
         result.clips.append(clip_id)

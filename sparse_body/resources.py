@@ -24,3 +24,8 @@ def share_dir() -> Path:
 
 def config_dir() -> Path:
     return share_dir() / "config"
+
+
+def models_dir() -> Path:
+    """The shipped ONNX models and their model cards."""
+    return share_dir() / "models"

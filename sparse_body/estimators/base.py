@@ -16,6 +16,7 @@ from ..core.types import BodyPose, TrackerFrame, TrackerStream
 ESTIMATORS: dict[str, str] = {
     "reference": "sparse_body.estimators.reference:ReferenceEstimator",
     "ik": "sparse_body.estimators.ik:IKEstimator",
+    "lobstr": "sparse_body.estimators.lobstr:LobstrEstimator",
 }
 
 

@@ -42,6 +42,33 @@ CHAINS = {
 }
 
 
+def solve(local: np.ndarray, root: np.ndarray, offsets: np.ndarray, goals, iterations: int = 10,
+          damping: float = 0.05) -> np.ndarray:
+    """Damped least squares: local rotations (22, 3, 3) moved so that each goal's end joint
+    reaches its target. goals: [(target position, end joint, dofs, damping weight)], dofs as
+    in CHAINS. Returns a new array; hinges stay within their limits."""
+    local = local.copy()
+    for _ in range(iterations):
+        glob, pos = forward_kinematics(local, root, offsets)
+        moved = False
+        for target, end, dofs, weight in goals:
+            err = target - pos[end]
+            if np.linalg.norm(err) < 1e-4:
+                continue
+            moved = True
+            axes = np.stack([glob[j] @ a for j, a, _ in dofs])
+            jac = np.cross(axes, pos[end] - np.stack([pos[j] for j, _, _ in dofs])).T   # (3, n)
+            lam = damping * weight
+            step = jac.T @ np.linalg.solve(jac @ jac.T + lam ** 2 * np.eye(3), err)
+            for (j, a, limits), d in zip(dofs, step):
+                local[j] = local[j] @ _about(a, d)
+                if limits is not None:   # hinges: stay a rotation about their axis, in range
+                    local[j] = _about(a, np.clip(_hinge_angle(local[j], a), *limits))
+        if not moved:
+            break
+    return local
+
+
 class IKEstimator(Estimator):
     name = "ik"
 
@@ -74,24 +101,9 @@ class IKEstimator(Estimator):
         active = [(site, *CHAINS[site]) for site, tgt in targets.items() if tgt is not None]
         if pelvis is None:   # the root already hangs from the head: leave the spine alone
             active = [a for a in active if a[0] != "head"]
-        for _ in range(self.iterations):
-            glob, pos = forward_kinematics(local, root, self.skeleton.offsets)
-            moved = False
-            for site, end, dofs, weight in active:
-                err = targets[site][0] - pos[J[end]]
-                if np.linalg.norm(err) < 1e-4:
-                    continue
-                moved = True
-                axes = np.stack([glob[j] @ a for j, a, _ in dofs])
-                jac = np.cross(axes, pos[J[end]] - np.stack([pos[j] for j, _, _ in dofs])).T   # (3, n)
-                lam = self.damping * weight
-                step = jac.T @ np.linalg.solve(jac @ jac.T + lam ** 2 * np.eye(3), err)
-                for (j, a, limits), d in zip(dofs, step):
-                    local[j] = local[j] @ _about(a, d)
-                    if limits is not None:   # hinges: stay a rotation about their axis, in range
-                        local[j] = _about(a, np.clip(_hinge_angle(local[j], a), *limits))
-            if not moved:
-                break
+        local = solve(local, root, self.skeleton.offsets,
+                      [(targets[site][0], J[end], dofs, weight) for site, end, dofs, weight in active],
+                      self.iterations, self.damping)
         glob, _ = forward_kinematics(local, root, self.skeleton.offsets)
         for site, target in targets.items():
             if target is not None and target[1] is not None:   # the end joint takes the tracker's orientation

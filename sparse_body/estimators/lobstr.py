@@ -1,0 +1,133 @@
+"""LoBSTr (Yang et al. 2021) at runtime: ONNX Runtime, one GRU step per frame.
+
+The legs come from the network, driven by the velocities of pelvis, head and hands; the
+upper body is solved by IK from the same trackers (the paper uses Final IK); contacts are
+held by IK (contact_ik.py). The GRU state is carried from frame to frame: the network sees
+the whole past instead of re-running a one-second window each frame (the model is trained
+on 1.5 s chunks and test_lobstr shows streaming equals running the recurrent net over the
+window). A gap in the input longer than max_gap, or time going back, starts the state over.
+"""
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+
+from ..core.rotations import axis_angle_to_matrix, matrix_to_6d, matrix_to_axis_angle, matrix_to_quat, quat_to_matrix, sixd_to_matrix
+from ..core.types import BodyPose, TrackerFrame
+from .base import Estimator
+from .contact_ik import ContactHold
+from .ik import IKEstimator
+from .lobstr_features import FEATURES, INPUT_SITES, apply_legs, body_scale, features
+
+
+def default_model_path() -> Path:
+    from ..resources import models_dir
+    return models_dir() / "lobstr.onnx"
+
+
+class LobstrModel:
+    """The exported step graph and what it was trained with."""
+
+    def __init__(self, path: str | Path | None = None, threads: int = 1) -> None:
+        import onnxruntime as ort
+        self.path = Path(path) if path else default_model_path()
+        if not self.path.is_file():
+            raise FileNotFoundError(f"{self.path}: no LoBSTr model there; train one with `sparse-body train lobstr`")
+        options = ort.SessionOptions()
+        options.intra_op_num_threads = threads
+        options.inter_op_num_threads = 1
+        try:
+            self.session = ort.InferenceSession(str(self.path), options, providers=["CPUExecutionProvider"])
+        except Exception as err:  # noqa: BLE001 - onnxruntime raises its own exception types
+            raise ValueError(f"{self.path}: not a loadable ONNX model ({err})") from None
+        meta = self.session.get_modelmeta().custom_metadata_map
+        try:
+            if json.loads(meta["method"]) != "lobstr":
+                raise ValueError
+            self.config = json.loads(meta["config"])
+            self.hidden, self.fps = int(self.config["hidden"]), float(self.config["fps"])
+        except (KeyError, ValueError, TypeError):
+            raise ValueError(f"{self.path}: not a LoBSTr model (its metadata lacks method/config)") from None
+
+    def initial_state(self) -> np.ndarray:
+        return np.zeros((1, 1, self.hidden), dtype=np.float32)
+
+    def step(self, x: np.ndarray, state: np.ndarray):
+        legs, prob, state = self.session.run(None, {"features": x.reshape(1, FEATURES).astype(np.float32),
+                                                    "state": state})
+        return legs[0], prob[0], state
+
+
+def _retime(x: np.ndarray, ratio: float) -> np.ndarray:
+    """Velocities measured over dt, expressed per model frame (ratio = model dt / dt)."""
+    x = x.copy()
+    for b in range(4):
+        x[b * 9:b * 9 + 3] *= ratio
+        rotvec = matrix_to_axis_angle(sixd_to_matrix(x[b * 9 + 3:b * 9 + 9]))
+        x[b * 9 + 3:b * 9 + 9] = matrix_to_6d(axis_angle_to_matrix(rotvec * ratio))
+    return x
+
+
+class LobstrEstimator(Estimator):
+    name = "lobstr"
+    required_sites = frozenset(INPUT_SITES)
+
+    def __init__(self, sensors, skeleton, fps: float = 60.0, model_path: str | None = None,
+                 contact_ik: bool = True, contact_threshold: float = 0.5, release_frames: int = 10,
+                 floor_height: float = 0.0, max_gap: float = 0.5, threads: int = 1) -> None:
+        super().__init__(sensors, skeleton, fps)
+        self.model = LobstrModel(model_path, threads)
+        self.scale = body_scale(skeleton)
+        self.floor, self.max_gap, self.threshold = floor_height, max_gap, contact_threshold
+        # Feet trackers, if configured, are not LoBSTr's input: the upper body sees only its four.
+        self.upper = IKEstimator(sensors.subset(INPUT_SITES), skeleton, fps)
+        self.contacts = ContactHold(skeleton, release_frames) if contact_ik else None
+        self.reset()
+
+    def reset(self) -> None:
+        self.upper.reset()
+        if self.contacts:
+            self.contacts.reset()
+        self._state = self.model.initial_state()
+        self._prev: tuple[float, np.ndarray, np.ndarray] | None = None
+        self._last: BodyPose | None = None
+
+    def step(self, frame: TrackerFrame) -> BodyPose:
+        targets = [self.joint_target(frame, s) for s in INPUT_SITES]
+        if any(t is None or t[1] is None for t in targets):
+            return self._hold(frame.stamp)   # keep the previous sample: the next velocity spans the gap
+        pos = (np.stack([t[0] for t in targets]) - [0.0, 0.0, self.floor]) * self.scale
+        rot = np.stack([t[1] for t in targets])
+        if self._prev is None or not 0 < frame.stamp - self._prev[0] <= self.max_gap:
+            self._state = self.model.initial_state()
+            if self.contacts:
+                self.contacts.reset()
+            self._prev = (frame.stamp - 1.0 / self.model.fps, pos, rot)
+        dt = frame.stamp - self._prev[0]
+        x = features(pos, rot, self._prev[1], self._prev[2])
+        ratio = 1.0 / (self.model.fps * dt)
+        if abs(ratio - 1.0) > 0.02:
+            x = _retime(x, ratio)
+        upper = self.upper.step(frame)
+        if not upper.valid:
+            return self._hold(frame.stamp)
+        legs, prob, state = self.model.step(x, self._state)
+        local = apply_legs(quat_to_matrix(upper.local_quats), legs)
+        contact = prob > self.threshold
+        if self.contacts:
+            local = self.contacts.apply(local, upper.root_position, contact)
+        if not (np.all(np.isfinite(local)) and np.all(np.isfinite(prob))):
+            self.reset()
+            return self._hold(frame.stamp)
+        self._state, self._prev = state, (frame.stamp, pos, rot)
+        self._last = BodyPose(frame.stamp, matrix_to_quat(local), upper.root_position.copy(),
+                              prob.astype(float), contact)
+        return self._last
+
+    def _hold(self, stamp: float) -> BodyPose:
+        if self._last is None:
+            from .reference import standing_pose
+            return BodyPose(stamp, matrix_to_quat(standing_pose()), np.zeros(3), valid=False)
+        return self._last.held(stamp)

@@ -1,0 +1,193 @@
+"""LoBSTr: features, the network's streaming export, contact IK, and the estimator on real clips."""
+import json
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from sparse_body.core.contacts import FOOT_JOINTS
+from sparse_body.core.kinematics import forward_kinematics
+from sparse_body.core.rotations import axis_angle_to_matrix, quat_to_matrix, yaw_matrix
+from sparse_body.core.sensors import load_sensor_config
+from sparse_body.core.skeleton import JOINT_INDEX as J
+from sparse_body.core.skeleton import Skeleton
+from sparse_body.data.catalog import load_clip
+from sparse_body.data.virtual_trackers import TrackerNoise, synthesize_trackers
+from sparse_body.estimators import create_estimator
+from sparse_body.estimators.contact_ik import ContactHold, release_weight
+from sparse_body.estimators.lobstr_features import (INPUT_JOINTS, apply_legs, leg_targets, sequence_features)
+from sparse_body.estimators.reference import standing_pose
+from sparse_body.resources import models_dir
+
+torch = pytest.importorskip("torch")
+
+
+@pytest.fixture(scope="module")
+def clip(clip_index):
+    return load_clip(clip_index["02_05"]).slice(0, 300)
+
+
+@pytest.fixture(scope="module")
+def tiny_model(tmp_path_factory, mocap_root):
+    """A tiny model trained for a few steps by the real training code on two clips."""
+    from sparse_body.train.lobstr_model import LobstrConfig
+    from sparse_body.train.lobstr_train import train
+    out = tmp_path_factory.mktemp("lobstr") / "tiny.onnx"
+    report = train(LobstrConfig.named("tiny"), mocap_root, out, limit=2, log=lambda *_: None)
+    return out, report
+
+
+def test_features_do_not_depend_on_where_the_person_stands_or_faces(clip):
+    pos, rot = clip.positions[:, INPUT_JOINTS], clip.global_rotations[:, INPUT_JOINTS]
+    turn = yaw_matrix(1.1)
+    moved_pos = np.einsum("ij,tkj->tki", turn, pos) + [3.0, -2.0, 0.0]
+    moved_rot = turn @ rot
+    a, b = sequence_features(pos, rot), sequence_features(moved_pos, moved_rot)
+    assert a.shape == (len(clip), 37)
+    np.testing.assert_allclose(a, b, atol=1e-9)
+    # ...but lifting the person changes the reference height, and only that
+    lifted = sequence_features(pos + [0, 0, 0.5], rot)
+    np.testing.assert_allclose(lifted[:, :36], a[:, :36], atol=1e-9)
+    np.testing.assert_allclose(lifted[:, 36] - a[:, 36], 0.5)
+    # the first frame has no velocity: identity rotations, zero translations
+    assert np.allclose(a[0, 0:3], 0) and np.allclose(a[0, 3:9], [1, 0, 0, 0, 1, 0])
+
+
+def test_leg_targets_round_trip_through_apply_legs(clip):
+    glob, local = clip.global_rotations, clip.local_rotations
+    targets = leg_targets(glob, local)
+    for t in (0, 150, len(clip) - 1):
+        np.testing.assert_allclose(apply_legs(local[t], targets[t]), local[t], atol=1e-9)
+
+
+def test_streaming_onnx_equals_the_recurrent_net_over_the_window(tmp_path, clip):
+    """The runtime carries the GRU state; running the exported step frame by frame must give
+    what the training graph gives for the whole window at once."""
+    import onnxruntime as ort
+    from sparse_body.train.lobstr_model import LobstrConfig, LobstrNet
+    from sparse_body.train.lobstr_train import export_onnx
+    torch.manual_seed(0)
+    config = LobstrConfig(hidden=32, latent=16)
+    net = LobstrNet(config).eval()
+    x = sequence_features(clip.positions[:90, INPUT_JOINTS], clip.global_rotations[:90, INPUT_JOINTS])
+    x = x.astype(np.float32)
+    net.mean.copy_(torch.from_numpy(x.mean(0)))
+    net.std.copy_(torch.from_numpy(x.std(0) + 1e-3))
+    export_onnx(net, tmp_path / "net.onnx", {"method": "lobstr", "config": config.to_dict()})
+    session = ort.InferenceSession(str(tmp_path / "net.onnx"), providers=["CPUExecutionProvider"])
+    state = np.zeros((1, 1, config.hidden), np.float32)
+    streamed_legs, streamed_prob = [], []
+    for t in range(len(x)):
+        legs, prob, state = session.run(None, {"features": x[t:t + 1], "state": state})
+        streamed_legs.append(legs[0])
+        streamed_prob.append(prob[0])
+    with torch.no_grad():
+        legs, logits, _ = net(torch.from_numpy(x[None]))
+    np.testing.assert_allclose(np.stack(streamed_legs), legs[0].numpy(), atol=1e-4)
+    np.testing.assert_allclose(np.stack(streamed_prob), torch.softmax(logits[0], -1)[..., 1].numpy(), atol=1e-4)
+    assert np.abs(np.diff(np.stack(streamed_legs), axis=0)).max() > 1e-3   # the state did carry something
+
+
+def test_onnx_metadata_carries_the_configuration(tiny_model):
+    import onnxruntime as ort
+    path, report = tiny_model
+    meta = ort.InferenceSession(str(path), providers=["CPUExecutionProvider"]).get_modelmeta().custom_metadata_map
+    assert json.loads(meta["method"]) == "lobstr"
+    assert json.loads(meta["config"]) == report["config"]
+
+
+def test_estimator_gives_one_finite_pose_per_frame_and_survives_bad_samples(tiny_model, clip):
+    path, _ = tiny_model
+    config = load_sensor_config("four_point")
+    stream = synthesize_trackers(clip, config, TrackerNoise(drop_probability=0.05), seed=3)
+    stream.positions[100:110, 1] = np.nan             # a headset reporting NaN
+    stream.orientations[200, 0] = [0, 0, 0, 0]        # a degenerate pelvis quaternion
+    est = create_estimator("lobstr", config, clip.skeleton, model_path=str(path))
+    poses = est.process(stream)
+    assert len(poses) == len(stream)
+    assert all(p.is_finite() for p in poses)
+    assert all(np.all(np.isfinite(p.contact_probability)) for p in poses if p.valid)
+    bad = ~stream.valid.all(axis=1) | np.isnan(stream.positions).any(axis=(1, 2))
+    bad[200] = True
+    valid = np.array([p.valid for p in poses])
+    assert not valid[bad].any() and valid[~bad].all()
+    # the upper body follows the hands exactly (IK); the legs are the network's
+    local = quat_to_matrix(poses[50].local_quats)
+    _, pos = forward_kinematics(local, poses[50].root_position, clip.skeleton.offsets)
+    np.testing.assert_allclose(pos[J["left_wrist"]], clip.positions[50, J["left_wrist"]], atol=0.01)
+
+
+def test_estimator_refuses_a_missing_or_foreign_model(tmp_path, clip, tiny_model):
+    config = load_sensor_config("four_point")
+    with pytest.raises(FileNotFoundError, match="train one"):
+        create_estimator("lobstr", config, clip.skeleton, model_path=str(tmp_path / "none.onnx"))
+    (tmp_path / "junk.onnx").write_bytes(b"not a model")
+    with pytest.raises(ValueError, match="junk.onnx"):
+        create_estimator("lobstr", config, clip.skeleton, model_path=str(tmp_path / "junk.onnx"))
+    with pytest.raises(ValueError, match="needs trackers on pelvis"):
+        create_estimator("lobstr", load_sensor_config("three_point"), clip.skeleton, model_path=str(tiny_model[0]))
+
+
+def test_contact_hold_pins_the_toe_then_lets_go_slowly():
+    skeleton = Skeleton.canonical()
+    hold = ContactHold(skeleton, release_frames=10)
+    local = standing_pose()
+    local[J["left_knee"]] = local[J["right_knee"]] = axis_angle_to_matrix([0.0, 0.3, 0.0])   # knees a little bent
+    root = np.array([0.0, 0.0, 0.95])
+    _, pos = forward_kinematics(local, root, skeleton.offsets)
+    anchor = pos[FOOT_JOINTS[0]].copy()
+    toes = []
+    for t in range(30):
+        moved = root + [0.01 * t, 0.0, -0.004 * t]       # the pelvis walks on and sinks a little
+        contact = np.array([t < 15, False])
+        out = hold.apply(local, moved, contact)
+        _, p = forward_kinematics(out, moved, skeleton.offsets)
+        _, free = forward_kinematics(local, moved, skeleton.offsets)
+        toes.append((p[FOOT_JOINTS[0]], free[FOOT_JOINTS[0]], p[FOOT_JOINTS[1]], free[FOOT_JOINTS[1]]))
+    for t in range(15):        # held: the toe stays where contact began
+        assert np.linalg.norm(toes[t][0] - anchor) < 0.005, t
+    for t in range(30):        # the other foot, never in contact, is left alone
+        np.testing.assert_allclose(toes[t][2], toes[t][3], atol=1e-9)
+    # released over 10 frames: from the anchor to the network's toe, slow at both ends
+    gaps = [np.linalg.norm(toes[t][0] - toes[t][1]) for t in range(15, 26)]
+    assert gaps[0] > 0.1 and gaps[-1] < 1e-3
+    assert all(a >= b - 1e-4 for a, b in zip(gaps, gaps[1:]))
+    w = [release_weight(k, 10) for k in range(11)]
+    assert w[0] == 0 and w[10] == 1 and w[1] < 0.1 and 0.9 < w[9] and np.allclose(w[5], 0.5)
+
+
+def test_contact_hold_lets_go_of_a_point_out_of_reach():
+    skeleton = Skeleton.canonical()
+    hold = ContactHold(skeleton)
+    local = standing_pose()
+    root = np.array([0.0, 0.0, 0.9])
+    hold.apply(local, root, np.array([True, True]))
+    far = root + [1.5, 0.0, 0.0]                          # the body jumped 1.5 m
+    out = hold.apply(local, far, np.array([True, True]))
+    _, p = forward_kinematics(out, far, skeleton.offsets)
+    assert np.all(np.isfinite(out))
+    assert np.linalg.norm(p[FOOT_JOINTS[0]][:2] - far[:2]) < 1.2   # not stretched back to the old point
+
+
+def test_train_is_one_command(tmp_path, mocap_root):
+    out = tmp_path / "m.onnx"
+    subprocess.run([sys.executable, "-m", "sparse_body.cli", "train", "lobstr", "--config", "tiny", "--steps", "2",
+                    "--limit", "1", "--out", str(out), "--no-card"], check=True, capture_output=True)
+    report = json.loads(out.with_suffix(".train.json").read_text())
+    assert out.is_file() and report["steps"] == 2 and report["train_clips"] == 1
+
+
+@pytest.mark.skipif(not (models_dir() / "lobstr.onnx").is_file(), reason="no shipped LoBSTr model")
+def test_shipped_model_beats_the_ik_baseline_on_a_test_clip(clip_index):
+    """The trained model on a held-out walk: legs and contacts better than standing IK legs."""
+    from sparse_body.data.catalog import load_split
+    from sparse_body.evaluation import evaluate_motion
+    assert "02_05" in load_split()["test"]
+    motion = load_clip(clip_index["02_05"])
+    config = load_sensor_config("four_point")
+    lobstr = evaluate_motion(motion, "lobstr", config)
+    ik = evaluate_motion(motion, "ik", config)
+    assert lobstr["Lower RE [deg]"] < ik["Lower RE [deg]"]
+    assert lobstr["Contact acc [%]"] > 70.0
+    assert lobstr["Toe PE [cm]"] < ik["Toe PE [cm]"]

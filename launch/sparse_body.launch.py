@@ -1,8 +1,8 @@
 """Trackers -> estimator -> JointState, contacts and TF, with robot_state_publisher for RViz.
 
-    ros2 launch sparse_body sparse_body.launch.py sensors:=four_point estimator:=ik bag:=/path/to/trackers
+    ros2 launch sparse_body sparse_body.launch.py sensors:=four_point estimator:=lobstr bag:=/path/to/trackers
 
-Arguments: sensors, estimator, height, bag (the tracker source; empty: trackers come from
+Arguments: sensors, estimator, model_path, height, bag (the tracker source; empty: trackers come from
 elsewhere on /tf), rviz, robot_state_publisher. The estimator is a lifecycle node; it is configured and activated
 here through its autostart parameter.
 """
@@ -25,6 +25,7 @@ def _nodes(context):
     height = float(arg("height"))
     estimator_params = [os.path.join(share, "config", "estimator.yaml"),
                         {"sensors": arg("sensors"), "estimator": arg("estimator"), "height": height,
+                         "model_path": arg("model_path"),
                          "publish_link_tf": False, "autostart": True}]
     with_rsp = arg("robot_state_publisher").lower() in ("true", "1")
     estimator_params[1]["publish_link_tf"] = not with_rsp
@@ -44,6 +45,8 @@ def generate_launch_description():
     return LaunchDescription([
         DeclareLaunchArgument("sensors", default_value="six_point", description="sensor configuration"),
         DeclareLaunchArgument("estimator", default_value="ik", description="estimation method"),
+        DeclareLaunchArgument("model_path", default_value="",
+                              description="model file of a learned estimator (empty: the shipped one)"),
         DeclareLaunchArgument("height", default_value="1.75", description="the person's height in metres"),
         DeclareLaunchArgument("bag", default_value="", description="rosbag2 of tracker TF to replay"),
         DeclareLaunchArgument("rviz", default_value="false", description="start RViz"),

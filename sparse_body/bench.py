@@ -104,6 +104,56 @@ def bench_latency(estimator: str, sensors_name: str, seconds: float = 10.0, rate
           f"{len(ms)} samples): p50 {np.percentile(ms, 50):.1f} ms, p99 {np.percentile(ms, 99):.1f} ms")
 
 
+def _percentiles(times) -> str:
+    ms = np.asarray(times) * 1000
+    return f"p50 {np.percentile(ms, 50):6.3f} ms   p99 {np.percentile(ms, 99):6.3f} ms"
+
+
+def bench_network(frames: int = 3000) -> None:
+    """LoBSTr's per-frame network step on one core: torch against ONNX Runtime, for the small
+    and the paper's sizes (random weights: the cost does not depend on their values), and the
+    shipped model. One GRU step with the state carried, batch 1, as the estimator runs it."""
+    import tempfile
+
+    import torch
+
+    from .estimators.lobstr import LobstrModel, default_model_path
+    from .estimators.lobstr_features import FEATURES
+    from .train.lobstr_model import LobstrConfig, LobstrNet, LobstrStep
+    from .train.lobstr_train import export_onnx
+    torch.set_num_threads(1)
+    rng = np.random.default_rng(0)
+    x = rng.normal(size=(frames, FEATURES)).astype(np.float32)
+    print(f"LoBSTr network step, {frames} frames, 1 thread (torch {torch.__version__})")
+
+    def time_ort(model: LobstrModel):
+        state, times = model.initial_state(), []
+        for row in x:
+            t0 = time.perf_counter()
+            _, _, state = model.step(row, state)
+            times.append(time.perf_counter() - t0)
+        return times[100:]
+
+    for name in ("small", "paper"):
+        config = LobstrConfig.named(name)
+        net = LobstrNet(config).eval()
+        step = LobstrStep(net)
+        state, times = torch.zeros(1, 1, config.hidden), []
+        with torch.inference_mode():
+            for row in torch.from_numpy(x):
+                t0 = time.perf_counter()
+                _, _, state = step(row[None], state)
+                times.append(time.perf_counter() - t0)
+        print(f"  {name:<6} hidden {config.hidden:<5} torch        {_percentiles(times[100:])}")
+        with tempfile.TemporaryDirectory() as tmp:
+            path = Path(tmp) / "lobstr.onnx"
+            export_onnx(net, path, {"method": "lobstr", "config": config.to_dict()})
+            print(f"  {name:<6} hidden {config.hidden:<5} onnxruntime  {_percentiles(time_ort(LobstrModel(path)))}")
+    if default_model_path().is_file():
+        model = LobstrModel()
+        print(f"  shipped {default_model_path().name} (hidden {model.hidden}) onnxruntime  {_percentiles(time_ort(model))}")
+
+
 def run(estimators, sensors_name: str, latency: bool = True) -> None:
     bench_offline(estimators, sensors_name)
     if latency:

@@ -191,3 +191,43 @@ def test_shipped_model_beats_the_ik_baseline_on_a_test_clip(clip_index):
     assert lobstr["Lower RE [deg]"] < ik["Lower RE [deg]"]
     assert lobstr["Contact acc [%]"] > 70.0
     assert lobstr["Toe PE [cm]"] < ik["Toe PE [cm]"]
+
+
+def test_estimator_node_runs_lobstr_over_dds(tiny_model, tmp_path, clip, monkeypatch):
+    """estimator:=lobstr with the four-point configuration, fed by the tracker bridge."""
+    rclpy = pytest.importorskip("rclpy")
+    pytest.importorskip("tf2_msgs.msg")
+    import os
+    from ros_helpers import Listener, isolated_domain, start_node, stop
+    from sensor_msgs.msg import JointState
+    from sparse_body.msg import EstimateStatus, FootContacts
+    from sparse_body.offline import make_bag
+    monkeypatch.setenv("ROS_DOMAIN_ID", isolated_domain())
+    env = dict(os.environ)
+    config = load_sensor_config("four_point")
+    make_bag(clip.slice(0, 180), config, tmp_path / "trackers")
+    est = start_node("sparse_body.ros.estimator_node",
+                     {"sensors": "four_point", "estimator": "lobstr", "model_path": str(tiny_model[0]),
+                      "autostart": True, "height": clip.skeleton.height(), "stale_timeout": 0.5},
+                     "sparse_body_estimator", tmp_path, env)
+    rclpy.init()
+    listener = Listener(rclpy, {"joint_states": JointState, "foot_contacts": FootContacts,
+                                "estimate_status": EstimateStatus})
+    bridge = None
+    try:
+        assert listener.spin_until(lambda: listener.received["joint_states"], 20.0), \
+            (tmp_path / "sparse_body_estimator.log").read_text()
+        bridge = start_node("sparse_body.ros.tracker_bridge_node",
+                            {"bag": str(tmp_path / "trackers"), "min_subscribers": 1, "start_delay": 0.5},
+                            "sparse_body_tracker_bridge", tmp_path, env)
+        listener.spin_until(lambda: sum(s.valid for s in listener.received["estimate_status"]) >= 100, 25.0)
+    finally:
+        listener.destroy()
+        rclpy.shutdown()
+        stop(est, *([bridge] if bridge else []))
+    valid = sum(s.valid for s in listener.received["estimate_status"])
+    assert valid >= 100, (tmp_path / "sparse_body_estimator.log").read_text()
+    assert all(np.all(np.isfinite(m.position)) for m in listener.received["joint_states"])
+    probabilities = np.array([c.probability for m in listener.received["foot_contacts"] for c in m.contacts])
+    known = probabilities[np.isfinite(probabilities)]     # NaN: no estimate yet
+    assert len(known) >= 2 * 100 and np.all((known >= 0.0) & (known <= 1.0))

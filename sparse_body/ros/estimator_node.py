@@ -38,7 +38,7 @@ from .tf_input import HAVE_TF2_ROS, Tf2Reader, TfReader
 PARAMETERS = {
     # name: (default, description)
     "sensors": ("six_point", "sensor configuration: a name under config/sensors or a YAML path"),
-    "estimator": ("ik", "estimation method (ik, reference, ...)"),
+    "estimator": ("ik", "estimation method: ik, reference, lobstr"),
     "model_path": ("", "model file for learned estimators; empty: the shipped model"),
     "fixed_frame": ("", "frame the trackers are looked up in; empty: the sensor configuration's"),
     "height": (1.75, "the tracked person's height in metres (scales the body)"),

@@ -1,37 +1,63 @@
-"""Tracker poses from a source, republished as TF.
+"""Tracker poses from a source, published as TF: a recorded bag, VMC over UDP, or serial devices.
 
-The source here is a rosbag2 of tracker TF (as `sparse-body make-bag` writes or a recording
-of real trackers): its /tf messages are played at the recorded pace, restamped to the
-current time by default, as live trackers would stamp them. Device adapters (VMC, serial)
-plug in as further sources.
+- source:=bag replays a rosbag2 of tracker /tf (as `sparse-body make-bag` writes, or a
+  recording of real trackers) at the recorded pace, restamped to now by default.
+- source:=vmc listens for the VMC protocol (SlimeVR, Virtual Motion Capture) on
+  vmc_host:vmc_port; source:=serial reads the serial tracker protocol
+  (docs/serial_protocol.md) from serial_port and reconnects when the device comes back.
+  Their devices are sent to body sites by the `devices` map (PATTERN=SITE) and published
+  under the sensor configuration's frame names, stamped with the sample's (device-clock
+  corrected) time. Orientation-only devices get a zero translation on TF; the sensor
+  configuration marks them `measures: orientation`, so no estimator ever reads it.
+
+A T-pose calibration (service ~/calibrate) measures each tracker's rotation offset and the
+person's height; from then on (and at start, from the `calibration` file) the bridge
+publishes joint-aligned orientations.
 """
 from __future__ import annotations
 
 import threading
 import time
 
+import numpy as np
 import rclpy
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from geometry_msgs.msg import TransformStamped
 from rcl_interfaces.msg import ParameterDescriptor
 from rclpy.node import Node
 from rclpy.qos import QoSProfile
 
+from ..adapters.calibration import Calibration, CalibrationError, calibrate_tpose
+from ..adapters.vmc import DEFAULT_PORT, map_device, parse_device_map
 from ..bagio import TF_TOPIC, BagError, typestore
+from ..core.sensors import SensorConfigError, load_sensor_config
 from .messages import to_time
 from .spin import spin_until_shutdown
 
+SOURCES = ("bag", "vmc", "serial")
 PARAMETERS = {
-    "bag": ("", "rosbag2 directory (or .mcap / .db3 file) holding tracker /tf"),
-    "rate": (1.0, "playback speed factor"),
-    "loop": (False, "start again at the end"),
-    "restamp": (True, "stamp transforms with the current time instead of the recorded one"),
-    "min_subscribers": (1, "wait until this many /tf subscribers are matched before playing"),
+    "source": ("bag", "where tracker poses come from: bag, vmc or serial"),
+    "sensors": ("six_point", "sensor configuration naming the body sites' TF frames and fixed frame"),
+    "bag": ("", "source bag: rosbag2 directory (or .mcap / .db3 file) holding tracker /tf"),
+    "rate": (1.0, "source bag: playback speed factor"),
+    "loop": (False, "source bag: start again at the end"),
+    "restamp": (True, "source bag: stamp transforms with the current time instead of the recorded one"),
+    "min_subscribers": (1, "wait until this many /tf subscribers are matched before publishing"),
     "start_delay": (0.5, "seconds to wait after that, so late subscribers can connect too"),
+    "devices": ([""], "vmc / serial: PATTERN=SITE entries mapping device names (hmd:NAME, con:NAME, "
+                      "tra:NAME, serial:ID) to body sites; empty: hmd:*=head for vmc, serial:N = "
+                      "the N-th site of the sensor configuration for serial"),
+    "vmc_host": ("127.0.0.1", "vmc: address to listen on"),
+    "vmc_port": (DEFAULT_PORT, "vmc: UDP port to listen on"),
+    "serial_port": ("", "serial: device or pyserial URL (/dev/ttyUSB0, loop://, socket://host:port)"),
+    "serial_baudrate": (921600, "serial: baud rate"),
+    "stale_after": (0.25, "vmc / serial: samples older than this (s) when they arrive are dropped and counted"),
+    "calibration": ("", "T-pose calibration YAML to apply at start, and where ~/calibrate saves by default"),
 }
 
 
 def load_tf_frames(path: str) -> list[tuple[float, list]]:
-    """(seconds from the first message, [(parent, child, translation, rotation)]) per /tf message."""
+    """(seconds from the first message, [(parent, child, stamp, translation, rotation)]) per /tf message."""
     from pathlib import Path
 
     from rosbags.rosbag2 import Reader
@@ -64,27 +90,87 @@ class TrackerBridge(Node):
         for name, (default, text) in PARAMETERS.items():
             self.declare_parameter(name, default, ParameterDescriptor(description=text))
         p = {name: self.get_parameter(name).value for name in PARAMETERS}
-        if not p["bag"]:
-            raise ValueError("parameter 'bag' is empty: name a rosbag2 of tracker TF")
-        if p["rate"] <= 0:
-            raise ValueError(f"parameter 'rate' must be positive, got {p['rate']}")
+        if p["source"] not in SOURCES:
+            raise ValueError(f"parameter 'source' must be one of {', '.join(SOURCES)}, got {p['source']!r}")
         self.params = p
-        self.frames = load_tf_frames(p["bag"])
+        self.sensors = load_sensor_config(p["sensors"])
+        self.site_of_frame = {s.frame_id: s.site for s in self.sensors.sites}
+        self.calibration = Calibration.load(p["calibration"]) if p["calibration"] else None
         from tf2_msgs.msg import TFMessage
+
+        from ..srv import Calibrate
         self._msg_type = TFMessage
         self.pub = self.create_publisher(TFMessage, "/tf", QoSProfile(depth=100))
-        self.get_logger().info(f"playing {len(self.frames)} TF messages from {p['bag']}")
+        self.pub_diag = self.create_publisher(DiagnosticArray, "/diagnostics", QoSProfile(depth=10))
+        self.create_service(Calibrate, "~/calibrate", self._on_calibrate)
+        self.counts = {"published": 0, "stale": 0, "unmapped": 0}
+        self.unmapped: set[str] = set()
+        self._collect: dict[str, list] | None = None
+        self._lock = threading.Lock()
         self._stop = threading.Event()
         self.finished = threading.Event()
-        self._thread = threading.Thread(target=self._play, daemon=True)
-        self._thread.start()
+        self.adapter = None
+        self._thread = None
+        if p["source"] == "bag":
+            if not p["bag"]:
+                raise ValueError("parameter 'bag' is empty: name a rosbag2 of tracker TF")
+            if p["rate"] <= 0:
+                raise ValueError(f"parameter 'rate' must be positive, got {p['rate']}")
+            self.frames = load_tf_frames(p["bag"])
+            self.get_logger().info(f"playing {len(self.frames)} TF messages from {p['bag']}")
+            self._thread = threading.Thread(target=self._play, daemon=True)
+            self._thread.start()
+        else:
+            self._start_device_source(p)
+        self.create_timer(1.0, self._publish_diagnostics)
 
-    def _play(self) -> None:
+    # -- live devices ----------------------------------------------------------------
+    def _start_device_source(self, p) -> None:
+        entries = [e for e in p["devices"] if e]
+        if not entries:
+            entries = (["hmd:*=head"] if p["source"] == "vmc"
+                       else [f"serial:{i + 1}={s.site}" for i, s in enumerate(self.sensors.sites)])
+        self.device_map = parse_device_map(entries)
+        unknown = {site for _, site in self.device_map} - set(self.sensors.site_names)
+        if unknown:
+            raise ValueError(f"devices map to {', '.join(sorted(unknown))}, which sensor configuration "
+                             f"{self.sensors.name!r} does not have")
+        if p["source"] == "vmc":
+            from ..adapters.vmc import VmcReceiver
+            self.adapter = VmcReceiver(self._on_samples, p["vmc_host"], p["vmc_port"])
+            self.get_logger().info(f"listening for VMC on {self.adapter.address[0]}:{self.adapter.address[1]}")
+        else:
+            from ..adapters.serial_reader import SerialTrackerReader
+            self.adapter = SerialTrackerReader(p["serial_port"], self._on_samples, p["serial_baudrate"])
+            self.get_logger().info(f"reading serial trackers from {p['serial_port']}")
+
+    def _on_samples(self, samples) -> None:
+        now = time.time()
+        transforms = []
+        for sample in samples:
+            site = map_device(sample.device, self.device_map)
+            if site is None:
+                self.counts["unmapped"] += 1
+                self.unmapped.add(sample.device)
+                continue
+            if sample.stamp < now - self.params["stale_after"]:
+                self.counts["stale"] += 1
+                continue
+            spec = self.sensors.site(site)
+            position = sample.position if (sample.position is not None and spec.has_position) else None
+            transforms.append(self._transform(site, spec.frame_id, sample.stamp, position, sample.orientation))
+        self._send(transforms)
+
+    # -- the bag --------------------------------------------------------------------
+    def _wait_for_subscribers(self) -> bool:
         # /tf is volatile: what is published before a subscriber is matched is lost to it.
         while self.pub.get_subscription_count() < self.params["min_subscribers"]:
             if self._stop.wait(0.05):
-                return
-        if self._stop.wait(self.params["start_delay"]):
+                return False
+        return not self._stop.wait(self.params["start_delay"])
+
+    def _play(self) -> None:
+        if not self._wait_for_subscribers():
             return
         while True:
             start = time.monotonic()
@@ -93,24 +179,92 @@ class TrackerBridge(Node):
                 if delay > 0 and self._stop.wait(delay):
                     return
                 now = self.get_clock().now().nanoseconds * 1e-9
-                msgs = []
-                for parent, child, stamp, tr, q in transforms:
-                    m = TransformStamped()
-                    m.header.frame_id, m.child_frame_id = parent, child
-                    m.header.stamp = to_time(now if self.params["restamp"] else stamp)
-                    (m.transform.translation.x, m.transform.translation.y, m.transform.translation.z) = tr
-                    (m.transform.rotation.x, m.transform.rotation.y, m.transform.rotation.z,
-                     m.transform.rotation.w) = q
-                    msgs.append(m)
-                self.pub.publish(self._msg_type(transforms=msgs))
+                self._send([self._transform(self.site_of_frame.get(child), child,
+                                            now if self.params["restamp"] else stamp, tr, q, parent)
+                            for parent, child, stamp, tr, q in transforms])
             if not self.params["loop"]:
                 self.finished.set()
                 self.get_logger().info("finished playing")
                 return
 
+    # -- common -----------------------------------------------------------------------
+    def _transform(self, site, frame_id, stamp, position, quat, parent=None) -> TransformStamped:
+        quat = np.asarray(quat, dtype=float)
+        if site is not None:
+            with self._lock:
+                if self._collect is not None:
+                    self._collect.setdefault(site, []).append(
+                        (None if position is None else np.asarray(position, float), quat))
+                if self.calibration is not None and np.all(np.isfinite(quat)) and np.linalg.norm(quat) > 0.5:
+                    quat = self.calibration.apply(site, quat)
+        m = TransformStamped()
+        m.header.frame_id, m.child_frame_id = parent or self.sensors.fixed_frame, frame_id
+        m.header.stamp = to_time(stamp)
+        (m.transform.translation.x, m.transform.translation.y,
+         m.transform.translation.z) = (0.0, 0.0, 0.0) if position is None else map(float, position)
+        (m.transform.rotation.x, m.transform.rotation.y, m.transform.rotation.z, m.transform.rotation.w) = map(float, quat)
+        return m
+
+    def _send(self, transforms) -> None:
+        if transforms:
+            self.pub.publish(self._msg_type(transforms=transforms))
+            self.counts["published"] += len(transforms)
+
+    def _on_calibrate(self, request, response):
+        seconds = request.seconds if request.seconds > 0 else 1.0
+        with self._lock:
+            self._collect = {}
+        time.sleep(seconds)      # samples arrive on the source's thread meanwhile
+        with self._lock:
+            collected, self._collect = self._collect, None
+        try:
+            head = self.sensors.site("head").offset_translation if "head" in self.sensors.site_names else None
+            calibration = calibrate_tpose(collected, head_offset=None if head is None else np.array(head))
+        except CalibrationError as err:
+            response.success, response.message = False, str(err)
+            self.get_logger().warn(f"calibration failed: {err}")
+            return response
+        path = request.save_path or self.params["calibration"]
+        if path:
+            calibration.save(path)
+        with self._lock:
+            self.calibration = calibration
+        response.success, response.height, response.sites = True, float(calibration.height), sorted(calibration.offsets)
+        response.message = (f"calibrated {', '.join(sorted(calibration.offsets))}; height {calibration.height:.2f} m"
+                            + (f"; saved to {path}" if path else ""))
+        self.get_logger().info(response.message)
+        return response
+
+    def _publish_diagnostics(self) -> None:
+        status = DiagnosticStatus(name="sparse_body: tracker bridge", hardware_id=self.params["source"])
+        values = {**{k: str(v) for k, v in self.counts.items()},
+                  "unmapped devices": ", ".join(sorted(self.unmapped)) or "none",
+                  "calibrated": "yes" if self.calibration else "no"}
+        level, message = DiagnosticStatus.OK, "ok"
+        if self.params["source"] == "serial" and self.adapter is not None:
+            st = self.adapter.decoder.stats
+            values.update({"frames": str(st.frames), "garbage bytes": str(st.garbage_bytes),
+                           "bad checksums": str(st.bad_checksums), "bad values": str(st.bad_values),
+                           "connects": str(self.adapter.connects), "disconnects": str(self.adapter.disconnects)})
+            if not self.adapter.connected.is_set():
+                level, message = DiagnosticStatus.ERROR, f"{self.params['serial_port']} not open: {self.adapter.last_error}"
+        elif self.params["source"] == "vmc" and self.adapter is not None:
+            values.update({f"errors: {k}": str(v) for k, v in self.adapter.decoder.errors.items()})
+            values["devices seen"] = ", ".join(sorted(self.adapter.decoder.devices)) or "none"
+        if self.counts["stale"] and level == DiagnosticStatus.OK:
+            level, message = DiagnosticStatus.WARN, f"{self.counts['stale']} stale samples dropped"
+        status.level, status.message = level, message
+        status.values = [KeyValue(key=k, value=v) for k, v in values.items()]
+        msg = DiagnosticArray(status=[status])
+        msg.header.stamp = self.get_clock().now().to_msg()
+        self.pub_diag.publish(msg)
+
     def destroy_node(self) -> None:
         self._stop.set()
-        self._thread.join(timeout=2.0)
+        if self._thread is not None:
+            self._thread.join(timeout=2.0)
+        if self.adapter is not None:
+            self.adapter.close()
         super().destroy_node()
 
 
@@ -118,7 +272,7 @@ def main(args=None) -> None:
     rclpy.init(args=args)
     try:
         node = TrackerBridge()
-    except (ValueError, BagError) as err:
+    except (ValueError, BagError, SensorConfigError, CalibrationError) as err:
         print(f"sparse_body_tracker_bridge: {err}", flush=True)
         rclpy.shutdown()
         raise SystemExit(1)

@@ -1,0 +1,117 @@
+"""T-pose calibration: each tracker's rotation relative to its joint, and the person's height.
+
+In the body's rest pose (a T-pose facing +x) every joint's rotation is the identity, so in
+a T-pose facing yaw psi every joint's rotation is Rz(psi). A tracker's orientation q then
+gives its mounting offset Rz(psi)^-1 q, which absorbs how the controller is held or the
+tracker strapped on, different each session. Facing comes from the hands (their left-right
+line), else from the headset's forward axis. Height: the headset's height above the floor
+scaled by the body model's stature ratio (LoBSTr's height scale, in metres).
+
+Applying a calibration turns a tracker orientation into its joint's orientation
+(q offset^-1); the bridge publishes that, so estimators see joint-aligned trackers.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import yaml
+from scipy.spatial.transform import Rotation
+
+from ..core.rotations import yaw_matrix
+from ..core.skeleton import STATURE_RATIO
+
+
+class CalibrationError(ValueError):
+    pass
+
+
+@dataclass
+class Calibration:
+    height: float
+    facing_yaw: float                                      # radians, the facing during calibration
+    offsets: dict[str, np.ndarray] = field(default_factory=dict)   # site -> (4,) x y z w
+
+    def apply(self, site: str, quat: np.ndarray) -> np.ndarray:
+        """The joint's orientation from its tracker's (unchanged for uncalibrated sites)."""
+        if site not in self.offsets:
+            return np.asarray(quat, dtype=float)
+        return (Rotation.from_quat(quat) * Rotation.from_quat(self.offsets[site]).inv()).as_quat()
+
+    def save(self, path: str | Path) -> None:
+        data = {"height": round(float(self.height), 4), "facing_yaw": round(float(self.facing_yaw), 6),
+                "offsets": {s: [round(float(v), 8) for v in q] for s, q in self.offsets.items()}}
+        Path(path).parent.mkdir(parents=True, exist_ok=True)
+        Path(path).write_text("# T-pose calibration written by sparse_body (rotation offsets x y z w:\n"
+                              "# the tracker's orientation in its joint's frame)\n" + yaml.safe_dump(data, sort_keys=False))
+
+    @classmethod
+    def load(cls, path: str | Path) -> "Calibration":
+        from ..core.sensors import SITE_JOINTS
+        path = Path(path)
+        try:
+            data = yaml.safe_load(path.read_text())
+        except OSError as err:
+            raise CalibrationError(f"{path}: cannot be read ({err.strerror})") from None
+        except yaml.YAMLError as err:
+            raise CalibrationError(f"{path}: not valid YAML ({err})") from None
+        if not isinstance(data, dict) or not isinstance(data.get("offsets", {}), dict):
+            raise CalibrationError(f"{path}: expected height, facing_yaw and an offsets mapping")
+        try:
+            height, yaw = float(data["height"]), float(data.get("facing_yaw", 0.0))
+        except (KeyError, TypeError, ValueError):
+            raise CalibrationError(f"{path}: 'height' must be a number") from None
+        if not 0.5 <= height <= 2.5:
+            raise CalibrationError(f"{path}: height {height} m is not a person's")
+        offsets = {}
+        for site, q in (data.get("offsets") or {}).items():
+            if site not in SITE_JOINTS:
+                raise CalibrationError(f"{path}: unknown body site {site!r}")
+            try:
+                q = np.array([float(v) for v in q])
+            except (TypeError, ValueError):
+                q = np.zeros(0)
+            if q.shape != (4,) or not np.all(np.isfinite(q)) or abs(np.linalg.norm(q) - 1) > 1e-3:
+                raise CalibrationError(f"{path}: offset of {site!r} is not a unit quaternion x y z w")
+            offsets[site] = q
+        return cls(height, yaw, offsets)
+
+
+def _mean_rotation(quats: np.ndarray) -> Rotation:
+    return Rotation.from_quat(np.asarray(quats)).mean()
+
+
+def calibrate_tpose(samples: dict[str, list[tuple[np.ndarray | None, np.ndarray]]], floor: float = 0.0,
+                    head_offset: np.ndarray | None = None) -> Calibration:
+    """samples: site -> [(position or None, orientation x y z w)] collected during the T-pose.
+
+    head_offset: the headset's mounting translation in the head joint's frame (the sensor
+    configuration's), so that the height is measured at the head joint."""
+    samples = {s: v for s, v in samples.items() if v}
+    if not samples:
+        raise CalibrationError("no tracker samples arrived during the calibration")
+    mean_pos = {s: np.mean([p for p, _ in v], axis=0) for s, v in samples.items()
+                if all(p is not None for p, _ in v)}
+    if "left_hand" in mean_pos and "right_hand" in mean_pos:
+        left = mean_pos["left_hand"] - mean_pos["right_hand"]
+        left[2] = 0.0
+        if np.linalg.norm(left) < 0.5:
+            raise CalibrationError(f"the hands are {np.linalg.norm(left):.2f} m apart: not a T-pose "
+                                   "(arms straight out to the sides)")
+        forward = np.cross(left / np.linalg.norm(left), [0.0, 0.0, 1.0])
+        yaw = float(np.arctan2(forward[1], forward[0]))
+    elif "head" in samples:
+        fwd = _mean_rotation([q for _, q in samples["head"]]).as_matrix()[:, 0]
+        yaw = float(np.arctan2(fwd[1], fwd[0]))
+    else:
+        raise CalibrationError("facing cannot be found: calibration needs both hands or the headset")
+    facing = Rotation.from_matrix(yaw_matrix(yaw))
+    offsets = {s: (facing.inv() * _mean_rotation([q for _, q in v])).as_quat() for s, v in samples.items()}
+    if "head" not in mean_pos:
+        raise CalibrationError("the height needs a headset with a position")
+    head = mean_pos["head"] - facing.apply(np.zeros(3) if head_offset is None else head_offset)
+    height = float((head[2] - floor) * STATURE_RATIO)   # as Skeleton.height(): head joint above the toes
+    if not 0.5 <= height <= 2.5:
+        raise CalibrationError(f"the headset is {head[2] - floor:.2f} m above the floor: not a standing person")
+    return Calibration(height, yaw, offsets)

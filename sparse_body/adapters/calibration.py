@@ -48,14 +48,9 @@ class Calibration:
 
     @classmethod
     def load(cls, path: str | Path) -> "Calibration":
-        from ..core.sensors import SITE_JOINTS
+        from ..core.sensors import SITE_JOINTS, read_yaml
         path = Path(path)
-        try:
-            data = yaml.safe_load(path.read_text())
-        except OSError as err:
-            raise CalibrationError(f"{path}: cannot be read ({err.strerror})") from None
-        except yaml.YAMLError as err:
-            raise CalibrationError(f"{path}: not valid YAML ({err})") from None
+        data = read_yaml(path, CalibrationError)
         if not isinstance(data, dict) or not isinstance(data.get("offsets", {}), dict):
             raise CalibrationError(f"{path}: expected height, facing_yaw and an offsets mapping")
         try:

@@ -134,10 +134,14 @@ def load_sensor_config(name_or_path: str | Path) -> SensorConfig:
         if not path.is_file():
             known = sorted(p.stem for p in (config_dir() / "sensors").glob("*.yaml"))
             raise SensorConfigError(f"no sensor configuration {name_or_path!r}; shipped ones are {', '.join(known)}")
+    return parse_sensor_config(read_yaml(path, SensorConfigError), str(path))
+
+
+def read_yaml(path: Path, error: type[Exception] = ValueError):
+    """A YAML file's content, or error naming the file and what is wrong with it."""
     try:
-        data = yaml.safe_load(path.read_text())
+        return yaml.safe_load(Path(path).read_text())
     except OSError as err:
-        raise SensorConfigError(f"{path}: cannot be read ({err.strerror})") from None
+        raise error(f"{path}: cannot be read ({err.strerror})") from None
     except yaml.YAMLError as err:
-        raise SensorConfigError(f"{path}: not valid YAML ({err})") from None
-    return parse_sensor_config(data, str(path))
+        raise error(f"{path}: not valid YAML ({err})") from None

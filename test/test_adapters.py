@@ -239,3 +239,25 @@ def test_a_bundle_with_a_negative_element_size_does_not_hang_the_decoder():
     worker.start()
     assert done.wait(5.0), "the decoder hangs"
     assert decoder.errors["not OSC"] == 1
+
+
+def test_orientation_only_foot_imus_turn_the_ankles_and_invent_no_position():
+    from sparse_body.core.rotations import quat_to_matrix
+    from sparse_body.core.sensors import load_sensor_config
+    from sparse_body.data.synthetic import synthetic_walk
+    from sparse_body.data.virtual_trackers import synthesize_trackers
+    from sparse_body.estimators import create_estimator
+    config = load_sensor_config("four_point_foot_imus")
+    motion = synthetic_walk(2.0)
+    stream = synthesize_trackers(motion, config)
+    feet = [config.site_names.index(s) for s in ("left_foot", "right_foot")]
+    assert np.isnan(stream.positions[:, feet]).all() and np.isfinite(stream.orientations[:, feet]).all()
+    est = create_estimator("ik", config, motion.skeleton)
+    assert est.joint_target(stream.frame(0), "left_foot")[0] is None
+    poses = est.process(stream)
+    assert all(p.valid and p.is_finite() for p in poses)
+    for t in (10, 60, 110):
+        local = quat_to_matrix(poses[t].local_quats)
+        glob, _ = forward_kinematics(local, poses[t].root_position, motion.skeleton.offsets)
+        for joint in ("left_ankle", "right_ankle"):
+            np.testing.assert_allclose(glob[J[joint]], motion.global_rotations[t, J[joint]], atol=1e-6)

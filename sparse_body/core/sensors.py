@@ -50,6 +50,11 @@ class TrackerSite:
         rot = Rotation.from_quat(quat) * Rotation.from_quat(self.offset_rotation).inv()
         return np.asarray(position) - rot.apply(self.offset_translation), rot.as_matrix()
 
+    def joint_rotation(self, quat: np.ndarray) -> np.ndarray:
+        """The followed joint's rotation matrix from the tracker's orientation alone."""
+        from scipy.spatial.transform import Rotation
+        return (Rotation.from_quat(quat) * Rotation.from_quat(self.offset_rotation).inv()).as_matrix()
+
     @property
     def has_position(self) -> bool:
         return self.measures in ("pose", "position")

@@ -49,19 +49,29 @@ class Estimator(ABC):
         """The body at frame.stamp."""
 
     def joint_target(self, frame: TrackerFrame, site: str):
-        """The followed joint's (position, rotation matrix or None) from a site's sample, or
-        None when the sample is missing, invalid or non-finite. A tracker without a usable
-        orientation gives its own position: its mounting offset cannot be undone."""
+        """The followed joint's (position or None, rotation matrix or None) from a site's
+        sample, or None when the sample is missing, invalid or non-finite.
+
+        A position-only tracker gives its own position (its mounting offset cannot be undone
+        without an orientation); an orientation-only tracker (IMU) gives (None, rotation):
+        a rotation constraint, never an invented position."""
         if site not in frame.sites:
             return None
+        spec = self.sensors.site(site)
         i = frame.index(site)
-        pos, quat = frame.positions[i], frame.orientations[i]
-        if not frame.valid[i] or not np.all(np.isfinite(pos)):
+        if not frame.valid[i]:
             return None
+        pos, quat = np.asarray(frame.positions[i], float), np.asarray(frame.orientations[i], float)
+        has_pos = spec.has_position and bool(np.all(np.isfinite(pos)))
         norm = np.linalg.norm(quat) if np.all(np.isfinite(quat)) else 0.0
-        if self.sensors.site(site).has_orientation and 0.9 < norm < 1.1:
-            return self.sensors.site(site).joint_pose(pos, quat / norm)
-        return np.asarray(pos, dtype=float), None
+        has_rot = spec.has_orientation and 0.9 < norm < 1.1
+        if spec.has_position and not has_pos:
+            return None                      # a position tracker without its position: unusable
+        if has_pos and has_rot:
+            return spec.joint_pose(pos, quat / norm)
+        if has_rot:
+            return None, spec.joint_rotation(quat / norm)
+        return (pos, None) if has_pos else None
 
     def process(self, stream: TrackerStream) -> list[BodyPose]:
         self.reset()

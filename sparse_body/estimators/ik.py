@@ -90,16 +90,21 @@ class IKEstimator(Estimator):
     def step(self, frame: TrackerFrame) -> BodyPose:
         targets = {s: self.joint_target(frame, s) for s in CHAINS if s in self.sensors.site_names}
         pelvis = self.joint_target(frame, "pelvis")
+        head = targets.get("head")
         local = self._local.copy()
-        if pelvis is not None and pelvis[1] is not None:
+        pelvis_pose = pelvis is not None and pelvis[0] is not None and pelvis[1] is not None
+        if pelvis_pose:
             local[0], root = pelvis[1], pelvis[0]
-        elif targets.get("head") is not None and targets["head"][1] is not None:
-            local[0] = yaw_matrix(heading(targets["head"][1]))
-            root = targets["head"][0] - local[0] @ self._head_above_pelvis
+        elif head is not None and head[0] is not None and head[1] is not None:
+            facing = yaw_matrix(heading(head[1]))
+            root = head[0] - facing @ self._head_above_pelvis
+            # a pelvis IMU (orientation only) still gives the pelvis its rotation
+            local[0] = pelvis[1] if pelvis is not None and pelvis[1] is not None else facing
         else:
             return self._hold(frame.stamp)
-        active = [(site, *CHAINS[site]) for site, tgt in targets.items() if tgt is not None]
-        if pelvis is None:   # the root already hangs from the head: leave the spine alone
+        # orientation-only trackers (IMUs) only turn their end joint, below
+        active = [(site, *CHAINS[site]) for site, tgt in targets.items() if tgt is not None and tgt[0] is not None]
+        if not pelvis_pose:   # the root already hangs from the head: leave the spine alone
             active = [a for a in active if a[0] != "head"]
         local = solve(local, root, self.skeleton.offsets,
                       [(targets[site][0], J[end], dofs, weight) for site, end, dofs, weight in active],

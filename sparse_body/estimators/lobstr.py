@@ -96,7 +96,7 @@ class LobstrEstimator(Estimator):
 
     def step(self, frame: TrackerFrame) -> BodyPose:
         targets = [self.joint_target(frame, s) for s in INPUT_SITES]
-        if any(t is None or t[1] is None for t in targets):
+        if any(t is None or t[0] is None or t[1] is None for t in targets):
             return self._hold(frame.stamp)   # keep the previous sample: the next velocity spans the gap
         pos = (np.stack([t[0] for t in targets]) - [0.0, 0.0, self.floor]) * self.scale
         rot = np.stack([t[1] for t in targets])

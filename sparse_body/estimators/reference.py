@@ -42,8 +42,9 @@ class ReferenceEstimator(Estimator):
     def step(self, frame: TrackerFrame) -> BodyPose:
         pelvis = self.joint_target(frame, "pelvis")
         head = self.joint_target(frame, "head")
-        pelvis = pelvis if pelvis is not None and pelvis[1] is not None else None   # needs a full pose
-        head = head if head is not None and head[1] is not None else None
+        full = lambda t: t is not None and t[0] is not None and t[1] is not None  # noqa: E731
+        pelvis = pelvis if full(pelvis) else None   # needs a full pose
+        head = head if full(head) else None
         if pelvis is not None:
             root_pos, root_rot = pelvis[0], yaw_matrix(heading(pelvis[1]))
         elif head is not None:

@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import threading
 import time
+from pathlib import Path
 
 import numpy as np
 import rclpy
@@ -52,14 +53,12 @@ PARAMETERS = {
     "serial_port": ("", "serial: device or pyserial URL (/dev/ttyUSB0, loop://, socket://host:port)"),
     "serial_baudrate": (921600, "serial: baud rate"),
     "stale_after": (0.25, "vmc / serial: samples older than this (s) when they arrive are dropped and counted"),
-    "calibration": ("", "T-pose calibration YAML to apply at start, and where ~/calibrate saves by default"),
+    "calibration": ("", "T-pose calibration YAML: applied at start when it exists; where ~/calibrate saves by default"),
 }
 
 
 def load_tf_frames(path: str) -> list[tuple[float, list]]:
     """(seconds from the first message, [(parent, child, stamp, translation, rotation)]) per /tf message."""
-    from pathlib import Path
-
     from rosbags.rosbag2 import Reader
     store = typestore()
     out, first = [], None
@@ -87,6 +86,9 @@ def load_tf_frames(path: str) -> list[tuple[float, list]]:
 class TrackerBridge(Node):
     def __init__(self, **kwargs) -> None:
         super().__init__("sparse_body_tracker_bridge", **kwargs)
+        self._stop = threading.Event()
+        self.adapter = None
+        self._thread = None
         for name, (default, text) in PARAMETERS.items():
             self.declare_parameter(name, default, ParameterDescriptor(description=text))
         p = {name: self.get_parameter(name).value for name in PARAMETERS}
@@ -95,7 +97,10 @@ class TrackerBridge(Node):
         self.params = p
         self.sensors = load_sensor_config(p["sensors"])
         self.site_of_frame = {s.frame_id: s.site for s in self.sensors.sites}
-        self.calibration = Calibration.load(p["calibration"]) if p["calibration"] else None
+        self.calibration = None
+        if p["calibration"] and Path(p["calibration"]).exists():
+            self.calibration = Calibration.load(p["calibration"])
+            self.get_logger().info(f"applying the calibration in {p['calibration']}")
         from tf2_msgs.msg import TFMessage
 
         from ..srv import Calibrate
@@ -107,10 +112,7 @@ class TrackerBridge(Node):
         self.unmapped: set[str] = set()
         self._collect: dict[str, list] | None = None
         self._lock = threading.Lock()
-        self._stop = threading.Event()
         self.finished = threading.Event()
-        self.adapter = None
-        self._thread = None
         if p["source"] == "bag":
             if not p["bag"]:
                 raise ValueError("parameter 'bag' is empty: name a rosbag2 of tracker TF")

@@ -1,0 +1,198 @@
+"""Real transports into the real nodes: VMC datagrams from a python-osc client over loopback,
+and serial frames from the reference sender through a pseudo-terminal, each through the
+tracker bridge into the estimator node, out as JointState; and the calibration service."""
+import socket
+import subprocess
+import sys
+import time
+
+import numpy as np
+import pytest
+
+rclpy = pytest.importorskip("rclpy", reason="rclpy is not installed (run the setup command)")
+pytest.importorskip("tf2_msgs.msg", reason="tf2_msgs is not available (run the setup command)")
+
+from diagnostic_msgs.msg import DiagnosticArray  # noqa: E402
+from sensor_msgs.msg import JointState  # noqa: E402
+from tf2_msgs.msg import TFMessage  # noqa: E402
+
+from ros_helpers import Listener, isolated_domain, start_node, stop  # noqa: E402
+from sparse_body.core.sensors import load_sensor_config  # noqa: E402
+from sparse_body.data.synthetic import synthetic_walk  # noqa: E402
+from sparse_body.data.virtual_trackers import synthesize_trackers  # noqa: E402
+from sparse_body.msg import EstimateStatus  # noqa: E402
+
+pytestmark = pytest.mark.ros
+ESTIMATOR = "sparse_body.ros.estimator_node"
+BRIDGE = "sparse_body.ros.tracker_bridge_node"
+VMC_DEVICES = ["hmd:*=head", "con:LEFT=left_hand", "con:RIGHT=right_hand", "tra:WAIST=pelvis"]
+VMC_NAMES = {"head": ("/VMC/Ext/Hmd/Pos", "HMD"), "left_hand": ("/VMC/Ext/Con/Pos", "LEFT"),
+             "right_hand": ("/VMC/Ext/Con/Pos", "RIGHT"), "pelvis": ("/VMC/Ext/Tra/Pos", "WAIST")}
+
+
+@pytest.fixture
+def ros_env(monkeypatch):
+    import os
+    monkeypatch.setenv("ROS_DOMAIN_ID", isolated_domain())
+    rclpy.init()
+    yield dict(os.environ)
+    rclpy.shutdown()
+
+
+def _free_udp_port() -> int:
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def to_unity(position, quat):
+    """REP-103 -> Unity, the inverse of adapters.vmc.unity_to_rep103."""
+    x, y, z = position
+    qx, qy, qz, qw = quat
+    return [float(-y), float(z), float(x)], [float(qy), float(-qz), float(-qx), float(qw)]
+
+
+def _diagnostic_values(listener, name):
+    values = {}
+    for d in listener.received["/diagnostics"]:
+        for st in d.status:
+            if st.name == name:
+                values.update({kv.key: kv.value for kv in st.values})
+    return values
+
+
+def test_vmc_over_loopback_reaches_joint_states(ros_env, tmp_path):
+    from pythonosc.udp_client import SimpleUDPClient
+    config = load_sensor_config("four_point")
+    motion = synthetic_walk(6.0)
+    stream = synthesize_trackers(motion, config)
+    port = _free_udp_port()
+    est = start_node(ESTIMATOR, {"sensors": "four_point", "estimator": "ik", "autostart": True, "stale_timeout": 0.3},
+                     "sparse_body_estimator", tmp_path, ros_env)
+    bridge = start_node(BRIDGE, {"source": "vmc", "sensors": "four_point", "vmc_port": port, "devices": VMC_DEVICES},
+                        "sparse_body_tracker_bridge", tmp_path, ros_env)
+    listener = Listener(rclpy, {"joint_states": JointState, "estimate_status": EstimateStatus, "/tf": TFMessage,
+                                "/diagnostics": DiagnosticArray}, qos={"/tf": 500})
+    client = SimpleUDPClient("127.0.0.1", port)
+    try:
+        assert listener.spin_until(lambda: listener.received["joint_states"], 20.0), "estimator did not start"
+        start = time.monotonic()
+        for i in range(len(stream)):
+            for s, site in enumerate(config.site_names):
+                address, name = VMC_NAMES[site]
+                p, q = to_unity(stream.positions[i, s], stream.orientations[i, s])
+                client.send_message(address, [name, *p, *q])
+            client.send_message("/VMC/Ext/Con/Pos", ["UNKNOWN", 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0])
+            listener.spin_until(lambda: time.monotonic() > start + (i + 1) / motion.fps, 1.0)
+        listener.spin_for(1.5)
+    finally:
+        listener.destroy()
+        stop(est, bridge)
+    valid = sum(s.valid for s in listener.received["estimate_status"])
+    assert valid > 0.5 * len(stream), (tmp_path / "sparse_body_tracker_bridge.log").read_text()
+    assert all(np.all(np.isfinite(m.position)) for m in listener.received["joint_states"])
+    # the estimated pelvis lies on the true pelvis path: the Unity axes were converted right
+    roots = np.array([[tf.transform.translation.x, tf.transform.translation.y, tf.transform.translation.z]
+                      for m in listener.received["/tf"] for tf in m.transforms if tf.child_frame_id == "pelvis"])
+    truth = motion.positions[:, 0]
+    nearest = np.min(np.linalg.norm(roots[:, None] - truth[None], axis=-1), axis=1)
+    assert len(roots) > 100 and np.percentile(nearest, 95) < 0.01
+    values = _diagnostic_values(listener, "sparse_body: tracker bridge")
+    assert values["unmapped devices"] == "con:UNKNOWN"
+
+
+def test_serial_trackers_through_a_pty_reach_joint_states_across_a_reconnect(ros_env, tmp_path):
+    link = tmp_path / "ttyTRACKERS"
+    est = start_node(ESTIMATOR, {"sensors": "four_point", "estimator": "ik", "autostart": True, "stale_timeout": 0.3},
+                     "sparse_body_estimator", tmp_path, ros_env)
+    bridge = start_node(BRIDGE, {"source": "serial", "sensors": "four_point", "serial_port": str(link)},
+                        "sparse_body_tracker_bridge", tmp_path, ros_env)
+    listener = Listener(rclpy, {"joint_states": JointState, "estimate_status": EstimateStatus,
+                                "/diagnostics": DiagnosticArray})
+    sender = None
+    try:
+        assert listener.spin_until(lambda: listener.received["joint_states"], 20.0), "estimator did not start"
+        listener.spin_for(1.0)
+        sender = subprocess.Popen([sys.executable, "-m", "sparse_body.adapters.serial_sender", "--pty", str(link),
+                                   "--sensors", "four_point", "--rate", "200", "--seconds", "6", "--garbage", "0.05",
+                                   "--bad-crc", "0.02", "--split", "--disconnect-at", "2.5", "--offline", "1.0"],
+                                  stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+        listener.spin_until(lambda: sender.poll() is not None, 30.0)
+        listener.spin_for(1.5)
+    finally:
+        listener.destroy()
+        stop(est, bridge, *([sender] if sender else []))
+    out = sender.stdout.read()
+    assert "reconnected" in out, out
+    statuses = listener.received["estimate_status"]
+    arrival = np.array(listener.arrival["estimate_status"])
+    valid = np.array([s.valid for s in statuses])
+    assert valid.sum() > 3 * 60, (tmp_path / "sparse_body_tracker_bridge.log").read_text()
+    # valid estimates before the unplugging, none while it lasts, valid again after
+    first, last = arrival[valid].min(), arrival[valid].max()
+    gaps = np.diff(arrival[valid])
+    assert gaps.max() > 0.6, "no gap while the device was unplugged"
+    assert last - first > 4.0
+    assert all(np.all(np.isfinite(m.position)) for m in listener.received["joint_states"])
+    values = _diagnostic_values(listener, "sparse_body: tracker bridge")
+    assert int(values["disconnects"]) >= 1 and int(values["connects"]) >= 2
+    assert int(values["bad checksums"]) > 0 and int(values["garbage bytes"]) > 0
+
+
+def test_calibration_service_measures_offsets_and_height_and_applies_them(ros_env, tmp_path):
+    from pythonosc.udp_client import SimpleUDPClient
+    from scipy.spatial.transform import Rotation
+    from sparse_body.adapters.calibration import Calibration
+    from sparse_body.core.kinematics import forward_kinematics
+    from sparse_body.core.rotations import yaw_matrix
+    from sparse_body.core.skeleton import JOINT_INDEX as J
+    from sparse_body.core.skeleton import Skeleton
+    from sparse_body.srv import Calibrate
+    skeleton = Skeleton.canonical(1.68)
+    local = np.tile(np.eye(3), (22, 1, 1))
+    local[0] = yaw_matrix(1.0)
+    glob, pos = forward_kinematics(local, [0.0, 0.0, -skeleton.rest_positions()[:, 2].min()], skeleton.offsets)
+    grip = Rotation.from_euler("xy", [0.8, -0.3])                   # how the left controller is held
+    joints = {"head": J["head"], "left_hand": J["left_wrist"], "right_hand": J["right_wrist"], "pelvis": J["pelvis"]}
+    port = _free_udp_port()
+    bridge = start_node(BRIDGE, {"source": "vmc", "sensors": "four_point", "vmc_port": port, "devices": VMC_DEVICES,
+                                 "calibration": str(tmp_path / "calibration.yaml")},
+                        "sparse_body_tracker_bridge", tmp_path, ros_env)
+    listener = Listener(rclpy, {"/tf": TFMessage}, qos={"/tf": 500})
+    client = SimpleUDPClient("127.0.0.1", port)
+    calibrate = listener.node.create_client(Calibrate, "/sparse_body_tracker_bridge/calibrate")
+
+    config = load_sensor_config("four_point")
+
+    def send_tpose():
+        for site, j in joints.items():
+            rot = Rotation.from_matrix(glob[j]) * (grip if site == "left_hand" else Rotation.identity())
+            mounted = pos[j] + glob[j] @ np.array(config.site(site).offset_translation)
+            p, q = to_unity(mounted, rot.as_quat())
+            client.send_message(VMC_NAMES[site][0], [VMC_NAMES[site][1], *p, *q])
+    try:
+        assert calibrate.wait_for_service(timeout_sec=20.0), "no calibration service"
+        future = calibrate.call_async(Calibrate.Request(seconds=0.5))
+        end = time.monotonic() + 15
+        while not future.done() and time.monotonic() < end:
+            send_tpose()
+            listener.spin_for(1 / 60)
+        listener.received["/tf"].clear()
+        for _ in range(30):
+            send_tpose()
+            listener.spin_for(1 / 60)
+    finally:
+        listener.destroy()
+        stop(bridge)
+    response = future.result()
+    assert response.success, response.message
+    assert abs(response.height - 1.68) < 0.05
+    assert sorted(response.sites) == ["head", "left_hand", "pelvis", "right_hand"]
+    saved = Calibration.load(tmp_path / "calibration.yaml")
+    assert (Rotation.from_quat(saved.offsets["left_hand"]) * grip.inv()).magnitude() < 0.01
+    # after calibration the left controller's frame carries the wrist's orientation, grip removed
+    lefts = [tf.transform.rotation for m in listener.received["/tf"] for tf in m.transforms
+             if tf.child_frame_id == "left_controller"]
+    assert lefts
+    q = lefts[-1]
+    assert (Rotation.from_quat([q.x, q.y, q.z, q.w]) * Rotation.from_matrix(glob[J["left_wrist"]]).inv()).magnitude() < 0.01

@@ -28,3 +28,17 @@ def random_rotations(rng, shape):
     from scipy.spatial.transform import Rotation
     n = int(np.prod(shape))
     return Rotation.random(n, random_state=rng).as_matrix().reshape(tuple(shape) + (3, 3))
+
+
+@pytest.fixture
+def ros_env(monkeypatch):
+    """rclpy initialised on a DDS domain of this test's own; yields the environment for
+    node processes started by the test."""
+    import os
+
+    from ros_helpers import isolated_domain
+    rclpy = pytest.importorskip("rclpy", reason="rclpy is not installed (run the setup command)")
+    monkeypatch.setenv("ROS_DOMAIN_ID", isolated_domain())
+    rclpy.init()
+    yield dict(os.environ)
+    rclpy.shutdown()

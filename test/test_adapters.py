@@ -1,6 +1,5 @@
 """Tracker adapters without ROS: the serial protocol over a real pseudo-terminal, device
 clocks, VMC over real UDP with python-osc, T-pose calibration, and a short fuzzing run."""
-import os
 import subprocess
 import sys
 import threading

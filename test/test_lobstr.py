@@ -193,24 +193,21 @@ def test_shipped_model_beats_the_ik_baseline_on_a_test_clip(clip_index):
     assert lobstr["Toe PE [cm]"] < ik["Toe PE [cm]"]
 
 
-def test_estimator_node_runs_lobstr_over_dds(tiny_model, tmp_path, clip, monkeypatch):
+def test_estimator_node_runs_lobstr_over_dds(tiny_model, tmp_path, clip, ros_env):
     """estimator:=lobstr with the four-point configuration, fed by the tracker bridge."""
-    rclpy = pytest.importorskip("rclpy")
+    import rclpy
     pytest.importorskip("tf2_msgs.msg")
-    import os
-    from ros_helpers import Listener, isolated_domain, start_node, stop
+    from ros_helpers import Listener, start_node, stop
     from sensor_msgs.msg import JointState
     from sparse_body.msg import EstimateStatus, FootContacts
     from sparse_body.offline import make_bag
-    monkeypatch.setenv("ROS_DOMAIN_ID", isolated_domain())
-    env = dict(os.environ)
+    env = ros_env
     config = load_sensor_config("four_point")
     make_bag(clip.slice(0, 180), config, tmp_path / "trackers")
     est = start_node("sparse_body.ros.estimator_node",
                      {"sensors": "four_point", "estimator": "lobstr", "model_path": str(tiny_model[0]),
                       "autostart": True, "height": clip.skeleton.height(), "stale_timeout": 0.5},
                      "sparse_body_estimator", tmp_path, env)
-    rclpy.init()
     listener = Listener(rclpy, {"joint_states": JointState, "foot_contacts": FootContacts,
                                 "estimate_status": EstimateStatus})
     bridge = None
@@ -223,7 +220,6 @@ def test_estimator_node_runs_lobstr_over_dds(tiny_model, tmp_path, clip, monkeyp
         listener.spin_until(lambda: sum(s.valid for s in listener.received["estimate_status"]) >= 100, 25.0)
     finally:
         listener.destroy()
-        rclpy.shutdown()
         stop(est, *([bridge] if bridge else []))
     valid = sum(s.valid for s in listener.received["estimate_status"])
     assert valid >= 100, (tmp_path / "sparse_body_estimator.log").read_text()

@@ -16,7 +16,7 @@ from diagnostic_msgs.msg import DiagnosticArray  # noqa: E402
 from sensor_msgs.msg import JointState  # noqa: E402
 from tf2_msgs.msg import TFMessage  # noqa: E402
 
-from ros_helpers import Listener, isolated_domain, start_node, stop  # noqa: E402
+from ros_helpers import Listener, start_node, stop  # noqa: E402
 from sparse_body.core.sensors import load_sensor_config  # noqa: E402
 from sparse_body.data.synthetic import synthetic_walk  # noqa: E402
 from sparse_body.data.virtual_trackers import synthesize_trackers  # noqa: E402
@@ -30,13 +30,6 @@ VMC_NAMES = {"head": ("/VMC/Ext/Hmd/Pos", "HMD"), "left_hand": ("/VMC/Ext/Con/Po
              "right_hand": ("/VMC/Ext/Con/Pos", "RIGHT"), "pelvis": ("/VMC/Ext/Tra/Pos", "WAIST")}
 
 
-@pytest.fixture
-def ros_env(monkeypatch):
-    import os
-    monkeypatch.setenv("ROS_DOMAIN_ID", isolated_domain())
-    rclpy.init()
-    yield dict(os.environ)
-    rclpy.shutdown()
 
 
 def _free_udp_port() -> int:

@@ -1,5 +1,4 @@
 """The estimator and tracker bridge nodes as real processes over real rclpy and Fast DDS."""
-import os
 import time
 
 import numpy as np
@@ -16,7 +15,7 @@ from sensor_msgs.msg import JointState  # noqa: E402
 from std_msgs.msg import String  # noqa: E402
 from tf2_msgs.msg import TFMessage  # noqa: E402
 
-from ros_helpers import Listener, isolated_domain, start_node, stop  # noqa: E402
+from ros_helpers import Listener, start_node, stop  # noqa: E402
 from sparse_body.core.kinematics import forward_kinematics  # noqa: E402
 from sparse_body.core.rotations import euler_to_matrix, quat_to_matrix  # noqa: E402
 from sparse_body.core.sensors import load_sensor_config  # noqa: E402
@@ -31,12 +30,6 @@ ESTIMATOR = "sparse_body.ros.estimator_node"
 BRIDGE = "sparse_body.ros.tracker_bridge_node"
 
 
-@pytest.fixture
-def ros_env(monkeypatch):
-    monkeypatch.setenv("ROS_DOMAIN_ID", isolated_domain())
-    rclpy.init()
-    yield dict(os.environ)
-    rclpy.shutdown()
 
 
 def _call(node, client, request, timeout=10.0):

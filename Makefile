@@ -2,7 +2,7 @@
 VENV ?= .venv
 PY := $(VENV)/bin/python
 
-.PHONY: setup test demo eval bench clean
+.PHONY: setup test demo eval bench fuzz train-lobstr clean
 
 setup:
 	bash scripts/setup.sh
@@ -15,9 +15,20 @@ demo: setup
 
 eval: setup
 	$(VENV)/bin/sparse-body eval --estimator reference --estimator ik --sensors six_point
+	$(VENV)/bin/sparse-body eval --estimator lobstr --sensors four_point
 
 bench: setup
 	$(VENV)/bin/sparse-body bench
+	$(VENV)/bin/sparse-body bench --network
+
+# A million generated inputs into each byte parser (VMC datagrams, the serial stream).
+fuzz: setup
+	$(VENV)/bin/python -m sparse_body.adapters.fuzz serial 1000000
+	$(VENV)/bin/python -m sparse_body.adapters.fuzz vmc 1000000
+
+# Retrain the shipped LoBSTr model (about an hour on 2 CPU cores) and rewrite its model card.
+train-lobstr: setup
+	$(VENV)/bin/sparse-body train lobstr --config small
 
 clean:
 	rm -rf build $(VENV)

@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import argparse
 import re
+from dataclasses import replace
 import sys
 from pathlib import Path
 
@@ -19,16 +20,18 @@ def _mocap(args) -> Path:
 def cmd_eval(args) -> int:
     from .core.sensors import load_sensor_config
     from .data.virtual_trackers import LOBSTR_NOISE, NO_NOISE
-    from .evaluation import COMPARE_WITH, PAPER_FIGURES, evaluate, format_table, write_json
+    from .evaluation import COMPARE_WITH, evaluate, format_table, paper_figures, write_json
     sensors = load_sensor_config(args.sensors)
     specs, reference = list(args.estimator), {}
     if not args.no_compare:
         for name in args.estimator:
             specs += [s for s in COMPARE_WITH.get(name, []) if s not in specs]
-            reference.update(PAPER_FIGURES.get(name, {}))
-    results = [evaluate(spec, sensors, _mocap(args), args.split, args.fps,
-                        LOBSTR_NOISE if args.noise else NO_NOISE, args.limit, progress=not args.quiet)
-               for spec in specs]
+            reference.update(paper_figures(name, sensors.name, args.faulty))
+    noise = LOBSTR_NOISE if args.noise else NO_NOISE
+    if args.faulty:
+        noise = replace(noise, fault_probability=args.faulty / 100)
+    results = [evaluate(spec, sensors, _mocap(args), args.split, args.fps, noise, args.limit,
+                        progress=not args.quiet) for spec in specs]
     print(format_table(results, reference))
     stem = re.sub(r"[^\w.+-]", "_", "+".join(args.estimator))
     out = Path(args.output or f"sparse_body_eval_{stem}_{sensors.name}.json")
@@ -39,26 +42,38 @@ def cmd_eval(args) -> int:
 
 def cmd_train(args) -> int:
     import json
+
     import torch
+
     from .resources import models_dir
-    from .train.lobstr_model import LobstrConfig
-    from .train.lobstr_train import train
-    out = Path(args.out or models_dir() / f"{args.method}.onnx")
-    report_path = out.with_suffix(".train.json")
+    if args.method == "lobstr":      # one file: models/lobstr.onnx
+        out = Path(args.out or models_dir() / "lobstr.onnx")
+        report_path = out.with_suffix(".train.json")
+    else:                            # a folder: dragposer_{encoder,decoder}.onnx
+        out = Path(args.out or models_dir())
+        report_path = out / "dragposer.train.json"
     if not args.card_only:
         torch.set_num_threads(args.threads)
-        config = LobstrConfig.named(args.config)
+        if args.method == "lobstr":
+            from .train.lobstr_model import LobstrConfig as Config
+            from .train.lobstr_train import train
+        else:
+            from .train.dragposer_train import train_vae as train
+            from .train.dragposer_vae import VaeConfig as Config
+        config = Config.named(args.config)
         if args.minutes is not None:
             config.minutes = args.minutes
         if args.steps is not None:
             config.steps = args.steps
         report = train(config, _mocap(args), out, seed=args.seed, limit=args.limit)
         report["command"] = "sparse-body " + " ".join(sys.argv[1:])
+        report_path.parent.mkdir(parents=True, exist_ok=True)
         report_path.write_text(json.dumps(report, indent=1))
         print(f"written {out} and {report_path}")
     if not args.no_card:
-        from .train.model_card import write_lobstr_card
-        card = write_lobstr_card(out, json.loads(report_path.read_text()), _mocap(args), limit=args.limit)
+        from .train import model_card
+        write = model_card.write_lobstr_card if args.method == "lobstr" else model_card.write_dragposer_card
+        card = write(out, json.loads(report_path.read_text()), _mocap(args), limit=args.limit)
         print(f"written {card}")
     return 0
 
@@ -158,6 +173,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--split", default="test", choices=["train", "validation", "test"])
     p.add_argument("--fps", type=float, default=60.0, help="frame rate the clips are resampled to")
     p.add_argument("--noise", action="store_true", help="add LoBSTr's tracker noise (1 cm, 1.5 deg)")
+    p.add_argument("--faulty", type=float, default=0.0, metavar="PERCENT",
+                   help="DragPoser's faulty sensors: each frame, with this probability (%%), one tracker "
+                        "disconnects for 100 frames")
     p.add_argument("--limit", type=int, help="only the first N clips of the split")
     p.add_argument("--mocap", help="the CMU folder (default: ../shared/mocap/cmu or $SPARSE_BODY_MOCAP)")
     p.add_argument("--output", help="where to write the JSON results")
@@ -197,9 +215,11 @@ def build_parser() -> argparse.ArgumentParser:
     p.set_defaults(func=cmd_bench)
 
     p = sub.add_parser("train", help="train a learned estimator on the CMU train split (ONNX + model card)")
-    p.add_argument("method", choices=["lobstr"])
-    p.add_argument("--config", default="small", help="paper, small (under an hour on 2 CPU cores) or tiny")
-    p.add_argument("--out", help="the .onnx file to write (default: the package's models/<method>.onnx)")
+    p.add_argument("method", choices=["lobstr", "dragposer"])
+    p.add_argument("--config", default="small",
+                   help="lobstr: paper, small (under an hour on 2 CPU cores) or tiny; dragposer: small or tiny")
+    p.add_argument("--out", help="lobstr: the .onnx file to write; dragposer: the folder for its encoder and "
+                                 "decoder (default: the package's models/)")
     p.add_argument("--minutes", type=float, help="stop training after this long")
     p.add_argument("--steps", type=int, help="stop training after this many steps")
     p.add_argument("--threads", type=int, default=2, help="torch CPU threads")

@@ -63,14 +63,33 @@ def evaluate_motion(motion: Motion, estimator_name: str, sensors: SensorConfig,
                             motion.fps, floor, gt_contacts, pred_contacts, tracked)
 
 
-# Published figures printed beside an estimator's results (the paper's own data and
-# protocol, so a guide rather than a like-for-like comparison).
+# Published figures printed beside an estimator's results, by (estimator, sensors[, faulty %])
+# (the papers' own data and protocols: a guide rather than a like-for-like comparison).
 PAPER_FIGURES = {
-    "lobstr": {"LoBSTr paper": {"Contact acc [%]": 85.77, "Lower RE [deg]": 8.53, "Toe PE [cm]": 6.63}},
+    ("lobstr", "four_point"): {"LoBSTr paper": {"Contact acc [%]": 85.77, "Lower RE [deg]": 8.53, "Toe PE [cm]": 6.63}},
+    # DragPoser, Table 2: joint position, rotation, velocity error and end-effector error
+    ("dragposer", "six_point"): {"DragPoser paper": {"MPJPE [cm]": 2.18, "MPJRE [deg]": 7.66, "MPJVE [cm/s]": 10.7,
+                                                     "End-effector PE [cm]": 1.02}},
+    ("dragposer", "four_point"): {"DragPoser paper": {"MPJPE [cm]": 7.86, "MPJRE [deg]": 10.6, "MPJVE [cm/s]": 20.0,
+                                                      "End-effector PE [cm]": 1.12}},
+    ("dragposer", "three_point"): {"DragPoser paper": {"MPJPE [cm]": 15.5, "MPJRE [deg]": 22.0, "MPJVE [cm/s]": 34.0,
+                                                       "End-effector PE [cm]": 16.1}},
+    ("dragposer", "hip_hands"): {"DragPoser paper": {"MPJPE [cm]": 9.95, "MPJRE [deg]": 14.1, "MPJVE [cm/s]": 23.1,
+                                                     "End-effector PE [cm]": 1.77}},
+    ("dragposer", "six_point", 1.0): {"DragPoser paper": {"MPJPE [cm]": 6.55, "MPJRE [deg]": 12.0,
+                                                          "MPJVE [cm/s]": 21.1, "End-effector PE [cm]": 10.2}},
 }
+
+
+def paper_figures(estimator: str, sensors: str, faulty_percent: float = 0.0) -> dict:
+    key = (estimator, sensors, faulty_percent) if faulty_percent else (estimator, sensors)
+    return PAPER_FIGURES.get(key, {})
+
+
 # What `sparse-body eval` runs beside a learned estimator unless told not to.
 COMPARE_WITH = {
     "lobstr": ["lobstr:contact_ik=false", "ik"],
+    "dragposer": ["ik"],
 }
 
 

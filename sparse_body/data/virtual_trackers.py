@@ -24,6 +24,10 @@ class TrackerNoise:
     occlusion_frames: int = 30
     occlusion_sites: tuple[str, ...] = ("left_foot", "right_foot")
     occlusion_mode: str = "origin"     # "origin": origin and identity; "bounded": noise within a leg length
+    # Faulty sensors (DragPoser): each frame, with this probability, one random tracker
+    # disconnects (valid = False, no values) for fault_frames frames.
+    fault_probability: float = 0.0
+    fault_frames: int = 100
 
     def __post_init__(self) -> None:
         if self.occlusion_mode not in ("origin", "bounded"):
@@ -32,6 +36,7 @@ class TrackerNoise:
 
 NO_NOISE = TrackerNoise()
 LOBSTR_NOISE = TrackerNoise(position_std=0.01, rotation_max_deg=1.5)
+FAULTY_1PCT = TrackerNoise(fault_probability=0.01)      # DragPoser's faulty-sensor protocol
 
 
 def _random_rotations(rng: np.random.Generator, n: int, max_deg: float) -> Rotation:
@@ -86,5 +91,11 @@ def synthesize_trackers(motion: Motion, config: SensorConfig, noise: TrackerNois
             valid[dropped, s] = False
             positions[dropped, s] = np.nan
             orientations[dropped, s] = np.nan
+    if noise.fault_probability > 0:
+        for t in np.flatnonzero(rng.random(T) < noise.fault_probability):
+            s = int(rng.integers(S))
+            valid[t:t + noise.fault_frames, s] = False
+            positions[t:t + noise.fault_frames, s] = np.nan
+            orientations[t:t + noise.fault_frames, s] = np.nan
     times = np.arange(T) / motion.fps
     return TrackerStream(config.site_names, times, positions, orientations, valid)

@@ -17,6 +17,7 @@ ESTIMATORS: dict[str, str] = {
     "reference": "sparse_body.estimators.reference:ReferenceEstimator",
     "ik": "sparse_body.estimators.ik:IKEstimator",
     "lobstr": "sparse_body.estimators.lobstr:LobstrEstimator",
+    "dragposer": "sparse_body.estimators.dragposer:DragPoserEstimator",
 }
 
 

@@ -10,13 +10,13 @@ from ..data.catalog import load_split
 def write_lobstr_card(onnx_path: Path, report: dict, mocap_root: Path, limit: int | None = None) -> Path:
     """Evaluate the model on the test split (four-point, clean trackers) beside the IK baseline,
     without its contact IK and the paper's figures, and write <model>.md."""
-    from ..evaluation import PAPER_FIGURES, evaluate, format_table
+    from ..evaluation import evaluate, format_table, paper_figures
     sensors = load_sensor_config("four_point")
     model = str(Path(onnx_path).resolve())
     results = [evaluate(spec, sensors, mocap_root, "test", limit=limit, progress=False, **options)
                for spec, options in [("lobstr", {"model_path": model}),
                                      ("lobstr:contact_ik=false", {"model_path": model}), ("ik", {})]]
-    table = format_table(results, PAPER_FIGURES["lobstr"])
+    table = format_table(results, paper_figures("lobstr", "four_point"))
     split = load_split()
     cfg, val = report["config"], report["validation"]
     history = report.get("history", [])
@@ -70,5 +70,75 @@ protocol: a guide, not a like-for-like comparison.
 - The reference frame is yaw only (as in the paper): lying, rolling or crawling are out of scope.
 """
     path = Path(onnx_path).with_suffix(".md")
+    path.write_text(text)
+    return path
+
+
+DRAGPOSER_SETUPS = [("six_point", 0.0), ("four_point", 0.0), ("three_point", 0.0), ("hip_hands", 0.0),
+                    ("six_point", 1.0)]
+
+
+def write_dragposer_card(out_dir: Path, report: dict, mocap_root: Path, limit: int | None = None) -> Path:
+    """Evaluate the pose VAE + optimiser on the test split for the paper's Table 2 setups, beside
+    the IK baseline and the paper's figures, and write dragposer.md."""
+    from dataclasses import replace
+
+    from ..data.virtual_trackers import NO_NOISE
+    from ..evaluation import evaluate, format_table, paper_figures
+    model_dir = str(Path(out_dir).resolve())
+    tables = []
+    for sensors_name, faulty in DRAGPOSER_SETUPS:
+        sensors = load_sensor_config(sensors_name)
+        noise = replace(NO_NOISE, fault_probability=faulty / 100)
+        results = [evaluate("dragposer", sensors, mocap_root, "test", noise=noise, limit=limit, progress=False,
+                            model_dir=model_dir),
+                   evaluate("ik", sensors, mocap_root, "test", noise=noise, limit=limit, progress=False)]
+        title = f"{sensors_name}" + (f", faulty {faulty:g} %" if faulty else "")
+        tables.append(f"### {title}\n\n```\n{format_table(results, paper_figures('dragposer', sensors_name, faulty))}\n```\n")
+    split = load_split()
+    cfg, val = report["config"], report["validation"]
+    history = report.get("history", [])
+    curve = "\n".join(f"| {h['step']} | {h['minutes']:.1f} | {h['total']:.4f} | {h['position_error_cm']:.2f} "
+                      f"| {h['rotation_error_deg']:.2f} |" for h in history[:: max(1, len(history) // 12)])
+    text = f"""# DragPoser model card: `dragposer_encoder.onnx`, `dragposer_decoder.onnx`
+
+DragPoser (Ponton et al. 2024): a pose VAE whose 24-D latent space a pose optimiser searches
+each frame until the constraints (trackers, floor, look-at, limits) hold. These two files are
+the VAE's encoder (dual quaternions in root space -> latent mean) and decoder (latent -> 22
+local rotations, the root's without heading). Runtime: ONNX Runtime and a damped Gauss-Newton
+step whose Jacobian comes from one batched decoder pass (`sparse_body/estimators/dragposer.py`).
+The temporal predictor is not part of this release: the optimiser's prior is the previous
+frame's latent.
+
+## Data
+- CMU motion capture from `../shared/mocap` (its README has the licence), retargeted onto the
+  22-joint body at 60 fps; rotations on the canonical body, root height scaled by leg length.
+- Split `config/splits/cmu.yaml` (by clip): {len(split['train'])} train / {len(split['validation'])} validation /
+  {len(split['test'])} test clips. Trained on every frame of {report['train_clips']} train clips
+  ({report['train_frames']} frames, each paired with the next for the continuity loss).
+
+## Training
+- Command: `{report.get('command', 'sparse-body train dragposer')}`
+- MLP encoder and decoder, hidden {cfg['hidden']} (the paper uses skeleton-aware convolutions of
+  about the same size), latent {cfg['latent']}; AdamW lr {cfg['lr']}, weight decay {cfg['weight_decay']},
+  batch {cfg['batch']}; losses reconstruction + {cfg['w_fk']:g} FK + {cfg['w_kld']:g} KL + {cfg['w_continuity']:g} continuity
+  (the paper's weights).
+- {report['steps']} steps in {report['minutes']:.1f} minutes on {report['hardware']} (torch {report['torch']}).
+
+| step | minutes | train loss | val position [cm] | val rotation [deg] |
+|---|---|---|---|---|
+{curve}
+
+Validation encode-decode error (exported weights): {val['position_error_cm']:.2f} cm, {val['rotation_error_deg']:.2f} deg.
+
+## Test split (`sparse-body eval --estimator dragposer --sensors S [--faulty 1]`)
+
+Optimiser defaults: 5 iterations a frame (50 on the first), position weight 1, orientation
+weight 0.3, feet above the floor.
+
+{chr(10).join(tables)}
+The paper's figures come from its own data and protocol (a guide, not a like-for-like comparison).
+"""
+    path = Path(out_dir) / "dragposer.md"
     path.write_text(text)
     return path

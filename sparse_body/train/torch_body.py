@@ -22,8 +22,16 @@ def forward_kinematics(local_rot: torch.Tensor, root_pos: torch.Tensor, offsets:
 
 
 def sixd_to_matrix(d6: torch.Tensor) -> torch.Tensor:
-    """6D (two columns, flattened column by column) to rotation matrices, as core.rotations."""
-    return roma.special_gramschmidt(torch.stack([d6[..., 0:3], d6[..., 3:6]], dim=-1))
+    """6D (two columns, flattened column by column) to rotation matrices, as core.rotations.
+    Written out rather than roma.special_gramschmidt: the ONNX export must keep the batch
+    dimension dynamic, and roma's reshapes trace to fixed shapes."""
+    a = d6[..., 0:3] / d6[..., 0:3].norm(dim=-1, keepdim=True)
+    b = d6[..., 3:6] - (a * d6[..., 3:6]).sum(-1, keepdim=True) * a
+    b = b / b.norm(dim=-1, keepdim=True)
+    c = torch.stack([a[..., 1] * b[..., 2] - a[..., 2] * b[..., 1],
+                     a[..., 2] * b[..., 0] - a[..., 0] * b[..., 2],
+                     a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0]], dim=-1)
+    return torch.stack([a, b, c], dim=-1)
 
 
 def matrix_to_6d(m: torch.Tensor) -> torch.Tensor:

@@ -1,0 +1,223 @@
+"""DragPoser (Ponton et al. 2024) at runtime: a pose is a point in the VAE's latent space, moved
+each frame until the constraints hold. No torch: the decoder runs in ONNX Runtime.
+
+Variables: the latent z (24), the root position (3) and the heading (1). Each iteration is
+one Levenberg-Marquardt (damped Gauss-Newton) step on the weighted constraint residuals,
+plus two priors that keep z plausible: stay near the previous frame's z (the temporal
+predictor's place until it ships) and near the Gaussian's centre. The Jacobian comes from
+ONE batched decoder pass over z and its 24 perturbations (forward differences), and batched
+numpy FK; the paper backpropagates through the decoder instead, one gradient step per
+iteration (train/dragposer_reference.py keeps that as the reference).
+
+Any sensor subset works without retraining: each tracker that has a usable sample this
+frame becomes a Position and/or Orientation constraint on its joint, a missing one simply
+is not there; user constraints (feet above the floor, look-at, angle limits) are added and
+removed through `constraints`.
+"""
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+
+from ..core.contacts import FOOT_JOINTS
+from ..core.kinematics import forward_kinematics
+from ..core.rotations import heading, matrix_to_quat, yaw_matrix
+from ..core.sensors import SITE_JOINTS
+from ..core.skeleton import JOINT_INDEX as J
+from ..core.types import BodyPose, TrackerFrame
+from .base import Estimator
+from .constraints import AboveFloor, ConstraintSet, Orientation, Position
+from .dragposer_pose import LATENT, dual_quaternions, split_heading
+
+
+def default_model_dir() -> Path:
+    from ..resources import models_dir
+    return models_dir()
+
+
+class PoseVaeRuntime:
+    """The exported decoder (and encoder, to start from a given pose)."""
+
+    def __init__(self, model_dir: str | Path | None = None, threads: int = 1) -> None:
+        import onnxruntime as ort
+        self.dir = Path(model_dir) if model_dir else default_model_dir()
+        options = ort.SessionOptions()
+        options.intra_op_num_threads, options.inter_op_num_threads = threads, 1
+        sessions = {}
+        for part in ("decoder", "encoder"):
+            path = self.dir / f"dragposer_{part}.onnx"
+            if not path.is_file():
+                raise FileNotFoundError(f"{path}: no DragPoser model there; train one with `sparse-body train dragposer`")
+            try:
+                sessions[part] = ort.InferenceSession(str(path), options, providers=["CPUExecutionProvider"])
+            except Exception as err:  # noqa: BLE001 - onnxruntime raises its own exception types
+                raise ValueError(f"{path}: not a loadable ONNX model ({err})") from None
+            meta = sessions[part].get_modelmeta().custom_metadata_map
+            if json.loads(meta.get("method", "null")) != "dragposer":
+                raise ValueError(f"{path}: not a DragPoser model (its metadata lacks method)")
+        self.decoder, self.encoder = sessions["decoder"], sessions["encoder"]
+
+    def decode(self, z: np.ndarray) -> np.ndarray:
+        """(B, 24) -> heading-free local rotations (B, 22, 3, 3)."""
+        out = self.decoder.run(None, {"latent": np.asarray(z, np.float32).reshape(-1, LATENT)})[0]
+        return out.astype(np.float64)
+
+    def encode(self, local_rot: np.ndarray, root_height: float, offsets: np.ndarray) -> np.ndarray:
+        free, _ = split_heading(local_rot[None])
+        dq = dual_quaternions(free, np.array([root_height]), offsets)
+        return self.encoder.run(None, {"dual_quaternions": dq.astype(np.float32)})[0][0].astype(np.float64)
+
+
+class LatentOptimizer:
+    """Levenberg-Marquardt over (z, root position, heading) for a constraint set."""
+
+    def __init__(self, vae: PoseVaeRuntime, offsets: np.ndarray, damping: float = 1e-2,
+                 prior_weight: float = 0.05, latent_weight: float = 0.01, eps: float = 1e-3) -> None:
+        self.vae, self.offsets = vae, offsets
+        self.damping, self.prior_weight, self.latent_weight, self.eps = damping, prior_weight, latent_weight, eps
+        self.lam = damping
+
+    def pose(self, z, root, yaw, decoded=None):
+        """local, global rotations and positions of one pose (or a batch: z (B, 24) ...)."""
+        if decoded is None:
+            decoded = self.vae.decode(z)[0] if np.ndim(z) == 1 else self.vae.decode(z)
+        free = decoded
+        local = free.copy()
+        local[..., 0, :, :] = yaw_matrix(np.asarray(yaw))[..., :, :] @ free[..., 0, :, :]
+        glob, pos = forward_kinematics(local, root, self.offsets)
+        return local, glob, pos
+
+    def residuals(self, constraints: ConstraintSet, z, root, yaw, z_prior, decoded=None):
+        local, glob, pos = self.pose(z, root, yaw, decoded)
+        r = constraints.residual(glob, pos, local)
+        priors = np.concatenate([np.sqrt(self.prior_weight) * (z - z_prior), np.sqrt(self.latent_weight) * z], -1)
+        return np.concatenate([r, priors], -1)
+
+    def step(self, constraints, z, root, yaw, z_prior):
+        """One Levenberg-Marquardt step; returns the new (z, root, yaw) and their residual."""
+        n = LATENT + 4
+        e = self.eps
+        zs = np.repeat(z[None], LATENT + 1, axis=0)
+        zs[1:] += e * np.eye(LATENT)
+        decoded = self.vae.decode(zs)                          # the one batched decoder pass
+        # poses: base, z perturbations, root x/y/z perturbations, heading perturbation
+        Z = np.concatenate([zs, np.repeat(z[None], 4, 0)])
+        R = np.repeat(root[None], n + 1, 0)
+        R[LATENT + 1:LATENT + 4] += e * np.eye(3)
+        Y = np.full(n + 1, yaw)
+        Y[-1] += e
+        D = np.concatenate([decoded, np.repeat(decoded[:1], 4, 0)])
+        res = self.residuals(constraints, Z, R, Y, z_prior[None], decoded=D)
+        r0 = res[0]
+        jac = (res[1:] - r0).T / e                              # (m, 28)
+        h, g = jac.T @ jac, jac.T @ r0
+        cost = r0 @ r0
+        # Levenberg-Marquardt: a step that does not lower the cost is refused, with more damping
+        for _ in range(6):
+            delta = -np.linalg.solve(h + self.lam * np.diag(np.diag(h) + 1e-9), g)
+            cand = (z + delta[:LATENT], root + delta[LATENT:LATENT + 3], yaw + delta[-1])
+            r1 = self.residuals(constraints, *cand, z_prior)
+            if np.all(np.isfinite(r1)) and r1 @ r1 < cost:
+                self.lam = max(self.lam / 3, 1e-6)
+                return (*cand, r1)
+            self.lam = min(self.lam * 4, 1e6)
+        return z, root, yaw, r0
+
+
+class DragPoserEstimator(Estimator):
+    name = "dragposer"
+
+    def __init__(self, sensors, skeleton, fps: float = 60.0, model_dir: str | None = None, iterations: int = 5,
+                 position_weight: float = 1.0, orientation_weight: float = 0.3, floor_height: float | None = 0.0,
+                 tolerance: float = 0.005, threads: int = 1, **optimizer) -> None:
+        super().__init__(sensors, skeleton, fps)
+        self.vae = PoseVaeRuntime(model_dir, threads)
+        self.optimizer = LatentOptimizer(self.vae, skeleton.offsets, **optimizer)
+        self.iterations, self.tolerance = iterations, tolerance
+        self.weights = (position_weight, orientation_weight)
+        self.floor = floor_height
+        self.constraints = ConstraintSet()      # the user's, kept across frames
+        if floor_height is not None:
+            for foot in FOOT_JOINTS:
+                self.constraints.add(AboveFloor(foot, 1.0, name=f"floor:{foot}", height=floor_height))
+        self._head_above_pelvis = skeleton.rest_positions()[J["head"]]
+        self.iterations_used: list[int] = []
+        self.reset()
+
+    def reset(self) -> None:
+        self._state = None             # (z, root, yaw)
+        self._last: BodyPose | None = None
+        self._last_toes = None
+
+    def tracker_constraints(self, frame: TrackerFrame) -> ConstraintSet:
+        out = ConstraintSet()
+        for site in self.sensors.site_names:
+            target = self.joint_target(frame, site)
+            if target is None:
+                continue
+            joint = J[SITE_JOINTS[site]]
+            if target[0] is not None:
+                out.add(Position(joint, self.weights[0], name=f"{site}:position", target=tuple(target[0])))
+            if target[1] is not None:
+                out.add(Orientation(joint, self.weights[1], name=f"{site}:orientation", target=target[1]))
+        return out
+
+    def _initial_state(self, trackers: ConstraintSet):
+        by_name = {c.name: c for c in trackers}
+        yaw = 0.0
+        for site in ("pelvis", "head"):
+            if f"{site}:orientation" in by_name:
+                yaw = float(heading(by_name[f"{site}:orientation"].target))
+                break
+        if "pelvis:position" in by_name:
+            root = np.array(by_name["pelvis:position"].target)
+        elif "head:position" in by_name:
+            root = np.array(by_name["head:position"].target) - yaw_matrix(yaw) @ self._head_above_pelvis
+        else:
+            points = [np.array(c.target) for c in trackers if isinstance(c, Position)]
+            if not points:
+                return None
+            root = np.mean(points, axis=0)
+        return np.zeros(LATENT), root, yaw
+
+    def step(self, frame: TrackerFrame) -> BodyPose:
+        trackers = self.tracker_constraints(frame)
+        if not len(trackers):
+            return self._hold(frame.stamp)
+        state = self._state or self._initial_state(trackers)
+        if state is None:
+            return self._hold(frame.stamp)
+        constraints = ConstraintSet()
+        for c in list(trackers) + list(self.constraints):
+            constraints.add(c)
+        z, root, yaw = state
+        z_prior = z.copy()
+        self.optimizer.lam = self.optimizer.damping
+        iterations = self.iterations if self._state is not None else 10 * self.iterations
+        used = 0
+        for used in range(1, iterations + 1):
+            z, root, yaw, r0 = self.optimizer.step(constraints, z, root, yaw, z_prior)
+            if np.abs(r0[:-2 * LATENT]).max(initial=0.0) < self.tolerance:
+                break
+        self.iterations_used.append(used)
+        if not (np.all(np.isfinite(z)) and np.all(np.isfinite(root)) and np.isfinite(yaw)):
+            self.reset()
+            return self._hold(frame.stamp)
+        self._state = (z, root, float(yaw))
+        local, _, pos = self.optimizer.pose(z, root, yaw)
+        toes = pos[list(FOOT_JOINTS)]
+        speed = (np.zeros(2) if self._last_toes is None
+                 else np.linalg.norm((toes - self._last_toes)[:, :2], axis=1) * self.fps)
+        self._last_toes = toes
+        contact = (toes[:, 2] - (self.floor or 0.0) < 0.05) & (speed < 0.3)
+        self._last = BodyPose(frame.stamp, matrix_to_quat(local), np.asarray(root, float),
+                              contact.astype(float), contact)
+        return self._last
+
+    def _hold(self, stamp: float) -> BodyPose:
+        if self._last is None:
+            from .reference import standing_pose
+            return BodyPose(stamp, matrix_to_quat(standing_pose()), np.zeros(3), valid=False)
+        return self._last.held(stamp)

@@ -1,0 +1,123 @@
+"""`sparse-body train dragposer`: CMU train split -> pose VAE (encoder and decoder ONNX) + model card.
+
+Every frame of every train clip is one example, put on the canonical body (rotations only
+matter to the VAE; the root keeps its height above the floor, scaled by leg length) and
+paired with its successor for the continuity loss. The best validation reconstruction is
+exported.
+"""
+from __future__ import annotations
+
+import json
+import platform
+import time
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from ..core.contacts import estimate_floor
+from ..core.kinematics import forward_kinematics
+from ..core.rotations import angle_between, matrix_to_6d
+from ..core.skeleton import Skeleton
+from ..data.catalog import load_clip, load_split, read_index
+from ..estimators.dragposer_pose import dual_quaternions, split_heading
+from ..estimators.lobstr_features import body_scale
+from .dragposer_vae import Decoder, Encoder, PoseVae, VaeConfig, losses
+from .torch_body import sixd_to_matrix
+
+
+def clip_arrays(motion, offsets: np.ndarray):
+    """(dual quaternions (T, 176), heading-free 6D pose (T, 132)) on the canonical body."""
+    local, _ = split_heading(motion.local_rotations)
+    height = (motion.root_positions[:, 2] - estimate_floor(motion.positions)) * body_scale(motion.skeleton)
+    dq = dual_quaternions(local, height, offsets)
+    return dq.astype(np.float32), matrix_to_6d(local).reshape(len(motion), -1).astype(np.float32)
+
+
+def load_frames(mocap_root: Path, split: str, fps: float = 60.0, limit: int | None = None):
+    index = {c.clip_id: c for c in read_index(mocap_root)}
+    ids = load_split()[split][:limit] if limit else load_split()[split]
+    offsets = Skeleton.canonical().offsets
+    return [clip_arrays(load_clip(index[i], fps), offsets) for i in ids]
+
+
+@torch.no_grad()
+def validate(vae: PoseVae, clips, offsets: torch.Tensor) -> dict[str, float]:
+    """Encode-decode every validation frame: joint position (cm) and rotation (deg) errors."""
+    dq = torch.from_numpy(np.concatenate([c[0] for c in clips]))
+    pose = torch.from_numpy(np.concatenate([c[1] for c in clips]))
+    rec = vae.decode(vae.encode(dq)[0])
+    r_hat, r = sixd_to_matrix(rec.unflatten(-1, (22, 6))), sixd_to_matrix(pose.unflatten(-1, (22, 6)))
+    _, p_hat = forward_kinematics(r_hat.numpy(), np.zeros((len(dq), 3)), offsets.numpy())
+    _, p = forward_kinematics(r.numpy(), np.zeros((len(dq), 3)), offsets.numpy())
+    return {"position_error_cm": float(np.linalg.norm(p_hat - p, axis=-1).mean() * 100),
+            "rotation_error_deg": float(np.degrees(angle_between(r_hat.numpy(), r.numpy())).mean())}
+
+
+def export(vae: PoseVae, out_dir: Path, metadata: dict) -> None:
+    import onnx
+    out_dir.mkdir(parents=True, exist_ok=True)
+    for name, module, example, inp, outp in [
+            ("dragposer_decoder.onnx", Decoder(vae), torch.zeros(1, vae.config.latent), "latent", "local_rotations"),
+            ("dragposer_encoder.onnx", Encoder(vae), torch.zeros(1, 176), "dual_quaternions", "latent")]:
+        path = out_dir / name
+        torch.onnx.export(module.eval(), (example,), str(path), input_names=[inp], output_names=[outp],
+                          dynamic_axes={inp: {0: "batch"}, outp: {0: "batch"}}, opset_version=17, dynamo=False)
+        model = onnx.load(str(path))
+        for key, value in metadata.items():
+            model.metadata_props.add(key=key, value=json.dumps(value))
+        onnx.save(model, str(path))
+
+
+def train_vae(config: VaeConfig, mocap_root: Path, out_dir: Path, seed: int = 0, limit: int | None = None,
+              log=print) -> dict:
+    torch.manual_seed(seed)
+    rng = np.random.default_rng(seed)
+    t0 = time.perf_counter()
+    train_clips = load_frames(mocap_root, "train", limit=limit)
+    val_clips = load_frames(mocap_root, "validation", limit=limit)
+    dq = np.concatenate([c[0] for c in train_clips])
+    pose = np.concatenate([c[1] for c in train_clips])
+    # an example is frame i with i+1 in the same clip
+    starts, offset = [], 0
+    for c in train_clips:
+        starts.append(offset + np.arange(len(c[0]) - 1))
+        offset += len(c[0])
+    starts = np.concatenate(starts)
+    log(f"data: {len(train_clips)} train clips ({len(dq)} frames), {len(val_clips)} validation clips, "
+        f"{time.perf_counter() - t0:.0f} s")
+    offsets = torch.tensor(Skeleton.canonical().offsets, dtype=torch.float32)
+    vae = PoseVae(config)
+    opt = torch.optim.AdamW(vae.parameters(), lr=config.lr, weight_decay=config.weight_decay)
+    best, best_state, history = float("inf"), None, []
+    start, step = time.perf_counter(), 0
+    while step < config.steps and not (config.minutes and time.perf_counter() - start > 60 * config.minutes):
+        vae.train()
+        idx = rng.choice(starts, size=config.batch)[:, None] + np.arange(2)
+        terms = losses(vae, {"dq": torch.from_numpy(dq[idx]), "pose": torch.from_numpy(pose[idx])}, offsets)
+        opt.zero_grad()
+        terms["total"].backward()
+        opt.step()
+        step += 1
+        if step % config.steps_per_check == 0 or step == config.steps:
+            vae.eval()
+            val = validate(vae, val_clips, offsets)
+            history.append({"step": step, "minutes": (time.perf_counter() - start) / 60,
+                            **{k: v.item() for k, v in terms.items()}, **val})
+            if val["position_error_cm"] < best:
+                best, best_state = val["position_error_cm"], {k: v.clone() for k, v in vae.state_dict().items()}
+            log(f"step {step} ({history[-1]['minutes']:.1f} min) loss {terms['total'].item():.4f} "
+                f"rec {terms['reconstruction'].item():.4f} fk {terms['fk'].item():.5f} kld {terms['kld'].item():.2f} "
+                f"cont {terms['continuity'].item():.4f} | val {val['position_error_cm']:.2f} cm "
+                f"{val['rotation_error_deg']:.2f} deg")
+    vae.load_state_dict(best_state or vae.state_dict())
+    vae.eval()
+    best_val = validate(vae, val_clips, offsets)
+    minutes = (time.perf_counter() - start) / 60
+    export(vae, out_dir, {"method": "dragposer", "part": "pose_vae", "config": config.to_dict(),
+                          "validation": best_val})
+    return {"config": config.to_dict(), "steps": step, "minutes": minutes, "validation": best_val,
+            "history": history, "train_clips": len(train_clips), "train_frames": int(len(dq)),
+            "validation_clips": len(val_clips),
+            "hardware": f"{platform.processor() or platform.machine()}, {torch.get_num_threads()} torch threads",
+            "torch": torch.__version__}

@@ -1,0 +1,161 @@
+"""DragPoser: pose representation, constraints (numpy and torch alike), the Gauss-Newton latent
+optimiser against the autograd reference, and the estimator on any sensor subset."""
+import json
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from sparse_body.core.kinematics import forward_kinematics
+from sparse_body.core.rotations import yaw_matrix
+from sparse_body.core.sensors import load_sensor_config
+from sparse_body.core.skeleton import JOINT_INDEX as J
+from sparse_body.core.skeleton import Skeleton
+from sparse_body.data.synthetic import synthetic_walk
+from sparse_body.data.virtual_trackers import TrackerNoise, synthesize_trackers
+from sparse_body.estimators import create_estimator
+from sparse_body.estimators.constraints import (AboveFloor, AngleLimit, ConstraintSet, LookAt, Orientation,
+                                                Position)
+from sparse_body.estimators.dragposer_pose import dual_quaternions, split_heading
+
+torch = pytest.importorskip("torch")
+
+
+@pytest.fixture(scope="module")
+def tiny_vae(tmp_path_factory, mocap_root):
+    from sparse_body.train.dragposer_train import train_vae
+    from sparse_body.train.dragposer_vae import VaeConfig
+    out = tmp_path_factory.mktemp("dragposer")
+    config = VaeConfig.named("tiny")
+    config.hidden, config.steps = 64, 20
+    train_vae(config, mocap_root, out, limit=2, log=lambda *_: None)
+    return out
+
+
+def test_encoder_input_ignores_heading_and_place():
+    motion = synthetic_walk(1.0)
+    local = motion.local_rotations
+    turned = local.copy()
+    turned[:, 0] = yaw_matrix(2.0) @ local[:, 0]
+    a = dual_quaternions(split_heading(local)[0], motion.root_positions[:, 2], motion.skeleton.offsets)
+    b = dual_quaternions(split_heading(turned)[0], motion.root_positions[:, 2], motion.skeleton.offsets)
+    np.testing.assert_allclose(a, b, atol=1e-9)
+    np.testing.assert_allclose(split_heading(turned)[1] - split_heading(local)[1],
+                               np.angle(np.exp(1j * 2.0)), atol=1e-9)
+    # unit real parts, dual parts orthogonal to them (a proper dual quaternion)
+    dq = a.reshape(len(a), 22, 8)
+    np.testing.assert_allclose(np.linalg.norm(dq[..., :4], axis=-1), 1.0, atol=1e-9)
+    np.testing.assert_allclose((dq[..., :4] * dq[..., 4:]).sum(-1), 0.0, atol=1e-9)
+
+
+def _random_pose(rng):
+    from scipy.spatial.transform import Rotation
+    local = Rotation.from_rotvec(rng.normal(0, 0.4, (22, 3))).as_matrix()
+    glob, pos = forward_kinematics(local, rng.normal(0, 0.5, 3), Skeleton.canonical().offsets)
+    return local, glob, pos
+
+
+def test_constraints_give_the_same_residuals_in_numpy_and_torch(rng):
+    local, glob, pos = _random_pose(rng)
+    _, target_glob, target_pos = _random_pose(rng)
+    set_ = ConstraintSet()
+    set_.add(Position("left_wrist", 1.0, target=tuple(target_pos[20])))
+    set_.add(Orientation("head", 0.3, target=target_glob[15]))
+    set_.add(AboveFloor("left_foot", 1.0, height=10.0))
+    set_.add(LookAt("head", 0.5, target=(3.0, 1.0, 1.5)))
+    set_.add(AngleLimit("left_knee", 2.0, max_angle=0.1))
+    r_np = set_.residual(glob, pos, local)
+    t = lambda a: torch.as_tensor(a, dtype=torch.float64)  # noqa: E731
+    r_t = set_.residual(t(glob), t(pos), t(local), xp=torch).numpy()
+    assert r_np.shape == (3 + 3 + 1 + 3 + 1,)
+    np.testing.assert_allclose(r_np, r_t, atol=1e-12)
+    np.testing.assert_allclose(r_np[:3], pos[20] - target_pos[20])
+    assert r_np[6] == pytest.approx(10.0 - pos[10, 2])
+    # satisfied constraints give zero
+    done = ConstraintSet()
+    done.add(Position("left_wrist", target=tuple(pos[20])))
+    done.add(Orientation("head", target=glob[15]))
+    done.add(AboveFloor("left_foot", height=pos[10, 2] - 0.1))
+    assert np.abs(done.residual(glob, pos, local)).max() < 1e-12
+    assert set_.remove("lookat:15") and not set_.remove("lookat:15") and len(set_) == 4
+
+
+def test_gauss_newton_reaches_a_decodable_pose_like_the_autograd_reference(tiny_vae, rng):
+    from sparse_body.estimators.dragposer import LatentOptimizer, PoseVaeRuntime
+    from sparse_body.train.dragposer_reference import load_vae, optimise
+    skeleton = Skeleton.canonical()
+    vae = PoseVaeRuntime(tiny_vae)
+    opt = LatentOptimizer(vae, skeleton.offsets, prior_weight=0.0, latent_weight=0.0)
+    z_true, root_true, yaw_true = rng.normal(0, 0.7, 24), np.array([0.4, -0.3, 0.95]), 0.8
+    _, glob, pos = opt.pose(z_true, root_true, yaw_true)
+    constraints = ConstraintSet()
+    for joint in ("pelvis", "head", "left_wrist", "right_wrist", "left_ankle", "right_ankle"):
+        constraints.add(Position(joint, target=tuple(pos[J[joint]])))
+        constraints.add(Orientation(joint, 0.3, target=glob[J[joint]]))
+    # the landscape of a barely trained decoder is rough: start in the basin of the answer
+    z0 = z_true + rng.normal(0, 0.05, 24)
+    z, root, yaw = z0, root_true + [0.1, 0.1, -0.05], yaw_true - 0.3
+    start = np.linalg.norm(opt.residuals(constraints, z, root, yaw, z)[:-48])
+    for _ in range(30):
+        z, root, yaw, r = opt.step(constraints, z, root, yaw, z)
+    assert np.linalg.norm(r[:-48]) < 0.05 * start
+    _, _, pos_gn = opt.pose(z, root, yaw)
+    ends = [J[j] for j in ("left_wrist", "right_wrist", "left_ankle", "right_ankle", "head")]
+    assert np.linalg.norm(pos_gn[ends] - pos[ends], axis=-1).max() < 0.02
+    # the reference: autograd + Adam on the same objective, from the same start
+    torch_vae = load_vae(tiny_vae)
+    z_ref, root_ref, yaw_ref = optimise(torch_vae, constraints, skeleton.offsets, z0,
+                                        root_true + [0.1, 0.1, -0.05], yaw_true - 0.3, np.zeros(24),
+                                        prior_weight=0.0, latent_weight=0.0, iterations=2000, lr=0.02)
+    _, _, pos_ref = opt.pose(z_ref, root_ref, yaw_ref)
+    assert np.linalg.norm(pos_ref - pos_gn, axis=-1).mean() < 0.01
+
+
+def test_estimator_works_on_any_sensor_subset_and_survives_faulty_sensors(tiny_vae):
+    motion = synthetic_walk(2.0)
+    for name in ("six_point", "four_point", "three_point", "hip_hands", "four_point_foot_imus"):
+        config = load_sensor_config(name)
+        noise = TrackerNoise(fault_probability=0.05, fault_frames=20) if name == "six_point" else TrackerNoise()
+        stream = synthesize_trackers(motion, config, noise, seed=1)
+        est = create_estimator("dragposer", config, motion.skeleton, model_dir=str(tiny_vae), iterations=3)
+        poses = est.process(stream)
+        assert len(poses) == len(stream) and all(p.is_finite() for p in poses), name
+        assert all(p.valid for p in poses), name       # some tracker is always there
+    stream = synthesize_trackers(motion, load_sensor_config("four_point"))
+    stream.valid[50:60] = False                         # every tracker gone
+    stream.positions[50:60] = np.nan
+    est = create_estimator("dragposer", load_sensor_config("four_point"), motion.skeleton, model_dir=str(tiny_vae))
+    poses = est.process(stream)
+    assert [p.valid for p in poses[48:62]] == [True] * 2 + [False] * 10 + [True] * 2
+
+
+def test_user_constraints_are_added_and_removed_at_runtime(tiny_vae):
+    motion = synthetic_walk(1.0)
+    config = load_sensor_config("four_point")
+    stream = synthesize_trackers(motion, config)
+    est = create_estimator("dragposer", config, motion.skeleton, model_dir=str(tiny_vae), iterations=10)
+    for frame in list(stream)[:10]:
+        est.step(frame)
+    assert sorted(est.constraints.names()) == ["floor:10", "floor:11"]
+    est.constraints.add(AboveFloor("left_foot", 5.0, name="lift", height=0.4))
+    pose = est.step(stream.frame(10))
+    from sparse_body.core.rotations import quat_to_matrix
+    local = quat_to_matrix(pose.local_quats)
+    _, pos = forward_kinematics(local, pose.root_position, motion.skeleton.offsets)
+    assert pos[J["left_foot"], 2] > 0.3                 # the foot went up to the new floor
+    assert est.constraints.remove("lift")
+    assert sorted(est.constraints.names()) == ["floor:10", "floor:11"]
+
+
+def test_missing_model_is_a_clear_error(tmp_path):
+    with pytest.raises(FileNotFoundError, match="train one with `sparse-body train dragposer`"):
+        create_estimator("dragposer", load_sensor_config("six_point"), Skeleton.canonical(), model_dir=str(tmp_path))
+
+
+def test_train_dragposer_is_one_command(tmp_path, mocap_root):
+    subprocess.run([sys.executable, "-m", "sparse_body.cli", "train", "dragposer", "--config", "tiny", "--steps", "2",
+                    "--limit", "1", "--out", str(tmp_path), "--no-card"], check=True, capture_output=True)
+    report = json.loads((tmp_path / "dragposer.train.json").read_text())
+    assert report["steps"] == 2
+    assert (tmp_path / "dragposer_decoder.onnx").is_file() and (tmp_path / "dragposer_encoder.onnx").is_file()

@@ -185,10 +185,10 @@ class DragPoserEstimator(Estimator):
     def step(self, frame: TrackerFrame) -> BodyPose:
         trackers = self.tracker_constraints(frame)
         if not len(trackers):
-            return self._hold(frame.stamp)
+            return self.held_pose(frame.stamp)
         state = self._state or self._initial_state(trackers)
         if state is None:
-            return self._hold(frame.stamp)
+            return self.held_pose(frame.stamp)
         constraints = ConstraintSet()
         for c in list(trackers) + list(self.constraints):
             constraints.add(c)
@@ -204,7 +204,7 @@ class DragPoserEstimator(Estimator):
         self.iterations_used.append(used)
         if not (np.all(np.isfinite(z)) and np.all(np.isfinite(root)) and np.isfinite(yaw)):
             self.reset()
-            return self._hold(frame.stamp)
+            return self.held_pose(frame.stamp)
         self._state = (z, root, float(yaw))
         local, _, pos = self.optimizer.pose(z, root, yaw)
         toes = pos[list(FOOT_JOINTS)]
@@ -215,9 +215,3 @@ class DragPoserEstimator(Estimator):
         self._last = BodyPose(frame.stamp, matrix_to_quat(local), np.asarray(root, float),
                               contact.astype(float), contact)
         return self._last
-
-    def _hold(self, stamp: float) -> BodyPose:
-        if self._last is None:
-            from .reference import standing_pose
-            return BodyPose(stamp, matrix_to_quat(standing_pose()), np.zeros(3), valid=False)
-        return self._last.held(stamp)

@@ -97,7 +97,7 @@ class LobstrEstimator(Estimator):
     def step(self, frame: TrackerFrame) -> BodyPose:
         targets = [self.joint_target(frame, s) for s in INPUT_SITES]
         if any(t is None or t[0] is None or t[1] is None for t in targets):
-            return self._hold(frame.stamp)   # keep the previous sample: the next velocity spans the gap
+            return self.held_pose(frame.stamp)   # keep the previous sample: the next velocity spans the gap
         pos = (np.stack([t[0] for t in targets]) - [0.0, 0.0, self.floor]) * self.scale
         rot = np.stack([t[1] for t in targets])
         if self._prev is None or not 0 < frame.stamp - self._prev[0] <= self.max_gap:
@@ -112,7 +112,7 @@ class LobstrEstimator(Estimator):
             x = _retime(x, ratio)
         upper = self.upper.step(frame)
         if not upper.valid:
-            return self._hold(frame.stamp)
+            return self.held_pose(frame.stamp)
         legs, prob, state = self.model.step(x, self._state)
         local = apply_legs(quat_to_matrix(upper.local_quats), legs)
         contact = prob > self.threshold
@@ -120,14 +120,8 @@ class LobstrEstimator(Estimator):
             local = self.contacts.apply(local, upper.root_position, contact)
         if not (np.all(np.isfinite(local)) and np.all(np.isfinite(prob))):
             self.reset()
-            return self._hold(frame.stamp)
+            return self.held_pose(frame.stamp)
         self._state, self._prev = state, (frame.stamp, pos, rot)
         self._last = BodyPose(frame.stamp, matrix_to_quat(local), upper.root_position.copy(),
                               prob.astype(float), contact)
         return self._last
-
-    def _hold(self, stamp: float) -> BodyPose:
-        if self._last is None:
-            from .reference import standing_pose
-            return BodyPose(stamp, matrix_to_quat(standing_pose()), np.zeros(3), valid=False)
-        return self._last.held(stamp)

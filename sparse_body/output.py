@@ -30,6 +30,24 @@ def joint_state_positions(pose: BodyPose) -> np.ndarray:
         return matrix_to_euler(local, JOINT_EULER_ORDER).reshape(-1)
 
 
+def pose_from_joint_state(names, positions, root_position, root_quat, stamp: float) -> BodyPose:
+    """The inverse of joint_state_positions: a pose from a JointState of our 63 joints (in
+    any order) and the root's pose (from TF). Missing joints or non-finite values: ValueError."""
+    from .core.rotations import euler_to_matrix, matrix_to_quat
+    index = {n: i for i, n in enumerate(names)}
+    wanted = joint_state_names()
+    missing = [n for n in wanted if n not in index]
+    if missing:
+        raise ValueError(f"JointState lacks {len(missing)} of the body's joints, e.g. {missing[0]!r}")
+    angles = np.array([positions[index[n]] for n in wanted], dtype=float).reshape(NUM_JOINTS - 1, 3)
+    if not (np.all(np.isfinite(angles)) and np.all(np.isfinite(root_position)) and np.all(np.isfinite(root_quat))):
+        raise ValueError("JointState or root pose holds non-finite values")
+    quats = np.empty((NUM_JOINTS, 4))
+    quats[0] = np.asarray(root_quat, float) / np.linalg.norm(root_quat)
+    quats[1:] = matrix_to_quat(euler_to_matrix(angles, JOINT_EULER_ORDER))
+    return BodyPose(stamp, quats, np.asarray(root_position, float))
+
+
 @dataclass(frozen=True)
 class Transform:
     parent: str

@@ -16,13 +16,15 @@ def isolated_domain() -> str:
     return str(random.Random(os.getpid() + time.time_ns()).randint(1, 200))
 
 
-def start_node(module: str, params: dict, node_name: str, tmp_path: Path, env: dict) -> subprocess.Popen:
-    """python -m MODULE --ros-args --params-file FILE: what a launch file gives the node."""
+def start_node(module: str, params: dict, node_name: str, tmp_path: Path, env: dict,
+               remaps: dict | None = None) -> subprocess.Popen:
+    """python -m MODULE --ros-args --params-file FILE [-r FROM:=TO]: what a launch file gives the node."""
     params_file = tmp_path / f"{node_name}.yaml"
     params_file.write_text(yaml.safe_dump({node_name: {"ros__parameters": params}}))
     log = open(tmp_path / f"{node_name}.log", "w")
-    return subprocess.Popen([sys.executable, "-m", module, "--ros-args", "--params-file", str(params_file)],
-                            stdout=log, stderr=subprocess.STDOUT, env=env)
+    remap_args = [a for src, dst in (remaps or {}).items() for a in ("-r", f"{src}:={dst}")]
+    return subprocess.Popen([sys.executable, "-m", module, "--ros-args", "--params-file", str(params_file),
+                             *remap_args], stdout=log, stderr=subprocess.STDOUT, env=env)
 
 
 def stop(*procs: subprocess.Popen) -> None:

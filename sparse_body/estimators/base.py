@@ -18,6 +18,7 @@ ESTIMATORS: dict[str, str] = {
     "ik": "sparse_body.estimators.ik:IKEstimator",
     "lobstr": "sparse_body.estimators.lobstr:LobstrEstimator",
     "dragposer": "sparse_body.estimators.dragposer:DragPoserEstimator",
+    "refined": "sparse_body.estimators.refined:RefinedEstimator",
 }
 
 

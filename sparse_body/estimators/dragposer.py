@@ -29,7 +29,9 @@ from ..core.skeleton import JOINT_INDEX as J
 from ..core.types import BodyPose, TrackerFrame
 from .base import Estimator
 from .constraints import AboveFloor, ConstraintSet, Orientation, Position
+from ..core.skeleton import Skeleton
 from .dragposer_pose import LATENT, dual_quaternions, split_heading
+from .lobstr_features import body_scale
 
 
 def default_model_dir() -> Path:
@@ -129,10 +131,15 @@ class LatentOptimizer:
 class DragPoserEstimator(Estimator):
     name = "dragposer"
 
-    def __init__(self, sensors, skeleton, fps: float = 60.0, model_dir: str | None = None, iterations: int = 5,
+    def __init__(self, sensors, skeleton, fps: float = 60.0, model_dir: str | None = None,
+                 model_path: str | None = None, iterations: int = 3,
                  position_weight: float = 1.0, orientation_weight: float = 0.3, floor_height: float | None = 0.0,
                  tolerance: float = 0.005, threads: int = 1, **optimizer) -> None:
+        if iterations < 1:
+            raise ValueError(f"iterations must be at least 1, got {iterations}")
         super().__init__(sensors, skeleton, fps)
+        if model_path and not model_dir:   # the nodes' model_path: the folder, or one of its two files
+            model_dir = model_path if Path(model_path).is_dir() else str(Path(model_path).parent)
         self.vae = PoseVaeRuntime(model_dir, threads)
         self.optimizer = LatentOptimizer(self.vae, skeleton.offsets, **optimizer)
         self.iterations, self.tolerance = iterations, tolerance
@@ -143,6 +150,8 @@ class DragPoserEstimator(Estimator):
             for foot in FOOT_JOINTS:
                 self.constraints.add(AboveFloor(foot, 1.0, name=f"floor:{foot}", height=floor_height))
         self._head_above_pelvis = skeleton.rest_positions()[J["head"]]
+        self._scale = body_scale(skeleton)
+        self._canonical_offsets = Skeleton.canonical().offsets
         self.iterations_used: list[int] = []
         self.reset()
 
@@ -182,20 +191,37 @@ class DragPoserEstimator(Estimator):
             root = np.mean(points, axis=0)
         return np.zeros(LATENT), root, yaw
 
+    def refine(self, pose: BodyPose, frame: TrackerFrame) -> BodyPose:
+        """Another estimator's pose, moved in the latent space until the trackers' (and the
+        user's) constraints hold: the pose is encoded to start the search and stays the prior,
+        so what the constraints do not decide keeps the other estimator's answer."""
+        if not pose.is_finite():
+            return self.held_pose(frame.stamp)
+        from ..core.rotations import quat_to_matrix
+        local = quat_to_matrix(pose.local_quats)
+        yaw = float(heading(local[0]))
+        height = (pose.root_position[2] - (self.floor or 0.0)) * self._scale
+        z = self.vae.encode(local, height, self._canonical_offsets)
+        return self._solve(frame, (z, np.asarray(pose.root_position, float), yaw), z_prior=z)
+
     def step(self, frame: TrackerFrame) -> BodyPose:
+        return self._solve(frame, self._state)
+
+    def _solve(self, frame: TrackerFrame, state, z_prior=None) -> BodyPose:
         trackers = self.tracker_constraints(frame)
         if not len(trackers):
             return self.held_pose(frame.stamp)
-        state = self._state or self._initial_state(trackers)
+        first = state is None
+        state = state or self._initial_state(trackers)
         if state is None:
             return self.held_pose(frame.stamp)
         constraints = ConstraintSet()
         for c in list(trackers) + list(self.constraints):
             constraints.add(c)
         z, root, yaw = state
-        z_prior = z.copy()
+        z_prior = z.copy() if z_prior is None else z_prior
         self.optimizer.lam = self.optimizer.damping
-        iterations = self.iterations if self._state is not None else 10 * self.iterations
+        iterations = 10 * self.iterations if first else self.iterations
         used = 0
         for used in range(1, iterations + 1):
             z, root, yaw, r0 = self.optimizer.step(constraints, z, root, yaw, z_prior)

@@ -52,9 +52,13 @@ PARAMETERS = {
 
 
 class EstimatorNode(LifecycleNode):
+    NAME = "sparse_body_estimator"
+    PARAMETERS = PARAMETERS
+    OUTPUTS = ""          # namespace of the output topics
+
     def __init__(self, **kwargs) -> None:
-        super().__init__("sparse_body_estimator", **kwargs)
-        for name, (default, text) in PARAMETERS.items():
+        super().__init__(self.NAME, **kwargs)
+        for name, (default, text) in self.PARAMETERS.items():
             descriptor = ParameterDescriptor(description=text)
             if name == "height":
                 descriptor.floating_point_range = [FloatingPointRange(from_value=0.5, to_value=2.5)]
@@ -65,14 +69,13 @@ class EstimatorNode(LifecycleNode):
 
     # -- lifecycle -------------------------------------------------------------------------
     def on_configure(self, state: LifecycleState) -> TransitionCallbackReturn:
-        p = {name: self.get_parameter(name).value for name in PARAMETERS}
+        p = {name: self.get_parameter(name).value for name in self.PARAMETERS}
         try:
             sensors = load_sensor_config(p["sensors"])
             if p["fixed_frame"]:
                 sensors = replace(sensors, fixed_frame=p["fixed_frame"])
             self.skeleton = Skeleton.canonical(p["height"])
-            options = {"model_path": p["model_path"]} if p["model_path"] else {}
-            self.estimator = create_estimator(p["estimator"], sensors, self.skeleton, fps=p["output_rate"], **options)
+            self.estimator = self._make_estimator(p, sensors)
         except (SensorConfigError, ValueError, FileNotFoundError) as err:
             self.get_logger().error(f"configure failed: {err}")
             self._release()
@@ -80,21 +83,33 @@ class EstimatorNode(LifecycleNode):
         self.sensors, self.params = sensors, p
         frames = {s.frame_id for s in sensors.sites}
         self.tf_in = Tf2Reader(self, frames) if (HAVE_TF2_ROS and p["use_tf2_ros"]) else TfReader(self, frames)
+        self._configure_inputs()
         qos = QoSProfile(depth=10)
         overrides = QoSOverridingOptions.with_default_policies()
         from tf2_msgs.msg import TFMessage   # here, not at import: the stand-in exists only after setup
         self._tf_message = TFMessage
-        self.pub_joints = self.create_lifecycle_publisher(JointState, "joint_states", qos, qos_overriding_options=overrides)
-        self.pub_contacts = self.create_lifecycle_publisher(FootContacts, "foot_contacts", qos, qos_overriding_options=overrides)
-        self.pub_status = self.create_lifecycle_publisher(EstimateStatus, "estimate_status", qos, qos_overriding_options=overrides)
+        ns = self.OUTPUTS
+        self.pub_joints = self.create_lifecycle_publisher(JointState, ns + "joint_states", qos,
+                                                          qos_overriding_options=overrides)
+        self.pub_contacts = self.create_lifecycle_publisher(FootContacts, ns + "foot_contacts", qos,
+                                                            qos_overriding_options=overrides)
+        self.pub_status = self.create_lifecycle_publisher(EstimateStatus, ns + "estimate_status", qos,
+                                                          qos_overriding_options=overrides)
         self.pub_tf = self.create_lifecycle_publisher(TFMessage, "/tf", QoSProfile(depth=100))
         self.pub_diag = self.create_lifecycle_publisher(DiagnosticArray, "/diagnostics", QoSProfile(depth=10))
         latched = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL)
-        self.pub_description = self.create_publisher(String, "robot_description", latched)
+        self.pub_description = self.create_publisher(String, ns + "robot_description", latched)
         self.pub_description.publish(String(data=body_urdf(self.skeleton)))
-        self.get_logger().info(f"configured: {p['estimator']} on {sensors.name} ({', '.join(sensors.site_names)}) "
+        self.get_logger().info(f"configured: {p.get('estimator', 'refinement')} on {sensors.name} ({', '.join(sensors.site_names)}) "
                                f"in frame {sensors.fixed_frame!r}, TF via {'tf2_ros' if isinstance(self.tf_in, Tf2Reader) else '/tf reader'}")
         return TransitionCallbackReturn.SUCCESS
+
+    def _make_estimator(self, p: dict, sensors):
+        options = {"model_path": p["model_path"]} if p["model_path"] else {}
+        return create_estimator(p["estimator"], sensors, self.skeleton, fps=p["output_rate"], **options)
+
+    def _configure_inputs(self) -> None:
+        """More inputs than the trackers' TF (the constraint node's estimate)."""
 
     def on_activate(self, state: LifecycleState) -> TransitionCallbackReturn:
         self.estimator.reset()
@@ -209,16 +224,16 @@ class EstimatorNode(LifecycleNode):
         if st["errors"] and st["last_error"]:
             level, message = DiagnosticStatus.ERROR, f"estimator errors ({st['errors']}): {st['last_error']}"
         status = DiagnosticStatus(level=level, name=f"{self.get_name()}: estimator", message=message,
-                                  hardware_id=self.params["estimator"],
+                                  hardware_id=self.params.get("estimator", "dragposer refinement"),
                                   values=[KeyValue(key=k, value=v) for k, v in values.items()])
         msg = DiagnosticArray(status=[status])
         msg.header.stamp = self.get_clock().now().to_msg()
         self.pub_diag.publish(msg)
 
 
-def main(args=None) -> None:
+def main(args=None, node_class=None) -> None:
     rclpy.init(args=args)
-    node = EstimatorNode()
+    node = (node_class or EstimatorNode)()
     if node.get_parameter("autostart").value:
         if node.trigger_configure() != TransitionCallbackReturn.SUCCESS:
             node.get_logger().fatal("configure failed; exiting")

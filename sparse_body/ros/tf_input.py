@@ -43,6 +43,10 @@ class TfReader:
             if result is not Accepted.OK and tf.child_frame_id in self.tracker_frames:
                 self.rejected[result] += 1
 
+    def lookup(self, fixed_frame: str, frame_id: str):
+        """(stamp, translation, rotation) of frame_id in fixed_frame, or None."""
+        return self.cache.lookup(fixed_frame, frame_id)
+
     def sample(self, config, now: float, stale_after: float):
         return sample_trackers(self.cache.lookup, config, now, stale_after)
 
@@ -62,7 +66,7 @@ class Tf2Reader:
         self.rejected = {a: 0 for a in Accepted if a is not Accepted.OK}
         self.jumped_back = False
 
-    def _lookup(self, fixed_frame: str, frame_id: str):
+    def lookup(self, fixed_frame: str, frame_id: str):
         from rclpy.time import Time
         try:
             tf = self.buffer.lookup_transform(fixed_frame, frame_id, Time())
@@ -72,7 +76,7 @@ class Tf2Reader:
         return to_seconds(tf.header.stamp), np.array([tr.x, tr.y, tr.z]), np.array([q.x, q.y, q.z, q.w])
 
     def sample(self, config, now: float, stale_after: float):
-        return sample_trackers(self._lookup, config, now, stale_after)
+        return sample_trackers(self.lookup, config, now, stale_after)
 
     def destroy(self) -> None:
         self.listener.unregister()

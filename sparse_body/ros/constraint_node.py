@@ -1,0 +1,141 @@
+"""The constraint node: any estimator's output, refined in DragPoser's latent space so the end
+effectors sit on their trackers (and the user's constraints hold), as a lifecycle node.
+
+Input: the estimate's JointState (`input/joint_states`, remap it to the estimator's
+`joint_states`) and its root on TF (`<input_prefix>pelvis` in the fixed frame), plus the
+trackers on TF. Output: `refined/joint_states`, `refined/foot_contacts`,
+`refined/estimate_status`, TF under `refined/`. Constraints change at runtime through
+`~/set_constraint` (sparse_body/srv/SetConstraint). The lifecycle, parameters, diagnostics
+and output handling are the estimator node's.
+"""
+from __future__ import annotations
+
+import numpy as np
+from sensor_msgs.msg import JointState
+
+from ..core.types import BodyPose
+from ..estimators.base import Estimator
+from ..estimators.constraints import AboveFloor, AngleLimit, LookAt, Orientation, Position
+from ..output import pose_from_joint_state
+from .estimator_node import PARAMETERS as ESTIMATOR_PARAMETERS
+from .estimator_node import EstimatorNode, main as estimator_main
+from .messages import to_seconds
+
+PARAMETERS = {k: v for k, v in ESTIMATOR_PARAMETERS.items() if k != "estimator"}
+PARAMETERS.update({
+    "model_path": ("", "folder holding dragposer_encoder.onnx and dragposer_decoder.onnx; empty: the shipped"),
+    "frame_prefix": ("refined/", "prefix of the refined body's TF frames"),
+    "input_prefix": ("", "prefix of the input estimate's TF frames (its root is <input_prefix>pelvis)"),
+    "input_timeout": (0.2, "seconds after which the newest input estimate no longer counts"),
+    "iterations": (3, "latent optimisation steps per frame"),
+})
+
+
+class InputRefiner(Estimator):
+    """step(frame) refines the newest input estimate against the frame's trackers."""
+
+    name = "refine"
+
+    def __init__(self, sensors, skeleton, fps: float, model_path: str, iterations: int, timeout: float) -> None:
+        from ..estimators.dragposer import DragPoserEstimator
+        super().__init__(sensors, skeleton, fps)
+        self.refiner = DragPoserEstimator(sensors, skeleton, fps, model_path=model_path or None, iterations=iterations)
+        self.timeout = timeout
+        self.latest: BodyPose | None = None
+        self._last = None
+
+    def reset(self) -> None:
+        self.refiner.reset()
+
+    def step(self, frame) -> BodyPose:
+        if self.latest is None or not self.latest.valid or frame.stamp - self.latest.stamp > self.timeout:
+            return self.held_pose(frame.stamp)
+        self._last = self.refiner.refine(self.latest, frame)
+        self._last.contact, self._last.contact_probability = self.latest.contact, self.latest.contact_probability
+        return self._last
+
+
+def constraint_from_request(request):
+    """A Constraint from a SetConstraint request, or ValueError saying what is wrong."""
+    v = list(request.values)
+    common = dict(joint=request.joint, weight=request.weight if request.weight > 0 else 1.0, name=request.name)
+    need = {"position": 3, "orientation": 4, "above_floor": 1, "look_at": 3, "angle_limit": 1}
+    if request.type not in need:
+        raise ValueError(f"unknown constraint type {request.type!r}; types are {', '.join(need)}")
+    if len(v) < need[request.type] or not np.all(np.isfinite(v)):
+        raise ValueError(f"a {request.type} constraint needs {need[request.type]} finite values, got {v}")
+    if request.type == "position":
+        return Position(**common, target=tuple(v[:3]))
+    if request.type == "orientation":
+        from scipy.spatial.transform import Rotation
+        if not 0.9 < np.linalg.norm(v[:4]) < 1.1:
+            raise ValueError("an orientation constraint needs a unit quaternion x y z w")
+        return Orientation(**common, target=Rotation.from_quat(v[:4]).as_matrix())
+    if request.type == "above_floor":
+        return AboveFloor(**common, height=v[0])
+    if request.type == "look_at":
+        return LookAt(**common, target=tuple(v[:3]), axis=tuple(v[3:6]) if len(v) >= 6 else (1.0, 0.0, 0.0))
+    return AngleLimit(**common, max_angle=v[0])
+
+
+class ConstraintNode(EstimatorNode):
+    NAME = "sparse_body_constraint"
+    PARAMETERS = PARAMETERS
+    OUTPUTS = "refined/"
+
+    def _make_estimator(self, p: dict, sensors):
+        return InputRefiner(sensors, self.skeleton, p["output_rate"], p["model_path"], int(p["iterations"]),
+                            p["input_timeout"])
+
+    def _configure_inputs(self) -> None:
+        from sparse_body.srv import SetConstraint
+        self.sub_input = self.create_subscription(JointState, "input/joint_states", self._on_input, 10)
+        self.srv_constraint = self.create_service(SetConstraint, "~/set_constraint", self._on_set_constraint)
+
+    def _on_input(self, msg: JointState) -> None:
+        if self.estimator is None:
+            return
+        found = self.tf_in.lookup(self.sensors.fixed_frame, self.params["input_prefix"] + "pelvis")
+        if found is None:
+            return
+        _, translation, rotation = found
+        try:
+            self.estimator.latest = pose_from_joint_state(msg.name, msg.position, translation, rotation,
+                                                          to_seconds(msg.header.stamp))
+        except ValueError as err:
+            self._stats["errors"] += 1
+            self._stats["last_error"] = f"input: {err}"
+
+    def _on_set_constraint(self, request, response):
+        constraints = None if self.estimator is None else self.estimator.refiner.constraints
+        if constraints is None:
+            response.success, response.message = False, "not configured"
+            return response
+        try:
+            if request.remove:
+                response.success = constraints.remove(request.name)
+                response.message = f"removed {request.name}" if response.success else f"no constraint {request.name!r}"
+            else:
+                constraint = constraint_from_request(request)
+                constraints.add(constraint)
+                response.success, response.message = True, f"set {constraint.name}"
+        except ValueError as err:
+            response.success, response.message = False, str(err)
+        response.active = constraints.names()
+        return response
+
+    def _release(self) -> None:
+        for name in ("sub_input", "srv_constraint"):
+            handle = getattr(self, name, None)
+            if handle is not None:
+                (self.destroy_subscription if name == "sub_input" else self.destroy_service)(handle)
+            setattr(self, name, None)
+        super()._release()
+
+
+def main(args=None) -> None:
+    estimator_main(args, node_class=ConstraintNode)
+
+
+if __name__ == "__main__":
+    main()

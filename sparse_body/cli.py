@@ -126,9 +126,11 @@ def cmd_make_bag(args) -> int:
 def cmd_process(args) -> int:
     from .core.sensors import load_sensor_config
     from .core.skeleton import Skeleton
+    from .evaluation import parse_estimator_spec
     from .offline import process_bag
-    poses = process_bag(Path(args.bag_in), Path(args.bag_out), args.estimator, load_sensor_config(args.sensors),
-                        Skeleton.canonical(args.height), args.fps, progress=not args.quiet)
+    name, options = parse_estimator_spec(args.estimator)
+    poses = process_bag(Path(args.bag_in), Path(args.bag_out), name, load_sensor_config(args.sensors),
+                        Skeleton.canonical(args.height), args.fps, progress=not args.quiet, **options)
     invalid = sum(not p.valid for p in poses)
     print(f"written {args.bag_out}: {len(poses)} estimates ({invalid} marked invalid)")
     return 0
@@ -199,7 +201,8 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("process", help="run an estimator over a tracker bag and write an estimate bag")
     p.add_argument("bag_in")
     p.add_argument("bag_out")
-    p.add_argument("--estimator", default="ik")
+    p.add_argument("--estimator", default="ik",
+                   help="estimator, with options: lobstr, refined:base=lobstr (DragPoser refinement after it)")
     p.add_argument("--sensors", default="six_point")
     p.add_argument("--height", type=float, default=1.75, help="the tracked person's height in metres")
     p.add_argument("--fps", type=float, default=60.0, help="the trackers' nominal rate")

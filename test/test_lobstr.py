@@ -180,7 +180,8 @@ def test_train_is_one_command(tmp_path, mocap_root):
 
 @pytest.mark.skipif(not (models_dir() / "lobstr.onnx").is_file(), reason="no shipped LoBSTr model")
 def test_shipped_model_beats_the_ik_baseline_on_a_test_clip(clip_index):
-    """The trained model on a held-out walk: legs and contacts better than standing IK legs."""
+    """The trained model on a held-out clip (boxing: punches and kicks): legs and contacts
+    better than the IK baseline's standing legs."""
     from sparse_body.data.catalog import load_split
     from sparse_body.evaluation import evaluate_motion
     assert "02_05" in load_split()["test"]
@@ -189,7 +190,7 @@ def test_shipped_model_beats_the_ik_baseline_on_a_test_clip(clip_index):
     lobstr = evaluate_motion(motion, "lobstr", config)
     ik = evaluate_motion(motion, "ik", config)
     assert lobstr["Lower RE [deg]"] < ik["Lower RE [deg]"]
-    assert lobstr["Contact acc [%]"] > 70.0
+    assert lobstr["Contact acc [%]"] > ik["Contact acc [%]"] + 10.0
     assert lobstr["Toe PE [cm]"] < ik["Toe PE [cm]"]
 
 

@@ -2,7 +2,7 @@
 
     ros2 launch sparse_body sparse_body.launch.py sensors:=four_point estimator:=lobstr bag:=/path/to/trackers
 
-Arguments: sensors, estimator, model_path, height, bag (the tracker source; empty: trackers come from
+Arguments: sensors, estimator, model_path, refine, height, bag (the tracker source; empty: trackers come from
 elsewhere on /tf), rviz, robot_state_publisher. The estimator is a lifecycle node; it is configured and activated
 here through its autostart parameter.
 """
@@ -34,6 +34,11 @@ def _nodes(context):
     if with_rsp:
         nodes.append(Node(package="robot_state_publisher", executable="robot_state_publisher", output="screen",
                           parameters=[{"robot_description": body_urdf(Skeleton.canonical(height))}]))
+    if arg("refine").lower() in ("true", "1"):
+        nodes.append(LifecycleNode(package="sparse_body", executable="constraint_node", name="sparse_body_constraint",
+                                   namespace="", output="screen",
+                                   parameters=[{"sensors": arg("sensors"), "height": height, "autostart": True}],
+                                   remappings=[("input/joint_states", "joint_states")]))
     if arg("bag"):
         nodes.append(Node(package="sparse_body", executable="tracker_bridge", name="sparse_body_tracker_bridge",
                           output="screen", parameters=[os.path.join(share, "config", "tracker_bridge.yaml"),
@@ -50,6 +55,8 @@ def generate_launch_description():
         DeclareLaunchArgument("height", default_value="1.75", description="the person's height in metres"),
         DeclareLaunchArgument("bag", default_value="", description="rosbag2 of tracker TF to replay"),
         DeclareLaunchArgument("rviz", default_value="false", description="start RViz"),
+        DeclareLaunchArgument("refine", default_value="false",
+                              description="also start the constraint node (DragPoser refinement, refined/ topics)"),
         DeclareLaunchArgument("robot_state_publisher", default_value="true",
                               description="start robot_state_publisher (else the estimator publishes link TF)"),
         OpaqueFunction(function=_nodes),

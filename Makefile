@@ -20,6 +20,7 @@ eval: setup
 bench: setup
 	$(VENV)/bin/sparse-body bench
 	$(VENV)/bin/sparse-body bench --network
+	$(VENV)/bin/sparse-body bench --dragposer
 
 # A million generated inputs into each byte parser (VMC datagrams, the serial stream).
 fuzz: setup

@@ -154,6 +154,60 @@ def bench_network(frames: int = 3000) -> None:
         print(f"  shipped {default_model_path().name} (hidden {model.hidden}) onnxruntime  {_percentiles(time_ort(model))}")
 
 
+def bench_dragposer(frames: int = 600, max_iterations: int = 20, tolerance: float = 0.01,
+                    rotation_tolerance: float = 0.087, torch_frames: int = 10) -> None:
+    """DragPoser's pose optimiser, six-point, on CMU test clip 02_05 (the synthetic walk without
+    ../shared/mocap): milliseconds per frame and iterations until the trackers are met (1 cm,
+    5 degrees), for the ONNX Runtime Gauss-Newton runtime and the torch autograd reference
+    (Adam, the paper's kind of step), both starting each frame from the runtime's previous
+    solution."""
+    import torch
+
+    from .estimators.dragposer import END_JOINTS, DragPoserEstimator
+    from .train.dragposer_reference import load_vae, optimise
+    from .data.catalog import find_mocap_root, load_clip, read_index
+    from .demo import DEMO_CLIP
+    torch.set_num_threads(1)
+    root = find_mocap_root()
+    if root is not None:
+        motion, where = load_clip({c.clip_id: c for c in read_index(root)}[DEMO_CLIP]).slice(0, frames), DEMO_CLIP
+    else:
+        motion, where = synthetic_walk(frames / 60.0), "synthetic walk"
+    config = load_sensor_config("six_point")
+    stream = synthesize_trackers(motion, config)
+    est = DragPoserEstimator(config, motion.skeleton, iterations=max_iterations, tolerance=tolerance,
+                             rotation_tolerance=rotation_tolerance)
+    times, states = [], []
+    for frame in stream:
+        states.append(est._state)
+        t0 = time.perf_counter()
+        est.step(frame)
+        times.append(time.perf_counter() - t0)
+    its = np.array(est.iterations_used[1:])
+    print(f"DragPoser optimiser, six-point, {where}, {len(stream)} frames, trackers met within "
+          f"{tolerance * 100:g} cm / {np.degrees(rotation_tolerance):.0f} deg, 1 thread")
+    print(f"  onnxruntime Gauss-Newton: {_percentiles(times[1:])} per frame; iterations to converge: mean "
+          f"{its.mean():.2f}, p99 {np.percentile(its, 99):.0f} (cap {max_iterations}); "
+          f"{1000 * np.mean(times[1:]) / its.mean():.2f} ms per iteration")
+    vae = load_vae(est.vae.dir)
+    picks = np.linspace(10, len(stream) - 1, torch_frames).astype(int)
+    t_iters, t_ms = [], []
+    for i in picks:
+        z, root, yaw = states[i]
+        frame = stream.frame(i)
+        constraints = est.tracker_constraints(frame)
+        for c in est.constraints:
+            constraints.add(c)
+        stats = {}
+        t0 = time.perf_counter()
+        optimise(vae, constraints, motion.skeleton.offsets, z, root, yaw, z, iterations=2000, lr=0.01,
+                 tolerance=tolerance, rotation_tolerance=rotation_tolerance, stats=stats, skip_orientation=END_JOINTS)
+        t_ms.append((time.perf_counter() - t0) * 1000)
+        t_iters.append(stats["iterations"])
+    print(f"  torch autograd (Adam):    {np.mean(t_ms):8.1f} ms per frame over {torch_frames} frames; iterations to "
+          f"converge: mean {np.mean(t_iters):.1f} (cap 2000); {np.sum(t_ms) / np.sum(t_iters):.2f} ms per iteration")
+
+
 def run(estimators, sensors_name: str, latency: bool = True) -> None:
     bench_offline(estimators, sensors_name)
     if latency:

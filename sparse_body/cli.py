@@ -146,9 +146,12 @@ def cmd_demo(args) -> int:
 
 
 def cmd_bench(args) -> int:
-    from .bench import bench_network, run
+    from .bench import bench_dragposer, bench_network, run
     if args.network:
         bench_network()
+        return 0
+    if args.dragposer:
+        bench_dragposer()
         return 0
     run(args.estimator or ["reference", "ik"], args.sensors, latency=not args.no_latency)
     return 0
@@ -215,6 +218,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--no-latency", action="store_true", help="only the offline speed (no ROS needed)")
     p.add_argument("--network", action="store_true",
                    help="only LoBSTr's network step: torch against ONNX Runtime on one core")
+    p.add_argument("--dragposer", action="store_true",
+                   help="only DragPoser's optimiser: ONNX Runtime Gauss-Newton against the torch reference")
     p.set_defaults(func=cmd_bench)
 
     p = sub.add_parser("train", help="train a learned estimator on the CMU train split (ONNX + model card)")

@@ -39,6 +39,7 @@ def _joint(name_or_index) -> int:
 
 @dataclass
 class Constraint:
+    size = 3                  # residual entries
     joint: int | str
     weight: float = 1.0
     name: str = ""            # to remove it again; defaults to a description
@@ -76,6 +77,7 @@ class Orientation(Constraint):
 @dataclass
 class AboveFloor(Constraint):
     """The joint no lower than the floor height plus a clearance (feet on or above the floor)."""
+    size = 1
     height: float = 0.0
 
     def residual(self, glob, pos, local, xp=np):
@@ -98,6 +100,7 @@ class LookAt(Constraint):
 @dataclass
 class AngleLimit(Constraint):
     """The joint's local rotation no further than max_angle (radians) from its rest."""
+    size = 1
     max_angle: float = 2.0
 
     def residual(self, glob, pos, local, xp=np):
@@ -130,6 +133,24 @@ class ConstraintSet:
 
     def names(self) -> list[str]:
         return list(self._items)
+
+    def converged(self, residual: np.ndarray, position_tol: float, rotation_tol: float,
+                  skip_orientation: frozenset = frozenset()) -> bool:
+        """Whether the tracker constraints in a residual vector (this set's order) are met:
+        positions within position_tol metres, orientations within rotation_tol radians
+        (except on the joints in skip_orientation)."""
+        i = 0
+        for c in self:
+            part = residual[i:i + c.size]
+            i += c.size
+            if c.weight == 0:
+                continue
+            err = np.linalg.norm(part) / c.weight
+            if isinstance(c, Position) and err > position_tol:
+                return False
+            if isinstance(c, Orientation) and c.joint not in skip_orientation and err > np.sin(rotation_tol):
+                return False
+        return True
 
     def residual(self, glob, pos, local, xp=np):
         parts = [c.residual(glob, pos, local, xp) for c in self]

@@ -34,6 +34,9 @@ from .dragposer_pose import LATENT, dual_quaternions, split_heading
 from .lobstr_features import body_scale
 
 
+END_JOINTS = frozenset(J[j] for j in ("head", "left_wrist", "right_wrist", "left_ankle", "right_ankle"))
+
+
 def default_model_dir() -> Path:
     from ..resources import models_dir
     return models_dir()
@@ -75,8 +78,10 @@ class PoseVaeRuntime:
 class LatentOptimizer:
     """Levenberg-Marquardt over (z, root position, heading) for a constraint set."""
 
+    # Priors: weak. They only break ties the constraints leave open; stronger ones pulled the
+    # end effectors off their trackers (02_05, six-point: 5 cm at 0.05 / 0.01, 0.9 cm here).
     def __init__(self, vae: PoseVaeRuntime, offsets: np.ndarray, damping: float = 1e-2,
-                 prior_weight: float = 0.05, latent_weight: float = 0.01, eps: float = 1e-3) -> None:
+                 prior_weight: float = 0.001, latent_weight: float = 0.0002, eps: float = 1e-3) -> None:
         self.vae, self.offsets = vae, offsets
         self.damping, self.prior_weight, self.latent_weight, self.eps = damping, prior_weight, latent_weight, eps
         self.lam = damping
@@ -133,8 +138,9 @@ class DragPoserEstimator(Estimator):
 
     def __init__(self, sensors, skeleton, fps: float = 60.0, model_dir: str | None = None,
                  model_path: str | None = None, iterations: int = 3,
-                 position_weight: float = 1.0, orientation_weight: float = 0.3, floor_height: float | None = 0.0,
-                 tolerance: float = 0.005, threads: int = 1, **optimizer) -> None:
+                 position_weight: float = 1.0, orientation_weight: float = 0.1, floor_height: float | None = 0.0,
+                 tolerance: float = 0.01, rotation_tolerance: float = 0.087, threads: int = 1,
+                 **optimizer) -> None:
         if iterations < 1:
             raise ValueError(f"iterations must be at least 1, got {iterations}")
         super().__init__(sensors, skeleton, fps)
@@ -142,7 +148,8 @@ class DragPoserEstimator(Estimator):
             model_dir = model_path if Path(model_path).is_dir() else str(Path(model_path).parent)
         self.vae = PoseVaeRuntime(model_dir, threads)
         self.optimizer = LatentOptimizer(self.vae, skeleton.offsets, **optimizer)
-        self.iterations, self.tolerance = iterations, tolerance
+        # the paper's stopping rule: positional and rotational thresholds on the trackers
+        self.iterations, self.tolerance, self.rotation_tolerance = iterations, tolerance, rotation_tolerance
         self.weights = (position_weight, orientation_weight)
         self.floor = floor_height
         self.constraints = ConstraintSet()      # the user's, kept across frames
@@ -225,14 +232,20 @@ class DragPoserEstimator(Estimator):
         used = 0
         for used in range(1, iterations + 1):
             z, root, yaw, r0 = self.optimizer.step(constraints, z, root, yaw, z_prior)
-            if np.abs(r0[:-2 * LATENT]).max(initial=0.0) < self.tolerance:
+            if constraints.converged(r0, self.tolerance, self.rotation_tolerance, END_JOINTS):
                 break
         self.iterations_used.append(used)
         if not (np.all(np.isfinite(z)) and np.all(np.isfinite(root)) and np.isfinite(yaw)):
             self.reset()
             return self.held_pose(frame.stamp)
         self._state = (z, root, float(yaw))
-        local, _, pos = self.optimizer.pose(z, root, yaw)
+        local, glob, pos = self.optimizer.pose(z, root, yaw)
+        # End joints take their trackers' orientation exactly, as the IK does: it moves only
+        # what hangs below them (hands, toes), and the VAE alone leaves 5-10 degrees there.
+        for c in trackers:
+            if isinstance(c, Orientation) and c.joint in END_JOINTS:
+                local[c.joint] = glob[self.skeleton.parents[c.joint]].T @ c.target
+        _, pos = forward_kinematics(local, root, self.skeleton.offsets)
         toes = pos[list(FOOT_JOINTS)]
         speed = (np.zeros(2) if self._last_toes is None
                  else np.linalg.norm((toes - self._last_toes)[:, :2], axis=1) * self.fps)

@@ -37,8 +37,11 @@ def load_vae(model_dir: Path) -> PoseVae:
 
 
 def optimise(vae: PoseVae, constraints: ConstraintSet, offsets: np.ndarray, z, root, yaw, z_prior,
-             prior_weight: float = 0.05, latent_weight: float = 0.01, iterations: int = 2000, lr: float = 0.01):
-    """Minimise the same objective as estimators.dragposer.LatentOptimizer with Adam."""
+             prior_weight: float = 0.001, latent_weight: float = 0.0002, iterations: int = 2000, lr: float = 0.01,
+             tolerance: float = 0.0, rotation_tolerance: float = 0.087, stats: dict | None = None,
+             skip_orientation: frozenset = frozenset()):
+    """Minimise the same objective as estimators.dragposer.LatentOptimizer with Adam; stop early
+    once the trackers are met as in ConstraintSet.converged (stats["iterations"] says when)."""
     offsets_t = torch.as_tensor(offsets, dtype=torch.float64)
     z = torch.tensor(z, dtype=torch.float64, requires_grad=True)
     root = torch.tensor(root, dtype=torch.float64, requires_grad=True)
@@ -47,7 +50,8 @@ def optimise(vae: PoseVae, constraints: ConstraintSet, offsets: np.ndarray, z, r
     opt = torch.optim.Adam([z, root, yaw], lr=lr)
     # annealed so the last steps settle instead of circling the minimum
     schedule = torch.optim.lr_scheduler.CosineAnnealingLR(opt, iterations)
-    for _ in range(iterations):
+    used = 0
+    for used in range(1, iterations + 1):
         free = sixd_to_matrix(vae.decode(z[None]).unflatten(-1, (22, 6)))[0]
         c, s = torch.cos(yaw), torch.sin(yaw)
         zero, one = torch.zeros_like(c), torch.ones_like(c)
@@ -55,10 +59,14 @@ def optimise(vae: PoseVae, constraints: ConstraintSet, offsets: np.ndarray, z, r
         local = torch.cat([(rz @ free[0])[None], free[1:]])
         glob, pos = forward_kinematics(local, root, offsets_t)
         r = constraints.residual(glob, pos, local, xp=torch)
+        if tolerance and constraints.converged(r.detach().numpy(), tolerance, rotation_tolerance, skip_orientation):
+            break
         loss = (r ** 2).sum() + prior_weight * ((z - z_prior) ** 2).sum() + latent_weight * (z ** 2).sum()
         opt.zero_grad()
         loss.backward()
         opt.step()
         schedule.step()
+    if stats is not None:
+        stats["iterations"] = used
     return z.detach().numpy(), root.detach().numpy(), float(yaw)
 

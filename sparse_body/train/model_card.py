@@ -133,8 +133,9 @@ Validation encode-decode error (exported weights): {val['position_error_cm']:.2f
 
 ## Test split (`sparse-body eval --estimator dragposer --sensors S [--faulty 1]`)
 
-Optimiser defaults: 5 iterations a frame (50 on the first), position weight 1, orientation
-weight 0.3, feet above the floor.
+Optimiser defaults: 3 Levenberg-Marquardt iterations a frame (30 on the first), position
+weight 1, orientation weight 0.1, prior weights 0.001 (previous latent) and 0.0002 (latent
+norm), feet above the floor.
 
 {chr(10).join(tables)}
 The paper's figures come from its own data and protocol (a guide, not a like-for-like comparison).

@@ -44,3 +44,11 @@ def contact_labels(positions: np.ndarray, fps: float, floor: float | None = None
     low = positions[:, FOOT_JOINTS, 2] - floor < thresholds.height
     still = toe_speeds(positions, fps) < thresholds.speed
     return low & still
+
+
+def toe_contacts(toes: np.ndarray, last_toes: np.ndarray | None, fps: float, floor: float = 0.0,
+                 height: float = 0.05, speed: float = 0.3) -> np.ndarray:
+    """Live contact flags (2,) for estimators without a contact model: toe (2, 3) low and
+    slower than speed (m/s) since the last frame's toes."""
+    moved = np.zeros(2) if last_toes is None else np.linalg.norm((toes - last_toes)[:, :2], axis=1) * fps
+    return (toes[:, 2] - floor < height) & (moved < speed)

@@ -76,13 +76,15 @@ class Estimator(ABC):
         return (pos, None) if has_pos else None
 
     def held_pose(self, stamp: float) -> BodyPose:
-        """The last output (self._last) again, marked invalid; before any, a standing pose at
-        the origin, invalid too."""
+        """The last output (self._last) again, marked invalid; before any, the estimator's
+        starting pose (self._local, else standing) at the origin, invalid too."""
         last = getattr(self, "_last", None)
         if last is None:
             from ..core.rotations import matrix_to_quat
             from .reference import standing_pose
-            return BodyPose(stamp, matrix_to_quat(standing_pose()), np.zeros(3), valid=False)
+            local = getattr(self, "_local", None)
+            return BodyPose(stamp, matrix_to_quat(standing_pose() if local is None else local), np.zeros(3),
+                            valid=False)
         return last.held(stamp)
 
     def process(self, stream: TrackerStream) -> list[BodyPose]:

@@ -21,7 +21,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..core.contacts import FOOT_JOINTS
+from ..core.contacts import FOOT_JOINTS, toe_contacts
 from ..core.kinematics import forward_kinematics
 from ..core.rotations import heading, matrix_to_quat, yaw_matrix
 from ..core.sensors import SITE_JOINTS
@@ -247,10 +247,8 @@ class DragPoserEstimator(Estimator):
                 local[c.joint] = glob[self.skeleton.parents[c.joint]].T @ c.target
         _, pos = forward_kinematics(local, root, self.skeleton.offsets)
         toes = pos[list(FOOT_JOINTS)]
-        speed = (np.zeros(2) if self._last_toes is None
-                 else np.linalg.norm((toes - self._last_toes)[:, :2], axis=1) * self.fps)
+        contact = toe_contacts(toes, self._last_toes, self.fps, self.floor or 0.0)
         self._last_toes = toes
-        contact = (toes[:, 2] - (self.floor or 0.0) < 0.05) & (speed < 0.3)
         self._last = BodyPose(frame.stamp, matrix_to_quat(local), np.asarray(root, float),
                               contact.astype(float), contact)
         return self._last

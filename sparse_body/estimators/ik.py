@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..core.contacts import FOOT_JOINTS
+from ..core.contacts import FOOT_JOINTS, toe_contacts
 from ..core.kinematics import forward_kinematics
 from ..core.rotations import axis_angle_to_matrix, heading, matrix_to_quat, yaw_matrix
 from ..core.skeleton import JOINT_INDEX as J
@@ -101,7 +101,7 @@ class IKEstimator(Estimator):
             # a pelvis IMU (orientation only) still gives the pelvis its rotation
             local[0] = pelvis[1] if pelvis is not None and pelvis[1] is not None else facing
         else:
-            return self._hold(frame.stamp)
+            return self.held_pose(frame.stamp)
         # orientation-only trackers (IMUs) only turn their end joint, below
         active = [(site, *CHAINS[site]) for site, tgt in targets.items() if tgt is not None and tgt[0] is not None]
         if not pelvis_pose:   # the root already hangs from the head: leave the spine alone
@@ -116,21 +116,15 @@ class IKEstimator(Estimator):
                 local[end] = glob[self.skeleton.parents[end]].T @ target[1]
         if not (np.all(np.isfinite(local)) and np.all(np.isfinite(root))):
             self.reset()
-            return self._hold(frame.stamp)
+            return self.held_pose(frame.stamp)
         self._local = local
         return self._finish(frame.stamp, local, root)
 
     def _finish(self, stamp, local, root) -> BodyPose:
         _, pos = forward_kinematics(local, root, self.skeleton.offsets)
         toes = pos[list(FOOT_JOINTS)]
-        speed = np.zeros(2) if self._last_toes is None else np.linalg.norm((toes - self._last_toes)[:, :2], axis=1) * self.fps
+        contact = toe_contacts(toes, self._last_toes, self.fps, self.floor)
         self._last_toes = toes
-        contact = (toes[:, 2] - self.floor < 0.05) & (speed < 0.3)
         pose = BodyPose(stamp, matrix_to_quat(local), np.asarray(root, float), contact.astype(float), contact)
         self._last = pose
         return pose
-
-    def _hold(self, stamp: float) -> BodyPose:
-        if self._last is None:
-            return BodyPose(stamp, matrix_to_quat(self._local), np.zeros(3), valid=False)
-        return self._last.held(stamp)

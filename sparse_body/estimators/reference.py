@@ -51,15 +51,10 @@ class ReferenceEstimator(Estimator):
             root_rot = yaw_matrix(heading(head[1]))
             root_pos = head[0] - root_rot @ self._head_above_pelvis
         else:
-            return self._hold(frame.stamp)
+            return self.held_pose(frame.stamp)
         local = self._local.copy()
         local[0] = root_rot
         pose = BodyPose(frame.stamp, matrix_to_quat(local), root_pos.astype(float), np.full(2, 0.5),
                         np.ones(2, dtype=bool))
         self._last = pose
         return pose
-
-    def _hold(self, stamp: float) -> BodyPose:
-        if self._last is None:
-            return BodyPose(stamp, matrix_to_quat(self._local), np.zeros(3), valid=False)
-        return self._last.held(stamp)

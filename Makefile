@@ -2,7 +2,7 @@
 VENV ?= .venv
 PY := $(VENV)/bin/python
 
-.PHONY: setup test demo eval bench fuzz train-lobstr clean
+.PHONY: setup test demo eval bench fuzz train-lobstr train-dragposer clean
 
 setup:
 	bash scripts/setup.sh
@@ -16,6 +16,7 @@ demo: setup
 eval: setup
 	$(VENV)/bin/sparse-body eval --estimator reference --estimator ik --sensors six_point
 	$(VENV)/bin/sparse-body eval --estimator lobstr --sensors four_point
+	$(VENV)/bin/sparse-body eval --estimator dragposer --sensors six_point
 
 bench: setup
 	$(VENV)/bin/sparse-body bench
@@ -30,6 +31,11 @@ fuzz: setup
 # Retrain the shipped LoBSTr model (about an hour on 2 CPU cores) and rewrite its model card.
 train-lobstr: setup
 	$(VENV)/bin/sparse-body train lobstr --config small
+
+# Retrain the shipped DragPoser models: the pose VAE, then its temporal predictor (30 + 30
+# minutes on 2 CPU cores), and rewrite the model card.
+train-dragposer: setup
+	$(VENV)/bin/sparse-body train dragposer --config small
 
 clean:
 	rm -rf build $(VENV)

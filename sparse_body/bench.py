@@ -175,8 +175,9 @@ def bench_dragposer(frames: int = 600, max_iterations: int = 20, tolerance: floa
         motion, where = synthetic_walk(frames / 60.0), "synthetic walk"
     config = load_sensor_config("six_point")
     stream = synthesize_trackers(motion, config)
+    # the search alone, as the reference does it: no temporal prior, no IK polish
     est = DragPoserEstimator(config, motion.skeleton, iterations=max_iterations, tolerance=tolerance,
-                             rotation_tolerance=rotation_tolerance)
+                             rotation_tolerance=rotation_tolerance, temporal_weight=0.0, polish_iterations=0)
     times, states = [], []
     for frame in stream:
         states.append(est._state)
@@ -206,6 +207,15 @@ def bench_dragposer(frames: int = 600, max_iterations: int = 20, tolerance: floa
         t_iters.append(stats["iterations"])
     print(f"  torch autograd (Adam):    {np.mean(t_ms):8.1f} ms per frame over {torch_frames} frames; iterations to "
           f"converge: mean {np.mean(t_iters):.1f} (cap 2000); {np.sum(t_ms) / np.sum(t_iters):.2f} ms per iteration")
+    for label, options in [("live defaults", {}), ("without the temporal predictor", {"temporal_weight": 0.0}),
+                           ("without the IK polish", {"polish_iterations": 0})]:
+        live = DragPoserEstimator(config, motion.skeleton, **options)
+        times = []
+        for frame in stream:
+            t0 = time.perf_counter()
+            live.step(frame)
+            times.append(time.perf_counter() - t0)
+        print(f"  estimator step, {label} ({live.iterations} iterations): {_percentiles(times[1:])} per frame")
 
 
 def run(estimators, sensors_name: str, latency: bool = True) -> None:

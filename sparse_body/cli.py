@@ -40,40 +40,54 @@ def cmd_eval(args) -> int:
     return 0
 
 
+def _trainers(args) -> list[tuple]:
+    """(config class, train function, report file) for each part the command trains."""
+    from .resources import models_dir
+    if args.method == "lobstr":      # one file: models/lobstr.onnx
+        from .train.lobstr_model import LobstrConfig
+        from .train.lobstr_train import train
+        out = Path(args.out or models_dir() / "lobstr.onnx")
+        return [(LobstrConfig, train, out, out.with_suffix(".train.json"))]
+    out = Path(args.out or models_dir())   # a folder: dragposer_{encoder,decoder,temporal}.onnx
+    parts = []
+    if args.part in ("all", "vae"):
+        from .train.dragposer_train import train_vae
+        from .train.dragposer_vae import VaeConfig
+        parts.append((VaeConfig, train_vae, out, out / "dragposer.train.json"))
+    if args.part in ("all", "temporal"):     # after the VAE: it learns in the VAE's latent space
+        from .train.dragposer_temporal import TemporalConfig
+        from .train.dragposer_temporal_train import train_temporal
+        parts.append((TemporalConfig, train_temporal, out, out / "dragposer_temporal.train.json"))
+    return parts
+
+
 def cmd_train(args) -> int:
     import json
 
     import torch
 
-    from .resources import models_dir
-    if args.method == "lobstr":      # one file: models/lobstr.onnx
-        out = Path(args.out or models_dir() / "lobstr.onnx")
-        report_path = out.with_suffix(".train.json")
-    else:                            # a folder: dragposer_{encoder,decoder}.onnx
-        out = Path(args.out or models_dir())
-        report_path = out / "dragposer.train.json"
+    parts = _trainers(args)
     if not args.card_only:
         torch.set_num_threads(args.threads)
-        if args.method == "lobstr":
-            from .train.lobstr_model import LobstrConfig as Config
-            from .train.lobstr_train import train
-        else:
-            from .train.dragposer_train import train_vae as train
-            from .train.dragposer_vae import VaeConfig as Config
-        config = Config.named(args.config)
-        if args.minutes is not None:
-            config.minutes = args.minutes
-        if args.steps is not None:
-            config.steps = args.steps
-        report = train(config, _mocap(args), out, seed=args.seed, limit=args.limit)
-        report["command"] = "sparse-body " + " ".join(sys.argv[1:])
-        report_path.parent.mkdir(parents=True, exist_ok=True)
-        report_path.write_text(json.dumps(report, indent=1))
-        print(f"written {out} and {report_path}")
+        configs = [config_class.named(args.config) for config_class, *_ in parts]   # errors before training
+        for config, (_, train, out, report_path) in zip(configs, parts):
+            if args.minutes is not None:
+                config.minutes = args.minutes
+            if args.steps is not None:
+                config.steps = args.steps
+            report = train(config, _mocap(args), out, seed=args.seed, limit=args.limit)
+            report["command"] = "sparse-body " + " ".join(sys.argv[1:])
+            report_path.parent.mkdir(parents=True, exist_ok=True)
+            report_path.write_text(json.dumps(report, indent=1))
+            print(f"written {out} and {report_path}")
     if not args.no_card:
         from .train import model_card
-        write = model_card.write_lobstr_card if args.method == "lobstr" else model_card.write_dragposer_card
-        card = write(out, json.loads(report_path.read_text()), _mocap(args), limit=args.limit)
+        out = parts[0][2]
+        if args.method == "lobstr":
+            card = model_card.write_lobstr_card(out, json.loads(parts[0][3].read_text()), _mocap(args),
+                                                limit=args.limit)
+        else:
+            card = model_card.write_dragposer_card(out, _mocap(args), limit=args.limit)
         print(f"written {card}")
     return 0
 
@@ -225,9 +239,12 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("train", help="train a learned estimator on the CMU train split (ONNX + model card)")
     p.add_argument("method", choices=["lobstr", "dragposer"])
     p.add_argument("--config", default="small",
-                   help="lobstr: paper, small (under an hour on 2 CPU cores) or tiny; dragposer: small or tiny")
-    p.add_argument("--out", help="lobstr: the .onnx file to write; dragposer: the folder for its encoder and "
-                                 "decoder (default: the package's models/)")
+                   help="lobstr: paper, small (under an hour on 2 CPU cores) or tiny; dragposer: small (30 "
+                        "minutes a part) or tiny, and paper for its temporal predictor")
+    p.add_argument("--part", choices=["all", "vae", "temporal"], default="all",
+                   help="dragposer: train the pose VAE, then the temporal predictor on its latents (all), or one")
+    p.add_argument("--out", help="lobstr: the .onnx file to write; dragposer: the folder for its encoder, decoder and "
+                                 "temporal predictor (default: the package's models/)")
     p.add_argument("--minutes", type=float, help="stop training after this long")
     p.add_argument("--steps", type=int, help="stop training after this many steps")
     p.add_argument("--threads", type=int, default=2, help="torch CPU threads")

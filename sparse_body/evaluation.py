@@ -69,7 +69,10 @@ PAPER_FIGURES = {
     ("lobstr", "four_point"): {"LoBSTr paper": {"Contact acc [%]": 85.77, "Lower RE [deg]": 8.53, "Toe PE [cm]": 6.63}},
     # DragPoser, Table 2: joint position, rotation, velocity error and end-effector error
     ("dragposer", "six_point"): {"DragPoser paper": {"MPJPE [cm]": 2.18, "MPJRE [deg]": 7.66, "MPJVE [cm/s]": 10.7,
-                                                     "End-effector PE [cm]": 1.02}},
+                                                     "End-effector PE [cm]": 1.02},
+                                 # Table 3: the optimiser without the temporal predictor
+                                 "paper, no predictor": {"MPJPE [cm]": 3.05, "MPJRE [deg]": 10.5,
+                                                         "MPJVE [cm/s]": 13.1, "End-effector PE [cm]": 1.36}},
     ("dragposer", "four_point"): {"DragPoser paper": {"MPJPE [cm]": 7.86, "MPJRE [deg]": 10.6, "MPJVE [cm/s]": 20.0,
                                                       "End-effector PE [cm]": 1.12}},
     ("dragposer", "three_point"): {"DragPoser paper": {"MPJPE [cm]": 15.5, "MPJRE [deg]": 22.0, "MPJVE [cm/s]": 34.0,
@@ -89,7 +92,7 @@ def paper_figures(estimator: str, sensors: str, faulty_percent: float = 0.0) -> 
 # What `sparse-body eval` runs beside a learned estimator unless told not to.
 COMPARE_WITH = {
     "lobstr": ["lobstr:contact_ik=false", "ik"],
-    "dragposer": ["ik"],
+    "dragposer": ["dragposer:temporal_weight=0", "ik"],   # the paper's Table 3 ablation, the baseline
 }
 
 

@@ -30,6 +30,9 @@ def tiny_vae(tmp_path_factory, mocap_root):
     config = VaeConfig.named("tiny")
     config.hidden, config.steps = 64, 20
     train_vae(config, mocap_root, out, limit=2, log=lambda *_: None)
+    from sparse_body.train.dragposer_temporal import TemporalConfig
+    from sparse_body.train.dragposer_temporal_train import train_temporal
+    train_temporal(TemporalConfig.named("tiny"), mocap_root, out, limit=2, log=lambda *_: None)
     return out
 
 
@@ -156,9 +159,10 @@ def test_missing_model_is_a_clear_error(tmp_path):
 def test_train_dragposer_is_one_command(tmp_path, mocap_root):
     subprocess.run([sys.executable, "-m", "sparse_body.cli", "train", "dragposer", "--config", "tiny", "--steps", "2",
                     "--limit", "1", "--out", str(tmp_path), "--no-card"], check=True, capture_output=True)
-    report = json.loads((tmp_path / "dragposer.train.json").read_text())
-    assert report["steps"] == 2
-    assert (tmp_path / "dragposer_decoder.onnx").is_file() and (tmp_path / "dragposer_encoder.onnx").is_file()
+    for report in ("dragposer.train.json", "dragposer_temporal.train.json"):   # the VAE, then the predictor
+        assert json.loads((tmp_path / report).read_text())["steps"] == 2
+    for part in ("decoder", "encoder", "temporal"):
+        assert (tmp_path / f"dragposer_{part}.onnx").is_file()
 
 
 def test_constraint_node_refines_an_estimator_over_dds_and_takes_new_constraints(tiny_vae, tmp_path, ros_env):
@@ -211,3 +215,123 @@ def test_constraint_node_refines_an_estimator_over_dds_and_takes_new_constraints
     assert not bad.success and "unknown constraint type 'teleport'" in bad.message
     assert removed.success and "lift" not in removed.active
     assert not missing.success
+
+
+def test_temporal_context_ignores_where_the_person_stands_and_faces(rng):
+    from sparse_body.estimators.dragposer_pose import temporal_context
+    root = np.cumsum(rng.normal(0, 0.05, (10, 3)), axis=0)
+    yaw = np.cumsum(rng.normal(0, 0.1, 10))
+    heights = rng.uniform(0, 1.7, (10, 6))
+    turn, shift = 2.0, np.array([3.0, -1.0, 0.0])
+    moved = root @ yaw_matrix(turn).T + shift
+    np.testing.assert_allclose(temporal_context(moved, yaw + turn, heights), temporal_context(root, yaw, heights),
+                               atol=1e-9)
+    step = temporal_context(np.array([[0, 0, 0.9], [0.1, 0, 0.9]]), np.array([np.pi / 2, np.pi / 2]), heights[:2])
+    np.testing.assert_allclose(step[1, :3], [0, -0.1, 0], atol=1e-9)    # moved to the person's right
+
+
+def test_limb_noise_turns_whole_limbs_and_nothing_else(rng):
+    from sparse_body.estimators.dragposer_pose import LIMBS
+    from sparse_body.train.dragposer_temporal_train import limb_noise
+    motion = synthetic_walk(seconds=4.0)
+    local = motion.local_rotations.astype(np.float32)
+    noisy = limb_noise(local, 0.3, 10.0, rng)
+    changed = ~np.all(np.isclose(noisy, local, atol=1e-6), axis=(-1, -2))   # (T, 22)
+    limb_joints = {J[j] for joints in LIMBS.values() for j in joints}
+    assert not changed[:, sorted(set(range(22)) - limb_joints)].any()   # spine, head, pelvis untouched
+    for joints in LIMBS.values():
+        idx = [J[j] for j in joints]
+        hit = changed[:, idx]
+        assert np.all(hit.all(1) == hit.any(1))                         # a limb is turned whole or not at all
+        assert 0.15 < hit.all(1).mean() < 0.45                          # about 30 % of frames
+        turn = np.einsum("tjba,tjbc->tjac", local[hit.all(1)][:, idx], noisy[hit.all(1)][:, idx])
+        angle = np.degrees(np.arccos(np.clip((np.trace(turn, axis1=-2, axis2=-1) - 1) / 2, -1, 1)))
+        assert 5 < np.median(angle) < 30                                # 10 degrees per axis
+    assert noisy.dtype == local.dtype and np.all(np.isfinite(noisy))
+
+
+def test_temporal_predictor_onnx_matches_torch_and_is_causal(tiny_vae, rng):
+    import onnxruntime as ort
+
+    from sparse_body.train.dragposer_temporal import TemporalConfig, TemporalPredictor
+    session = ort.InferenceSession(str(tiny_vae / "dragposer_temporal.onnx"))
+    config = TemporalConfig(**json.loads(session.get_modelmeta().custom_metadata_map["config"]))
+    model = TemporalPredictor(config).eval()   # random weights: the graph, not the training, is under test
+    path = tiny_vae / "check_temporal.onnx"
+    from sparse_body.train.dragposer_temporal_train import export
+    export(model, path, {"method": "dragposer"})
+    past = rng.normal(size=(1, config.past, 24)).astype(np.float32)
+    context = rng.normal(size=(1, config.past, 9)).astype(np.float32)
+    future = rng.normal(size=(1, config.future, 24)).astype(np.float32)
+    run = ort.InferenceSession(str(path)).run
+    names = ["past_latents", "past_context", "future_latents"]
+    out = run(None, dict(zip(names, [past, context, future])))[0]
+    with torch.no_grad():
+        ref = model(*(torch.from_numpy(a) for a in (past, context, future))).numpy()
+    np.testing.assert_allclose(out, ref, atol=1e-4)
+    later = future.copy()
+    later[:, 1:] = 0                                   # what the runtime pads with
+    np.testing.assert_allclose(run(None, dict(zip(names, [past, context, later])))[0][:, 0], out[:, 0], atol=1e-5)
+
+
+def test_temporal_prior_waits_for_history_then_feeds_its_own_predictions(tiny_vae, rng):
+    from sparse_body.estimators.dragposer_temporal import TemporalPrior
+    def run(ahead, last_z):
+        prior = TemporalPrior(tiny_vae, ahead=ahead)
+        n, predictions = prior.every, []
+        for tick in range(prior.past + 2):
+            z = rng.normal(size=24) if tick < prior.past + 1 else last_z
+            for frame in range(n):
+                prior.observe(z, np.array([0.01 * tick, 0, 0.9]), 0.0, np.full(6, 0.5))
+                predictions.append(None if prior.prediction is None else prior.prediction.copy())
+        return prior, predictions
+    prior, predictions = run(1, np.zeros(24))
+    first = next(i for i, p in enumerate(predictions) if p is not None)
+    assert first == prior.past * prior.every                 # W_p steps of history, then the next tick
+    assert np.all(np.isfinite(predictions[-1]))
+    # ahead=1: every prediction restarts from the newest solved latent; ahead>1: the decoder
+    # is fed its own predictions, so what was solved in between does not change it
+    seed = rng.bit_generator.state
+    a = run(1, np.zeros(24))[1][-1]
+    rng.bit_generator.state = seed
+    b = run(1, np.ones(24))[1][-1]
+    assert not np.allclose(a, b)
+    rng.bit_generator.state = seed
+    a = run(prior.window, np.zeros(24))[1][-1]
+    rng.bit_generator.state = seed
+    b = run(prior.window, np.ones(24))[1][-1]
+    np.testing.assert_allclose(a, b, atol=1e-6)
+    with pytest.raises(ValueError, match="ahead must be between 1 and"):
+        TemporalPrior(tiny_vae, ahead=prior.window + 1)
+
+
+def test_polish_puts_end_effectors_on_their_trackers_without_moving_the_latent(tiny_vae):
+    from sparse_body.core.rotations import quat_to_matrix
+    motion = synthetic_walk(1.0)
+    config = load_sensor_config("six_point")
+    stream = synthesize_trackers(motion, config)
+    errors, states = {}, {}
+    for polish in (0, 10):
+        est = create_estimator("dragposer", config, motion.skeleton, model_dir=str(tiny_vae), polish_iterations=polish)
+        per_joint = []
+        for frame in list(stream)[:20]:
+            pose = est.step(frame)
+            _, pos = forward_kinematics(quat_to_matrix(pose.local_quats), pose.root_position, motion.skeleton.offsets)
+            per_joint.append({c.joint: np.linalg.norm(pos[c.joint] - c.target) for c in est.tracker_constraints(frame)
+                              if isinstance(c, Position)})
+        errors[polish] = {j: np.mean([e[j] for e in per_joint]) for j in per_joint[0]}
+        states[polish] = est._state[0].copy()
+    for joint in ("pelvis", "head", "left_wrist", "right_wrist"):   # the tiny VAE's legs can be far off
+        assert errors[10][J[joint]] < 0.01, joint
+    assert np.mean(list(errors[10].values())) < np.mean(list(errors[0].values()))
+    np.testing.assert_allclose(states[10], states[0])     # the search itself is not changed
+
+
+def test_missing_temporal_predictor_names_the_file_and_the_way_out(tiny_vae, tmp_path):
+    for part in ("encoder", "decoder"):
+        (tmp_path / f"dragposer_{part}.onnx").write_bytes((tiny_vae / f"dragposer_{part}.onnx").read_bytes())
+    with pytest.raises(FileNotFoundError, match="dragposer_temporal.onnx.*temporal_weight to 0"):
+        create_estimator("dragposer", load_sensor_config("six_point"), Skeleton.canonical(), model_dir=str(tmp_path))
+    est = create_estimator("dragposer", load_sensor_config("six_point"), Skeleton.canonical(), model_dir=str(tmp_path),
+                           temporal_weight=0)
+    assert est.temporal is None

@@ -3,8 +3,9 @@ each frame until the constraints hold. No torch: the decoder runs in ONNX Runtim
 
 Variables: the latent z (24), the root position (3) and the heading (1). Each iteration is
 one Levenberg-Marquardt (damped Gauss-Newton) step on the weighted constraint residuals,
-plus two priors that keep z plausible: stay near the previous frame's z (the temporal
-predictor's place until it ships) and near the Gaussian's centre. The Jacobian comes from
+plus two priors that keep z plausible: stay near the temporal predictor's latent for this
+frame (dragposer_temporal.py; the previous frame's z until it has a second of history) and
+near the Gaussian's centre. The Jacobian comes from
 ONE batched decoder pass over z and its 24 perturbations (forward differences), and batched
 numpy FK; the paper backpropagates through the decoder instead, one gradient step per
 iteration (train/dragposer_reference.py keeps that as the reference).
@@ -30,10 +31,19 @@ from ..core.types import BodyPose, TrackerFrame
 from .base import Estimator
 from .constraints import AboveFloor, ConstraintSet, Orientation, Position
 from ..core.skeleton import Skeleton
-from .dragposer_pose import LATENT, dual_quaternions, split_heading
+from .dragposer_pose import HEIGHT_JOINTS, LATENT, dual_quaternions, split_heading
+from .dragposer_temporal import TemporalPrior
+from .ik import CHAINS
+from .ik import solve as ik_solve
 from .lobstr_features import body_scale
 
 
+HEIGHT_INDEX = [J[j] for j in HEIGHT_JOINTS]
+# the IK's chains with every joint free in 3 axes (a decoded elbow or knee is seldom an exact
+# hinge), the arms from the collar: a nearly straight arm's target is often just out of reach
+_REACH = {J["left_wrist"]: [J["left_collar"]], J["right_wrist"]: [J["right_collar"]]}
+POLISH_CHAINS = {J[end]: [(j, axis, None) for j in _REACH.get(J[end], []) + list(dict.fromkeys(d[0] for d in dofs))
+                          for axis in np.eye(3)] for end, dofs, _ in CHAINS.values()}
 END_JOINTS = frozenset(J[j] for j in ("head", "left_wrist", "right_wrist", "left_ankle", "right_ankle"))
 
 
@@ -96,13 +106,14 @@ class LatentOptimizer:
         glob, pos = forward_kinematics(local, root, self.offsets)
         return local, glob, pos
 
-    def residuals(self, constraints: ConstraintSet, z, root, yaw, z_prior, decoded=None):
+    def residuals(self, constraints: ConstraintSet, z, root, yaw, z_prior, decoded=None, prior_weight=None):
         local, glob, pos = self.pose(z, root, yaw, decoded)
         r = constraints.residual(glob, pos, local)
-        priors = np.concatenate([np.sqrt(self.prior_weight) * (z - z_prior), np.sqrt(self.latent_weight) * z], -1)
+        w = self.prior_weight if prior_weight is None else prior_weight
+        priors = np.concatenate([np.sqrt(w) * (z - z_prior), np.sqrt(self.latent_weight) * z], -1)
         return np.concatenate([r, priors], -1)
 
-    def step(self, constraints, z, root, yaw, z_prior):
+    def step(self, constraints, z, root, yaw, z_prior, prior_weight=None):
         """One Levenberg-Marquardt step; returns the new (z, root, yaw) and their residual."""
         n = LATENT + 4
         e = self.eps
@@ -116,7 +127,7 @@ class LatentOptimizer:
         Y = np.full(n + 1, yaw)
         Y[-1] += e
         D = np.concatenate([decoded, np.repeat(decoded[:1], 4, 0)])
-        res = self.residuals(constraints, Z, R, Y, z_prior[None], decoded=D)
+        res = self.residuals(constraints, Z, R, Y, z_prior[None], decoded=D, prior_weight=prior_weight)
         r0 = res[0]
         jac = (res[1:] - r0).T / e                              # (m, 28)
         h, g = jac.T @ jac, jac.T @ r0
@@ -125,7 +136,7 @@ class LatentOptimizer:
         for _ in range(6):
             delta = -np.linalg.solve(h + self.lam * np.diag(np.diag(h) + 1e-9), g)
             cand = (z + delta[:LATENT], root + delta[LATENT:LATENT + 3], yaw + delta[-1])
-            r1 = self.residuals(constraints, *cand, z_prior)
+            r1 = self.residuals(constraints, *cand, z_prior, prior_weight=prior_weight)
             if np.all(np.isfinite(r1)) and r1 @ r1 < cost:
                 self.lam = max(self.lam / 3, 1e-6)
                 return (*cand, r1)
@@ -140,6 +151,8 @@ class DragPoserEstimator(Estimator):
                  model_path: str | None = None, iterations: int = 3,
                  position_weight: float = 1.0, orientation_weight: float = 0.1, floor_height: float | None = 0.0,
                  tolerance: float = 0.01, rotation_tolerance: float = 0.087, threads: int = 1,
+                 temporal_weight: float = 0.002, ahead: int = 1, temporal_ramp: bool = True,
+                 polish_iterations: int = 10,
                  **optimizer) -> None:
         if iterations < 1:
             raise ValueError(f"iterations must be at least 1, got {iterations}")
@@ -147,10 +160,14 @@ class DragPoserEstimator(Estimator):
         if model_path and not model_dir:   # the nodes' model_path: the folder, or one of its two files
             model_dir = model_path if Path(model_path).is_dir() else str(Path(model_path).parent)
         self.vae = PoseVaeRuntime(model_dir, threads)
+        # the temporal predictor's pull on the latent (the paper's lambda_T); 0: without it
+        self.temporal_weight = temporal_weight
+        self.temporal = TemporalPrior(self.vae.dir, ahead, threads, temporal_ramp) if temporal_weight > 0 else None
         self.optimizer = LatentOptimizer(self.vae, skeleton.offsets, **optimizer)
         # the paper's stopping rule: positional and rotational thresholds on the trackers
         self.iterations, self.tolerance, self.rotation_tolerance = iterations, tolerance, rotation_tolerance
         self.weights = (position_weight, orientation_weight)
+        self.polish_iterations = polish_iterations
         self.floor = floor_height
         self.constraints = ConstraintSet()      # the user's, kept across frames
         if floor_height is not None:
@@ -166,6 +183,8 @@ class DragPoserEstimator(Estimator):
         self._state = None             # (z, root, yaw)
         self._last: BodyPose | None = None
         self._last_toes = None
+        if self.temporal is not None:
+            self.temporal.reset()
 
     def tracker_constraints(self, frame: TrackerFrame) -> ConstraintSet:
         out = ConstraintSet()
@@ -212,9 +231,31 @@ class DragPoserEstimator(Estimator):
         return self._solve(frame, (z, np.asarray(pose.root_position, float), yaw), z_prior=z)
 
     def step(self, frame: TrackerFrame) -> BodyPose:
-        return self._solve(frame, self._state)
+        prediction = None if self.temporal is None else self.temporal.target()
+        if prediction is None or self._state is None:
+            return self._solve(frame, self._state, observe=True)
+        return self._solve(frame, self._state, prediction, self.temporal_weight, observe=True)
 
-    def _solve(self, frame: TrackerFrame, state, z_prior=None) -> BodyPose:
+    def _polish(self, local, root, trackers: ConstraintSet):
+        """Put the tracked pelvis and end effectors exactly on their trackers (ours, not the
+        paper's): the latent search stops within its tolerance and a VAE with 1.6 cm
+        reconstruction error cannot always close the last centimetre. The root moves onto the
+        pelvis tracker, then a few damped-least-squares iterations bend the end effectors'
+        chains. The latent state stays as the search left it, so this does not steer later
+        frames."""
+        root = np.array(root, float)
+        positions = [c for c in trackers if isinstance(c, Position)]
+        for c in positions:
+            if c.joint == J["pelvis"]:
+                root = np.array(c.target, float)
+        goals = [(np.asarray(c.target), c.joint, POLISH_CHAINS[c.joint], 1.0) for c in positions
+                 if c.joint in POLISH_CHAINS]
+        if goals:
+            local = ik_solve(local, root, self.skeleton.offsets, goals, self.polish_iterations, tolerance=1e-3)
+        glob, _ = forward_kinematics(local, root, self.skeleton.offsets)
+        return local, glob, root
+
+    def _solve(self, frame: TrackerFrame, state, z_prior=None, prior_weight=None, observe=False) -> BodyPose:
         trackers = self.tracker_constraints(frame)
         if not len(trackers):
             return self.held_pose(frame.stamp)
@@ -231,7 +272,7 @@ class DragPoserEstimator(Estimator):
         iterations = 10 * self.iterations if first else self.iterations
         used = 0
         for used in range(1, iterations + 1):
-            z, root, yaw, r0 = self.optimizer.step(constraints, z, root, yaw, z_prior)
+            z, root, yaw, r0 = self.optimizer.step(constraints, z, root, yaw, z_prior, prior_weight)
             if constraints.converged(r0, self.tolerance, self.rotation_tolerance, END_JOINTS):
                 break
         self.iterations_used.append(used)
@@ -240,6 +281,11 @@ class DragPoserEstimator(Estimator):
             return self.held_pose(frame.stamp)
         self._state = (z, root, float(yaw))
         local, glob, pos = self.optimizer.pose(z, root, yaw)
+        if observe and self.temporal is not None:   # the search's pose: its heights belong to z
+            heights = pos[HEIGHT_INDEX, 2] - (self.floor or 0.0)
+            self.temporal.observe(z, np.asarray(root) * self._scale, yaw, heights * self._scale)
+        if self.polish_iterations:
+            local, glob, root = self._polish(local, root, trackers)
         # End joints take their trackers' orientation exactly, as the IK does: it moves only
         # what hangs below them (hands, toes), and the VAE alone leaves 5-10 degrees there.
         for c in trackers:

@@ -51,3 +51,35 @@ def dual_quaternions(local_rot: np.ndarray, root_height: np.ndarray, offsets: np
                            tx * qy - ty * qx + tz * qw,
                            -tx * qx - ty * qy - tz * qz], axis=-1)
     return np.concatenate([real, dual], axis=-1).reshape(lead[:-1] + (ENCODER_INPUT,))
+
+
+# --- temporal predictor context -------------------------------------------------------------
+# The paper gives the predictor's encoder "root displacements and the height to the ground
+# for the root, head, hands, and feet" beside each past latent: the latent alone does not say
+# whether the person walks or stands, nor how high they are.
+HEIGHT_JOINTS = ("pelvis", "head", "left_wrist", "right_wrist", "left_foot", "right_foot")
+LIMBS = {   # the paper's noise unit: one limb at a time
+    "left_arm": ("left_collar", "left_shoulder", "left_elbow", "left_wrist"),
+    "right_arm": ("right_collar", "right_shoulder", "right_elbow", "right_wrist"),
+    "left_leg": ("left_hip", "left_knee", "left_ankle", "left_foot"),
+    "right_leg": ("right_hip", "right_knee", "right_ankle", "right_foot"),
+}
+TEMPORAL_CONTEXT = 3 + len(HEIGHT_JOINTS)
+
+
+def temporal_context(root: np.ndarray, yaw: np.ndarray, heights: np.ndarray) -> np.ndarray:
+    """(T, 9) for T successive predictor steps: the root's ground displacement since the
+    previous step in that step's heading frame (x, y), the heading change (rad), and the
+    heights above the floor of HEIGHT_JOINTS. Lengths in canonical-body units (callers scale
+    by body_scale). The first step has no displacement.
+
+    root (T, 3), yaw (T,), heights (T, 6)."""
+    out = np.zeros((len(root), TEMPORAL_CONTEXT))
+    if len(root) > 1:
+        step = root[1:, :2] - root[:-1, :2]
+        c, s = np.cos(yaw[:-1]), np.sin(yaw[:-1])
+        out[1:, 0] = c * step[:, 0] + s * step[:, 1]
+        out[1:, 1] = -s * step[:, 0] + c * step[:, 1]
+        out[1:, 2] = np.angle(np.exp(1j * (yaw[1:] - yaw[:-1])))
+    out[:, 3:] = heights
+    return out

@@ -43,17 +43,18 @@ CHAINS = {
 
 
 def solve(local: np.ndarray, root: np.ndarray, offsets: np.ndarray, goals, iterations: int = 10,
-          damping: float = 0.05) -> np.ndarray:
+          damping: float = 0.05, tolerance: float = 1e-4) -> np.ndarray:
     """Damped least squares: local rotations (22, 3, 3) moved so that each goal's end joint
     reaches its target. goals: [(target position, end joint, dofs, damping weight)], dofs as
-    in CHAINS. Returns a new array; hinges stay within their limits."""
+    in CHAINS. Stops when every goal is within tolerance (m). Returns a new array; hinges stay
+    within their limits."""
     local = local.copy()
     for _ in range(iterations):
         glob, pos = forward_kinematics(local, root, offsets)
         moved = False
         for target, end, dofs, weight in goals:
             err = target - pos[end]
-            if np.linalg.norm(err) < 1e-4:
+            if np.linalg.norm(err) < tolerance:
                 continue
             moved = True
             axes = np.stack([glob[j] @ a for j, a, _ in dofs])

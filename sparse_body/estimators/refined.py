@@ -19,7 +19,8 @@ class RefinedEstimator(Estimator):
         if base == "refined":
             raise ValueError("a refined estimator's base cannot be 'refined'")
         self.base = create_estimator(base, sensors, skeleton, fps, **base_options)
-        self.refiner = DragPoserEstimator(sensors, skeleton, fps, model_dir=model_dir, iterations=iterations)
+        self.refiner = DragPoserEstimator(sensors, skeleton, fps, model_dir=model_dir, iterations=iterations,
+                                          temporal_weight=0.0)   # the base pose is the prior
 
     def reset(self) -> None:
         self.base.reset()

@@ -39,7 +39,8 @@ class InputRefiner(Estimator):
     def __init__(self, sensors, skeleton, fps: float, model_path: str, iterations: int, timeout: float) -> None:
         from ..estimators.dragposer import DragPoserEstimator
         super().__init__(sensors, skeleton, fps)
-        self.refiner = DragPoserEstimator(sensors, skeleton, fps, model_path=model_path or None, iterations=iterations)
+        self.refiner = DragPoserEstimator(sensors, skeleton, fps, model_path=model_path or None, iterations=iterations,
+                                          temporal_weight=0.0)   # the input pose is the prior
         self.timeout = timeout
         self.latest: BodyPose | None = None
         self._last = None

@@ -305,6 +305,30 @@ def test_temporal_prior_waits_for_history_then_feeds_its_own_predictions(tiny_va
         TemporalPrior(tiny_vae, ahead=prior.window + 1)
 
 
+def test_temporal_target_ramps_from_the_solved_latent_to_the_prediction(tiny_vae, rng):
+    from sparse_body.estimators.dragposer_temporal import TemporalPrior
+    ramped, held = TemporalPrior(tiny_vae), TemporalPrior(tiny_vae, ramp=False)
+    n, tick = ramped.every, ramped.past * ramped.every       # the first tick with W_p steps of history
+
+    def observe(z, frame):
+        for prior in (ramped, held):
+            prior.observe(z, np.array([0.01 * frame, 0, 0.9]), 0.0, np.full(6, 0.5))
+    for frame in range(tick + 1):
+        assert ramped.target() is None and held.target() is None   # nothing before the history
+        tick_z = rng.normal(size=24)
+        observe(tick_z, frame)
+    prediction = ramped.prediction
+    np.testing.assert_allclose(held.prediction, prediction)
+    assert not np.allclose(prediction, tick_z)
+    # k frames after the tick the ramp is k/n of the way from the tick's latent to the prediction
+    for k in range(1, n + 1):
+        np.testing.assert_allclose(ramped.target(), tick_z + k / n * (prediction - tick_z), atol=1e-12)
+        np.testing.assert_allclose(held.target(), prediction)
+        if k < n:
+            observe(rng.normal(size=24), tick + k)               # between ticks: no new prediction
+            np.testing.assert_allclose(ramped.prediction, prediction)
+
+
 def test_polish_puts_end_effectors_on_their_trackers_without_moving_the_latent(tiny_vae):
     from sparse_body.core.rotations import quat_to_matrix
     motion = synthetic_walk(1.0)

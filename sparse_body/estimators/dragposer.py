@@ -3,8 +3,8 @@ each frame until the constraints hold. No torch: the decoder runs in ONNX Runtim
 
 Variables: the latent z (24), the root position (3) and the heading (1). Each iteration is
 one Levenberg-Marquardt (damped Gauss-Newton) step on the weighted constraint residuals,
-plus two priors that keep z plausible: stay near the temporal predictor's latent for this
-frame (dragposer_temporal.py; the previous frame's z until it has a second of history) and
+plus priors that keep z plausible: stay near the previous frame's z and the temporal
+predictor's latent for this frame (dragposer_temporal.py; from a second of history on), and
 near the Gaussian's centre. The Jacobian comes from
 ONE batched decoder pass over z and its 24 perturbations (forward differences), and batched
 numpy FK; the paper backpropagates through the decoder instead, one gradient step per
@@ -234,7 +234,12 @@ class DragPoserEstimator(Estimator):
         prediction = None if self.temporal is None else self.temporal.target()
         if prediction is None or self._state is None:
             return self._solve(frame, self._state, observe=True)
-        return self._solve(frame, self._state, prediction, self.temporal_weight, observe=True)
+        # Both pulls at once: w_p |z - z_prev|^2 + w_T |z - z_T|^2 is one quadratic with the
+        # weights' sum, centred at their weighted mean. The paper's single gradient step a
+        # frame keeps z near z_prev by itself; a Gauss-Newton step needs the term said.
+        w_prev, w_t = self.optimizer.prior_weight, self.temporal_weight
+        centre = (w_prev * self._state[0] + w_t * prediction) / (w_prev + w_t)
+        return self._solve(frame, self._state, centre, w_prev + w_t, observe=True)
 
     def _polish(self, local, root, trackers: ConstraintSet):
         """Put the tracked pelvis and end effectors exactly on their trackers (ours, not the

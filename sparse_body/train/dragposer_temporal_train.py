@@ -100,18 +100,22 @@ def batch(data, starts: np.ndarray, config: TemporalConfig, rng=None, clean_newe
 
 @torch.no_grad()
 def validate(model: TemporalPredictor, data, config: TemporalConfig) -> dict[str, float]:
-    """Teacher-forced MSE on clean inputs, its first position (what W_f = 1 uses), and the
-    same for holding the newest latent (the optimiser's prior without the predictor)."""
+    """Teacher-forced MSE on clean inputs, its first position (what W_f = 1 uses), and two
+    baselines a predictor has to beat: holding the newest latent (the optimiser's prior
+    without the predictor) and, for the next step, carrying on half the last step's change."""
     model.eval()
     starts = data["starts"][:: max(1, config.future // 2)]
-    errors, hold = [], []
+    errors, hold, extrapolate = [], [], []
     for i in range(0, len(starts), 1024):
         b = batch(data, starts[i:i + 1024], config)
         errors.append(((model(b["past"], b["context"], b["future"]) - b["target"]) ** 2).mean(-1))
         hold.append(((b["future"] - b["target"]) ** 2).mean(-1))
+        newest = b["future"][:, 0]
+        extrapolate.append(((newest + 0.5 * (newest - b["past"][:, -1]) - b["target"][:, 0]) ** 2).mean(-1))
     errors, hold = torch.cat(errors), torch.cat(hold)
     return {"mse": errors.mean().item(), "mse_next": errors[:, 0].mean().item(),
-            "hold_mse": hold.mean().item(), "hold_mse_next": hold[:, 0].mean().item()}
+            "hold_mse": hold.mean().item(), "hold_mse_next": hold[:, 0].mean().item(),
+            "extrapolate_mse_next": torch.cat(extrapolate).mean().item()}
 
 
 def export(model: TemporalPredictor, path: Path, metadata: dict) -> None:

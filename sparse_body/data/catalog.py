@@ -8,6 +8,7 @@ import os
 from dataclasses import dataclass
 from pathlib import Path
 
+import numpy as np
 import yaml
 
 from ..resources import config_dir
@@ -120,7 +121,11 @@ def load_clip(clip: Clip, fps: float = DEFAULT_FPS, use_cache: bool = True) -> M
     else:
         raise MotionFileError(clip.path, f"unknown format {clip.format!r}")
     motion = retarget(source, fps)
-    motion.name = clip.clip_id
+    # Exactly what the cache holds (float32 quaternions), so a clip gives bit-identical results
+    # parsed or cached: the latent optimiser's accept/refuse decisions grow 1e-7 differences
+    # into metric changes of a few hundredths (seen as two evaluations of one configuration).
+    motion = Motion(clip.clip_id, motion.fps, motion.skeleton,
+                    motion.local_quats.astype(np.float32).astype(np.float64), motion.root_positions)
     if use_cache:
         cached.parent.mkdir(parents=True, exist_ok=True)
         tmp = cached.with_suffix(".tmp.npz")

@@ -41,7 +41,7 @@ def cmd_eval(args) -> int:
 
 
 def _trainers(args) -> list[tuple]:
-    """(config class, train function, report file) for each part the command trains."""
+    """(config class, train function, output, report file) for each part the command trains."""
     from .resources import models_dir
     if args.method == "lobstr":      # one file: models/lobstr.onnx
         from .train.lobstr_model import LobstrConfig

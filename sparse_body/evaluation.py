@@ -14,7 +14,7 @@ from .core.kinematics import forward_kinematics
 from .core.metrics import sequence_metrics, weighted_mean
 from .core.rotations import quat_to_matrix
 from .core.sensors import SensorConfig
-from .data.catalog import DEFAULT_FPS, load_clip, load_split, read_index
+from .data.catalog import DEFAULT_FPS, load_clip, split_clips
 from .data.motion import Motion
 from .data.virtual_trackers import NO_NOISE, TrackerNoise, synthesize_trackers
 from .estimators import create_estimator
@@ -114,21 +114,16 @@ def evaluate(estimator_spec: str, sensors: SensorConfig, mocap_root: Path, split
     """estimator_spec: a name, optionally with options ("lobstr:contact_ik=false")."""
     estimator_name, spec_options = parse_estimator_spec(estimator_spec)
     options = {**spec_options, **options}
-    index = {c.clip_id: c for c in read_index(mocap_root)}
-    wanted = load_split()[split]
-    missing = [c for c in wanted if c not in index]
-    if missing:
-        raise FileNotFoundError(f"{mocap_root}: clips of the {split} split are missing: {', '.join(missing[:5])}")
-    clips = wanted[:limit] if limit else wanted
+    clips = split_clips(mocap_root, split, limit)
     result = EvalResult(estimator_spec, sensors.name, split)
     start = time.perf_counter()
     iterator = clips
     if progress:
         from tqdm import tqdm
         iterator = tqdm(clips, desc=f"eval {estimator_spec}/{sensors.name}", unit="clip")
-    for k, clip_id in enumerate(iterator):
-        motion = load_clip(index[clip_id], fps)
-        result.clips.append(clip_id)
+    for k, clip in enumerate(iterator):
+        motion = load_clip(clip, fps)
+        result.clips.append(clip.clip_id)
         result.frames.append(len(motion))
         result.per_clip.append(evaluate_motion(motion, estimator_name, sensors, noise, seed=k, **options))
     result.seconds = time.perf_counter() - start

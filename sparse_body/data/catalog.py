@@ -95,6 +95,16 @@ def load_split(path: Path | None = None) -> dict[str, list[str]]:
     return {s: [str(c) for c in data[s]] for s in SPLITS}
 
 
+def split_clips(mocap_root: Path, split: str, limit: int | None = None) -> list[Clip]:
+    """The clips of one part of the committed split, in its order (only the first `limit`)."""
+    index = {c.clip_id: c for c in read_index(mocap_root)}
+    wanted = load_split()[split]
+    missing = [c for c in wanted if c not in index]
+    if missing:
+        raise FileNotFoundError(f"{mocap_root}: clips of the {split} split are missing: {', '.join(missing[:5])}")
+    return [index[c] for c in (wanted[:limit] if limit else wanted)]
+
+
 def cache_dir() -> Path:
     return Path(os.environ.get("SPARSE_BODY_CACHE", Path.home() / ".cache" / "sparse_body"))
 

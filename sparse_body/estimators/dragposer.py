@@ -80,9 +80,19 @@ class PoseVaeRuntime:
         return out.astype(np.float64)
 
     def encode(self, local_rot: np.ndarray, root_height: float, offsets: np.ndarray) -> np.ndarray:
+        """One pose's local rotations (22, 3, 3) -> its latent (24)."""
         free, _ = split_heading(local_rot[None])
-        dq = dual_quaternions(free, np.array([root_height]), offsets)
-        return self.encoder.run(None, {"dual_quaternions": dq.astype(np.float32)})[0][0].astype(np.float64)
+        return self.encode_free(free, np.array([root_height]), offsets)[0].astype(np.float64)
+
+    def encode_free(self, free: np.ndarray, root_height: np.ndarray, offsets: np.ndarray,
+                    chunk: int = 4096) -> np.ndarray:
+        """Heading-free local rotations (T, 22, 3, 3) and root heights (T,) -> latents (T, 24),
+        float32, `chunk` poses an encoder pass."""
+        out = []
+        for i in range(0, len(free), chunk):
+            dq = dual_quaternions(free[i:i + chunk].astype(np.float64), root_height[i:i + chunk], offsets)
+            out.append(self.encoder.run(None, {"dual_quaternions": dq.astype(np.float32)})[0])
+        return np.concatenate(out)
 
 
 class LatentOptimizer:

@@ -24,9 +24,9 @@ from scipy.spatial.transform import Rotation
 
 from ..core.contacts import estimate_floor
 from ..core.skeleton import JOINT_INDEX, Skeleton
-from ..data.catalog import load_clip, load_split, read_index
+from ..data.catalog import load_clip, split_clips
 from ..estimators.dragposer import PoseVaeRuntime
-from ..estimators.dragposer_pose import HEIGHT_JOINTS, LIMBS, dual_quaternions, split_heading, temporal_context
+from ..estimators.dragposer_pose import HEIGHT_JOINTS, LIMBS, split_heading, temporal_context
 from ..estimators.lobstr_features import body_scale
 from .dragposer_temporal import TemporalConfig, TemporalPredictor, loss
 
@@ -39,14 +39,6 @@ def clip_arrays(motion) -> dict[str, np.ndarray]:
     heights = (motion.positions[:, [JOINT_INDEX[j] for j in HEIGHT_JOINTS], 2] - floor) * scale
     return {"local": free.astype(np.float32), "yaw": yaw, "root": motion.root_positions * scale,
             "heights": heights}
-
-
-def encode(vae: PoseVaeRuntime, local: np.ndarray, root_height: np.ndarray, offsets: np.ndarray) -> np.ndarray:
-    out = []
-    for i in range(0, len(local), 4096):
-        dq = dual_quaternions(local[i:i + 4096].astype(np.float64), root_height[i:i + 4096], offsets)
-        out.append(vae.encoder.run(None, {"dual_quaternions": dq.astype(np.float32)})[0])
-    return np.concatenate(out)
 
 
 def limb_noise(local: np.ndarray, probability: float, degrees: float, rng) -> np.ndarray:
@@ -68,8 +60,8 @@ def sequences(clips, vae, config: TemporalConfig, rng, noisy=True, phases=None):
     clean, copies, context, starts, offset = [], [], [], [], 0
     for c in clips:
         height = c["root"][:, 2]
-        z = encode(vae, c["local"], height, offsets)
-        zn = [encode(vae, limb_noise(c["local"], config.limb_noise, config.limb_noise_deg, rng), height, offsets)
+        z = vae.encode_free(c["local"], height, offsets)
+        zn = [vae.encode_free(limb_noise(c["local"], config.limb_noise, config.limb_noise_deg, rng), height, offsets)
               for _ in range(config.noisy_copies)] if noisy and config.limb_noise > 0 else [z]
         for phase in (phases if phases is not None else range(config.every)):
             idx = np.arange(phase, len(z), config.every)
@@ -85,15 +77,13 @@ def sequences(clips, vae, config: TemporalConfig, rng, noisy=True, phases=None):
             "context": np.concatenate(context).astype(np.float32), "starts": np.concatenate(starts)}
 
 
-def batch(data, starts: np.ndarray, config: TemporalConfig, rng=None, clean_newest=False) -> dict[str, torch.Tensor]:
+def batch(data, starts: np.ndarray, config: TemporalConfig, rng=None) -> dict[str, torch.Tensor]:
     p, f = config.past, config.future
     idx = starts[:, None] + np.arange(p + f + 1)
     if rng is None:
         inputs = data["clean"][idx]
     else:   # each step from a random noisy copy
         inputs = data["noisy"][rng.integers(len(data["noisy"]), size=idx.shape), idx]
-        if clean_newest:
-            inputs[:, p] = data["clean"][idx[:, p]]
     return {"past": torch.from_numpy(inputs[:, :p]), "context": torch.from_numpy(data["context"][idx[:, :p]]),
             "future": torch.from_numpy(inputs[:, p:p + f]), "target": torch.from_numpy(data["clean"][idx[:, p + 1:]])}
 
@@ -135,9 +125,7 @@ def export(model: TemporalPredictor, path: Path, metadata: dict) -> None:
 
 
 def load_clips(mocap_root: Path, split: str, limit: int | None, fps: float = 60.0):
-    index = {c.clip_id: c for c in read_index(mocap_root)}
-    ids = load_split()[split][:limit] if limit else load_split()[split]
-    return [clip_arrays(load_clip(index[i], fps)) for i in ids]
+    return [clip_arrays(load_clip(c, fps)) for c in split_clips(mocap_root, split, limit)]
 
 
 def train_temporal(config: TemporalConfig, mocap_root: Path, out_dir: Path, seed: int = 0,

@@ -19,7 +19,7 @@ from ..core.contacts import estimate_floor
 from ..core.kinematics import forward_kinematics
 from ..core.rotations import angle_between, matrix_to_6d
 from ..core.skeleton import Skeleton
-from ..data.catalog import load_clip, load_split, read_index
+from ..data.catalog import load_clip, split_clips
 from ..estimators.dragposer_pose import dual_quaternions, split_heading
 from ..estimators.lobstr_features import body_scale
 from .dragposer_vae import Decoder, Encoder, PoseVae, VaeConfig, losses
@@ -35,10 +35,8 @@ def clip_arrays(motion, offsets: np.ndarray):
 
 
 def load_frames(mocap_root: Path, split: str, fps: float = 60.0, limit: int | None = None):
-    index = {c.clip_id: c for c in read_index(mocap_root)}
-    ids = load_split()[split][:limit] if limit else load_split()[split]
     offsets = Skeleton.canonical().offsets
-    return [clip_arrays(load_clip(index[i], fps), offsets) for i in ids]
+    return [clip_arrays(load_clip(c, fps), offsets) for c in split_clips(mocap_root, split, limit)]
 
 
 @torch.no_grad()

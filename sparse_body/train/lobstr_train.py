@@ -19,7 +19,7 @@ import torch
 from ..core.contacts import contact_labels, estimate_floor
 from ..core.rotations import angle_between, heading
 from ..core.skeleton import Skeleton
-from ..data.catalog import load_clip, load_split, read_index
+from ..data.catalog import load_clip, split_clips
 from ..data.virtual_trackers import LOBSTR_NOISE, _random_rotations
 from ..estimators.lobstr_features import (INPUT_JOINTS, LEG_JOINTS, body_scale, leg_targets,
                                           reference_frames, sequence_features)
@@ -118,10 +118,8 @@ def export_onnx(net: LobstrNet, path: Path, metadata: dict) -> None:
 
 
 def load_clips(mocap_root: Path, split: str, config: LobstrConfig, rng, limit: int | None = None):
-    index = {c.clip_id: c for c in read_index(mocap_root)}
-    ids = load_split()[split][:limit] if limit else load_split()[split]
-    return [clip_tensors(load_clip(index[i], config.fps), config.noise_copies if split == "train" else 0, rng)
-            for i in ids]
+    return [clip_tensors(load_clip(c, config.fps), config.noise_copies if split == "train" else 0, rng)
+            for c in split_clips(mocap_root, split, limit)]
 
 
 def train(config: LobstrConfig, mocap_root: Path, out: Path, seed: int = 0, limit: int | None = None,

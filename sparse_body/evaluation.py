@@ -18,6 +18,7 @@ from .data.catalog import DEFAULT_FPS, load_clip, split_clips
 from .data.motion import Motion
 from .data.virtual_trackers import NO_NOISE, TrackerNoise, synthesize_trackers
 from .estimators import create_estimator
+from .estimators.base import parse_estimator_spec  # noqa: F401 - the CLI's import
 
 
 @dataclass
@@ -94,18 +95,6 @@ COMPARE_WITH = {
     "lobstr": ["lobstr:contact_ik=false", "ik"],
     "dragposer": ["dragposer:temporal_weight=0", "ik"],   # the paper's Table 3 ablation, the baseline
 }
-
-
-def parse_estimator_spec(spec: str) -> tuple[str, dict]:
-    """"name" or "name:key=value,key=value" (values read as YAML scalars) -> (name, options)."""
-    name, _, rest = spec.partition(":")
-    options = {}
-    for item in filter(None, rest.split(",")):
-        key, eq, value = item.partition("=")
-        if not eq or not key:
-            raise ValueError(f"estimator option {item!r} in {spec!r} is not key=value")
-        options[key.strip()] = yaml.safe_load(value)
-    return name.strip(), options
 
 
 def evaluate(estimator_spec: str, sensors: SensorConfig, mocap_root: Path, split: str = "test",

@@ -1,7 +1,8 @@
-"""The latest tracker transforms, for where tf2_ros is not installed (and for bags).
+"""The latest tracker transforms, for the nodes' /tf input and for bags.
 
-Keeps the newest transform of every child frame, and looks a frame up in a fixed frame by
-walking parents. Unlike tf2 it does not interpolate: estimators want the newest sample.
+Keeps the newest transform of every child frame (and how often it comes), and looks a frame
+up in a fixed frame by walking parents. Unlike tf2 it does not interpolate: estimators want
+the newest sample, and a newer one replaces it (a burst is coalesced, never queued).
 Samples are checked on the way in: non-finite values and degenerate quaternions are refused;
 an older stamp than the one held is refused as out of order, unless it is older by more than
 `jump_back` seconds, which is taken for a clock jump back (a looping bag): then everything
@@ -31,6 +32,7 @@ class Edge:
     translation: np.ndarray
     rotation: np.ndarray   # x y z w, unit
     static: bool
+    interval: float = 0.0  # running mean of the time between samples (s); 0 until the second
 
 
 class TfCache:
@@ -56,8 +58,22 @@ class TfCache:
                 return Accepted.OUT_OF_ORDER
             self.clear()
             result = Accepted.JUMPED_BACK
-        self._edges[child] = Edge(parent, float(stamp), t, q / norm, static)
+        interval = 0.0
+        if held is not None and result is Accepted.OK and not static:
+            gap = float(stamp) - held.stamp
+            interval = gap if held.interval == 0.0 else 0.9 * held.interval + 0.1 * gap
+        self._edges[child] = Edge(parent, float(stamp), t, q / norm, static, interval)
         return result
+
+    def stamp(self, child: str) -> float:
+        """The newest stamp of a child frame's own transform (-inf unknown, inf static)."""
+        edge = self._edges.get(child)
+        return -np.inf if edge is None else (np.inf if edge.static else edge.stamp)
+
+    def interval(self, child: str) -> float:
+        """The usual time between a child frame's samples (0 when not known yet)."""
+        edge = self._edges.get(child)
+        return 0.0 if edge is None else edge.interval
 
     def lookup(self, target: str, source: str):
         """(stamp, translation, rotation xyzw) of source in target, or None when unknown.
@@ -83,13 +99,15 @@ class TfCache:
         return max(dynamic) if dynamic else -np.inf
 
 
-def sample_trackers(lookup, config, stamp: float, stale_after: float):
-    """The trackers of a sensor configuration at `stamp`.
+def sample_trackers(lookup, config, stamp: float, stale_after: float, intervals=None):
+    """The trackers of a sensor configuration at `stamp` (the newest tracker sample's stamp:
+    staleness is judged in the input's own time, so a late delivery is latency, not loss).
 
-    lookup(fixed_frame, frame_id) gives (stamp, translation, rotation xyzw) or None: a
-    TfCache's lookup, or a tf2_ros buffer wrapped alike. Returns (TrackerFrame, stamps): a
-    site is invalid when its frame is unknown, its pose is not finite, or its newest
-    transform is older than stale_after seconds; stamps[s] is that transform's stamp (-inf
+    lookup(fixed_frame, frame_id) gives (stamp, translation, rotation xyzw) or None (a
+    TfCache's lookup). Returns (TrackerFrame, stamps): a site is invalid when its frame is
+    unknown, its pose is not finite, or its newest transform is older than `stamp` by more
+    than its budget: stale_after, or three of the tracker's own sample intervals when that
+    is longer (intervals: frame_id -> seconds). stamps[s] is that transform's stamp (-inf
     when unknown, `stamp` when the chain is all static).
     Orientation-only sites get NaN positions, position-only sites NaN orientations."""
     from .core.types import TrackerFrame
@@ -105,7 +123,8 @@ def sample_trackers(lookup, config, stamp: float, stale_after: float):
         t_stamp, t, q = found
         stamps[s] = t_stamp if np.isfinite(t_stamp) else stamp
         norm = np.linalg.norm(q)
-        if stamp - stamps[s] > stale_after or not (np.all(np.isfinite(t)) and np.isfinite(norm) and norm > 0.5):
+        budget = max(stale_after, 3.0 * intervals.get(site.frame_id, 0.0)) if intervals else stale_after
+        if stamp - stamps[s] > budget or not (np.all(np.isfinite(t)) and np.isfinite(norm) and norm > 0.5):
             continue
         valid[s] = True
         if site.has_position:

@@ -3,11 +3,13 @@ and how it is mounted. Configurations are YAML files under config/sensors/."""
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from functools import cached_property
 from pathlib import Path
 
 import numpy as np
 import yaml
 
+from .rotations import unit_quat_matrix
 from .skeleton import JOINT_INDEX
 
 # Body sites a tracker can sit on, and the body joint each one follows.
@@ -44,16 +46,23 @@ class TrackerSite:
         return JOINT_INDEX[self.joint]
 
     def joint_pose(self, position: np.ndarray, quat: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """The followed joint's (position, rotation matrix) from a full tracker pose: the
-        inverse of the mounting offset."""
-        from scipy.spatial.transform import Rotation
-        rot = Rotation.from_quat(quat) * Rotation.from_quat(self.offset_rotation).inv()
-        return np.asarray(position) - rot.apply(self.offset_translation), rot.as_matrix()
+        """The followed joint's (position, rotation matrix) from a full tracker pose (unit
+        quaternion): the inverse of the mounting offset."""
+        rot = self.joint_rotation(quat)
+        return np.asarray(position) - rot @ self._offset_in_joint, rot
 
     def joint_rotation(self, quat: np.ndarray) -> np.ndarray:
-        """The followed joint's rotation matrix from the tracker's orientation alone."""
-        from scipy.spatial.transform import Rotation
-        return (Rotation.from_quat(quat) * Rotation.from_quat(self.offset_rotation).inv()).as_matrix()
+        """The followed joint's rotation matrix from the tracker's (unit) orientation alone."""
+        return unit_quat_matrix(quat) @ self._offset_matrix.T
+
+    @cached_property
+    def _offset_matrix(self) -> np.ndarray:
+        return unit_quat_matrix(np.asarray(self.offset_rotation, float) / np.linalg.norm(self.offset_rotation))
+
+    @cached_property
+    def _offset_in_joint(self) -> np.ndarray:
+        # the tracker sits at joint position + R_joint @ t_offset
+        return np.asarray(self.offset_translation, float)
 
     @property
     def has_position(self) -> bool:

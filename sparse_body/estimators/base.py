@@ -2,10 +2,12 @@
 from __future__ import annotations
 
 import importlib
+import math
 from abc import ABC, abstractmethod
 from typing import ClassVar
 
 import numpy as np
+import yaml
 
 from ..core.sensors import SensorConfig
 from ..core.skeleton import Skeleton
@@ -42,13 +44,34 @@ class Estimator(ABC):
         self.skeleton = skeleton
         self.fps = fps
 
-    @abstractmethod
     def reset(self) -> None:
         """Forget all history (a new take, a clock jump back)."""
+        self._last: BodyPose | None = None
+        self._reset()
+
+    def _reset(self) -> None:
+        """Forget the method's own history (recurrent state, contacts, the last latent)."""
+
+    def step(self, frame: TrackerFrame) -> BodyPose:
+        """The body at frame.stamp. What every method shares is here: too little input holds
+        the last pose (invalid), a non-finite result starts the method over and holds too,
+        and the last valid pose is kept for holding."""
+        return self._checked(frame.stamp, self._estimate(frame))
 
     @abstractmethod
-    def step(self, frame: TrackerFrame) -> BodyPose:
-        """The body at frame.stamp."""
+    def _estimate(self, frame: TrackerFrame) -> BodyPose | None:
+        """The method: a pose from this frame's usable samples (joint_target), or None when
+        they are too few."""
+
+    def _checked(self, stamp: float, pose: BodyPose | None) -> BodyPose:
+        if pose is None:
+            return self.held_pose(stamp)
+        if not pose.is_finite():
+            self.reset()
+            return self.held_pose(stamp)
+        if pose.valid:
+            self._last = pose
+        return pose
 
     def joint_target(self, frame: TrackerFrame, site: str):
         """The followed joint's (position or None, rotation matrix or None) from a site's
@@ -64,8 +87,9 @@ class Estimator(ABC):
         if not frame.valid[i]:
             return None
         pos, quat = np.asarray(frame.positions[i], float), np.asarray(frame.orientations[i], float)
-        has_pos = spec.has_position and bool(np.all(np.isfinite(pos)))
-        norm = np.linalg.norm(quat) if np.all(np.isfinite(quat)) else 0.0
+        # a sum or a dot product is finite exactly when every element is (and is cheaper here)
+        has_pos = spec.has_position and math.isfinite(pos.sum())
+        norm = math.sqrt(q2) if math.isfinite(q2 := float(quat @ quat)) else 0.0
         has_rot = spec.has_orientation and 0.9 < norm < 1.1
         if spec.has_position and not has_pos:
             return None                      # a position tracker without its position: unusable
@@ -90,6 +114,18 @@ class Estimator(ABC):
     def process(self, stream: TrackerStream) -> list[BodyPose]:
         self.reset()
         return [self.step(frame) for frame in stream]
+
+
+def parse_estimator_spec(spec: str) -> tuple[str, dict]:
+    """"name" or "name:key=value,key=value" (values read as YAML scalars) -> (name, options)."""
+    name, _, rest = spec.partition(":")
+    options = {}
+    for item in filter(None, rest.split(",")):
+        key, eq, value = item.partition("=")
+        if not eq or not key:
+            raise ValueError(f"estimator option {item!r} in {spec!r} is not key=value")
+        options[key.strip()] = yaml.safe_load(value)
+    return name.strip(), options
 
 
 def create_estimator(name: str, sensors: SensorConfig, skeleton: Skeleton, fps: float = 60.0,

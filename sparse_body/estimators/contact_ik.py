@@ -1,7 +1,7 @@
 """Foot contacts held by IK (LoBSTr, section 3.4.1).
 
 When a foot's contact turns on, its toe's position becomes the contact point, and hip and
-knee are solved (Jacobian IK) so that the toe stays there while contact lasts. When contact
+knee are solved (the shared two-bone IK, with the toe as the limb's end) so that the toe stays there while contact lasts. When contact
 ends, the target moves from the contact point to where the network puts the toe over
 release_frames frames with a slow-in / slow-out (shifted sine) weight, so the foot does
 not snap. A contact point the leg can no longer reach is let go the same way.
@@ -12,15 +12,15 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..core.body_ik import LIMBS, reach
 from ..core.contacts import FOOT_JOINTS
 from ..core.kinematics import forward_kinematics
 from ..core.skeleton import JOINT_INDEX as J
 from ..core.skeleton import Skeleton
-from .ik import CHAINS, solve
 
 # The toe is moved by the hip (ball) and knee (hinge) of its leg; ankle and toe keep the
 # network's rotations.
-_LEG_DOFS = (CHAINS["left_foot"][1], CHAINS["right_foot"][1])
+_LEGS = (LIMBS[J["left_ankle"]], LIMBS[J["right_ankle"]])
 _HIPS = (J["left_hip"], J["right_hip"])
 _KNEES = (J["left_knee"], J["right_knee"])
 
@@ -38,12 +38,11 @@ def release_weight(step: int, frames: int) -> float:
 
 
 class ContactHold:
-    def __init__(self, skeleton: Skeleton, release_frames: int = 10, iterations: int = 10,
-                 damping: float = 0.05) -> None:
+    def __init__(self, skeleton: Skeleton, release_frames: int = 10) -> None:
         if release_frames < 1:
             raise ValueError(f"release_frames must be at least 1, got {release_frames}")
         self.skeleton = skeleton
-        self.release_frames, self.iterations, self.damping = release_frames, iterations, damping
+        self.release_frames = release_frames
         self.reset()
 
     def reset(self) -> None:
@@ -52,12 +51,12 @@ class ContactHold:
     def apply(self, local: np.ndarray, root: np.ndarray, contact: np.ndarray) -> np.ndarray:
         """Local rotations (22, 3, 3) with the legs moved to honour the contacts (left, right)."""
         _, pos = forward_kinematics(local, root, self.skeleton.offsets)
-        goals = []
+        local, offsets = local.copy(), self.skeleton.offsets
         for side, foot in enumerate(self._feet):
             toe, hip, knee = pos[FOOT_JOINTS[side]], pos[_HIPS[side]], pos[_KNEES[side]]
             # what hip and knee can reach with the ankle as the network has it
-            reach = 0.999 * (np.linalg.norm(knee - hip) + np.linalg.norm(toe - knee))
-            if foot.anchor is not None and np.linalg.norm(foot.anchor - hip) > reach:
+            span = 0.999 * (np.linalg.norm(knee - hip) + np.linalg.norm(toe - knee))
+            if foot.anchor is not None and np.linalg.norm(foot.anchor - hip) > span:
                 contact = contact.copy()
                 contact[side] = False        # out of reach: let it go rather than stretch
             if contact[side]:
@@ -75,7 +74,7 @@ class ContactHold:
                 target = (1 - w) * foot.release_from + w * toe
                 if foot.release_step >= self.release_frames:
                     foot.release_from = None
-            goals.append((target, FOOT_JOINTS[side], _LEG_DOFS[side], 1.0))
-        if not goals:
-            return local
-        return solve(local, root, self.skeleton.offsets, goals, self.iterations, self.damping)
+            leg = _LEGS[side]
+            toe_from_knee = offsets[leg.end] + local[leg.end] @ offsets[FOOT_JOINTS[side]]
+            reach(local, local[0], pos[leg.upper], offsets, leg, target, end_vector=toe_from_knee)
+        return local

@@ -33,17 +33,11 @@ from .constraints import AboveFloor, ConstraintSet, Orientation, Position
 from ..core.skeleton import Skeleton
 from .dragposer_pose import HEIGHT_JOINTS, LATENT, dual_quaternions, split_heading
 from .dragposer_temporal import TemporalPrior
-from .ik import CHAINS
-from .ik import solve as ik_solve
+from ..core.body_ik import solve_body
 from .lobstr_features import body_scale
 
 
 HEIGHT_INDEX = [J[j] for j in HEIGHT_JOINTS]
-# the IK's chains with every joint free in 3 axes (a decoded elbow or knee is seldom an exact
-# hinge), the arms from the collar: a nearly straight arm's target is often just out of reach
-_REACH = {J["left_wrist"]: [J["left_collar"]], J["right_wrist"]: [J["right_collar"]]}
-POLISH_CHAINS = {J[end]: [(j, axis, None) for j in _REACH.get(J[end], []) + list(dict.fromkeys(d[0] for d in dofs))
-                          for axis in np.eye(3)] for end, dofs, _ in CHAINS.values()}
 END_JOINTS = frozenset(J[j] for j in ("head", "left_wrist", "right_wrist", "left_ankle", "right_ankle"))
 
 
@@ -189,9 +183,8 @@ class DragPoserEstimator(Estimator):
         self.iterations_used: list[int] = []
         self.reset()
 
-    def reset(self) -> None:
+    def _reset(self) -> None:
         self._state = None             # (z, root, yaw)
-        self._last: BodyPose | None = None
         self._last_toes = None
         if self.temporal is not None:
             self.temporal.reset()
@@ -238,9 +231,9 @@ class DragPoserEstimator(Estimator):
         yaw = float(heading(local[0]))
         height = (pose.root_position[2] - (self.floor or 0.0)) * self._scale
         z = self.vae.encode(local, height, self._canonical_offsets)
-        return self._solve(frame, (z, np.asarray(pose.root_position, float), yaw), z_prior=z)
+        return self._checked(frame.stamp, self._solve(frame, (z, np.asarray(pose.root_position, float), yaw), z_prior=z))
 
-    def step(self, frame: TrackerFrame) -> BodyPose:
+    def _estimate(self, frame: TrackerFrame) -> BodyPose | None:
         prediction = None if self.temporal is None else self.temporal.target()
         if prediction is None or self._state is None:
             return self._solve(frame, self._state, observe=True)
@@ -255,29 +248,29 @@ class DragPoserEstimator(Estimator):
         """Put the tracked pelvis and end effectors exactly on their trackers (ours, not the
         paper's): the latent search stops within its tolerance and a VAE with 1.6 cm
         reconstruction error cannot always close the last centimetre. The root moves onto the
-        pelvis tracker, then a few damped-least-squares iterations bend the end effectors'
-        chains. The latent state stays as the search left it, so this does not steer later
+        pelvis tracker, then the shared closed-form IK turns the spine towards the head and
+        reaches each tracked hand and foot, keeping the decoded elbows, knees and spine curve
+        (a decoded elbow is seldom an exact hinge) and only turning them. The latent state stays as the search left it, so this does not steer later
         frames."""
         root = np.array(root, float)
         positions = [c for c in trackers if isinstance(c, Position)]
         for c in positions:
             if c.joint == J["pelvis"]:
                 root = np.array(c.target, float)
-        goals = [(np.asarray(c.target), c.joint, POLISH_CHAINS[c.joint], 1.0) for c in positions
-                 if c.joint in POLISH_CHAINS]
+        goals = {c.joint: np.asarray(c.target, float) for c in positions if c.joint in END_JOINTS}
         if goals:
-            local = ik_solve(local, root, self.skeleton.offsets, goals, self.polish_iterations, tolerance=1e-3)
+            local, _, _ = solve_body(local, root, self.skeleton.offsets, goals, keep_shape=True)
         glob, _ = forward_kinematics(local, root, self.skeleton.offsets)
         return local, glob, root
 
     def _solve(self, frame: TrackerFrame, state, z_prior=None, prior_weight=None, observe=False) -> BodyPose:
         trackers = self.tracker_constraints(frame)
         if not len(trackers):
-            return self.held_pose(frame.stamp)
+            return None
         first = state is None
         state = state or self._initial_state(trackers)
         if state is None:
-            return self.held_pose(frame.stamp)
+            return None
         constraints = ConstraintSet()
         for c in list(trackers) + list(self.constraints):
             constraints.add(c)
@@ -293,7 +286,7 @@ class DragPoserEstimator(Estimator):
         self.iterations_used.append(used)
         if not (np.all(np.isfinite(z)) and np.all(np.isfinite(root)) and np.isfinite(yaw)):
             self.reset()
-            return self.held_pose(frame.stamp)
+            return None
         self._state = (z, root, float(yaw))
         local, glob, pos = self.optimizer.pose(z, root, yaw)
         if observe and self.temporal is not None:   # the search's pose: its heights belong to z
@@ -310,6 +303,4 @@ class DragPoserEstimator(Estimator):
         toes = pos[list(FOOT_JOINTS)]
         contact = toe_contacts(toes, self._last_toes, self.fps, self.floor or 0.0)
         self._last_toes = toes
-        self._last = BodyPose(frame.stamp, matrix_to_quat(local), np.asarray(root, float),
-                              contact.astype(float), contact)
-        return self._last
+        return BodyPose(frame.stamp, matrix_to_quat(local), np.asarray(root, float), contact.astype(float), contact)

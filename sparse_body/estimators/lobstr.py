@@ -86,18 +86,17 @@ class LobstrEstimator(Estimator):
         self.contacts = ContactHold(skeleton, release_frames) if contact_ik else None
         self.reset()
 
-    def reset(self) -> None:
+    def _reset(self) -> None:
         self.upper.reset()
         if self.contacts:
             self.contacts.reset()
         self._state = self.model.initial_state()
         self._prev: tuple[float, np.ndarray, np.ndarray] | None = None
-        self._last: BodyPose | None = None
 
-    def step(self, frame: TrackerFrame) -> BodyPose:
+    def _estimate(self, frame: TrackerFrame) -> BodyPose | None:
         targets = [self.joint_target(frame, s) for s in INPUT_SITES]
         if any(t is None or t[0] is None or t[1] is None for t in targets):
-            return self.held_pose(frame.stamp)   # keep the previous sample: the next velocity spans the gap
+            return None   # keep the previous sample: the next velocity spans the gap
         pos = (np.stack([t[0] for t in targets]) - [0.0, 0.0, self.floor]) * self.scale
         rot = np.stack([t[1] for t in targets])
         if self._prev is None or not 0 < frame.stamp - self._prev[0] <= self.max_gap:
@@ -112,16 +111,14 @@ class LobstrEstimator(Estimator):
             x = _retime(x, ratio)
         upper = self.upper.step(frame)
         if not upper.valid:
-            return self.held_pose(frame.stamp)
+            return None
         legs, prob, state = self.model.step(x, self._state)
         local = apply_legs(quat_to_matrix(upper.local_quats), legs)
         contact = prob > self.threshold
         if self.contacts:
             local = self.contacts.apply(local, upper.root_position, contact)
-        if not (np.all(np.isfinite(local)) and np.all(np.isfinite(prob))):
+        if not np.all(np.isfinite(prob)):
             self.reset()
-            return self.held_pose(frame.stamp)
+            return None
         self._state, self._prev = state, (frame.stamp, pos, rot)
-        self._last = BodyPose(frame.stamp, matrix_to_quat(local), upper.root_position.copy(),
-                              prob.astype(float), contact)
-        return self._last
+        return BodyPose(frame.stamp, matrix_to_quat(local), upper.root_position.copy(), prob.astype(float), contact)

@@ -34,12 +34,9 @@ class ReferenceEstimator(Estimator):
             raise ValueError("the reference estimator needs a head or a pelvis tracker")
         self._local = standing_pose()
         self._head_above_pelvis = skeleton.rest_positions()[HEAD]
-        self._last: BodyPose | None = None
+        self.reset()
 
-    def reset(self) -> None:
-        self._last = None
-
-    def step(self, frame: TrackerFrame) -> BodyPose:
+    def _estimate(self, frame: TrackerFrame) -> BodyPose | None:
         pelvis = self.joint_target(frame, "pelvis")
         head = self.joint_target(frame, "head")
         full = lambda t: t is not None and t[0] is not None and t[1] is not None  # noqa: E731
@@ -51,10 +48,8 @@ class ReferenceEstimator(Estimator):
             root_rot = yaw_matrix(heading(head[1]))
             root_pos = head[0] - root_rot @ self._head_above_pelvis
         else:
-            return self.held_pose(frame.stamp)
+            return None
         local = self._local.copy()
         local[0] = root_rot
-        pose = BodyPose(frame.stamp, matrix_to_quat(local), root_pos.astype(float), np.full(2, 0.5),
+        return BodyPose(frame.stamp, matrix_to_quat(local), root_pos.astype(float), np.full(2, 0.5),
                         np.ones(2, dtype=bool))
-        self._last = pose
-        return pose

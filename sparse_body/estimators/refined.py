@@ -22,16 +22,16 @@ class RefinedEstimator(Estimator):
         self.refiner = DragPoserEstimator(sensors, skeleton, fps, model_dir=model_dir, iterations=iterations,
                                           temporal_weight=0.0)   # the base pose is the prior
 
-    def reset(self) -> None:
+    def _reset(self) -> None:
         self.base.reset()
         self.refiner.reset()
 
-    def step(self, frame):
+    def _estimate(self, frame):
         pose = self.base.step(frame)
         if not pose.valid:
             return pose
         refined = self.refiner.refine(pose, frame)
         if not refined.valid:
-            return pose.held(frame.stamp)
+            return pose.held(frame.stamp)   # the base's pose, marked invalid
         refined.contact, refined.contact_probability = pose.contact, pose.contact_probability
         return refined

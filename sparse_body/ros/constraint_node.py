@@ -43,17 +43,17 @@ class InputRefiner(Estimator):
                                           temporal_weight=0.0)   # the input pose is the prior
         self.timeout = timeout
         self.latest: BodyPose | None = None
-        self._last = None
+        self.reset()
 
-    def reset(self) -> None:
+    def _reset(self) -> None:
         self.refiner.reset()
 
-    def step(self, frame) -> BodyPose:
+    def _estimate(self, frame) -> BodyPose | None:
         if self.latest is None or not self.latest.valid or frame.stamp - self.latest.stamp > self.timeout:
-            return self.held_pose(frame.stamp)
-        self._last = self.refiner.refine(self.latest, frame)
-        self._last.contact, self._last.contact_probability = self.latest.contact, self.latest.contact_probability
-        return self._last
+            return None
+        pose = self.refiner.refine(self.latest, frame)
+        pose.contact, pose.contact_probability = self.latest.contact, self.latest.contact_probability
+        return pose
 
 
 def constraint_from_request(request):
@@ -93,6 +93,9 @@ class ConstraintNode(EstimatorNode):
         self.sub_input = self.create_subscription(JointState, "input/joint_states", self._on_input, 10)
         self.srv_constraint = self.create_service(SetConstraint, "~/set_constraint", self._on_set_constraint)
 
+    def _on_tracker(self) -> None:
+        """The input estimate drives this node, not the trackers (they come first)."""
+
     def _on_input(self, msg: JointState) -> None:
         if self.estimator is None:
             return
@@ -106,6 +109,9 @@ class ConstraintNode(EstimatorNode):
         except ValueError as err:
             self._stats["errors"] += 1
             self._stats["last_error"] = f"input: {err}"
+            return
+        if self.timer is not None:
+            self._estimate(fallback=False)
 
     def _on_set_constraint(self, request, response):
         constraints = None if self.estimator is None else self.estimator.refiner.constraints

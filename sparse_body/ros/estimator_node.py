@@ -1,9 +1,16 @@
 """The estimator as a lifecycle node.
 
 configure: read parameters, load the sensor configuration and the estimator, create the
-publishers and the TF input; activate: start the output timer; deactivate: stop it;
-cleanup: release everything. Bad tracker input never stops the node: it is reported on
-/diagnostics, and the outputs hold the last good pose, marked invalid on estimate_status.
+publishers and the TF input; activate: start estimating; deactivate: stop; cleanup: release
+everything. Bad tracker input never stops the node: it is reported on /diagnostics, and the
+outputs hold the last good pose, marked invalid on estimate_status.
+
+Estimates are driven by the input: one is made as soon as every live tracker has a sample
+newer than the last estimate's, stamped with the newest tracker stamp. A timer at
+output_rate is only the fallback: it estimates from what is there when input is slow or
+partial, and holds the pose (invalid) when no tracker sample has come for tracker_timeout.
+Staleness is judged in the trackers' own time, so a starved CPU shows up as latency on
+/diagnostics, not as invalid estimates.
 """
 from __future__ import annotations
 
@@ -29,24 +36,29 @@ from ..core.sensors import SensorConfigError, load_sensor_config
 from ..core.skeleton import Skeleton
 from ..core.types import BodyPose
 from ..estimators import create_estimator
+from ..estimators.base import parse_estimator_spec
 from ..estimators.reference import standing_pose
+from ..output import body_transforms
 from ..urdf import body_urdf
 from . import messages
 from .spin import spin_until_shutdown
-from .tf_input import HAVE_TF2_ROS, Tf2Reader, TfReader
+from .tf_input import TfReader
 
 PARAMETERS = {
     # name: (default, description)
     "sensors": ("six_point", "sensor configuration: a name under config/sensors or a YAML path"),
-    "estimator": ("ik", "estimation method: ik, reference, lobstr"),
+    "estimator": ("ik", "estimation method: ik, reference, lobstr, dragposer, refined:base=NAME"),
     "model_path": ("", "model file for learned estimators; empty: the shipped model"),
     "fixed_frame": ("", "frame the trackers are looked up in; empty: the sensor configuration's"),
     "height": (1.75, "the tracked person's height in metres (scales the body)"),
-    "output_rate": (60.0, "estimates per second"),
-    "stale_timeout": (0.1, "seconds after which a tracker's newest pose no longer counts"),
+    "output_rate": (60.0, "estimates per second when the trackers do not drive them (input slow, partial or "
+                          "absent); estimates driven by tracker input are limited to twice this"),
+    "stale_timeout": (0.1, "a tracker's newest sample no longer counts when it is this many seconds (or three of "
+                           "the tracker's own sample intervals, if longer) behind the newest tracker sample"),
+    "tracker_timeout": (1.0, "seconds without a new tracker sample (by the node's clock) after which the estimate "
+                             "is held, invalid"),
     "frame_prefix": ("", "prefix of the body's TF frames"),
     "publish_link_tf": (True, "publish every body link on /tf (off when robot_state_publisher does)"),
-    "use_tf2_ros": (True, "read TF with tf2_ros when it is installed (else a /tf reader)"),
     "autostart": (False, "configure and activate on start-up (without a lifecycle manager)"),
 }
 
@@ -62,7 +74,7 @@ class EstimatorNode(LifecycleNode):
             descriptor = ParameterDescriptor(description=text)
             if name == "height":
                 descriptor.floating_point_range = [FloatingPointRange(from_value=0.5, to_value=2.5)]
-            elif name in ("output_rate", "stale_timeout"):
+            elif name in ("output_rate", "stale_timeout", "tracker_timeout"):
                 descriptor.floating_point_range = [FloatingPointRange(from_value=0.001, to_value=1000.0)]
             self.declare_parameter(name, default, descriptor)
         self._release()
@@ -81,19 +93,20 @@ class EstimatorNode(LifecycleNode):
             self._release()
             return TransitionCallbackReturn.FAILURE
         self.sensors, self.params = sensors, p
-        frames = {s.frame_id for s in sensors.sites}
-        self.tf_in = Tf2Reader(self, frames) if (HAVE_TF2_ROS and p["use_tf2_ros"]) else TfReader(self, frames)
+        self._frames = [s.frame_id for s in sensors.sites]
+        own = {t.child for t in body_transforms(self._held(0.0), self.skeleton, sensors.fixed_frame, p["frame_prefix"])}
+        self.tf_in = TfReader(self, set(self._frames), ignore_frames=own, on_tracker=self._on_tracker)
         self._configure_inputs()
-        qos = QoSProfile(depth=10)
         overrides = QoSOverridingOptions.with_default_policies()
         from tf2_msgs.msg import TFMessage   # here, not at import: the stand-in exists only after setup
         self._tf_message = TFMessage
         ns = self.OUTPUTS
-        self.pub_joints = self.create_lifecycle_publisher(JointState, ns + "joint_states", qos,
+        # one profile object per publisher: rclpy's QoS overrides change the object they are given
+        self.pub_joints = self.create_lifecycle_publisher(JointState, ns + "joint_states", QoSProfile(depth=10),
                                                           qos_overriding_options=overrides)
-        self.pub_contacts = self.create_lifecycle_publisher(FootContacts, ns + "foot_contacts", qos,
+        self.pub_contacts = self.create_lifecycle_publisher(FootContacts, ns + "foot_contacts", QoSProfile(depth=10),
                                                             qos_overriding_options=overrides)
-        self.pub_status = self.create_lifecycle_publisher(EstimateStatus, ns + "estimate_status", qos,
+        self.pub_status = self.create_lifecycle_publisher(EstimateStatus, ns + "estimate_status", QoSProfile(depth=10),
                                                           qos_overriding_options=overrides)
         self.pub_tf = self.create_lifecycle_publisher(TFMessage, "/tf", QoSProfile(depth=100))
         self.pub_diag = self.create_lifecycle_publisher(DiagnosticArray, "/diagnostics", QoSProfile(depth=10))
@@ -101,12 +114,14 @@ class EstimatorNode(LifecycleNode):
         self.pub_description = self.create_publisher(String, ns + "robot_description", latched)
         self.pub_description.publish(String(data=body_urdf(self.skeleton)))
         self.get_logger().info(f"configured: {p.get('estimator', 'refinement')} on {sensors.name} ({', '.join(sensors.site_names)}) "
-                               f"in frame {sensors.fixed_frame!r}, TF via {'tf2_ros' if isinstance(self.tf_in, Tf2Reader) else '/tf reader'}")
+                               f"in frame {sensors.fixed_frame!r}")
         return TransitionCallbackReturn.SUCCESS
 
     def _make_estimator(self, p: dict, sensors):
-        options = {"model_path": p["model_path"]} if p["model_path"] else {}
-        return create_estimator(p["estimator"], sensors, self.skeleton, fps=p["output_rate"], **options)
+        name, options = parse_estimator_spec(p["estimator"])
+        if p["model_path"]:
+            options["model_path"] = p["model_path"]
+        return create_estimator(name, sensors, self.skeleton, fps=p["output_rate"], **options)
 
     def _configure_inputs(self) -> None:
         """More inputs than the trackers' TF (the constraint node's estimate)."""
@@ -114,8 +129,10 @@ class EstimatorNode(LifecycleNode):
     def on_activate(self, state: LifecycleState) -> TransitionCallbackReturn:
         self.estimator.reset()
         self._stats = {"steps": deque(maxlen=600), "latency": deque(maxlen=600), "invalid": 0, "errors": 0,
-                       "resets": 0, "last_error": ""}
+                       "resets": 0, "last_error": "", "input driven": 0, "fallback": 0}
         self._last_now = None
+        self._last_input = -np.inf      # the newest tracker stamp the last estimate used
+        self._last_step = -np.inf       # when it was made (monotonic)
         self.timer = self.create_timer(1.0 / self.params["output_rate"], self._tick)
         self.diag_timer = self.create_timer(1.0, self._publish_diagnostics)
         return super().on_activate(state)
@@ -152,19 +169,49 @@ class EstimatorNode(LifecycleNode):
         self.pub_joints = self.pub_contacts = self.pub_status = self.pub_tf = self.pub_diag = None
         self.pub_description = self.timer = self.diag_timer = None
         self._last_good: BodyPose | None = None
-        self._ages = None
+        self._ages = self._site_valid = None
 
     # -- work --------------------------------------------------------------------------------
+    def _on_tracker(self) -> None:
+        """A tracker sample came: estimate now if every live tracker has moved since the last
+        estimate. Bursts are coalesced: at most one estimate per half output period, the
+        newest samples waiting in the cache (the fallback timer picks up what is left)."""
+        if self.timer is None or time.monotonic() - self._last_step < 0.5 / self.params["output_rate"]:
+            return
+        stamps = np.array(self.tf_in.stamps(self._frames))
+        dynamic = stamps[np.isfinite(stamps)]
+        if not len(dynamic):
+            return
+        newest = dynamic.max()
+        stale = self.params["stale_timeout"]
+        budgets = np.array([max(stale, 3.0 * self.tf_in.cache.interval(f)) for f in self._frames])
+        live = np.isfinite(stamps) & (newest - stamps <= budgets)
+        if np.all(stamps[live] > self._last_input):
+            self._estimate(fallback=False)
+
     def _tick(self) -> None:
+        if time.monotonic() - self._last_step >= 1.5 / self.params["output_rate"]:
+            self._estimate(fallback=True)
+
+    def _estimate(self, fallback: bool) -> None:
         now = self.get_clock().now().nanoseconds * 1e-9
         if (self._last_now is not None and now < self._last_now - 1.0) or self.tf_in.jumped_back:
             # A clock jump back (a looping bag, a restarted simulation): start afresh.
             self.tf_in.jumped_back = False
             self.estimator.reset()
+            self._last_input = -np.inf
             self._stats["resets"] += 1
         self._last_now = now
-        frame, stamps = self.tf_in.sample(self.sensors, now, self.params["stale_timeout"])
-        self._ages = now - stamps
+        # a tracker whose whole chain is static is current
+        stamps = np.array([now if s == np.inf else s for s in self.tf_in.stamps(self._frames)])
+        newest = stamps.max() if len(stamps) else -np.inf
+        no_input = not now - newest <= self.params["tracker_timeout"]
+        if fallback and not no_input and newest <= self._last_input:
+            return                                       # nothing new yet: wait for the trackers
+        frame, stamps = self.tf_in.sample(self.sensors, now if no_input else newest, self.params["stale_timeout"])
+        if no_input:
+            frame.valid[:] = False
+        self._ages, self._site_valid = now - stamps, frame.valid.copy()
         reason = ""
         try:
             pose = self.estimator.step(frame)
@@ -184,7 +231,10 @@ class EstimatorNode(LifecycleNode):
         stamp = messages.to_time(source_time)
         if not pose.valid:
             self._stats["invalid"] += 1
-            if not reason:
+            if not reason and no_input:
+                reason = ("held: no tracker input yet" if not np.isfinite(newest)
+                          else f"held: no tracker input for {now - newest:.1f} s")
+            elif not reason:
                 missing = [s for s, ok in zip(self.sensors.site_names, frame.valid) if not ok]
                 reason = f"held: no usable pose from {', '.join(missing)}" if missing else "held"
         frame_id = self.sensors.fixed_frame
@@ -193,8 +243,12 @@ class EstimatorNode(LifecycleNode):
         self.pub_status.publish(messages.estimate_status(pose, stamp, frame_id, reason))
         self.pub_tf.publish(self._tf_message(transforms=messages.transforms(
             pose, self.skeleton, stamp, frame_id, self.params["frame_prefix"], self.params["publish_link_tf"])))
-        self._stats["steps"].append(time.monotonic())
-        self._stats["latency"].append(now - source_time)
+        self._last_step = time.monotonic()
+        if not no_input:
+            self._last_input = newest
+            self._stats["latency"].append(now - source_time)
+        self._stats["steps"].append(self._last_step)
+        self._stats["fallback" if fallback else "input driven"] += 1
 
     def _held(self, stamp: float) -> BodyPose:
         if self._last_good is None:
@@ -209,10 +263,13 @@ class EstimatorNode(LifecycleNode):
         values = {"output rate [Hz]": f"{rate:.1f}", "latency p50 [ms]": f"{np.percentile(lat, 50):.1f}",
                   "latency p99 [ms]": f"{np.percentile(lat, 99):.1f}", "invalid estimates": str(st["invalid"]),
                   "estimator errors": str(st["errors"]), "clock jumps back": str(st["resets"])}
+        values["estimates driven by input"] = str(st["input driven"])
+        values["estimates by the fallback timer"] = str(st["fallback"])
         stale = []
-        for site, age in zip(self.sensors.site_names, self._ages if self._ages is not None else []):
+        for k, site in enumerate(self.sensors.site_names if self._ages is not None else []):
+            age = self._ages[k]
             values[f"{site} age [s]"] = "never seen" if not np.isfinite(age) else f"{age:.3f}"
-            if not age <= self.params["stale_timeout"]:
+            if not self._site_valid[k]:
                 stale.append(site)
         for reason, count in self.tf_in.rejected.items():
             values[f"rejected samples: {reason.value}"] = str(count)

@@ -1,0 +1,212 @@
+"""Closed-form IK for the 22-joint body: two-bone limbs and a one-parameter spine fit.
+
+One solver for every estimator (the `ik` baseline, LoBSTr's upper body and contact hold,
+DragPoser's polish). Each frame costs a fixed, small amount of arithmetic; nothing iterates
+on the whole body:
+
+- A limb (shoulder-elbow-wrist, hip-knee-ankle, or hip-knee-toe with the ankle held) is a
+  ball joint and a hinge. The hinge angle that makes the limb as long as the distance to
+  the target follows from the law of cosines (in a form that allows bones that are not
+  collinear, as retargeted skeletons have); the ball joint then turns by the smallest
+  rotation that points the limb at the target. That smallest rotation keeps the limb's
+  swivel (where the elbow or knee points) from the previous pose.
+- The spine (spine1 .. neck under a tracked pelvis) bends forward or back by the same angle
+  at spine2, spine3 and neck until the pelvis-to-head distance is right (a 1-D monotone
+  search in complex arithmetic, no matrices), then spine1 turns to point it at the head.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from .kinematics import forward_kinematics
+from .rotations import cross3 as cross
+from .rotations import rotation_about as about
+from .rotations import rotation_between as swing
+from .skeleton import JOINT_INDEX as J
+from .skeleton import PARENTS
+
+X, Y, Z = np.eye(3)
+
+
+@dataclass(frozen=True)
+class Limb:
+    upper: int          # ball joint (shoulder, hip)
+    hinge: int          # elbow, knee
+    axis: np.ndarray    # the hinge's local axis
+    limits: tuple[float, float]
+    end: int            # wrist, ankle
+
+
+LIMBS = {
+    J["left_wrist"]: Limb(J["left_shoulder"], J["left_elbow"], Z, (-2.7, 0.0), J["left_wrist"]),
+    J["right_wrist"]: Limb(J["right_shoulder"], J["right_elbow"], Z, (0.0, 2.7), J["right_wrist"]),
+    J["left_ankle"]: Limb(J["left_hip"], J["left_knee"], Y, (0.0, 2.6), J["left_ankle"]),
+    J["right_ankle"]: Limb(J["right_hip"], J["right_knee"], Y, (0.0, 2.6), J["right_ankle"]),
+}
+# what a limb's solution moves, in order (a foot hangs below its ankle)
+_MOVED = {end: [limb.upper, limb.hinge, limb.end] + ([J["left_foot"]] if end == J["left_ankle"] else
+                                                     [J["right_foot"]] if end == J["right_ankle"] else [])
+          for end, limb in LIMBS.items()}
+_ARMS = (J["left_wrist"], J["right_wrist"])
+SPINE_BEND = (J["spine2"], J["spine3"], J["neck"])
+MAX_BEND = 0.6          # radians per spine joint: about 100 degrees over the three
+
+
+def hinge_angle(m: np.ndarray, axis: np.ndarray) -> float:
+    """The angle of m about a coordinate axis (exact when m is a rotation about it)."""
+    i = int(np.argmax(axis))
+    j, k = (i + 1) % 3, (i + 2) % 3
+    return float(math.atan2(m[k, j], m[j, j]))
+
+
+def reach_angle(a, w, axis, distance: float, current: float, limits: tuple[float, float] | None) -> float:
+    """The hinge angle t with |a + R(axis, t) w| = distance, or the nearest reachable.
+
+    a: ball joint to hinge, w: hinge to end (in the hinge's frame at angle 0), both in the
+    ball joint's frame. Of the two solutions the one within the limits, nearest the current
+    angle, wins. (Plain floats: numpy's per-call cost dominates on 3-vectors.)"""
+    ax, ay, az = (float(v) for v in a)
+    wx, wy, wz = (float(v) for v in w)
+    kx, ky, kz = (float(v) for v in axis)
+    along = kx * wx + ky * wy + kz * wz
+    px, py, pz = wx - kx * along, wy - ky * along, wz - kz * along          # w across the axis
+    A = ax * px + ay * py + az * pz
+    B = ax * (ky * pz - kz * py) + ay * (kz * px - kx * pz) + az * (kx * py - ky * px)   # a . (k x p)
+    fixed = ax * ax + ay * ay + az * az + wx * wx + wy * wy + wz * wz + 2 * (ax * kx + ay * ky + az * kz) * along
+    C = math.hypot(A, B)
+    if C < 1e-12:
+        return current if limits is None else min(max(current, limits[0]), limits[1])
+    phi, spread = math.atan2(B, A), math.acos(min(1.0, max(-1.0, 0.5 * (distance * distance - fixed) / C)))
+    best, best_key = current, None
+    for t in (phi + spread, phi - spread):
+        t = math.remainder(t, 2 * math.pi)
+        if limits is not None:
+            t = min(max(t, limits[0]), limits[1])
+        miss = abs(math.sqrt(max(0.0, fixed + 2 * (A * math.cos(t) + B * math.sin(t)))) - distance)
+        key = (round(miss, 5), abs(t - current))
+        if best_key is None or key < best_key:
+            best, best_key = t, key
+    return best
+
+
+def reach(local: np.ndarray, parent_rot: np.ndarray, upper_pos: np.ndarray, offsets: np.ndarray, limb: Limb,
+          target: np.ndarray, end_vector: np.ndarray | None = None, exact_hinge: bool = True) -> None:
+    """Turn the limb's ball joint and hinge (in place in local) so that its end reaches target.
+
+    parent_rot: global rotation of the ball joint's parent; upper_pos: the ball joint's
+    position. end_vector: the hinge-to-end vector in the hinge's frame (default the end
+    joint's offset; the toe's for a foot held on its toe). exact_hinge: the hinge becomes a
+    rotation about its axis within its limits (the IK's model of an elbow or knee); else the
+    hinge keeps its other components and only turns about its axis (a decoded pose), unless
+    so turned it cannot make the limb long or short enough (within 5 mm)."""
+    u, h = limb.upper, limb.hinge
+    w = offsets[limb.end] if end_vector is None else end_vector
+    a = offsets[h]
+    distance = float(np.linalg.norm(target - upper_pos))
+    if not exact_hinge:   # solve in the hinge's own frame: |L_h^T a + R(t) w|
+        base = local[h]
+        turned = base @ about(limb.axis, reach_angle(base.T @ a, w, limb.axis, distance, 0.0, None))
+        exact_hinge = abs(float(np.linalg.norm(a + turned @ w)) - distance) > 0.005
+        local[h] = turned
+    if exact_hinge:
+        angle = reach_angle(a, w, limb.axis, distance, hinge_angle(local[h], limb.axis), limb.limits)
+        local[h] = about(limb.axis, angle)
+    upper_rot = parent_rot @ local[u]
+    limb_vector = upper_rot @ (a + local[h] @ w)
+    local[u] = parent_rot.T @ swing(limb_vector, target - upper_pos) @ upper_rot
+
+
+def fit_spine(local: np.ndarray, root: np.ndarray, offsets: np.ndarray, head_target: np.ndarray,
+              keep_bend: bool = False) -> None:
+    """Bend and turn the spine (in place in local) so that the head joint reaches head_target,
+    the pelvis (local[0], root) staying where it is. keep_bend: only turn the spine as it is
+    curved (a decoded pose), unless that curve leaves the head more than 5 mm short or long."""
+    pelvis = local[0]
+    s1 = J["spine1"]
+    s1_pos = root + pelvis @ offsets[s1]
+    to_target = head_target - s1_pos
+    if keep_bend:
+        b = [local[j] for j in SPINE_BEND]
+        head_vector = offsets[SPINE_BEND[0]] + b[0] @ (offsets[SPINE_BEND[1]] + b[1] @ (
+            offsets[SPINE_BEND[2]] + b[2] @ offsets[J["head"]]))
+        if abs(math.sqrt(head_vector @ head_vector) - math.sqrt(to_target @ to_target)) < 0.005:
+            s1_rot = pelvis @ local[s1]
+            local[s1] = pelvis.T @ swing(s1_rot @ head_vector, to_target) @ s1_rot
+            return
+    distance = math.sqrt(to_target @ to_target)
+    # the bend plane is spine1's x-z plane; in it a rotation about y is a complex product
+    chain = [offsets[j] for j in SPINE_BEND] + [offsets[J["head"]]]
+    xz = [complex(o[2], o[0]) for o in chain]
+    lateral = sum(o[1] for o in chain)
+
+    def length(beta: float) -> float:
+        e, h = complex(math.cos(beta), math.sin(beta)), 0j
+        for w in reversed(xz[1:]):
+            h = e * (w + h)
+        h += xz[0]
+        return math.sqrt(abs(h) ** 2 + lateral * lateral)
+
+    forward = float((pelvis @ local[s1]).T[0] @ to_target) >= 0.0   # lean direction in spine1's frame
+    limit = MAX_BEND if forward else -MAX_BEND
+    lo, hi = 0.0, limit
+    if distance >= length(0.0):
+        beta = 0.0
+    elif distance <= length(limit):
+        beta = limit
+    else:
+        for _ in range(18):      # |head - spine1| shrinks monotonically as the bend grows
+            mid = 0.5 * (lo + hi)
+            lo, hi = (mid, hi) if length(mid) > distance else (lo, mid)
+        beta = 0.5 * (lo + hi)
+    bend = about(Y, beta)
+    for j in SPINE_BEND:
+        local[j] = bend
+    head_vector = offsets[SPINE_BEND[0]] + bend @ (offsets[SPINE_BEND[1]] + bend @ (
+        offsets[SPINE_BEND[2]] + bend @ offsets[J["head"]]))
+    s1_rot = pelvis @ local[s1]
+    local[s1] = pelvis.T @ swing(s1_rot @ head_vector, to_target) @ s1_rot
+
+
+def _collar_towards(local, glob, pos, offsets, limb: Limb, target: np.ndarray) -> None:
+    """A hand beyond the arm's reach: the collar turns the shoulder towards it (in place),
+    as far as puts the stretched arm's end on the line from the collar to the target."""
+    length = math.sqrt(offsets[limb.hinge] @ offsets[limb.hinge]) + math.sqrt(offsets[limb.end] @ offsets[limb.end])
+    to_target = target - pos[limb.upper]
+    distance = math.sqrt(to_target @ to_target)
+    if distance <= length:
+        return
+    collar = PARENTS[limb.upper]
+    stretched = pos[limb.upper] + to_target * (length / distance)
+    glob[collar] = swing(stretched - pos[collar], target - pos[collar]) @ glob[collar]
+    local[collar] = glob[PARENTS[collar]].T @ glob[collar]
+    pos[limb.upper] = pos[collar] + glob[collar] @ offsets[limb.upper]
+    glob[limb.upper] = glob[collar] @ local[limb.upper]
+
+
+def solve_body(local: np.ndarray, root: np.ndarray, offsets: np.ndarray, targets: dict[int, np.ndarray],
+               keep_shape: bool = False):
+    """A copy of local (22, 3, 3) with the spine fitted to a head target and each limb with
+    a target (wrist or ankle joint index -> position) reaching it. The root stays.
+    keep_shape: the pose's own spine curve, elbows and knees are kept and only turned (a
+    decoded pose); else elbows and knees are exact hinges within their limits.
+    Returns (local, global rotations, positions) of the solved pose."""
+    local = local.copy()
+    head = targets.get(J["head"])
+    if head is not None:
+        fit_spine(local, root, offsets, head, keep_bend=keep_shape)
+    glob, pos = forward_kinematics(local, root, offsets)
+    for end, target in targets.items():
+        limb = LIMBS.get(end)
+        if limb is None:
+            continue
+        if end in _ARMS:
+            _collar_towards(local, glob, pos, offsets, limb, target)
+        reach(local, glob[PARENTS[limb.upper]], pos[limb.upper], offsets, limb, target, exact_hinge=not keep_shape)
+        for j in _MOVED[end]:      # the limbs are independent: update only what this one moved
+            parent = PARENTS[j]
+            glob[j] = glob[parent] @ local[j]
+            pos[j] = pos[parent] + glob[parent] @ offsets[j]
+    return local, glob, pos

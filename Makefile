@@ -2,13 +2,17 @@
 VENV ?= .venv
 PY := $(VENV)/bin/python
 
-.PHONY: setup test demo eval bench fuzz train-lobstr train-dragposer clean
+.PHONY: setup test test-busy demo eval bench fuzz train-lobstr train-dragposer clean
 
 setup:
 	bash scripts/setup.sh
 
 test: setup
-	$(PY) -m pytest -q test
+	$(PY) -m pytest -q -rs test
+
+# The suite on a busy machine: one CPU-burning process per core runs beside it.
+test-busy: setup
+	bash scripts/busy.sh $(PY) -m pytest -q -rs test
 
 demo: setup
 	$(VENV)/bin/sparse-body demo

@@ -70,3 +70,87 @@ class Listener:
 
     def destroy(self) -> None:
         self.node.destroy_node()
+
+
+class CpuBurners:
+    """One process per core spinning in a Python loop: the busy machine a teleoperation
+    computer is. A context manager; the processes end with it."""
+
+    def __init__(self, count: int | None = None) -> None:
+        self.count = count or os.cpu_count() or 2
+        self.procs: list[subprocess.Popen] = []
+
+    def __enter__(self) -> "CpuBurners":
+        self.procs = [subprocess.Popen([sys.executable, "-c", "while True: pass"]) for _ in range(self.count)]
+        return self
+
+    def __exit__(self, *exc) -> None:
+        for p in self.procs:
+            p.kill()
+        for p in self.procs:
+            p.wait(timeout=10)
+
+
+def replay_bag(rclpy, ros_env, tmp_path: Path, motion, config, estimator_params: dict):
+    """A tracker bag of `motion` played by the real tracker bridge into the real estimator
+    node (default parameters but those given); returns the Listener after the whole bag has
+    played (deadlines generous enough for a starved CPU)."""
+    from rclpy.qos import DurabilityPolicy, QoSProfile
+    from sensor_msgs.msg import JointState
+    from std_msgs.msg import String
+    from tf2_msgs.msg import TFMessage
+
+    from sparse_body.msg import EstimateStatus, FootContacts
+    from sparse_body.offline import make_bag
+    make_bag(motion, config, tmp_path / "trackers")
+    est = start_node("sparse_body.ros.estimator_node", {"sensors": config.name, "autostart": True, **estimator_params},
+                     "sparse_body_estimator", tmp_path, ros_env)
+    latched = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL)
+    from diagnostic_msgs.msg import DiagnosticArray
+    listener = Listener(rclpy, {"joint_states": JointState, "foot_contacts": FootContacts, "/tf": TFMessage,
+                                "estimate_status": EstimateStatus, "robot_description": String,
+                                "/diagnostics": DiagnosticArray},
+                        qos={"robot_description": latched, "/tf": 500, "joint_states": 500, "estimate_status": 500})
+    frames = {s.frame_id for s in config.sites}
+    listener.tracker_stamps = []
+    bridge = None
+    try:
+        assert listener.spin_until(lambda: listener.received["robot_description"], 60.0), "estimator did not start"
+        bridge = start_node("sparse_body.ros.tracker_bridge_node", {"bag": str(tmp_path / "trackers"), "min_subscribers": 2,
+                                                                    "start_delay": 0.5},
+                            "sparse_body_tracker_bridge", tmp_path, ros_env)
+
+        def tracker_messages():
+            return sum(any(tf.child_frame_id in frames for tf in m.transforms) for m in listener.received["/tf"])
+        # Until the whole bag has played (with slack for a loaded machine), then a little more.
+        listener.spin_until(lambda: tracker_messages() >= len(motion), 60.0 + 2 * len(motion) / motion.fps)
+        listener.spin_for(1.0)
+    finally:
+        listener.destroy()
+        stop(est, *([bridge] if bridge else []))
+    assert tracker_messages() >= len(motion), "the bridge did not play the whole bag"
+    listener.tracker_stamps = sorted({stamp_key(tf.header.stamp) for m in listener.received["/tf"]
+                                      for tf in m.transforms if tf.child_frame_id in frames})
+    return listener
+
+
+def diagnostic_values(listener, name_part: str) -> dict:
+    """The newest value of each key on /diagnostics from statuses whose name contains name_part."""
+    values = {}
+    for d in listener.received["/diagnostics"]:
+        for st in d.status:
+            if name_part in st.name:
+                values.update({kv.key: kv.value for kv in st.values})
+    return values
+
+
+def stamp_key(stamp) -> int:
+    """A header stamp to the nearest 10 us (stamps travel as float seconds inside the node:
+    0.5 us resolution at today's epoch)."""
+    return round((stamp.sec + stamp.nanosec * 1e-9) * 1e5)
+
+
+def during_playback(listener, topic: str) -> list:
+    """The messages of a topic stamped from the first to the last tracker sample."""
+    first, last = listener.tracker_stamps[0], listener.tracker_stamps[-1]
+    return [m for m in listener.received[topic] if first <= stamp_key(m.header.stamp) <= last]

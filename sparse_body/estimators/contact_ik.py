@@ -14,7 +14,7 @@ import numpy as np
 
 from ..core.body_ik import LIMBS, reach
 from ..core.contacts import FOOT_JOINTS
-from ..core.kinematics import forward_kinematics
+from ..core.kinematics import leg_positions
 from ..core.skeleton import JOINT_INDEX as J
 from ..core.skeleton import Skeleton
 
@@ -50,8 +50,9 @@ class ContactHold:
 
     def apply(self, local: np.ndarray, root: np.ndarray, contact: np.ndarray) -> np.ndarray:
         """Local rotations (22, 3, 3) with the legs moved to honour the contacts (left, right)."""
-        _, pos = forward_kinematics(local, root, self.skeleton.offsets)
-        local, offsets = local.copy(), self.skeleton.offsets
+        offsets = self.skeleton.offsets
+        pos = leg_positions(local, root, offsets)
+        local = local.copy()
         for side, foot in enumerate(self._feet):
             toe, hip, knee = pos[FOOT_JOINTS[side]], pos[_HIPS[side]], pos[_KNEES[side]]
             # what hip and knee can reach with the ankle as the network has it

@@ -43,6 +43,20 @@ class IKEstimator(Estimator):
         self._last_toes: np.ndarray | None = None
 
     def _estimate(self, frame: TrackerFrame) -> BodyPose | None:
+        solved = self.solve(frame)
+        if solved is None:
+            return None
+        local, root, glob, pos = solved
+        # the toes under the ankles' final rotations (what contacts are judged on)
+        toes = np.stack([pos[a] + glob[a] @ self.skeleton.offsets[f] for a, f in zip(_ANKLES, FOOT_JOINTS)])
+        contact = toe_contacts(toes, self._last_toes, self.fps, self.floor)
+        self._last_toes = toes
+        return BodyPose(frame.stamp, rotations_to_quat(local), np.asarray(root, float), contact.astype(float), contact)
+
+    def solve(self, frame: TrackerFrame):
+        """(local rotations, root, global rotations, positions) from this frame's trackers, or
+        None without a usable head or pelvis; the pose is kept as the next frame's start.
+        Global rotations and positions hold for every joint but the feet."""
         targets = {s: self.joint_target(frame, s) for s in self._sites}
         pelvis = self.joint_target(frame, "pelvis")
         head = targets.get("head")
@@ -66,12 +80,8 @@ class IKEstimator(Estimator):
                 end = J[SITE_JOINTS[site]]
                 local[end] = glob[PARENTS[end]].T @ target[1]
                 glob[end] = target[1]
+        if not (np.all(np.isfinite(local)) and np.all(np.isfinite(root))):
+            self._reset()
+            return None
         self._local = local
-        # the toes under the ankles' final rotations (what contacts are judged on)
-        toes = np.stack([pos[a] + glob[a] @ self.skeleton.offsets[f] for a, f in zip(_ANKLES, FOOT_JOINTS)])
-        return self._finish(frame.stamp, local, root, toes)
-
-    def _finish(self, stamp, local, root, toes) -> BodyPose:
-        contact = toe_contacts(toes, self._last_toes, self.fps, self.floor)
-        self._last_toes = toes
-        return BodyPose(stamp, rotations_to_quat(local), np.asarray(root, float), contact.astype(float), contact)
+        return local, root, glob, pos

@@ -14,7 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..core.rotations import axis_angle_to_matrix, matrix_to_6d, matrix_to_axis_angle, matrix_to_quat, quat_to_matrix, sixd_to_matrix
+from ..core.rotations import axis_angle_to_matrix, matrix_to_6d, matrix_to_axis_angle, rotations_to_quat, sixd_to_matrix
 from ..core.types import BodyPose, TrackerFrame
 from .base import Estimator
 from .contact_ik import ContactHold
@@ -109,16 +109,17 @@ class LobstrEstimator(Estimator):
         ratio = 1.0 / (self.model.fps * dt)
         if abs(ratio - 1.0) > 0.02:
             x = _retime(x, ratio)
-        upper = self.upper.step(frame)
-        if not upper.valid:
+        upper = self.upper.solve(frame)
+        if upper is None:
             return None
+        upper_local, root = upper[0], np.asarray(upper[1], float)
         legs, prob, state = self.model.step(x, self._state)
-        local = apply_legs(quat_to_matrix(upper.local_quats), legs)
+        local = apply_legs(upper_local, legs)
         contact = prob > self.threshold
         if self.contacts:
-            local = self.contacts.apply(local, upper.root_position, contact)
+            local = self.contacts.apply(local, root, contact)
         if not np.all(np.isfinite(prob)):
             self.reset()
             return None
         self._state, self._prev = state, (frame.stamp, pos, rot)
-        return BodyPose(frame.stamp, matrix_to_quat(local), upper.root_position.copy(), prob.astype(float), contact)
+        return BodyPose(frame.stamp, rotations_to_quat(local), root.copy(), prob.astype(float), contact)

@@ -1,0 +1,173 @@
+"""The closed-form body IK (core/body_ik.py) and the estimator template it runs in."""
+import numpy as np
+import pytest
+
+from conftest import random_rotations
+from sparse_body.core.body_ik import LIMBS, fit_spine, hinge_angle, reach_angle, solve_body
+from sparse_body.core.kinematics import forward_kinematics
+from sparse_body.core.rotations import rotation_about
+from sparse_body.core.skeleton import JOINT_INDEX as J
+from sparse_body.core.skeleton import Skeleton
+from sparse_body.estimators.reference import standing_pose
+
+def _limb_length(offsets, limb):
+    return np.linalg.norm(offsets[limb.hinge]) + np.linalg.norm(offsets[limb.end])
+
+
+def test_reach_angle_makes_the_limb_as_long_as_asked_for_bones_that_are_not_collinear(rng):
+    for _ in range(200):
+        a, w = rng.normal(size=3) * 0.3, rng.normal(size=3) * 0.3
+        axis = rng.normal(size=3)
+        axis /= np.linalg.norm(axis)
+        lengths = [np.linalg.norm(a + rotation_about(axis, t) @ w) for t in np.linspace(-np.pi, np.pi, 721)]
+        wanted = rng.uniform(min(lengths), max(lengths))
+        t = reach_angle(a, w, axis, wanted, 0.0, None)
+        assert abs(np.linalg.norm(a + rotation_about(axis, t) @ w) - wanted) < 1e-9
+
+
+def test_solved_limbs_reach_reachable_targets_with_exact_hinges_within_limits(rng):
+    skeleton = Skeleton.canonical(1.8)
+    offsets = skeleton.offsets
+    start = standing_pose()
+    root = np.array([0.3, -0.2, 1.0])
+    _, rest = forward_kinematics(start, root, offsets)
+    for _ in range(50):
+        targets = {}
+        for end, limb in LIMBS.items():
+            direction = rng.normal(size=3)
+            direction /= np.linalg.norm(direction)
+            # from a third of the limb's length to nearly straight
+            targets[end] = rest[limb.upper] + direction * rng.uniform(0.35, 0.98) * _limb_length(offsets, limb)
+        local, glob, pos = solve_body(start, root, offsets, targets)
+        _, fk = forward_kinematics(local, root, offsets)
+        np.testing.assert_allclose(fk, pos, atol=1e-12)        # what it returns is the pose's own FK
+        for end, limb in LIMBS.items():
+            assert np.linalg.norm(fk[end] - targets[end]) < 1e-6
+            hinge = local[limb.hinge]
+            angle = hinge_angle(hinge, limb.axis)
+            np.testing.assert_allclose(hinge @ limb.axis, limb.axis, atol=1e-12)   # a rotation about its axis only
+            assert limb.limits[0] - 1e-9 <= angle <= limb.limits[1] + 1e-9
+        np.testing.assert_allclose(local[0], start[0])                # the root is not the limbs' to move
+
+
+def test_a_target_out_of_reach_gets_the_stretched_limb_pointing_at_it():
+    offsets = Skeleton.canonical().offsets
+    root = np.zeros(3)
+    _, rest = forward_kinematics(standing_pose(), root, offsets)
+    limb = LIMBS[J["left_ankle"]]
+    target = rest[limb.upper] + np.array([0.5, 0.2, -2.0])
+    local, _, pos = solve_body(standing_pose(), root, offsets, {J["left_ankle"]: target})
+    reached = pos[J["left_ankle"]] - pos[limb.upper]
+    assert abs(np.linalg.norm(reached) - _limb_length(offsets, limb)) < 1e-6
+    wanted = target - pos[limb.upper]
+    assert np.degrees(np.arccos(reached @ wanted / np.linalg.norm(reached) / np.linalg.norm(wanted))) < 1e-3
+
+
+def test_the_swivel_follows_from_the_previous_pose_without_jumps():
+    """A hand moved in small steps: the elbow moves in small steps too (no flips)."""
+    offsets = Skeleton.canonical().offsets
+    root = np.zeros(3)
+    local = standing_pose()
+    _, pos = forward_kinematics(local, root, offsets)
+    shoulder = pos[J["left_shoulder"]]
+    elbows, hands = [], []
+    for t in np.linspace(0, 2 * np.pi, 400):                       # a circle in front of the body
+        target = shoulder + np.array([0.35 + 0.1 * np.cos(t), 0.15 * np.sin(t), -0.15 + 0.1 * np.sin(2 * t)])
+        local, _, pos = solve_body(local, root, offsets, {J["left_wrist"]: target})
+        elbows.append(pos[J["left_elbow"]])
+        hands.append(pos[J["left_wrist"]])
+    hand_step = np.linalg.norm(np.diff(hands, axis=0), axis=1).max()
+    elbow_step = np.linalg.norm(np.diff(elbows, axis=0), axis=1).max()
+    assert elbow_step < 3 * hand_step
+
+
+def test_the_spine_puts_the_head_on_its_target_and_leaves_the_pelvis(rng):
+    offsets = Skeleton.canonical().offsets
+    root = np.array([0.0, 0.0, 1.0])
+    _, rest = forward_kinematics(standing_pose(), root, offsets)
+    spine_length = np.linalg.norm(rest[J["head"]] - rest[J["spine1"]])
+    for _ in range(50):
+        local = standing_pose()
+        local[0] = random_rotations(rng, (1,))[0]
+        direction = rng.normal(size=3)
+        direction /= np.linalg.norm(direction)
+        s1 = root + local[0] @ offsets[J["spine1"]]
+        target = s1 + direction * spine_length * rng.uniform(0.85, 1.0)     # leaning and bending
+        before = local.copy()
+        fit_spine(local, root, offsets, target)
+        _, pos = forward_kinematics(local, root, offsets)
+        assert np.linalg.norm(pos[J["head"]] - target) < 1e-4
+        np.testing.assert_allclose(local[0], before[0])
+
+
+def test_keep_shape_only_turns_a_decoded_elbow_about_its_axis(rng):
+    offsets = Skeleton.canonical().offsets
+    root = np.zeros(3)
+    local = standing_pose()
+    limb = LIMBS[J["right_wrist"]]
+    local[limb.hinge] = rotation_about(limb.axis, 0.8) @ rotation_about(np.array([1.0, 0, 0]), 0.05)  # not a pure hinge
+    _, pos = forward_kinematics(local, root, offsets)
+    target = pos[J["right_wrist"]] + np.array([0.03, 0.02, 0.05])
+    solved, _, solved_pos = solve_body(local, root, offsets, {J["right_wrist"]: target}, keep_shape=True)
+    assert np.linalg.norm(solved_pos[J["right_wrist"]] - target) < 1e-6
+    turn = local[limb.hinge].T @ solved[limb.hinge]             # the change is a turn about the hinge axis
+    np.testing.assert_allclose(turn @ limb.axis, limb.axis, atol=1e-9)
+
+
+def test_the_estimator_template_holds_the_last_pose_and_starts_over_after_a_non_finite_result():
+    from sparse_body.core.sensors import load_sensor_config
+    from sparse_body.core.types import BodyPose
+    from sparse_body.data.synthetic import synthetic_walk
+    from sparse_body.data.virtual_trackers import synthesize_trackers
+    from sparse_body.estimators.base import Estimator
+
+    class Scripted(Estimator):
+        """Returns what it is told to: a pose, None (too little input) or NaN."""
+        name = "scripted"
+
+        def __init__(self, *args):
+            super().__init__(*args)
+            self.resets, self.script = 0, []
+            self.reset()
+
+        def _reset(self):
+            self.resets += 1
+
+        def _estimate(self, frame):
+            kind = self.script.pop(0)
+            quats = np.tile([0.0, 0.0, 0.0, 1.0], (22, 1))
+            if kind == "nan":
+                quats[3] = np.nan
+            return None if kind == "none" else BodyPose(frame.stamp, quats, np.full(3, frame.stamp))
+
+    config = load_sensor_config("three_point")
+    motion = synthetic_walk(1.0)
+    stream = synthesize_trackers(motion, config)
+    est = Scripted(config, motion.skeleton)
+    est.script = ["pose", "none", "nan", "pose"]
+    first, held, broken, again = (est.step(stream.frame(i)) for i in range(4))
+    assert first.valid and not held.valid and not broken.valid and again.valid
+    np.testing.assert_allclose(held.root_position, first.root_position)    # the last pose, at the new stamp
+    assert held.stamp == stream.times[1]
+    assert broken.is_finite() and est.resets == 2                          # started over, nothing non-finite out
+    np.testing.assert_allclose(broken.root_position, 0.0)                  # after the reset: the starting pose
+
+
+@pytest.mark.parametrize("sensors", ["three_point", "four_point", "six_point"])
+def test_ik_puts_every_tracked_joint_on_its_tracker(sensors):
+    from sparse_body.core.rotations import quat_to_matrix
+    from sparse_body.core.sensors import SITE_JOINTS, load_sensor_config
+    from sparse_body.data.synthetic import synthetic_walk
+    from sparse_body.data.virtual_trackers import synthesize_trackers
+    from sparse_body.estimators import create_estimator
+    config = load_sensor_config(sensors)
+    motion = synthetic_walk(3.0)
+    stream = synthesize_trackers(motion, config)
+    est = create_estimator("ik", config, motion.skeleton)
+    errors = []
+    for i, frame in enumerate(stream):
+        pose = est.step(frame)
+        _, pos = forward_kinematics(quat_to_matrix(pose.local_quats), pose.root_position, motion.skeleton.offsets)
+        errors.append([np.linalg.norm(pos[J[SITE_JOINTS[s]]] - motion.positions[i, J[SITE_JOINTS[s]]])
+                       for s in config.site_names])
+    assert np.max(errors) < 0.005, dict(zip(config.site_names, np.max(errors, axis=0)))

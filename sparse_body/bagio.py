@@ -6,6 +6,9 @@ tf2_msgs/TFMessage) plus this package's msg/ files, registered from their text, 
 """
 from __future__ import annotations
 
+import os
+import shutil
+from contextlib import contextmanager
 from pathlib import Path
 
 import numpy as np
@@ -15,7 +18,7 @@ from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 from .core.sensors import SensorConfig
 from .core.skeleton import Skeleton
 from .core.types import BodyPose, TrackerStream
-from .output import FOOT_NAMES, body_transforms, contact_points, joint_state_names, joint_state_positions
+from .output import FOOT_NAMES, body_transforms, contact_points, joint_state_names, joint_state_positions, stamp_parts
 from .resources import share_dir
 from .tf_cache import Accepted, TfCache, sample_trackers
 
@@ -38,8 +41,8 @@ def typestore():
 
 
 def _time(store, seconds: float):
-    sec = int(np.floor(seconds))
-    return store.types["builtin_interfaces/msg/Time"](sec=sec, nanosec=int(round((seconds - sec) * 1e9)) % 1_000_000_000)
+    sec, nanosec = stamp_parts(seconds)
+    return store.types["builtin_interfaces/msg/Time"](sec=sec, nanosec=nanosec)
 
 
 def _header(store, seconds: float, frame_id: str):
@@ -65,11 +68,34 @@ def _log_times(stamps) -> list[int]:
     return out
 
 
-def write_tracker_bag(path: Path, stream: TrackerStream, config: SensorConfig, start: float = 1_700_000_000.0) -> None:
+@contextmanager
+def bag_writer(path: Path, overwrite: bool = False):
+    """A rosbag2 (MCAP) Writer on a temporary name beside `path`, moved into place only when
+    the block ends without an error: an interrupted or failed write leaves nothing behind.
+    An existing `path` is an error unless overwrite."""
+    path = Path(path)
+    if path.exists() and not overwrite:
+        raise BagError(f"{path}: already exists (choose another name, or --overwrite)")
+    tmp = path.with_name(f".{path.name}.partial-{os.getpid()}")
+    shutil.rmtree(tmp, ignore_errors=True)
+    try:
+        with Writer(tmp, version=8, storage_plugin=StoragePlugin.MCAP) as writer:
+            yield writer
+        if path.exists():
+            shutil.rmtree(path) if path.is_dir() else path.unlink()
+        os.replace(tmp, path)
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)
+
+
+def write_tracker_bag(path: Path, stream: TrackerStream, config: SensorConfig, start: float = 1_700_000_000.0,
+                      overwrite: bool = False) -> None:
     """One /tf message per frame with every valid tracker; dropped samples are left out."""
+    if len(stream) == 0:
+        raise BagError(f"{path}: no frames to write (an empty motion)")
     store = typestore()
     TFMessage = store.types[TF_TYPE]
-    with Writer(Path(path), version=8, storage_plugin=StoragePlugin.MCAP) as writer:
+    with bag_writer(path, overwrite) as writer:
         conn = writer.add_connection(TF_TOPIC, TF_TYPE, typestore=store)
         log_ns = _log_times(start + np.asarray(stream.times, dtype=float))
         for i in range(len(stream)):
@@ -85,9 +111,12 @@ def write_tracker_bag(path: Path, stream: TrackerStream, config: SensorConfig, s
             writer.write(conn, log_ns[i], data)
 
 
-def read_tracker_stream(path: Path, config: SensorConfig, stale_after: float = 0.1) -> TrackerStream:
+def read_tracker_stream(path: Path, config: SensorConfig, stale_after: float = 0.1,
+                        refused: dict | None = None) -> TrackerStream:
     """The trackers at each input frame of a bag: every /tf message that moves a tracker
-    frame is one frame, sampled at the newest stamp it carries."""
+    frame is one frame, sampled at the newest stamp it carries. A tracker whose sample in
+    that message was refused (non-finite, degenerate quaternion, out of order) is invalid in
+    that frame, and counted in `refused` (reason -> count) when a dict is given."""
     path = Path(path)
     if not path.exists():
         raise BagError(f"{path}: no such bag")
@@ -103,7 +132,7 @@ def read_tracker_stream(path: Path, config: SensorConfig, stale_after: float = 0
             for conn, _, raw in reader.messages(connections=conns):
                 msg = store.deserialize_cdr(raw, conn.msgtype)
                 static = conn.topic == TF_STATIC_TOPIC
-                newest, moved = -np.inf, False
+                newest, moved, refused_frames, refused_stamp = -np.inf, False, set(), -np.inf
                 for tf in msg.transforms:
                     stamp = tf.header.stamp.sec + tf.header.stamp.nanosec * 1e-9
                     tr, q = tf.transform.translation, tf.transform.rotation
@@ -113,9 +142,19 @@ def read_tracker_stream(path: Path, config: SensorConfig, stale_after: float = 0
                         moved = True   # even a refused sample is an input frame: it gets an output
                         if result in (Accepted.OK, Accepted.JUMPED_BACK):
                             newest = max(newest, stamp)
+                        else:
+                            refused_frames.add(tf.child_frame_id)
+                            refused_stamp = max(refused_stamp, stamp) if np.isfinite(stamp) else refused_stamp
+                            if refused is not None:
+                                refused[result.value] = refused.get(result.value, 0) + 1
                 if moved:
-                    stamp = newest if np.isfinite(newest) else (times[-1] if times else 0.0)
+                    if not np.isfinite(newest):   # every sample refused: the frame keeps its own stamp if it has one
+                        newest = refused_stamp if np.isfinite(refused_stamp) else (times[-1] if times else 0.0)
+                    stamp = newest
                     frame, _ = sample_trackers(cache.lookup, config, stamp, stale_after)
+                    for s, site in enumerate(config.sites):
+                        if site.frame_id in refused_frames:
+                            frame.valid[s] = False
                     times.append(stamp)
                     frames.append(frame)
     except BagError:
@@ -129,12 +168,12 @@ def read_tracker_stream(path: Path, config: SensorConfig, stale_after: float = 0
 
 
 def write_estimate_bag(path: Path, poses: list[BodyPose], skeleton: Skeleton, fixed_frame: str = "world",
-                       prefix: str = "") -> None:
+                       prefix: str = "", overwrite: bool = False) -> None:
     """Per pose: one JointState, one FootContacts, one EstimateStatus and one /tf message."""
     store = typestore()
     T = store.types
     names = joint_state_names()
-    with Writer(Path(path), version=8, storage_plugin=StoragePlugin.MCAP) as writer:
+    with bag_writer(path, overwrite) as writer:
         c_js = writer.add_connection(JOINT_STATES_TOPIC, "sensor_msgs/msg/JointState", typestore=store)
         c_fc = writer.add_connection(CONTACTS_TOPIC, "sparse_body/msg/FootContacts", typestore=store)
         c_st = writer.add_connection(STATUS_TOPIC, "sparse_body/msg/EstimateStatus", typestore=store)

@@ -129,10 +129,13 @@ def cmd_make_bag(args) -> int:
     from .core.sensors import load_sensor_config
     from .data.virtual_trackers import LOBSTR_NOISE, NO_NOISE
     from .offline import make_bag
+    if not (args.clip or args.motion or args.seconds > 0):
+        raise ValueError("make-bag needs a motion: --clip ID, --motion FILE, or --seconds S of the synthetic walk")
     motion = _motion(args)
     if args.seconds and (args.clip or args.motion):
         motion = motion.slice(0, int(args.seconds * motion.fps))
-    n = make_bag(motion, load_sensor_config(args.sensors), Path(args.out), LOBSTR_NOISE if args.noise else NO_NOISE)
+    n = make_bag(motion, load_sensor_config(args.sensors), Path(args.out), LOBSTR_NOISE if args.noise else NO_NOISE,
+                 overwrite=args.overwrite)
     print(f"written {args.out}: {n} frames of {motion.name} at {motion.fps:g} Hz")
     return 0
 
@@ -143,10 +146,14 @@ def cmd_process(args) -> int:
     from .evaluation import parse_estimator_spec
     from .offline import process_bag
     name, options = parse_estimator_spec(args.estimator)
+    refused: dict[str, int] = {}
     poses = process_bag(Path(args.bag_in), Path(args.bag_out), name, load_sensor_config(args.sensors),
-                        Skeleton.canonical(args.height), args.fps, progress=not args.quiet, **options)
+                        Skeleton.canonical(args.height), args.fps, progress=not args.quiet, overwrite=args.overwrite,
+                        refused=refused, **options)
     invalid = sum(not p.valid for p in poses)
-    print(f"written {args.bag_out}: {len(poses)} estimates ({invalid} marked invalid)")
+    rejected = ", ".join(f"{n} {reason}" for reason, n in sorted(refused.items())) or "none"
+    print(f"written {args.bag_out}: {len(poses)} estimates ({invalid} marked invalid); "
+          f"tracker samples refused: {rejected}")
     return 0
 
 
@@ -174,9 +181,35 @@ def cmd_bench(args) -> int:
     return 0
 
 
+def _positive_int(text: str) -> int:
+    value = int(text)
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"must be at least 1, got {value}")
+    return value
+
+
+def _percent(text: str) -> float:
+    value = float(text)
+    if not 0.0 <= value <= 100.0:
+        raise argparse.ArgumentTypeError(f"a percentage from 0 to 100, got {text}")
+    return value
+
+
+def _choices_text() -> str:
+    from .estimators.base import ESTIMATORS
+    from .resources import config_dir
+    sensors = sorted(p.stem for p in (config_dir() / "sensors").glob("*.yaml"))
+    return (f"estimators: {', '.join(sorted(ESTIMATORS))} (options as NAME:key=value,...); "
+            f"sensor configurations: {', '.join(sensors)} (or a YAML path)")
+
+
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(prog="sparse-body", description=__doc__)
+    parser = argparse.ArgumentParser(prog="sparse-body", description=__doc__, epilog=_choices_text())
     sub = parser.add_subparsers(dest="command", required=True)
+    _add = sub.add_parser
+    # every subcommand's --help shows the defaults and what can be chosen
+    sub.add_parser = lambda *a, **k: _add(*a, formatter_class=argparse.ArgumentDefaultsHelpFormatter,
+                                          epilog=_choices_text(), **k)
 
     p = sub.add_parser("demo", help="motion -> tracker bag -> estimator -> metrics and an animation")
     p.add_argument("--out", default="sparse_body_demo", help="folder for the bags and demo.gif")
@@ -195,10 +228,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--split", default="test", choices=["train", "validation", "test"])
     p.add_argument("--fps", type=float, default=60.0, help="frame rate the clips are resampled to")
     p.add_argument("--noise", action="store_true", help="add LoBSTr's tracker noise (1 cm, 1.5 deg)")
-    p.add_argument("--faulty", type=float, default=0.0, metavar="PERCENT",
+    p.add_argument("--faulty", type=_percent, default=0.0, metavar="PERCENT",
                    help="DragPoser's faulty sensors: each frame, with this probability (%%), one tracker "
                         "disconnects for 100 frames")
-    p.add_argument("--limit", type=int, help="only the first N clips of the split")
+    p.add_argument("--limit", type=_positive_int, help="only the first N clips of the split")
     p.add_argument("--mocap", help="the CMU folder (default: ../shared/mocap/cmu or $SPARSE_BODY_MOCAP)")
     p.add_argument("--output", help="where to write the JSON results")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
@@ -216,6 +249,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--fps", type=float, default=60.0)
     p.add_argument("--noise", action="store_true", help="add LoBSTr's tracker noise")
     p.add_argument("--mocap", help="the CMU folder")
+    p.add_argument("--overwrite", action="store_true", help="replace OUT if it exists")
     p.set_defaults(func=cmd_make_bag)
 
     p = sub.add_parser("process", help="run an estimator over a tracker bag and write an estimate bag")
@@ -227,6 +261,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--height", type=float, default=1.75, help="the tracked person's height in metres")
     p.add_argument("--fps", type=float, default=60.0, help="the trackers' nominal rate")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
+    p.add_argument("--overwrite", action="store_true", help="replace BAG_OUT if it exists")
     p.set_defaults(func=cmd_process)
 
     p = sub.add_parser("bench", help="step times and end-to-end latency over DDS, beside their goals")
@@ -254,7 +289,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--steps", type=int, help="stop training after this many steps")
     p.add_argument("--threads", type=int, default=2, help="torch CPU threads")
     p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--limit", type=int, help="only the first N clips of each split (smoke runs)")
+    p.add_argument("--limit", type=_positive_int, help="only the first N clips of each split (smoke runs)")
     p.add_argument("--mocap", help="the CMU folder")
     p.add_argument("--no-card", action="store_true", help="skip the test-split evaluation and model card")
     p.add_argument("--card-only", action="store_true", help="only rewrite the model card of an existing model")
@@ -273,6 +308,9 @@ def main(argv: list[str] | None = None) -> None:
         sys.exit(args.func(args))
     except (ValueError, FileNotFoundError) as err:   # includes MotionFileError, BagError, SensorConfigError
         sys.exit(f"sparse-body: {err}")
+    except KeyboardInterrupt:                         # partial output was removed on the way out
+        print(f"sparse-body {args.command}: interrupted; nothing written", file=sys.stderr)
+        sys.exit(130)
 
 
 if __name__ == "__main__":

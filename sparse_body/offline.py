@@ -3,7 +3,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from .bagio import read_tracker_stream, write_estimate_bag, write_tracker_bag
+from .bagio import BagError, read_tracker_stream, write_estimate_bag, write_tracker_bag
 from .core.sensors import SensorConfig
 from .core.skeleton import Skeleton
 from .core.types import BodyPose
@@ -13,17 +13,26 @@ from .estimators import create_estimator
 
 
 def make_bag(motion: Motion, sensors: SensorConfig, out: Path, noise: TrackerNoise = NO_NOISE, seed: int = 0,
-             start: float = 1_700_000_000.0) -> int:
+             start: float = 1_700_000_000.0, overwrite: bool = False) -> int:
     """Write the virtual trackers of a motion as a rosbag2 (MCAP) of /tf; returns the frame count."""
     stream = synthesize_trackers(motion, sensors, noise, seed)
-    write_tracker_bag(out, stream, sensors, start)
+    write_tracker_bag(out, stream, sensors, start, overwrite)
     return len(stream)
 
 
 def process_bag(bag_in: Path, bag_out: Path, estimator: str, sensors: SensorConfig, skeleton: Skeleton,
-                fps: float = 60.0, stale_after: float = 0.1, progress: bool = True, **options) -> list[BodyPose]:
-    """Run an estimator over a tracker bag and write one estimate per input frame."""
-    stream = read_tracker_stream(bag_in, sensors, stale_after)
+                fps: float = 60.0, stale_after: float = 0.1, progress: bool = True, overwrite: bool = False,
+                refused: dict | None = None, **options) -> list[BodyPose]:
+    """Run an estimator over a tracker bag and write one estimate per input frame (refused
+    tracker samples are counted in `refused`, reason -> count, when a dict is given)."""
+    if Path(bag_out).exists() and not overwrite:    # before the estimation, not after it
+        raise BagError(f"{bag_out}: already exists (choose another name, or --overwrite)")
+    stream = read_tracker_stream(bag_in, sensors, stale_after, refused)
+    never = [site for s, site in enumerate(sensors.site_names) if not stream.valid[:, s].any()]
+    if never:
+        import warnings
+        warnings.warn(f"{bag_in}: the configured tracker(s) {', '.join(never)} of {sensors.name!r} never appear "
+                      f"with a usable pose (wrong --sensors?)", stacklevel=2)
     est = create_estimator(estimator, sensors, skeleton, fps=fps, **options)
     est.reset()
     frames = iter(stream)
@@ -36,5 +45,5 @@ def process_bag(bag_in: Path, bag_out: Path, estimator: str, sensors: SensorConf
             est.reset()   # the recording jumped back (a concatenated or looping take)
         last_stamp = frame.stamp
         poses.append(est.step(frame))
-    write_estimate_bag(bag_out, poses, skeleton, sensors.fixed_frame)
+    write_estimate_bag(bag_out, poses, skeleton, sensors.fixed_frame, overwrite=overwrite)
     return poses

@@ -74,3 +74,14 @@ def contact_points(pose: BodyPose, skeleton: Skeleton) -> np.ndarray:
 
 
 FOOT_NAMES = ("left_foot", "right_foot")
+
+
+def stamp_parts(seconds: float) -> tuple[int, int]:
+    """(sec, nanosec) of a time in seconds, for builtin_interfaces/Time on both the rclpy and
+    the rosbags path. Nanoseconds that round up to a whole second carry into the seconds
+    (a wrap would jump the stamp back by a second)."""
+    sec = int(np.floor(seconds))
+    nanosec = int(round((seconds - sec) * 1e9))
+    if nanosec >= 1_000_000_000:
+        sec, nanosec = sec + 1, nanosec - 1_000_000_000
+    return sec, nanosec

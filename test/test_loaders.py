@@ -151,3 +151,56 @@ def test_amc_frame_missing_a_bone_is_named(tmp_path):
     (tmp_path / "bad.asf").write_text(ASF.replace("    b c\n", "    b zz\n"))
     with pytest.raises(MotionFileError, match=r"bad\.asf: hierarchy names undefined bones: zz"):
         load_asf(tmp_path / "bad.asf")
+
+
+def _refused_quickly(load, path, *args):
+    """A MotionFileError naming the file within a few seconds (a hang is a failure too)."""
+    import signal
+
+    def hang(*_):
+        raise TimeoutError(f"{path.name}: the loader hangs")
+    old = signal.signal(signal.SIGALRM, hang)
+    signal.alarm(5)
+    try:
+        with pytest.raises(MotionFileError) as err:
+            load(path, *args)
+    finally:
+        signal.alarm(0)
+        signal.signal(signal.SIGALRM, old)
+    assert path.name in str(err.value)
+    return str(err.value)
+
+
+@pytest.mark.parametrize("old,new,problem", [
+    ("CHANNELS 3 Zrotation", "CHANNELS -2 Zrotation", "CHANNELS"),                 # looped forever
+    ("Frame Time: 0.5", "Frame Time: 0", "Frame Time"),                             # ZeroDivisionError
+    ("Frame Time: 0.5", "Frame Time: inf", "Frame Time"),                           # OverflowError
+    ("Frame Time: 0.5", "Frame Time: nan", "Frame Time"),
+    ("Frame Time: 0.5", "Frame Time: -0.5", "Frame Time"),
+    ("Frame Time: 0.5", "Frame Time: 1e-300", "Frame Time"),                        # frames collapsed
+    ("Zrotation Xrotation Yrotation\n    End", "Wposition Xrotation Yrotation\n    End", "unknown channel"),
+    ("CHANNELS 3 Zrotation Xrotation Yrotation", "CHANNELS 3 Xrotation Xrotation Yrotation", "twice"),
+    ("CHANNELS 3 Zrotation Xrotation Yrotation", "CHANNELS 2 Xrotation Yrotation", "rotation channels"),
+])
+def test_malformed_bvh_is_a_clear_error_naming_the_file(tmp_path, old, new, problem):
+    assert old in BVH
+    path = tmp_path / "bad.bvh"
+    text = BVH.replace(old, new, 1)
+    if "CHANNELS 2" in new:       # keep the data consistent: one value fewer per frame
+        text = text.replace("0 100 0 0 0 0 0 0 0", "0 100 0 0 0 0 0 0").replace("20 100 0 0 0 0 90 0 0", "20 100 0 0 0 0 90 0")
+    path.write_text(text)
+    assert problem in _refused_quickly(load_bvh, path)
+
+
+@pytest.mark.parametrize("old,new,problem", [
+    ("    b c\n", "    b c\n    a a\n", "twice"),                                  # a bone its own child: looped forever
+    ("  length 1.0\n", "  length 0\n", "units length"),                           # ZeroDivisionError
+    ("order TX TY TZ RX RY RZ", "order X", "root order"),                         # IndexError
+    ("order TX TY TZ RX RY RZ", "order TX TY TW", "root order"),
+    ("    dof rz", "    dof rx rx", "dof"),
+])
+def test_malformed_asf_is_a_clear_error_naming_the_file(tmp_path, old, new, problem):
+    assert old in ASF
+    path = tmp_path / "bad.asf"
+    path.write_text(ASF.replace(old, new, 1))
+    assert problem in _refused_quickly(load_asf, path)

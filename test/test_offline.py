@@ -86,3 +86,105 @@ def test_unreadable_bags_name_the_path(tmp_path):
     make_bag(synthetic_walk(0.5), load_sensor_config("six_point").subset(["pelvis"]), tmp_path / "other")
     with pytest.raises(BagError, match="no transforms of the tracker frames"):
         read_tracker_stream(tmp_path / "other", config)
+
+
+def test_frames_whose_samples_were_all_refused_are_invalid_and_counted(tmp_path):
+    motion = synthetic_walk(2.0)
+    config = load_sensor_config("four_point")
+    stream = synthesize_trackers(motion, config)
+    stream.positions[50, :] = np.nan                     # every tracker of frame 50: NaN
+    stream.orientations[60, :] = 0.0                     # every tracker of frame 60: a zero quaternion
+    write_tracker_bag(tmp_path / "bad", stream, config)
+    refused = {}
+    poses = process_bag(tmp_path / "bad", tmp_path / "out", "ik", config, motion.skeleton, progress=False,
+                        refused=refused)
+    assert len(poses) == len(motion)
+    assert not poses[50].valid and not poses[60].valid and poses[49].valid and poses[61].valid
+    assert refused == {"non-finite": 4, "degenerate quaternion": 4}
+    stamps = [p.stamp for p in poses]
+    assert len(set(stamps)) == len(stamps)               # each frame keeps its own stamp
+
+
+def test_outputs_are_never_half_written_nor_silently_replaced(tmp_path, monkeypatch):
+    import sparse_body.bagio as bagio
+    from sparse_body.cli import main
+    motion = synthetic_walk(1.0)
+    config = load_sensor_config("three_point")
+    make_bag(motion, config, tmp_path / "in")
+    with pytest.raises(BagError, match=r"in: already exists .*--overwrite"):
+        make_bag(motion, config, tmp_path / "in")
+    make_bag(motion, config, tmp_path / "in", overwrite=True)
+    process_bag(tmp_path / "in", tmp_path / "out", "ik", config, motion.skeleton, progress=False)
+    # an existing output is refused before the estimation starts
+    monkeypatch.setattr("sparse_body.offline.read_tracker_stream", lambda *a, **k: pytest.fail("estimated first"))
+    with pytest.raises(BagError, match=r"out: already exists"):
+        process_bag(tmp_path / "in", tmp_path / "out", "ik", config, motion.skeleton, progress=False)
+    monkeypatch.undo()
+    # Ctrl-C while writing: nothing is left behind, and the command exits 130 with one line
+    calls = []
+
+    def interrupted(*args):
+        calls.append(1)
+        if len(calls) > 5:
+            raise KeyboardInterrupt
+        return np.zeros((2, 3))
+    monkeypatch.setattr(bagio, "contact_points", interrupted)
+    before = sorted(p.name for p in tmp_path.iterdir())
+    with pytest.raises(SystemExit) as ended:
+        main(["process", str(tmp_path / "in"), str(tmp_path / "new"), "--sensors", "three_point", "--quiet"])
+    assert ended.value.code == 130
+    assert sorted(p.name for p in tmp_path.iterdir()) == before
+
+
+def test_empty_bags_are_refused(tmp_path):
+    from rosbags.rosbag2 import StoragePlugin, Writer
+    from sparse_body.bagio import TF_TYPE, typestore
+    from sparse_body.cli import main
+    from sparse_body.core.types import TrackerStream
+    config = load_sensor_config("three_point")
+    with pytest.raises(SystemExit, match="make-bag needs a motion"):          # wrote a 0-frame bag before
+        main(["make-bag", str(tmp_path / "nothing")])
+    assert not (tmp_path / "nothing").exists()
+    empty = TrackerStream(config.site_names, np.zeros(0), np.zeros((0, 3, 3)), np.zeros((0, 3, 4)), np.zeros((0, 3), bool))
+    with pytest.raises(BagError, match="no frames"):
+        write_tracker_bag(tmp_path / "empty", empty, config)
+    with Writer(tmp_path / "silent", version=8, storage_plugin=StoragePlugin.MCAP) as writer:
+        writer.add_connection(TF_TOPIC, TF_TYPE, typestore=typestore())        # a /tf topic, no message
+    pytest.importorskip("rclpy", reason="the bridge needs rclpy")
+    from sparse_body.ros.tracker_bridge_node import load_tf_frames
+    with pytest.raises(BagError, match=r"silent: no /tf messages"):          # the bridge's loop spun a core
+        load_tf_frames(str(tmp_path / "silent"))
+
+
+def test_stamps_that_round_up_carry_into_the_seconds_on_both_paths():
+    from sparse_body.bagio import _time, typestore
+    from sparse_body.output import stamp_parts
+    assert stamp_parts(5.9999999999) == (6, 0)                              # the bag path wrapped to (5, 0)
+    assert stamp_parts(1_700_000_000.25) == (1_700_000_000, 250_000_000)
+    t = _time(typestore(), 5.9999999999)
+    assert (t.sec, t.nanosec) == (6, 0)
+    pytest.importorskip("rclpy", reason="rclpy is not installed")
+    from sparse_body.ros.messages import to_time
+    assert (to_time(5.9999999999).sec, to_time(5.9999999999).nanosec) == (6, 0)
+
+
+def test_cli_refuses_bad_arguments_and_lists_what_is_there(tmp_path, capsys):
+    from sparse_body.cli import main
+    for argv, said in [(["eval", "--estimator", "ik", "--limit", "0"], "must be at least 1"),
+                       (["eval", "--estimator", "ik", "--limit", "-1"], "must be at least 1"),
+                       (["eval", "--estimator", "ik", "--faulty", "150"], "a percentage from 0 to 100")]:
+        with pytest.raises(SystemExit):
+            main(argv)
+        assert said in capsys.readouterr().err
+    motion = synthetic_walk(1.0)
+    make_bag(motion, load_sensor_config("three_point"), tmp_path / "three")
+    with pytest.raises(SystemExit, match="estimator 'ik' has no option 'bogus'; its options are floor_height"):
+        main(["process", str(tmp_path / "three"), str(tmp_path / "o"), "--estimator", "ik:bogus=1",
+              "--sensors", "three_point", "--quiet"])
+    with pytest.warns(UserWarning, match="tracker.s. pelvis, left_foot, right_foot of 'six_point' never appear"):
+        process_bag(tmp_path / "three", tmp_path / "six", "ik", load_sensor_config("six_point"), motion.skeleton,
+                    progress=False)
+    with pytest.raises(SystemExit):
+        main(["process", "--help"])
+    help_text = capsys.readouterr().out
+    assert "(default: ik)" in help_text and "six_point" in help_text and "lobstr" in help_text

@@ -1,4 +1,5 @@
 """The estimator and tracker bridge nodes as real processes over real rclpy and Fast DDS."""
+import subprocess
 import time
 
 import numpy as np
@@ -106,7 +107,10 @@ def test_replayed_bag_gives_one_valid_estimate_per_tracker_frame_with_small_end_
     # sample's stamp, and each tracker frame gets at most one (bursts are coalesced).
     played = during_playback(listener, "joint_states")
     keys = [stamp_key(m.header.stamp) for m in played]
-    assert set(keys) <= set(listener.tracker_stamps) and len(keys) == len(set(keys))
+    tracker = set(listener.tracker_stamps)
+    # (a float round trip inside the node may move a stamp across a 10 us rounding edge)
+    assert all({k - 1, k, k + 1} & tracker for k in keys), [k for k in keys if not {k - 1, k, k + 1} & tracker]
+    assert len(keys) == len(set(keys))
     statuses = during_playback(listener, "estimate_status")
     assert sum(s.valid for s in statuses) >= 0.95 * len(statuses), {s.message for s in statuses if not s.valid}
     values = diagnostic_values(listener, "estimator")
@@ -276,3 +280,37 @@ def test_the_tf_reader_ignores_the_frames_its_node_publishes(ros_env):
         reader.destroy()
     finally:
         node.destroy_node()
+
+
+@pytest.mark.parametrize("signal_name", ["SIGINT", "SIGTERM"])
+def test_every_node_ends_cleanly_on_a_signal_while_data_flows(ros_env, tmp_path, signal_name):
+    import signal
+    config = load_sensor_config("four_point")
+    make_bag(synthetic_walk(4.0), config, tmp_path / "trackers")
+    est = start_node(ESTIMATOR, {"sensors": "four_point", "estimator": "ik", "autostart": True},
+                     "sparse_body_estimator", tmp_path, ros_env)
+    refiner = start_node("sparse_body.ros.constraint_node", {"sensors": "four_point", "autostart": True},
+                         "sparse_body_constraint", tmp_path, ros_env, remaps={"input/joint_states": "/joint_states"})
+    bridge = start_node(BRIDGE, {"bag": str(tmp_path / "trackers"), "loop": True, "min_subscribers": 2},
+                        "sparse_body_tracker_bridge", tmp_path, ros_env)
+    procs = {"sparse_body_estimator": est, "sparse_body_constraint": refiner, "sparse_body_tracker_bridge": bridge}
+    listener = Listener(rclpy, {"joint_states": JointState, "refined/joint_states": JointState})
+    try:
+        flowing = listener.spin_until(lambda: len(listener.received["joint_states"]) >= 30
+                                      and len(listener.received["refined/joint_states"]) >= 5, 90.0)
+        for p in procs.values():
+            p.send_signal(getattr(signal, signal_name))
+        codes = {}
+        for name, p in procs.items():
+            try:
+                codes[name] = p.wait(timeout=30)
+            except subprocess.TimeoutExpired:
+                codes[name] = "still running"
+    finally:
+        listener.destroy()
+        stop(*procs.values())
+    assert flowing, "no data flowed"
+    logs = {name: (tmp_path / f"{name}.log").read_text() for name in procs}
+    for name in procs:
+        assert codes[name] == 0, (name, codes[name], logs[name][-2000:])
+        assert "Traceback" not in logs[name], (name, logs[name][-2000:])

@@ -128,6 +128,11 @@ def parse_sensor_config(data: dict, source: str = "<dict>") -> SensorConfig:
         if measures not in MEASURES:
             raise SensorConfigError(f"{where}: measures must be one of {', '.join(MEASURES)}, got {measures!r}")
         offset = spec.get("offset") or {}
+        if not isinstance(offset, dict):
+            raise SensorConfigError(f"{where}: offset must be a mapping with translation and/or rotation, got {offset!r}")
+        unknown = set(offset) - {"translation", "rotation"}
+        if unknown:
+            raise SensorConfigError(f"{where}: unknown offset key(s) {', '.join(sorted(map(str, unknown)))}")
         translation = _vector(f"{where} offset.translation", offset.get("translation", (0, 0, 0)), 3)
         rotation = _vector(f"{where} offset.rotation", offset.get("rotation", (0, 0, 0, 1)), 4)
         norm = float(np.linalg.norm(rotation))
@@ -157,5 +162,7 @@ def read_yaml(path: Path, error: type[Exception] = ValueError):
         return yaml.safe_load(Path(path).read_text())
     except OSError as err:
         raise error(f"{path}: cannot be read ({err.strerror})") from None
+    except UnicodeDecodeError as err:
+        raise error(f"{path}: not UTF-8 text ({err.reason} at byte {err.start})") from None
     except yaml.YAMLError as err:
         raise error(f"{path}: not valid YAML ({err})") from None

@@ -39,16 +39,23 @@ class AsfSkeleton:
     children: dict[str, list[str]]
 
     def order(self) -> list[str]:
-        """Bones with every parent before its children, starting at root."""
-        out, stack = [], ["root"]
+        """Bones with every parent before its children, starting at root; a bone reached
+        twice (a cycle, or two parents) is a MotionFileError naming it."""
+        out, stack, seen = [], ["root"], set()
         while stack:
             name = stack.pop(0)
+            if name in seen:
+                raise MotionFileError(self.path, f"the hierarchy reaches bone {name!r} twice (a cycle or two parents)")
+            seen.add(name)
             out.append(name)
             stack[0:0] = self.children.get(name, [])
         return out
 
     def parent_of(self) -> dict[str, str]:
         return {c: p for p, cs in self.children.items() for c in cs}
+
+
+ROOT_CHANNELS = {"TX", "TY", "TZ", "RX", "RY", "RZ"}
 
 
 def _axis_matrix(values: list[str], order: str) -> np.ndarray:
@@ -73,9 +80,14 @@ def load_asf(path: Path) -> AsfSkeleton:
                 continue
             if section == ":units" and tok[0] == "length":
                 length = float(tok[1])
+                if not (np.isfinite(length) and length > 0):
+                    raise MotionFileError(path, f"line {lineno}: units length must be a positive number, got {tok[1]}")
             elif section == ":root":
                 if tok[0] == "order":
                     root_order = [t.upper() for t in tok[1:]]
+                    if not set(root_order) <= ROOT_CHANNELS or len(set(root_order)) != len(root_order):
+                        raise MotionFileError(path, f"line {lineno}: root order {' '.join(tok[1:])!r}: each of "
+                                                    f"{', '.join(sorted(ROOT_CHANNELS))} at most once")
                 elif tok[0] == "axis":
                     root_axis = _axis_matrix(["0", "0", "0"], tok[1])
                 elif tok[0] == "position":
@@ -100,8 +112,13 @@ def load_asf(path: Path) -> AsfSkeleton:
                         current["axis"] = _axis_matrix(tok[1:4], tok[4] if len(tok) > 4 else "XYZ")
                     elif tok[0] == "dof":
                         current["dof"] = [t.lower() for t in tok[1:]]
+                        if not set(current["dof"]) <= {"rx", "ry", "rz"} or len(set(current["dof"])) != len(current["dof"]):
+                            raise MotionFileError(path, f"line {lineno}: dof {' '.join(tok[1:])!r}: each of rx, ry, rz "
+                                                        "at most once")
             elif section == ":hierarchy" and tok[0] not in ("begin", "end"):
                 children.setdefault(tok[0], []).extend(tok[1:])
+    except MotionFileError:
+        raise
     except (ValueError, IndexError) as err:
         raise MotionFileError(path, f"malformed ASF ({err})") from None
     if not bones:
@@ -112,7 +129,9 @@ def load_asf(path: Path) -> AsfSkeleton:
     metres = INCH / length
     for bone in bones.values():
         bone.length *= metres
-    return AsfSkeleton(path, metres, root_order, root_axis, root_position * metres, bones, children)
+    skeleton = AsfSkeleton(path, metres, root_order, root_axis, root_position * metres, bones, children)
+    skeleton.order()     # a cycle is an error here, not a hang later
+    return skeleton
 
 
 def _read_amc_frames(path: Path, skeleton: AsfSkeleton) -> dict[str, np.ndarray]:

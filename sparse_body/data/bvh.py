@@ -29,6 +29,23 @@ def _layout(names: list[str]) -> str:
     return "unknown"
 
 
+_CHANNELS = {f"{a}{kind}" for a in "XYZ" for kind in ("position", "rotation")}
+
+
+def _check_channels(path: Path, joint: str, channels: list[str]) -> None:
+    """Known names, each at most once, and three rotations or none (scipy's Euler order)."""
+    for ch in channels:
+        if ch[:1].upper() + ch[1:].lower() not in _CHANNELS:
+            raise MotionFileError(path, f"joint {joint!r} has unknown channel {ch!r} "
+                                        f"(known: Xposition ... Zrotation)")
+    lowered = [c.lower() for c in channels]
+    if len(set(lowered)) != len(lowered):
+        raise MotionFileError(path, f"joint {joint!r} lists a channel twice: {' '.join(channels)}")
+    rotations = sum(c.endswith("rotation") for c in lowered)
+    if rotations not in (0, 3):
+        raise MotionFileError(path, f"joint {joint!r} has {rotations} rotation channels (0 or 3 allowed)")
+
+
 def default_unit(layout: str) -> float:
     return 0.01 if layout == "cmu_bvh_daz" else CMU_ASF_UNIT
 
@@ -71,13 +88,20 @@ def load_bvh(path: Path, length_unit: float | None = None) -> SourceMotion:
                 i += 1
             elif tok == "OFFSET":
                 offsets[-1] = [float(v) for v in tokens[i + 1:i + 4]]
+                if len(offsets[-1]) != 3 or not np.all(np.isfinite(offsets[-1])):
+                    raise MotionFileError(path, f"joint {names[-1]!r} has a malformed OFFSET")
                 i += 4
             elif tok == "CHANNELS":
                 n = int(tokens[i + 1])
+                if not 0 <= n <= 6 or len(tokens) < i + 2 + n:
+                    raise MotionFileError(path, f"joint {names[-1]!r} declares {tokens[i + 1]} CHANNELS (0 to 6 allowed)")
                 channels[-1] = tokens[i + 2:i + 2 + n]
+                _check_channels(path, names[-1], channels[-1])
                 i += 2 + n
             else:
                 raise MotionFileError(path, f"unexpected token {tok!r} in HIERARCHY")
+    except MotionFileError:
+        raise
     except (ValueError, IndexError):
         raise MotionFileError(path, "malformed HIERARCHY") from None
     if not names or any(o is None for o in offsets) or stack:
@@ -87,10 +111,14 @@ def load_bvh(path: Path, length_unit: float | None = None) -> SourceMotion:
     try:
         frames = int(header.split("Frames:")[1].split()[0])
         frame_time, *values = data.split()
-        fps = 1.0 / float(frame_time)
+        frame_time = float(frame_time)
         values = np.asarray(values, dtype=np.float64)
     except (IndexError, ValueError):
         raise MotionFileError(path, "malformed MOTION header or non-numeric motion data") from None
+    # 1/1000 s to 10 s a frame: what a motion capture system records
+    if not 1e-3 <= frame_time <= 10.0:
+        raise MotionFileError(path, f"Frame Time {frame_time!r} is not a frame duration (1 ms to 10 s)")
+    fps = 1.0 / frame_time
     n_channels = sum(len(c) for c in channels)
     if frames <= 0 or values.size != frames * n_channels:
         have = values.size / n_channels if n_channels else 0

@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import importlib
+import inspect
 import math
 from abc import ABC, abstractmethod
 from typing import ClassVar
@@ -135,4 +136,17 @@ def create_estimator(name: str, sensors: SensorConfig, skeleton: Skeleton, fps: 
     except KeyError:
         raise ValueError(f"unknown estimator {name!r}; available: {', '.join(sorted(ESTIMATORS))}") from None
     module, cls = target.split(":")
-    return getattr(importlib.import_module(module), cls)(sensors, skeleton, fps=fps, **options)
+    cls = getattr(importlib.import_module(module), cls)
+    known = [p for p in inspect.signature(cls.__init__).parameters if p not in ("self", "sensors", "skeleton", "fps")
+             and inspect.signature(cls.__init__).parameters[p].kind is inspect.Parameter.POSITIONAL_OR_KEYWORD]
+    takes_more = any(p.kind is inspect.Parameter.VAR_KEYWORD for p in inspect.signature(cls.__init__).parameters.values())
+    unknown = [k for k in options if k not in known]
+    if unknown and not takes_more:
+        raise ValueError(f"estimator {name!r} has no option {', '.join(map(repr, unknown))}; "
+                         f"its options are {', '.join(known) or 'none'}")
+    try:
+        return cls(sensors, skeleton, fps=fps, **options)
+    except TypeError as err:
+        if "unexpected keyword argument" not in str(err):
+            raise
+        raise ValueError(f"estimator {name!r}: {err}; its options are {', '.join(known)}") from None

@@ -41,7 +41,7 @@ from ..estimators.reference import standing_pose
 from ..output import body_transforms
 from ..urdf import body_urdf
 from . import messages
-from .spin import spin_until_shutdown
+from .spin import ExternalShutdownException, spin_until_shutdown
 from .tf_input import TfReader
 
 PARAMETERS = {
@@ -90,6 +90,10 @@ class EstimatorNode(LifecycleNode):
             self.estimator = self._make_estimator(p, sensors)
         except (SensorConfigError, ValueError, FileNotFoundError) as err:
             self.get_logger().error(f"configure failed: {err}")
+            self._release()
+            return TransitionCallbackReturn.FAILURE
+        except Exception as err:  # noqa: BLE001 - an unforeseen failure still fails configure, said
+            self.get_logger().error(f"configure failed: {type(err).__name__}: {err}")
             self._release()
             return TransitionCallbackReturn.FAILURE
         self.sensors, self.params = sensors, p
@@ -290,14 +294,18 @@ class EstimatorNode(LifecycleNode):
 
 def main(args=None, node_class=None) -> None:
     rclpy.init(args=args)
-    node = (node_class or EstimatorNode)()
-    if node.get_parameter("autostart").value:
-        if node.trigger_configure() != TransitionCallbackReturn.SUCCESS:
-            node.get_logger().fatal("configure failed; exiting")
-            node.destroy_node()
-            rclpy.shutdown()
-            sys.exit(1)
-        node.trigger_activate()
+    try:
+        node = (node_class or EstimatorNode)()
+        if node.get_parameter("autostart").value:
+            if node.trigger_configure() != TransitionCallbackReturn.SUCCESS:
+                node.get_logger().fatal("configure failed; exiting")
+                node.destroy_node()
+                rclpy.try_shutdown()
+                sys.exit(1)
+            node.trigger_activate()
+    except (KeyboardInterrupt, ExternalShutdownException):   # stopped while loading a model: a normal end
+        rclpy.try_shutdown()
+        return
     spin_until_shutdown(node)
 
 

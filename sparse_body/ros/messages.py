@@ -10,14 +10,14 @@ from sparse_body.msg import EstimateStatus, FootContact, FootContacts
 
 from ..core.skeleton import Skeleton
 from ..core.types import BodyPose
-from ..output import FOOT_NAMES, body_transforms, contact_points, joint_state_names, joint_state_positions
+from ..output import FOOT_NAMES, body_transforms, contact_points, joint_state_names, joint_state_positions, stamp_parts
 
 JOINT_NAMES = joint_state_names()
 
 
 def to_time(seconds: float) -> Time:
-    sec = int(np.floor(seconds))
-    return Time(sec=sec, nanosec=min(int(round((seconds - sec) * 1e9)), 999_999_999))
+    sec, nanosec = stamp_parts(seconds)
+    return Time(sec=sec, nanosec=nanosec)
 
 
 def to_seconds(stamp: Time) -> float:

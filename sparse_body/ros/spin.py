@@ -6,11 +6,19 @@ from rclpy.executors import ExternalShutdownException
 
 
 def spin_until_shutdown(node) -> None:
+    """Spin until SIGINT / SIGTERM (rclpy's handlers shut the context down) and end without a
+    traceback: an error raised by a callback that raced the shutdown (its context already
+    gone) is part of stopping, not a failure."""
     try:
         rclpy.spin(node)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
-    finally:
-        node.destroy_node()
+    except Exception:  # noqa: BLE001 - re-raised unless the context was shut down under it
         if rclpy.ok():
-            rclpy.shutdown()
+            raise
+    finally:
+        try:
+            node.destroy_node()
+        except Exception:  # noqa: BLE001 - destroying after the context went away
+            pass
+        rclpy.try_shutdown()

@@ -33,7 +33,7 @@ from ..adapters.vmc import DEFAULT_PORT, map_device, parse_device_map
 from ..bagio import TF_TOPIC, BagError, typestore
 from ..core.sensors import SensorConfigError, load_sensor_config
 from .messages import to_time
-from .spin import spin_until_shutdown
+from .spin import ExternalShutdownException, spin_until_shutdown
 
 SOURCES = ("bag", "vmc", "serial")
 PARAMETERS = {
@@ -80,6 +80,8 @@ def load_tf_frames(path: str) -> list[tuple[float, list]]:
         raise
     except Exception as err:  # noqa: BLE001
         raise BagError(f"{path}: cannot be read as a rosbag2 ({err})") from None
+    if not out:      # a loop over nothing would spin a core
+        raise BagError(f"{path}: no {TF_TOPIC} messages to play")
     return out
 
 
@@ -112,6 +114,7 @@ class TrackerBridge(Node):
         self.unmapped: set[str] = set()
         self._collect: dict[str, list] | None = None
         self._lock = threading.Lock()
+        self._counts_lock = threading.Lock()
         self.finished = threading.Event()
         if p["source"] == "bag":
             if not p["bag"]:
@@ -146,17 +149,23 @@ class TrackerBridge(Node):
             self.adapter = SerialTrackerReader(p["serial_port"], self._on_samples, p["serial_baudrate"])
             self.get_logger().info(f"reading serial trackers from {p['serial_port']}")
 
+    def _count(self, key: str, n: int = 1) -> None:
+        """Counters are changed from the adapters' and the player's threads."""
+        with self._counts_lock:
+            self.counts[key] += n
+
     def _on_samples(self, samples) -> None:
         now = time.time()
         transforms = []
         for sample in samples:
             site = map_device(sample.device, self.device_map)
             if site is None:
-                self.counts["unmapped"] += 1
-                self.unmapped.add(sample.device)
+                self._count("unmapped")
+                with self._counts_lock:
+                    self.unmapped.add(sample.device)
                 continue
             if sample.stamp < now - self.params["stale_after"]:
-                self.counts["stale"] += 1
+                self._count("stale")
                 continue
             spec = self.sensors.site(site)
             position = sample.position if (sample.position is not None and spec.has_position) else None
@@ -208,9 +217,15 @@ class TrackerBridge(Node):
         return m
 
     def _send(self, transforms) -> None:
-        if transforms:
+        if not transforms or self._stop.is_set():
+            return
+        try:
             self.pub.publish(self._msg_type(transforms=transforms))
-            self.counts["published"] += len(transforms)
+        except Exception:  # noqa: BLE001 - a source thread racing the shutdown: its context is gone
+            if rclpy.ok() and not self._stop.is_set():
+                raise
+            return
+        self._count("published", len(transforms))
 
     def _on_calibrate(self, request, response):
         seconds = request.seconds if request.seconds > 0 else 1.0
@@ -239,8 +254,10 @@ class TrackerBridge(Node):
 
     def _publish_diagnostics(self) -> None:
         status = DiagnosticStatus(name="sparse_body: tracker bridge", hardware_id=self.params["source"])
-        values = {**{k: str(v) for k, v in self.counts.items()},
-                  "unmapped devices": ", ".join(sorted(self.unmapped)) or "none",
+        with self._counts_lock:
+            counts, unmapped = dict(self.counts), sorted(self.unmapped)
+        values = {**{k: str(v) for k, v in counts.items()},
+                  "unmapped devices": ", ".join(unmapped) or "none",
                   "calibrated": "yes" if self.calibration else "no"}
         level, message = DiagnosticStatus.OK, "ok"
         if self.params["source"] == "serial" and self.adapter is not None:
@@ -253,8 +270,8 @@ class TrackerBridge(Node):
         elif self.params["source"] == "vmc" and self.adapter is not None:
             values.update({f"errors: {k}": str(v) for k, v in self.adapter.decoder.errors.items()})
             values["devices seen"] = ", ".join(sorted(self.adapter.decoder.devices)) or "none"
-        if self.counts["stale"] and level == DiagnosticStatus.OK:
-            level, message = DiagnosticStatus.WARN, f"{self.counts['stale']} stale samples dropped"
+        if counts["stale"] and level == DiagnosticStatus.OK:
+            level, message = DiagnosticStatus.WARN, f"{counts['stale']} stale samples dropped"
         status.level, status.message = level, message
         status.values = [KeyValue(key=k, value=v) for k, v in values.items()]
         msg = DiagnosticArray(status=[status])
@@ -276,8 +293,11 @@ def main(args=None) -> None:
         node = TrackerBridge()
     except (ValueError, BagError, SensorConfigError, CalibrationError) as err:
         print(f"sparse_body_tracker_bridge: {err}", flush=True)
-        rclpy.shutdown()
+        rclpy.try_shutdown()
         raise SystemExit(1)
+    except (KeyboardInterrupt, ExternalShutdownException):   # stopped while loading a bag: a normal end
+        rclpy.try_shutdown()
+        return
     spin_until_shutdown(node)
 
 

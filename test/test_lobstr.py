@@ -127,6 +127,21 @@ def test_estimator_refuses_a_missing_or_foreign_model(tmp_path, clip, tiny_model
         create_estimator("lobstr", config, clip.skeleton, model_path=str(tmp_path / "junk.onnx"))
     with pytest.raises(ValueError, match="needs trackers on pelvis"):
         create_estimator("lobstr", load_sensor_config("three_point"), clip.skeleton, model_path=str(tiny_model[0]))
+    # metadata that claims LoBSTr over a graph with other inputs: refused when loaded, not at every step
+    import onnx
+    from onnx import TensorProto, helper
+    graph = helper.make_graph([helper.make_node("Identity", ["x"], ["y"])], "other",
+                              [helper.make_tensor_value_info("x", TensorProto.FLOAT, [1, 5])],
+                              [helper.make_tensor_value_info("y", TensorProto.FLOAT, [1, 5])])
+    model = helper.make_model(graph, opset_imports=[helper.make_opsetid("", 17)])
+    model.ir_version = 8
+    helper.set_model_props(model, {"method": '"lobstr"', "config": '{"hidden": 8, "fps": 60}'})
+    onnx.save(model, tmp_path / "claims_lobstr.onnx")
+    with pytest.raises(ValueError, match=r"claims_lobstr\.onnx: a lobstr model needs an input 'features'"):
+        create_estimator("lobstr", config, clip.skeleton, model_path=str(tmp_path / "claims_lobstr.onnx"))
+    # DragPoser pointed at the LoBSTr file: refused, not silently the shipped models beside it
+    with pytest.raises(ValueError, match="not a DragPoser model"):
+        create_estimator("dragposer", config, clip.skeleton, model_path=str(tiny_model[0]))
 
 
 def test_contact_hold_pins_the_toe_then_lets_go_slowly():

@@ -314,3 +314,57 @@ def test_every_node_ends_cleanly_on_a_signal_while_data_flows(ros_env, tmp_path,
     for name in procs:
         assert codes[name] == 0, (name, codes[name], logs[name][-2000:])
         assert "Traceback" not in logs[name], (name, logs[name][-2000:])
+
+
+@pytest.mark.parametrize("height", [-1.0, float("nan"), float("inf"), 100.0, "tall"])
+def test_a_bad_height_refuses_configure_with_the_reason_and_the_node_stays_up(ros_env, tmp_path, height):
+    import sys
+    # given on the command line, as `ros2 run ... -p height:=...` gives it (it ended the process before)
+    log = open(tmp_path / "bad_height.log", "w")
+    value = height if isinstance(height, str) else repr(height).replace("nan", ".nan").replace("inf", ".inf")
+    proc = subprocess.Popen([sys.executable, "-m", ESTIMATOR, "--ros-args", "-p", "sensors:=three_point",
+                             "-p", "estimator:=reference", "-p", f"height:={value}"],
+                            stdout=log, stderr=subprocess.STDOUT, env=ros_env)
+    listener = Listener(rclpy, {})
+    try:
+        node = listener.node
+        change = node.create_client(ChangeState, "/sparse_body_estimator/change_state")
+        get = node.create_client(GetState, "/sparse_body_estimator/get_state")
+        assert not _call(node, change, ChangeState.Request(transition=Transition(id=Transition.TRANSITION_CONFIGURE)),
+                         timeout=30.0).success
+        assert _call(node, get, GetState.Request()).current_state.id == State.PRIMARY_STATE_UNCONFIGURED
+        assert proc.poll() is None
+    finally:
+        listener.destroy()
+        stop(proc)
+    text = (tmp_path / "bad_height.log").read_text()
+    assert "configure failed: height must be" in text and "Traceback" not in text, text
+
+
+def test_parameters_set_while_configured_apply_live_or_are_refused_with_the_reason(ros_env, tmp_path):
+    from rcl_interfaces.msg import Parameter, ParameterType, ParameterValue
+    from rcl_interfaces.srv import SetParameters
+    proc = start_node(ESTIMATOR, {"sensors": "three_point", "estimator": "reference", "autostart": True},
+                      "sparse_body_estimator", tmp_path, ros_env)
+    listener = Listener(rclpy, {"joint_states": JointState})
+    try:
+        node = listener.node
+        assert listener.spin_until(lambda: listener.received["joint_states"], 30.0)
+        setp = node.create_client(SetParameters, "/sparse_body_estimator/set_parameters")
+
+        def set_one(name, **value):
+            kind = ParameterType.PARAMETER_STRING if "string_value" in value else ParameterType.PARAMETER_DOUBLE
+            param = Parameter(name=name, value=ParameterValue(type=kind, **value))
+            return _call(node, setp, SetParameters.Request(parameters=[param])).results[0]
+
+        bogus = set_one("estimator", string_value="bogus")
+        assert not bogus.successful and "unknown estimator 'bogus'" in bogus.reason
+        later = set_one("sensors", string_value="six_point")
+        assert not later.successful and "takes effect at configure" in later.reason
+        live = set_one("stale_timeout", double_value=0.3)
+        assert live.successful
+        negative = set_one("stale_timeout", double_value=-1.0)
+        assert not negative.successful and "between" in negative.reason
+    finally:
+        listener.destroy()
+        stop(proc)

@@ -17,7 +17,6 @@ removed through `constraints`.
 """
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
 import numpy as np
@@ -35,9 +34,11 @@ from .dragposer_pose import HEIGHT_JOINTS, LATENT, dual_quaternions, split_headi
 from .dragposer_temporal import TemporalPrior
 from ..core.body_ik import solve_body
 from .lobstr_features import body_scale
+from .onnx_model import load_model
 
 
 HEIGHT_INDEX = [J[j] for j in HEIGHT_JOINTS]
+MODEL_FILES = ("dragposer_encoder.onnx", "dragposer_decoder.onnx", "dragposer_temporal.onnx")
 END_JOINTS = frozenset(J[j] for j in ("head", "left_wrist", "right_wrist", "left_ankle", "right_ankle"))
 
 
@@ -50,23 +51,12 @@ class PoseVaeRuntime:
     """The exported decoder (and encoder, to start from a given pose)."""
 
     def __init__(self, model_dir: str | Path | None = None, threads: int = 1) -> None:
-        import onnxruntime as ort
         self.dir = Path(model_dir) if model_dir else default_model_dir()
-        options = ort.SessionOptions()
-        options.intra_op_num_threads, options.inter_op_num_threads = threads, 1
-        sessions = {}
-        for part in ("decoder", "encoder"):
-            path = self.dir / f"dragposer_{part}.onnx"
-            if not path.is_file():
-                raise FileNotFoundError(f"{path}: no DragPoser model there; train one with `sparse-body train dragposer`")
-            try:
-                sessions[part] = ort.InferenceSession(str(path), options, providers=["CPUExecutionProvider"])
-            except Exception as err:  # noqa: BLE001 - onnxruntime raises its own exception types
-                raise ValueError(f"{path}: not a loadable ONNX model ({err})") from None
-            meta = sessions[part].get_modelmeta().custom_metadata_map
-            if json.loads(meta.get("method", "null")) != "dragposer":
-                raise ValueError(f"{path}: not a DragPoser model (its metadata lacks method)")
-        self.decoder, self.encoder = sessions["decoder"], sessions["encoder"]
+        hint = "train one with `sparse-body train dragposer`"
+        self.decoder, _ = load_model(self.dir / "dragposer_decoder.onnx", ("method", "dragposer"), {"latent": LATENT},
+                                     hint, threads)
+        self.encoder, _ = load_model(self.dir / "dragposer_encoder.onnx", ("method", "dragposer"),
+                                     {"dual_quaternions": None}, hint, threads)
 
     def decode(self, z: np.ndarray) -> np.ndarray:
         """(B, 24) -> heading-free local rotations (B, 22, 3, 3)."""
@@ -161,7 +151,10 @@ class DragPoserEstimator(Estimator):
         if iterations < 1:
             raise ValueError(f"iterations must be at least 1, got {iterations}")
         super().__init__(sensors, skeleton, fps)
-        if model_path and not model_dir:   # the nodes' model_path: the folder, or one of its two files
+        if model_path and not model_dir:   # the nodes' model_path: the folder, or one of its files
+            if not Path(model_path).is_dir() and Path(model_path).name not in MODEL_FILES:
+                raise ValueError(f"{model_path}: not a DragPoser model; name the folder holding "
+                                 f"{', '.join(MODEL_FILES)} (or one of them)")
             model_dir = model_path if Path(model_path).is_dir() else str(Path(model_path).parent)
         self.vae = PoseVaeRuntime(model_dir, threads)
         # the temporal predictor's pull on the latent (the paper's lambda_T); 0: without it

@@ -16,34 +16,24 @@ frames, about a second) there is no prediction and the caller falls back to its 
 """
 from __future__ import annotations
 
-import json
 from collections import deque
 from pathlib import Path
 
 import numpy as np
 
 from .dragposer_pose import LATENT, temporal_context
+from .onnx_model import load_model
 
 FILE = "dragposer_temporal.onnx"
 
 
 class TemporalPrior:
     def __init__(self, model_dir: str | Path, ahead: int = 1, threads: int = 1, ramp: bool = True) -> None:
-        import onnxruntime as ort
-        path = Path(model_dir) / FILE
-        if not path.is_file():
-            raise FileNotFoundError(f"{path}: no DragPoser temporal predictor there; train one with "
-                                    "`sparse-body train dragposer --part temporal`, or set temporal_weight to 0")
-        options = ort.SessionOptions()
-        options.intra_op_num_threads, options.inter_op_num_threads = threads, 1
-        try:
-            self.session = ort.InferenceSession(str(path), options, providers=["CPUExecutionProvider"])
-        except Exception as err:  # noqa: BLE001 - onnxruntime raises its own exception types
-            raise ValueError(f"{path}: not a loadable ONNX model ({err})") from None
-        meta = self.session.get_modelmeta().custom_metadata_map
-        if json.loads(meta.get("part", "null")) != "temporal_predictor":
-            raise ValueError(f"{path}: not a DragPoser temporal predictor (its metadata lacks part)")
-        config = json.loads(meta["config"])
+        self.session, meta = load_model(
+            Path(model_dir) / FILE, ("part", "temporal_predictor"),
+            {"past_latents": LATENT, "past_context": None, "future_latents": LATENT},
+            "train one with `sparse-body train dragposer --part temporal`, or set temporal_weight to 0", threads)
+        config = meta["config"]
         self.past, self.window, self.every = config["past"], config["future"], config["every"]
         if not 1 <= ahead <= self.window:
             raise ValueError(f"ahead must be between 1 and {self.window} (the model's W_f), got {ahead}")

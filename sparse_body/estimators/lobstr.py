@@ -9,7 +9,6 @@ window). A gap in the input longer than max_gap, or time going back, starts the 
 """
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
 import numpy as np
@@ -20,6 +19,7 @@ from .base import Estimator
 from .contact_ik import ContactHold
 from .ik import IKEstimator
 from .lobstr_features import FEATURES, INPUT_SITES, apply_legs, body_scale, features
+from .onnx_model import load_model
 
 
 def default_model_path() -> Path:
@@ -31,25 +31,14 @@ class LobstrModel:
     """The exported step graph and what it was trained with."""
 
     def __init__(self, path: str | Path | None = None, threads: int = 1) -> None:
-        import onnxruntime as ort
         self.path = Path(path) if path else default_model_path()
-        if not self.path.is_file():
-            raise FileNotFoundError(f"{self.path}: no LoBSTr model there; train one with `sparse-body train lobstr`")
-        options = ort.SessionOptions()
-        options.intra_op_num_threads = threads
-        options.inter_op_num_threads = 1
+        self.session, meta = load_model(self.path, ("method", "lobstr"), {"features": FEATURES, "state": None},
+                                        "train one with `sparse-body train lobstr`", threads)
         try:
-            self.session = ort.InferenceSession(str(self.path), options, providers=["CPUExecutionProvider"])
-        except Exception as err:  # noqa: BLE001 - onnxruntime raises its own exception types
-            raise ValueError(f"{self.path}: not a loadable ONNX model ({err})") from None
-        meta = self.session.get_modelmeta().custom_metadata_map
-        try:
-            if json.loads(meta["method"]) != "lobstr":
-                raise ValueError
-            self.config = json.loads(meta["config"])
+            self.config = meta["config"]
             self.hidden, self.fps = int(self.config["hidden"]), float(self.config["fps"])
         except (KeyError, ValueError, TypeError):
-            raise ValueError(f"{self.path}: not a LoBSTr model (its metadata lacks method/config)") from None
+            raise ValueError(f"{self.path}: not a LoBSTr model (its metadata lacks config)") from None
 
     def initial_state(self) -> np.ndarray:
         return np.zeros((1, 1, self.hidden), dtype=np.float32)

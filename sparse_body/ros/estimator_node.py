@@ -22,7 +22,7 @@ from dataclasses import replace
 import numpy as np
 import rclpy
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
-from rcl_interfaces.msg import FloatingPointRange, ParameterDescriptor
+from rcl_interfaces.msg import ParameterDescriptor, SetParametersResult
 from rclpy.lifecycle import LifecycleNode, LifecycleState, TransitionCallbackReturn
 from rclpy.qos import DurabilityPolicy, QoSProfile
 from rclpy.qos_overriding_options import QoSOverridingOptions
@@ -61,6 +61,36 @@ PARAMETERS = {
     "publish_link_tf": (True, "publish every body link on /tf (off when robot_state_publisher does)"),
     "autostart": (False, "configure and activate on start-up (without a lifecycle manager)"),
 }
+# Numbers outside these bounds are refused with the reason (at configure and on a live set).
+RANGES = {"height": (0.5, 2.5), "output_rate": (0.1, 1000.0), "stale_timeout": (0.001, 10.0),
+          "tracker_timeout": (0.01, 60.0), "input_timeout": (0.01, 60.0), "iterations": (1, 100)}
+# What a configured node applies at once; the rest is refused until it is cleaned up.
+LIVE = {"stale_timeout", "tracker_timeout", "publish_link_tf", "autostart"}
+
+
+def check_parameter(name: str, value, default) -> str | None:
+    """Why value is not acceptable for parameter name (whose default shows its type), or None."""
+    if isinstance(default, bool):
+        return None if isinstance(value, bool) else f"{name} must be true or false, got {value!r}"
+    if isinstance(default, (int, float)):
+        if isinstance(value, bool) or not isinstance(value, (int, float)) or not np.isfinite(value):
+            return f"{name} must be a finite number, got {value!r}"
+        if isinstance(default, int) and not float(value).is_integer():
+            return f"{name} must be a whole number, got {value!r}"
+        low, high = RANGES.get(name, (-np.inf, np.inf))
+        return None if low <= value <= high else f"{name} must be between {low:g} and {high:g}, got {value!r}"
+    if isinstance(default, str):
+        if not isinstance(value, str):
+            return f"{name} must be a string, got {value!r}"
+        if name == "estimator":
+            from ..estimators.base import ESTIMATORS
+            try:
+                method, _ = parse_estimator_spec(value)
+            except ValueError as err:
+                return str(err)
+            if method not in ESTIMATORS:
+                return f"unknown estimator {method!r}; available: {', '.join(sorted(ESTIMATORS))}"
+    return None
 
 
 class EstimatorNode(LifecycleNode):
@@ -70,18 +100,36 @@ class EstimatorNode(LifecycleNode):
 
     def __init__(self, **kwargs) -> None:
         super().__init__(self.NAME, **kwargs)
+        # Typed by their defaults but declared dynamically: a wrong type or value given at
+        # start-up is refused by configure with the reason, instead of ending the process.
         for name, (default, text) in self.PARAMETERS.items():
-            descriptor = ParameterDescriptor(description=text)
-            if name == "height":
-                descriptor.floating_point_range = [FloatingPointRange(from_value=0.5, to_value=2.5)]
-            elif name in ("output_rate", "stale_timeout", "tracker_timeout"):
-                descriptor.floating_point_range = [FloatingPointRange(from_value=0.001, to_value=1000.0)]
-            self.declare_parameter(name, default, descriptor)
+            self.declare_parameter(name, default, ParameterDescriptor(description=text, dynamic_typing=True))
+        self.add_on_set_parameters_callback(self._on_set_parameters)
         self._release()
+
+    def _on_set_parameters(self, parameters) -> SetParametersResult:
+        for prm in parameters:
+            if prm.name not in self.PARAMETERS:
+                continue
+            reason = check_parameter(prm.name, prm.value, self.PARAMETERS[prm.name][0])
+            if reason is None and self.estimator is not None and prm.name not in LIVE:
+                reason = f"{prm.name} takes effect at configure: deactivate and clean up the node first"
+            if reason is not None:
+                return SetParametersResult(successful=False, reason=reason)
+        if self.estimator is not None:       # configured: the live ones apply from the next estimate
+            for prm in parameters:
+                if prm.name in LIVE and prm.name in self.params:
+                    self.params[prm.name] = prm.value
+        return SetParametersResult(successful=True)
 
     # -- lifecycle -------------------------------------------------------------------------
     def on_configure(self, state: LifecycleState) -> TransitionCallbackReturn:
         p = {name: self.get_parameter(name).value for name in self.PARAMETERS}
+        problems = [r for name, (default, _) in self.PARAMETERS.items() if (r := check_parameter(name, p[name], default))]
+        if problems:
+            self.get_logger().error(f"configure failed: {'; '.join(problems)}")
+            return TransitionCallbackReturn.FAILURE
+        p = {name: float(v) if isinstance(self.PARAMETERS[name][0], float) else v for name, v in p.items()}
         try:
             sensors = load_sensor_config(p["sensors"])
             if p["fixed_frame"]:

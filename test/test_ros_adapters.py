@@ -191,3 +191,38 @@ def test_calibration_service_measures_offsets_and_height_and_applies_them(ros_en
     assert lefts
     q = lefts[-1]
     assert (Rotation.from_quat([q.x, q.y, q.z, q.w]) * Rotation.from_matrix(glob[J["left_wrist"]]).inv()).magnitude() < 0.01
+
+
+def test_calibration_requests_are_bounded_and_write_only_under_the_calibration_dir(ros_env, tmp_path):
+    from sparse_body.srv import Calibrate
+    (tmp_path / "cal").mkdir()
+    bridge = start_node(BRIDGE, {"source": "vmc", "sensors": "four_point", "vmc_port": _free_udp_port(),
+                                 "devices": VMC_DEVICES, "calibration_dir": str(tmp_path / "cal")},
+                        "sparse_body_tracker_bridge", tmp_path, ros_env)
+    listener = Listener(rclpy, {"/diagnostics": DiagnosticArray})
+    calibrate = listener.node.create_client(Calibrate, "/sparse_body_tracker_bridge/calibrate")
+
+    def call(**fields):
+        future = calibrate.call_async(Calibrate.Request(**fields))
+        assert listener.spin_until(future.done, 30.0), f"no answer to {fields}"
+        return future.result()
+    try:
+        assert calibrate.wait_for_service(timeout_sec=30.0), "no calibration service"
+        endless = call(seconds=float("inf"))                        # killed the bridge (OverflowError)
+        forever = call(seconds=2e9)                                  # blocked its executor for ever
+        outside = call(seconds=0.1, save_path=str(tmp_path / "elsewhere" / "x.yaml"))
+        sneaky = call(seconds=0.1, save_path="../escape.yaml")
+        # while a calibration waits for samples the bridge's other work goes on
+        listener.received["/diagnostics"].clear()
+        waiting = call(seconds=2.5, save_path="mine.yaml")            # no trackers: fails, but only after 2.5 s
+        heard = len(listener.received["/diagnostics"])
+        alive = bridge.poll() is None
+    finally:
+        listener.destroy()
+        stop(bridge)
+    assert alive, (tmp_path / "sparse_body_tracker_bridge.log").read_text()
+    assert not endless.success and "seconds must be between 0 and 30" in endless.message
+    assert not forever.success and "seconds must be between" in forever.message
+    assert not outside.success and "not a .yaml file under" in outside.message
+    assert not sneaky.success and not (tmp_path / "escape.yaml").exists() and not (tmp_path / "elsewhere").exists()
+    assert not waiting.success and heard >= 1

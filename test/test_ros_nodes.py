@@ -368,3 +368,32 @@ def test_parameters_set_while_configured_apply_live_or_are_refused_with_the_reas
     finally:
         listener.destroy()
         stop(proc)
+
+
+def test_trackers_on_a_static_chain_count_as_current(ros_env, tmp_path):
+    """Frames published once on /tf_static (a fixed tracker, a mock-up) are never stale."""
+    from geometry_msgs.msg import TransformStamped
+    from rclpy.qos import DurabilityPolicy, QoSProfile
+    from sparse_body.data.virtual_trackers import synthesize_trackers
+    config = load_sensor_config("three_point")
+    stream = synthesize_trackers(synthetic_walk(1.0), config)
+    proc = start_node(ESTIMATOR, {"sensors": "three_point", "estimator": "ik", "autostart": True},
+                      "sparse_body_estimator", tmp_path, ros_env)
+    listener = Listener(rclpy, {"estimate_status": EstimateStatus})
+    latched = QoSProfile(depth=10, durability=DurabilityPolicy.TRANSIENT_LOCAL)
+    pub = listener.node.create_publisher(TFMessage, "/tf_static", latched)
+    msg = TFMessage()
+    for s, site in enumerate(config.sites):
+        tf = TransformStamped()
+        tf.header.frame_id, tf.child_frame_id = "world", site.frame_id
+        tf.transform.translation.x, tf.transform.translation.y, tf.transform.translation.z = map(float, stream.positions[0, s])
+        (tf.transform.rotation.x, tf.transform.rotation.y, tf.transform.rotation.z,
+         tf.transform.rotation.w) = map(float, stream.orientations[0, s])
+        msg.transforms.append(tf)
+    pub.publish(msg)
+    try:
+        assert listener.spin_until(lambda: sum(s.valid for s in listener.received["estimate_status"]) >= 10, 30.0), \
+            {s.message for s in listener.received["estimate_status"]}
+    finally:
+        listener.destroy()
+        stop(proc)

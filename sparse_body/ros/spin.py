@@ -5,12 +5,17 @@ import rclpy
 from rclpy.executors import ExternalShutdownException
 
 
-def spin_until_shutdown(node) -> None:
+def spin_until_shutdown(node, threads: int = 1) -> None:
     """Spin until SIGINT / SIGTERM (rclpy's handlers shut the context down) and end without a
     traceback: an error raised by a callback that raced the shutdown (its context already
-    gone) is part of stopping, not a failure."""
+    gone) is part of stopping, not a failure. threads > 1: a multi-threaded executor, so a
+    callback in its own group can wait without stopping the others."""
     try:
-        rclpy.spin(node)
+        if threads > 1:
+            from rclpy.executors import MultiThreadedExecutor
+            rclpy.spin(node, executor=MultiThreadedExecutor(num_threads=threads))
+        else:
+            rclpy.spin(node)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     except Exception:  # noqa: BLE001 - re-raised unless the context was shut down under it

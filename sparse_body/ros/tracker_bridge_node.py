@@ -25,6 +25,7 @@ import rclpy
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from geometry_msgs.msg import TransformStamped
 from rcl_interfaces.msg import ParameterDescriptor
+from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
 from rclpy.node import Node
 from rclpy.qos import QoSProfile
 
@@ -54,7 +55,10 @@ PARAMETERS = {
     "serial_baudrate": (921600, "serial: baud rate"),
     "stale_after": (0.25, "vmc / serial: samples older than this (s) when they arrive are dropped and counted"),
     "calibration": ("", "T-pose calibration YAML: applied at start when it exists; where ~/calibrate saves by default"),
+    "calibration_dir": ("", "folder under which a ~/calibrate request's save_path may write (it must exist); "
+                            "empty: requests cannot name a file, only the calibration parameter's is written"),
 }
+MAX_CALIBRATION_SECONDS = 30.0
 
 
 def load_tf_frames(path: str) -> list[tuple[float, list]]:
@@ -109,7 +113,10 @@ class TrackerBridge(Node):
         self._msg_type = TFMessage
         self.pub = self.create_publisher(TFMessage, "/tf", QoSProfile(depth=100))
         self.pub_diag = self.create_publisher(DiagnosticArray, "/diagnostics", QoSProfile(depth=10))
-        self.create_service(Calibrate, "~/calibrate", self._on_calibrate)
+        # its own callback group: the service waits while samples arrive, the rest (diagnostics)
+        # goes on in the executor's other thread
+        self.create_service(Calibrate, "~/calibrate", self._on_calibrate,
+                            callback_group=MutuallyExclusiveCallbackGroup())
         self.counts = {"published": 0, "stale": 0, "unmapped": 0}
         self.unmapped: set[str] = set()
         self._collect: dict[str, list] | None = None
@@ -227,8 +234,33 @@ class TrackerBridge(Node):
             return
         self._count("published", len(transforms))
 
+    def _save_path(self, requested: str) -> Path | None:
+        """Where a calibration may be written: the calibration parameter's file, or a
+        request's save_path inside calibration_dir (any peer on the domain can call the
+        service: it must not write anywhere else, nor create folders)."""
+        if not requested:
+            return Path(self.params["calibration"]) if self.params["calibration"] else None
+        folder = self.params["calibration_dir"]
+        if not folder:
+            raise CalibrationError("save_path refused: the bridge has no calibration_dir to write requests under")
+        path = Path(requested).expanduser()
+        path = (Path(folder) / path if not path.is_absolute() else path).resolve()
+        if not path.is_relative_to(Path(folder).resolve()) or path.suffix not in (".yaml", ".yml"):
+            raise CalibrationError(f"save_path refused: {requested!r} is not a .yaml file under {folder}")
+        if not path.parent.is_dir():
+            raise CalibrationError(f"save_path refused: {path.parent} does not exist")
+        return path
+
     def _on_calibrate(self, request, response):
-        seconds = request.seconds if request.seconds > 0 else 1.0
+        seconds = float(request.seconds) if request.seconds != 0 else 1.0
+        try:
+            if not 0 < seconds <= MAX_CALIBRATION_SECONDS:   # also NaN and inf
+                raise CalibrationError(f"seconds must be between 0 and {MAX_CALIBRATION_SECONDS:g}, got {request.seconds}")
+            path = self._save_path(request.save_path)
+        except CalibrationError as err:
+            response.success, response.message = False, str(err)
+            self.get_logger().warn(f"calibration refused: {err}")
+            return response
         with self._lock:
             self._collect = {}
         time.sleep(seconds)      # samples arrive on the source's thread meanwhile
@@ -241,7 +273,6 @@ class TrackerBridge(Node):
             response.success, response.message = False, str(err)
             self.get_logger().warn(f"calibration failed: {err}")
             return response
-        path = request.save_path or self.params["calibration"]
         if path:
             calibration.save(path)
         with self._lock:
@@ -298,7 +329,7 @@ def main(args=None) -> None:
     except (KeyboardInterrupt, ExternalShutdownException):   # stopped while loading a bag: a normal end
         rclpy.try_shutdown()
         return
-    spin_until_shutdown(node)
+    spin_until_shutdown(node, threads=2)
 
 
 if __name__ == "__main__":

@@ -27,10 +27,10 @@ bench: setup
 	$(VENV)/bin/sparse-body bench --network
 	$(VENV)/bin/sparse-body bench --dragposer
 
-# A million generated inputs into each byte parser (VMC datagrams, the serial stream).
+# A million generated inputs into each parser of outside input: the serial stream, VMC
+# datagrams, BVH and ASF/AMC motion files, sensor configuration and calibration YAML.
 fuzz: setup
-	$(VENV)/bin/python -m sparse_body.adapters.fuzz serial 1000000
-	$(VENV)/bin/python -m sparse_body.adapters.fuzz vmc 1000000
+	for target in serial vmc bvh asf_amc yaml; do $(VENV)/bin/python -m sparse_body.fuzz $$target 1000000 || exit 1; done
 
 # Retrain the shipped LoBSTr model (about an hour on 2 CPU cores) and rewrite its model card.
 train-lobstr: setup

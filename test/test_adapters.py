@@ -222,14 +222,15 @@ def test_calibration_refuses_what_is_not_a_tpose(rng, tmp_path):
         Calibration.load(tmp_path / "worse.yaml")
 
 
-@pytest.mark.parametrize("target", ["serial", "vmc"])
-def test_a_short_fuzzing_run_finds_nothing(target):
+@pytest.mark.parametrize("target,runs", [("serial", 20000), ("vmc", 20000), ("bvh", 3000), ("asf_amc", 3000),
+                                         ("yaml", 3000)])
+def test_a_short_fuzzing_run_finds_nothing(target, runs):
     """The full run (a million inputs each) is `make fuzz`; this keeps the harness working."""
     pytest.importorskip("atheris")
-    out = subprocess.run([sys.executable, "-m", "sparse_body.adapters.fuzz", target, "20000"],
-                         capture_output=True, text=True, timeout=300)
+    out = subprocess.run([sys.executable, "-m", "sparse_body.fuzz", target, str(runs)],
+                         capture_output=True, text=True, timeout=600)
     assert out.returncode == 0, out.stderr[-3000:]
-    assert "Done 20000 runs" in out.stderr
+    assert f"Done {runs} runs" in out.stderr
 
 
 def test_a_bundle_with_a_negative_element_size_does_not_hang_the_decoder():

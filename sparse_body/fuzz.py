@@ -1,0 +1,209 @@
+"""`python -m sparse_body.fuzz TARGET RUNS`: coverage-guided fuzzing (atheris, libFuzzer) of
+every parser that reads what a user or a device hands us.
+
+Targets: serial (the tracker byte stream), vmc (one UDP datagram), bvh (a motion file),
+asf_amc (a skeleton and its motion), yaml (a sensor configuration and a calibration). The
+corpus starts from well-formed input that libFuzzer then mutates. serial: the input is split
+into reads of sizes taken from the input itself and fed to one FrameDecoder, as a stream
+with garbage and torn frames. The file targets write the input to a file and load it: the
+parser must return finite data or raise its own error type (MotionFileError,
+SensorConfigError, CalibrationError) naming the file. Anything else escaping, a bad decoded
+sample, or one input taking longer than the time limit (a hang) stops the run with a crash
+report and a non-zero exit status; a clean run prints how many inputs it executed.
+"""
+from __future__ import annotations
+
+import sys
+import tempfile
+from pathlib import Path
+
+import atheris
+import numpy as np
+import scipy.spatial.transform  # noqa: F401 - imported uninstrumented: coverage of our parsers, not of scipy
+import yaml  # noqa: F401 - likewise
+
+with atheris.instrument_imports():
+    from pythonosc.osc_bundle_builder import IMMEDIATELY, OscBundleBuilder
+    from pythonosc.osc_message_builder import OscMessageBuilder
+
+    from sparse_body.adapters.calibration import Calibration, CalibrationError
+    from sparse_body.adapters.serial_protocol import FrameDecoder, encode_frame
+    from sparse_body.adapters.vmc import KINDS, VmcDecoder
+    from sparse_body.core.sensors import SensorConfigError, load_sensor_config
+    from sparse_body.data import MotionFileError
+    from sparse_body.data.asf_amc import load_amc, load_asf
+    from sparse_body.data.bvh import load_bvh
+
+
+def _check(orientation, position) -> None:
+    if not (np.all(np.isfinite(orientation)) and abs(np.linalg.norm(orientation) - 1) < 1e-6):
+        raise AssertionError(f"decoded a bad orientation {orientation}")
+    if position is not None and not np.all(np.isfinite(position)):
+        raise AssertionError(f"decoded a bad position {position}")
+
+
+_serial = FrameDecoder()
+_vmc = VmcDecoder()
+
+
+def serial_input(data: bytes) -> None:
+    fdp = atheris.FuzzedDataProvider(data)
+    cuts = [fdp.ConsumeIntInRange(1, 64) for _ in range(fdp.ConsumeIntInRange(1, 4))]
+    rest = fdp.ConsumeBytes(fdp.remaining_bytes())
+    i = k = 0
+    while i < len(rest):
+        for frame in _serial.feed(rest[i:i + cuts[k % len(cuts)]]):
+            _check(frame.orientation, frame.position)
+        i, k = i + cuts[k % len(cuts)], k + 1
+
+
+def vmc_input(data: bytes) -> None:
+    for sample in _vmc.datagram(data, 0.0):
+        _check(sample.orientation, sample.position)
+
+
+_DIR = Path(tempfile.mkdtemp(prefix="sparse_body_fuzz_files_"))
+_SPLIT = b"\n%%\n"          # asf_amc and yaml: two files in one input
+
+
+def _file(name: str, data: bytes) -> Path:
+    path = _DIR / name
+    path.write_bytes(data)
+    return path
+
+
+def bvh_input(data: bytes) -> None:
+    try:
+        motion = load_bvh(_file("input.bvh", data))
+    except MotionFileError as err:
+        assert "input.bvh" in str(err), err
+        return
+    assert np.all(np.isfinite(motion.positions)) and motion.fps > 0
+
+
+def asf_amc_input(data: bytes) -> None:
+    asf, _, amc = data.partition(_SPLIT)
+    try:
+        motion = load_amc(_file("input.amc", amc), load_asf(_file("input.asf", asf)))
+    except MotionFileError as err:
+        assert "input.as" in str(err) or "input.amc" in str(err), err
+        return
+    assert np.all(np.isfinite(motion.positions))
+
+
+def yaml_input(data: bytes) -> None:
+    sensors, _, calibration = data.partition(_SPLIT)
+    try:
+        load_sensor_config(_file("sensors.yaml", sensors))
+    except SensorConfigError as err:
+        assert "sensors.yaml" in str(err), err
+    try:
+        Calibration.load(_file("calibration.yaml", calibration))
+    except CalibrationError as err:
+        assert "calibration.yaml" in str(err), err
+
+
+TARGETS = {"serial": serial_input, "vmc": vmc_input, "bvh": bvh_input, "asf_amc": asf_amc_input, "yaml": yaml_input}
+TEXT_TARGETS = {"bvh", "asf_amc", "yaml"}
+
+
+def text_seeds() -> list[bytes]:
+    from sparse_body.resources import config_dir
+    return [_BVH, _ASF + _SPLIT + _AMC,
+            (config_dir() / "sensors" / "four_point.yaml").read_bytes() + _SPLIT + _CALIBRATION]
+
+
+_BVH = b"""HIERARCHY
+ROOT Hips
+{
+  OFFSET 0 0 0
+  CHANNELS 6 Xposition Yposition Zposition Zrotation Xrotation Yrotation
+  JOINT Chest
+  {
+    OFFSET 0 10 0
+    CHANNELS 3 Zrotation Xrotation Yrotation
+    End Site
+    {
+      OFFSET 0 5 0
+    }
+  }
+}
+MOTION
+Frames: 2
+Frame Time: 0.5
+0 100 0 0 0 0 0 0 0
+20 100 0 0 0 0 90 0 0
+"""
+_ASF = b""":units
+  length 1.0
+:root
+   order TX TY TZ RX RY RZ
+   axis XYZ
+   position 0 0 0
+:bonedata
+  begin
+     name a
+     direction 1 0 0
+     length 10
+     axis 0 0 0 XYZ
+    dof rz
+  end
+  begin
+     name b
+     direction 0 1 0
+     length 10
+     axis 0 0 90 XYZ
+    dof rx ry
+  end
+:hierarchy
+  begin
+    root a
+    a b
+  end
+"""
+_AMC = b""":FULLY-SPECIFIED
+:DEGREES
+1
+root 0 0 0 0 0 0
+a 0
+b 0 10
+2
+root 1 0 0 0 5 0
+a 90
+b 0 0
+"""
+_CALIBRATION = b"height: 1.7\nfacing_yaw: 0.1\noffsets:\n  head: [0, 0, 0, 1]\n"
+
+
+def seeds() -> list[bytes]:
+    out = [encode_frame(1, 1000, [0, 0, 0, 1]), encode_frame(2, 2 ** 32 - 5, [0.5, 0.5, 0.5, 0.5], [1, 2, 3])]
+    out.append(b"\x02\x01" + out[0] + b"\xa5\x5a\x01" + out[1])
+    for address in KINDS:
+        b = OscMessageBuilder(address)
+        for v in ["LHR-1", 0.1, 1.6, 0.2, 0.0, 0.0, 0.0, 1.0]:
+            b.add_arg(v)
+        out.append(b.build().dgram)
+    bundle = OscBundleBuilder(IMMEDIATELY)
+    bundle.add_content(OscMessageBuilder("/VMC/Ext/Hmd/Pos").build())
+    out.append(bundle.build().dgram)
+    return out
+
+
+def main(argv: list[str] | None = None) -> None:
+    argv = list(sys.argv if argv is None else argv)
+    if len(argv) < 3 or argv[1] not in TARGETS:
+        sys.exit(f"usage: python -m sparse_body.fuzz {{{','.join(TARGETS)}}} RUNS [libFuzzer flags]")
+    target, runs = argv[1], int(argv[2])
+    corpus = Path(tempfile.mkdtemp(prefix=f"sparse_body_fuzz_{target}_"))
+    for i, seed in enumerate(text_seeds() if target in TEXT_TARGETS else seeds()):
+        (corpus / f"seed{i}").write_bytes(seed)
+    # -timeout: an input that takes seconds is a hang (a receiver thread stuck for good, a
+    # loader that never returns)
+    max_len = 4096 if target in TEXT_TARGETS else 512
+    atheris.Setup([argv[0], f"-runs={runs}", f"-max_len={max_len}", "-timeout=10", *argv[3:], str(corpus)],
+                  TARGETS[target])
+    atheris.Fuzz()
+
+
+if __name__ == "__main__":
+    main()

@@ -8,12 +8,20 @@ here through its autostart parameter.
 """
 import os
 
-from ament_index_python.packages import get_package_share_directory
+from ament_index_python.packages import PackageNotFoundError, get_package_share_directory
 from launch import LaunchDescription
-from launch.actions import DeclareLaunchArgument, OpaqueFunction
+from launch.actions import DeclareLaunchArgument, LogInfo, OpaqueFunction
 from launch.conditions import IfCondition
 from launch.substitutions import LaunchConfiguration
 from launch_ros.actions import LifecycleNode, Node
+
+
+def _installed(package: str) -> bool:
+    try:
+        get_package_share_directory(package)
+        return True
+    except PackageNotFoundError:
+        return False
 
 
 def _nodes(context):
@@ -28,8 +36,15 @@ def _nodes(context):
                          "model_path": arg("model_path"),
                          "publish_link_tf": False, "autostart": True}]
     with_rsp = arg("robot_state_publisher").lower() in ("true", "1")
+    notes = []
+    if with_rsp and not _installed("robot_state_publisher"):
+        # checked before anything starts: a failing node must not leave the estimator orphaned
+        notes.append(LogInfo(msg="robot_state_publisher is not installed: the estimator publishes the body's "
+                                 "link TF itself (install ros-$ROS_DISTRO-robot-state-publisher, or pass "
+                                 "robot_state_publisher:=false to silence this)"))
+        with_rsp = False
     estimator_params[1]["publish_link_tf"] = not with_rsp
-    nodes = [LifecycleNode(package="sparse_body", executable="estimator_node", name="sparse_body_estimator",
+    nodes = notes + [LifecycleNode(package="sparse_body", executable="estimator_node", name="sparse_body_estimator",
                            namespace="", output="screen", parameters=estimator_params)]
     if with_rsp:
         nodes.append(Node(package="robot_state_publisher", executable="robot_state_publisher", output="screen",
@@ -58,7 +73,8 @@ def generate_launch_description():
         DeclareLaunchArgument("refine", default_value="false",
                               description="also start the constraint node (DragPoser refinement, refined/ topics)"),
         DeclareLaunchArgument("robot_state_publisher", default_value="true",
-                              description="start robot_state_publisher (else the estimator publishes link TF)"),
+                              description="start robot_state_publisher (else, or when it is not installed, the "
+                                          "estimator publishes link TF)"),
         OpaqueFunction(function=_nodes),
         Node(package="rviz2", executable="rviz2", output="screen", condition=IfCondition(LaunchConfiguration("rviz")),
              arguments=["-d", os.path.join(get_package_share_directory("sparse_body"), "config", "sparse_body.rviz")]),

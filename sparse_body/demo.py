@@ -11,9 +11,11 @@ from .core.kinematics import forward_kinematics
 from .core.metrics import sequence_metrics
 from .core.rotations import quat_to_matrix
 from .core.sensors import SensorConfig
-from .core.skeleton import PARENTS
+from .core.skeleton import JOINT_INDEX, PARENTS
 from .data.motion import Motion
 from .offline import make_bag, process_bag
+
+HEAD = JOINT_INDEX["head"]
 
 DEMO_CLIP = "02_05"   # punching and striking, from the test split: never trained on
 
@@ -31,9 +33,16 @@ def pick_motion(mocap_root: Path | None, motion_file: str | None, seconds: float
             "a built-in SYNTHETIC walk (no motion capture found: pass --motion FILE or --mocap DIR for real motion)")
 
 
+def head_tops(positions: np.ndarray, global_rot: np.ndarray, skull: float) -> np.ndarray:
+    """(T, 3) tops of the heads: the 22-joint body ends mid-neck (the head joint), so the
+    skull is drawn as a segment of its length up the head's own z axis."""
+    return positions[:, HEAD] + global_rot[:, HEAD] @ np.array([0.0, 0.0, skull])
+
+
 def animate(path: Path, truth: np.ndarray, estimate: np.ndarray, trackers: np.ndarray, fps: float,
-            title: str, out_fps: float = 15.0) -> None:
-    """A GIF: ground truth in grey, the estimate in blue, trackers as red dots."""
+            title: str, out_fps: float = 15.0, tops: tuple[np.ndarray, np.ndarray] | None = None) -> None:
+    """A GIF following the body: ground truth in grey, the estimate in blue, trackers as red
+    dots where they are mounted (a mounting offset away from their joints)."""
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
@@ -43,22 +52,28 @@ def animate(path: Path, truth: np.ndarray, estimate: np.ndarray, trackers: np.nd
     idx = np.arange(0, len(truth), step)
     fig = plt.figure(figsize=(5, 5))
     ax = fig.add_subplot(projection="3d")
-    lo, hi = truth.reshape(-1, 3).min(0), truth.reshape(-1, 3).max(0)
-    centre, half = (lo + hi) / 2, max(hi - lo) / 2 + 0.2
+    # the view follows the pelvis and is just larger than the body, which then fills it
+    half = 0.55 * (truth[..., 2].max() - truth[..., 2].min()) + 0.1
+    floor = truth[..., 2].min()
 
     def draw(k):
         i = idx[k]
         ax.cla()
+        centre = truth[i, 0]
         ax.set_xlim(centre[0] - half, centre[0] + half)
         ax.set_ylim(centre[1] - half, centre[1] + half)
-        ax.set_zlim(0, 2 * half)
-        ax.set_xlabel("x")
-        ax.set_ylabel("y")
-        ax.set_title(f"{title}\nframe {i}: grey truth, blue estimate, red trackers", fontsize=8)
-        for pos, colour in ((truth[i], "0.6"), (estimate[i], "tab:blue")):
+        ax.set_zlim(floor, floor + 2 * half)
+        ax.set_xlabel("x [m]")
+        ax.set_ylabel("y [m]")
+        ax.set_zlabel("z [m]")
+        ax.set_title(f"{title}\nframe {i}: grey truth, blue estimate,\nred trackers as mounted (offset from their joints)",
+                     fontsize=8)
+        for n, (pos, colour) in enumerate(((truth[i], "0.6"), (estimate[i], "tab:blue"))):
             for j in range(1, len(PARENTS)):
                 p = PARENTS[j]
                 ax.plot(*zip(pos[p], pos[j]), color=colour, lw=2)
+            if tops is not None:
+                ax.plot(*zip(pos[HEAD], tops[n][i]), color=colour, lw=5)
         tr = trackers[i][np.all(np.isfinite(trackers[i]), axis=1)]
         ax.scatter(tr[:, 0], tr[:, 1], tr[:, 2], color="tab:red", s=20)
 
@@ -93,6 +108,9 @@ def run_demo(out_dir: Path, sensors: SensorConfig, estimator: str, mocap_root: P
     if gif:
         stream = read_tracker_stream(trackers, sensors)
         animation = out_dir / "demo.gif"
-        animate(animation, motion.positions, pos, stream.positions, motion.fps, f"{estimator} / {sensors.name}")
+        skull = 0.1 * motion.skeleton.height() / 1.75
+        tops = (head_tops(motion.positions, motion.global_rotations, skull), head_tops(pos, glob, skull))
+        animate(animation, motion.positions, pos, stream.positions, motion.fps, f"{estimator} / {sensors.name}",
+                tops=tops)
         print(f"animation: {animation}")
     return metrics

@@ -188,3 +188,17 @@ def test_cli_refuses_bad_arguments_and_lists_what_is_there(tmp_path, capsys):
         main(["process", "--help"])
     help_text = capsys.readouterr().out
     assert "(default: ik)" in help_text and "six_point" in help_text and "lobstr" in help_text
+
+
+def test_setup_py_defers_to_pyproject():
+    """ROS Python tooling still looks for a setup.py; it must give pyproject.toml's metadata."""
+    import subprocess
+    import sys
+    import tomllib
+    from pathlib import Path
+    root = Path(__file__).resolve().parents[1]
+    project = tomllib.loads((root / "pyproject.toml").read_text())["project"]
+    out = subprocess.run([sys.executable, "setup.py", "--name", "--version"], cwd=root, capture_output=True,
+                         text=True, timeout=120)
+    assert out.returncode == 0, out.stderr[-2000:]
+    assert out.stdout.split()[-2:] == [project["name"], project["version"]]

@@ -60,3 +60,23 @@ def test_foot_contacts_cross_processes_over_dds(ros_domain):
     assert [c.name for c in got.contacts] == ["left_foot", "right_foot"]
     assert got.contacts[0].in_contact and not got.contacts[1].in_contact
     assert got.contacts[0].probability == pytest.approx(0.9) and got.contacts[0].contact_point.x == 1.5
+
+
+def test_cmake_configures_with_the_build_directory_outside_the_source_tree(tmp_path):
+    """What colcon does (build/ beside the package), with the setup's .venv inside the package:
+    numpy's headers under the source tree were refused in the exported targets."""
+    import os
+    import shutil
+    import subprocess
+    import sys
+    from pathlib import Path
+    root = Path(__file__).resolve().parents[1]
+    venv = Path(sys.prefix)
+    if shutil.which("cmake") is None or not (venv / "share" / "ament_cmake" / "cmake").is_dir():
+        pytest.skip("cmake or the ament CMake packages of the setup are not there")
+    env = {**os.environ, "AMENT_PREFIX_PATH": str(venv), "CMAKE_PREFIX_PATH": str(venv),
+           "PATH": f"{venv / 'bin'}:{os.environ['PATH']}", "_ROS_WHEELS_BOOTSTRAP_COMPLETE": "1"}
+    out = subprocess.run(["cmake", "-S", str(root), "-B", str(tmp_path / "build"), "-DBUILD_TESTING=OFF",
+                          "-DSPARSE_BODY_INSTALL_PYTHON=OFF", f"-DCMAKE_INSTALL_PREFIX={tmp_path / 'install'}",
+                          f"-DPython3_EXECUTABLE={sys.executable}"], env=env, capture_output=True, text=True, timeout=600)
+    assert out.returncode == 0, (out.stdout + out.stderr)[-3000:]

@@ -32,7 +32,7 @@ bench: setup
 fuzz: setup
 	for target in serial vmc bvh asf_amc yaml; do $(VENV)/bin/python -m sparse_body.fuzz $$target 1000000 || exit 1; done
 
-# Retrain the shipped LoBSTr model (about an hour on 2 CPU cores) and rewrite its model card.
+# Retrain the shipped LoBSTr model (about 50 minutes on 2 CPU cores) and rewrite its model card.
 train-lobstr: setup
 	$(VENV)/bin/sparse-body train lobstr --config small
 

@@ -119,13 +119,21 @@ def evaluate(estimator_spec: str, sensors: SensorConfig, mocap_root: Path, split
     return result
 
 
-def format_table(results: list[EvalResult], reference: dict[str, dict[str, float]] | None = None) -> str:
-    """Metrics as rows, one column per result (and per paper figure given in reference)."""
+def format_table(results: list[EvalResult], reference: dict[str, dict[str, float]] | None = None,
+                 max_width: int = 100) -> str:
+    """Metrics as rows, one column per result (and per paper figure given in reference).
+    Columns whose names would make the table wider than max_width are numbered, and the
+    numbers named below the table, so it fits a normal terminal."""
     columns = [f"{r.estimator}/{r.sensors}" for r in results] + list(reference or {})
     values = [r.summary for r in results] + list((reference or {}).values())
     keys = list(results[0].summary)
     width = max(len(k) for k in keys) + 2
     colw = max(12, *(len(c) + 2 for c in columns))
+    legend = []
+    if width + colw * len(columns) > max_width:
+        legend = [f"  [{k + 1}] {c}" for k, c in enumerate(columns)]
+        columns = [f"[{k + 1}]" for k in range(len(columns))]
+        colw = 9
     lines = ["".ljust(width) + "".join(c.rjust(colw) for c in columns)]
     for key in keys:
         cells = []
@@ -135,7 +143,7 @@ def format_table(results: list[EvalResult], reference: dict[str, dict[str, float
         lines.append(key.ljust(width) + "".join(cells))
     frames = sum(results[0].frames)
     lines.append(f"({len(results[0].clips)} clips of the {results[0].split} split, {frames} frames)")
-    return "\n".join(lines)
+    return "\n".join(lines + legend)
 
 
 def write_json(results: list[EvalResult], path: Path) -> None:

@@ -71,3 +71,15 @@ def test_eval_without_mocap_says_where_to_point(tmp_path):
     proc = subprocess.run([sys.executable, "-m", "sparse_body.cli", "eval", "--estimator", "reference",
                            "--mocap", str(tmp_path)], capture_output=True, text=True, timeout=120)
     assert proc.returncode != 0 and "no clips.tsv there" in proc.stderr
+
+
+def test_wide_eval_tables_fit_a_terminal_with_their_columns_named_below():
+    from sparse_body.evaluation import EvalResult, format_table
+    metrics = {"MPJPE [cm]": 4.4, "Contact acc [%]": 79.3, "End-effector PE [cm]": 0.1}
+    results = [EvalResult(name, "four_point", "test", ["02_05"], [100], [metrics])
+               for name in ("lobstr", "lobstr:contact_ik=false", "ik", "refined:base=lobstr,iterations=5")]
+    table = format_table(results, {"LoBSTr paper": {"Contact acc [%]": 85.77}})
+    assert max(len(line) for line in table.splitlines()) <= 100, table
+    assert "[2] lobstr:contact_ik=false/four_point" in table and "[5] LoBSTr paper" in table
+    narrow = format_table(results[:1])
+    assert "lobstr/four_point" in narrow.splitlines()[0]        # a narrow table keeps its names on top

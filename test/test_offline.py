@@ -202,3 +202,18 @@ def test_setup_py_defers_to_pyproject():
                          text=True, timeout=120)
     assert out.returncode == 0, out.stderr[-2000:]
     assert out.stdout.split()[-2:] == [project["name"], project["version"]]
+
+
+def test_the_demo_draws_the_skull_above_the_head_joint_and_its_output_is_not_committed():
+    from pathlib import Path
+    from sparse_body.core.kinematics import forward_kinematics
+    from sparse_body.demo import HEAD, head_tops
+    from sparse_body.estimators.reference import standing_pose
+    from sparse_body.core.skeleton import Skeleton
+    glob, pos = forward_kinematics(standing_pose()[None], np.zeros((1, 3)), Skeleton.canonical().offsets)
+    top = head_tops(pos, glob, 0.1)
+    np.testing.assert_allclose(top[0] - pos[0, HEAD], [0.0, 0.0, 0.1], atol=1e-12)
+    root = Path(__file__).resolve().parents[1]
+    assert "/sparse_body_demo/" in (root / ".gitignore").read_text().split()
+    recipe = (root / "Makefile").read_text().split("\ntest: setup\n")[1].splitlines()[0]
+    assert "pytest" in recipe and "-rs" in recipe            # make test says what it skipped and why

@@ -397,3 +397,10 @@ def test_trackers_on_a_static_chain_count_as_current(ros_env, tmp_path):
     finally:
         listener.destroy()
         stop(proc)
+
+
+def test_the_estimator_parameter_names_every_estimator():
+    from sparse_body.estimators.base import ESTIMATORS
+    from sparse_body.ros.estimator_node import PARAMETERS
+    text = PARAMETERS["estimator"][1]
+    assert all(name in text for name in ESTIMATORS), text

@@ -33,6 +33,7 @@ with atheris.instrument_imports():
     from sparse_body.data import MotionFileError
     from sparse_body.data.asf_amc import load_amc, load_asf
     from sparse_body.data.bvh import load_bvh
+    from sparse_body.data.samples import TINY_AMC, TINY_ASF, TINY_BVH
 
 
 def _check(orientation, position) -> None:
@@ -109,69 +110,10 @@ TEXT_TARGETS = {"bvh", "asf_amc", "yaml"}
 
 def text_seeds() -> list[bytes]:
     from sparse_body.resources import config_dir
-    return [_BVH, _ASF + _SPLIT + _AMC,
+    return [TINY_BVH.encode(), TINY_ASF.encode() + _SPLIT + TINY_AMC.encode(),
             (config_dir() / "sensors" / "four_point.yaml").read_bytes() + _SPLIT + _CALIBRATION]
 
 
-_BVH = b"""HIERARCHY
-ROOT Hips
-{
-  OFFSET 0 0 0
-  CHANNELS 6 Xposition Yposition Zposition Zrotation Xrotation Yrotation
-  JOINT Chest
-  {
-    OFFSET 0 10 0
-    CHANNELS 3 Zrotation Xrotation Yrotation
-    End Site
-    {
-      OFFSET 0 5 0
-    }
-  }
-}
-MOTION
-Frames: 2
-Frame Time: 0.5
-0 100 0 0 0 0 0 0 0
-20 100 0 0 0 0 90 0 0
-"""
-_ASF = b""":units
-  length 1.0
-:root
-   order TX TY TZ RX RY RZ
-   axis XYZ
-   position 0 0 0
-:bonedata
-  begin
-     name a
-     direction 1 0 0
-     length 10
-     axis 0 0 0 XYZ
-    dof rz
-  end
-  begin
-     name b
-     direction 0 1 0
-     length 10
-     axis 0 0 90 XYZ
-    dof rx ry
-  end
-:hierarchy
-  begin
-    root a
-    a b
-  end
-"""
-_AMC = b""":FULLY-SPECIFIED
-:DEGREES
-1
-root 0 0 0 0 0 0
-a 0
-b 0 10
-2
-root 1 0 0 0 5 0
-a 90
-b 0 0
-"""
 _CALIBRATION = b"height: 1.7\nfacing_yaw: 0.1\noffsets:\n  head: [0, 0, 0, 1]\n"
 
 

@@ -1,4 +1,4 @@
-"""BVH and ASF/AMC loaders on small files written here, with hand-computed answers."""
+"""BVH and ASF/AMC loaders on tiny files (sparse_body/data/samples.py) with hand-computed answers, and on broken ones."""
 import gzip
 
 import numpy as np
@@ -7,28 +7,9 @@ import pytest
 from sparse_body.data import MotionFileError
 from sparse_body.data.asf_amc import load_amc, load_asf
 from sparse_body.data.bvh import load_bvh
+from sparse_body.data.samples import TINY_AMC, TINY_ASF, TINY_BVH
 
-BVH = """HIERARCHY
-ROOT Hips
-{
-  OFFSET 0 0 0
-  CHANNELS 6 Xposition Yposition Zposition Zrotation Xrotation Yrotation
-  JOINT Chest
-  {
-    OFFSET 0 10 0
-    CHANNELS 3 Zrotation Xrotation Yrotation
-    End Site
-    {
-      OFFSET 0 5 0
-    }
-  }
-}
-MOTION
-Frames: 2
-Frame Time: 0.5
-0 100 0 0 0 0 0 0 0
-20 100 0 0 0 0 90 0 0
-"""
+BVH, ASF, AMC = TINY_BVH, TINY_ASF, TINY_AMC
 
 
 def test_bvh_positions_hand_computed(tmp_path):
@@ -62,64 +43,7 @@ def test_truncated_bvh_names_file_and_problem(tmp_path):
         load_bvh(tmp_path / "absent.bvh")
 
 
-ASF = """:version 1.10
-:name tiny
-:units
-  mass 1.0
-  length 1.0
-  angle deg
-:root
-   order TX TY TZ RX RY RZ
-   axis XYZ
-   position 0 0 0
-   orientation 0 0 0
-:bonedata
-  begin
-     id 1
-     name a
-     direction 1 0 0
-     length 10
-     axis 0 0 0 XYZ
-    dof rz
-  end
-  begin
-     id 2
-     name b
-     direction 0 1 0
-     length 10
-     axis 0 0 90 XYZ
-    dof rx
-  end
-  begin
-     id 3
-     name c
-     direction 0 1 0
-     length 10
-     axis 0 0 0 XYZ
-  end
-:hierarchy
-  begin
-    root a
-    a b
-    b c
-  end
-"""
 
-AMC = """:FULLY-SPECIFIED
-:DEGREES
-1
-root 0 0 0 0 0 0
-a 0
-b 0
-2
-root 0 0 0 0 0 0
-a 90
-b 0
-3
-root 0 0 0 0 0 0
-a 0
-b 90
-"""
 
 
 def test_asf_amc_positions_hand_computed(tmp_path):

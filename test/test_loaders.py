@@ -122,6 +122,8 @@ def test_malformed_bvh_is_a_clear_error_naming_the_file(tmp_path, old, new, prob
     ("order TX TY TZ RX RY RZ", "order X", "root order"),                         # IndexError
     ("order TX TY TZ RX RY RZ", "order TX TY TW", "root order"),
     ("    dof rz", "    dof rx rx", "dof"),
+    ("direction 1 0 0", "direction 1 0", "three finite numbers"),         # found by make fuzz: a matmul error
+    ("     length 10\n", "     length nan\n", "bone length"),
 ])
 def test_malformed_asf_is_a_clear_error_naming_the_file(tmp_path, old, new, problem):
     assert old in ASF

@@ -39,6 +39,9 @@ def test_unknown_site_is_named_with_the_file(tmp_path):
     path.write_text("sites:\n  head: {offset: [1, 2, 3]}\n")               # was an AttributeError
     with pytest.raises(SensorConfigError, match=r"mine\.yaml: site 'head': offset must be a mapping"):
         load_sensor_config(path)
+    path.write_text("sites:\n  head: {true: 1}\n")                          # found by make fuzz: a TypeError
+    with pytest.raises(SensorConfigError, match="unknown key.s. True"):
+        load_sensor_config(path)
     path.write_bytes(b"sites:\n  head: {frame: \xff\xfe}\n")                 # not UTF-8: the file is named
     with pytest.raises(SensorConfigError, match=r"mine\.yaml: not UTF-8 text"):
         load_sensor_config(path)

@@ -123,7 +123,7 @@ def parse_sensor_config(data: dict, source: str = "<dict>") -> SensorConfig:
             raise SensorConfigError(f"{where}: expected a mapping, got {spec!r}")
         unknown = set(spec) - {"frame", "measures", "offset"}
         if unknown:
-            raise SensorConfigError(f"{where}: unknown key(s) {', '.join(sorted(unknown))}")
+            raise SensorConfigError(f"{where}: unknown key(s) {', '.join(sorted(map(str, unknown)))}")
         measures = spec.get("measures", "pose")
         if measures not in MEASURES:
             raise SensorConfigError(f"{where}: measures must be one of {', '.join(MEASURES)}, got {measures!r}")

@@ -58,6 +58,13 @@ class AsfSkeleton:
 ROOT_CHANNELS = {"TX", "TY", "TZ", "RX", "RY", "RZ"}
 
 
+def _three(path: Path, lineno: int, what: str, values: list[str]) -> np.ndarray:
+    out = np.array([float(v) for v in values[:3]])
+    if out.shape != (3,) or not np.all(np.isfinite(out)):
+        raise MotionFileError(path, f"line {lineno}: {what} needs three finite numbers, got {' '.join(values)!r}")
+    return out
+
+
 def _axis_matrix(values: list[str], order: str) -> np.ndarray:
     angles = np.deg2rad([float(v) for v in values])
     return Rotation.from_euler(order.lower(), angles).as_matrix()
@@ -91,7 +98,7 @@ def load_asf(path: Path) -> AsfSkeleton:
                 elif tok[0] == "axis":
                     root_axis = _axis_matrix(["0", "0", "0"], tok[1])
                 elif tok[0] == "position":
-                    root_position = np.array([float(v) for v in tok[1:4]])
+                    root_position = _three(path, lineno, "root position", tok[1:])
             elif section == ":bonedata":
                 if tok[0] == "begin":
                     current = {"dof": []}
@@ -105,9 +112,11 @@ def load_asf(path: Path) -> AsfSkeleton:
                     if tok[0] == "name":
                         current["name"] = tok[1]
                     elif tok[0] == "direction":
-                        current["direction"] = np.array([float(v) for v in tok[1:4]])
+                        current["direction"] = _three(path, lineno, "direction", tok[1:])
                     elif tok[0] == "length":
                         current["length"] = float(tok[1])
+                        if not (np.isfinite(current["length"]) and current["length"] >= 0):
+                            raise MotionFileError(path, f"line {lineno}: bone length must be a number >= 0, got {tok[1]}")
                     elif tok[0] == "axis":
                         current["axis"] = _axis_matrix(tok[1:4], tok[4] if len(tok) > 4 else "XYZ")
                     elif tok[0] == "dof":

@@ -192,7 +192,7 @@ def bench_dragposer(frames: int = 600, max_iterations: int = 20, tolerance: floa
     stream = synthesize_trackers(motion, config)
     # the search alone, as the reference does it: no temporal prior, no IK polish
     est = DragPoserEstimator(config, motion.skeleton, iterations=max_iterations, tolerance=tolerance,
-                             rotation_tolerance=rotation_tolerance, temporal_weight=0.0, polish_iterations=0)
+                             rotation_tolerance=rotation_tolerance, temporal_weight=0.0, polish=False)
     times, states = [], []
     for frame in stream:
         states.append(est._state)
@@ -223,7 +223,7 @@ def bench_dragposer(frames: int = 600, max_iterations: int = 20, tolerance: floa
     print(f"  torch autograd (Adam):    {np.mean(t_ms):8.1f} ms per frame over {torch_frames} frames; iterations to "
           f"converge: mean {np.mean(t_iters):.1f} (cap 2000); {np.sum(t_ms) / np.sum(t_iters):.2f} ms per iteration")
     for label, options in [("live defaults", {}), ("without the temporal predictor", {"temporal_weight": 0.0}),
-                           ("without the IK polish", {"polish_iterations": 0})]:
+                           ("without the IK polish", {"polish": False})]:
         live = DragPoserEstimator(config, motion.skeleton, **options)
         times = []
         for frame in stream:

@@ -333,8 +333,8 @@ def test_polish_puts_end_effectors_on_their_trackers_without_moving_the_latent(t
     config = load_sensor_config("six_point")
     stream = synthesize_trackers(motion, config)
     errors, states = {}, {}
-    for polish in (0, 10):
-        est = create_estimator("dragposer", config, motion.skeleton, model_dir=str(tiny_vae), polish_iterations=polish)
+    for polish in (False, True):
+        est = create_estimator("dragposer", config, motion.skeleton, model_dir=str(tiny_vae), polish=polish)
         per_joint = []
         for frame in list(stream)[:20]:
             pose = est.step(frame)
@@ -344,9 +344,9 @@ def test_polish_puts_end_effectors_on_their_trackers_without_moving_the_latent(t
         errors[polish] = {j: np.mean([e[j] for e in per_joint]) for j in per_joint[0]}
         states[polish] = est._state[0].copy()
     for joint in ("pelvis", "head", "left_wrist", "right_wrist"):   # the tiny VAE's legs can be far off
-        assert errors[10][J[joint]] < 0.01, joint
-    assert np.mean(list(errors[10].values())) < np.mean(list(errors[0].values()))
-    np.testing.assert_allclose(states[10], states[0])     # the search itself is not changed
+        assert errors[True][J[joint]] < 0.01, joint
+    assert np.mean(list(errors[True].values())) < np.mean(list(errors[False].values()))
+    np.testing.assert_allclose(states[True], states[False])     # the search itself is not changed
 
 
 def test_missing_temporal_predictor_names_the_file_and_the_way_out(tiny_vae, tmp_path):

@@ -146,7 +146,7 @@ class DragPoserEstimator(Estimator):
                  position_weight: float = 1.0, orientation_weight: float = 0.1, floor_height: float | None = 0.0,
                  tolerance: float = 0.01, rotation_tolerance: float = 0.087, threads: int = 1,
                  temporal_weight: float = 0.002, ahead: int = 1, temporal_ramp: bool = True,
-                 polish_iterations: int = 10,
+                 polish: bool = True,
                  **optimizer) -> None:
         if iterations < 1:
             raise ValueError(f"iterations must be at least 1, got {iterations}")
@@ -164,7 +164,7 @@ class DragPoserEstimator(Estimator):
         # the paper's stopping rule: positional and rotational thresholds on the trackers
         self.iterations, self.tolerance, self.rotation_tolerance = iterations, tolerance, rotation_tolerance
         self.weights = (position_weight, orientation_weight)
-        self.polish_iterations = polish_iterations
+        self.polish = polish
         self.floor = floor_height
         self.constraints = ConstraintSet()      # the user's, kept across frames
         if floor_height is not None:
@@ -285,7 +285,7 @@ class DragPoserEstimator(Estimator):
         if observe and self.temporal is not None:   # the search's pose: its heights belong to z
             heights = pos[HEIGHT_INDEX, 2] - (self.floor or 0.0)
             self.temporal.observe(z, np.asarray(root) * self._scale, yaw, heights * self._scale)
-        if self.polish_iterations:
+        if self.polish:
             local, glob, root = self._polish(local, root, trackers)
         # End joints take their trackers' orientation exactly, as the IK does: it moves only
         # what hangs below them (hands, toes), and the VAE alone leaves 5-10 degrees there.

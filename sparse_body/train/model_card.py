@@ -194,11 +194,11 @@ Optimiser defaults: 3 Levenberg-Marquardt iterations a frame (30 on the first), 
 weight 1, orientation weight 0.1; the latent is pulled towards the previous frame's (weight
 0.001) and the temporal predictor's (weight 0.002; run every 4 frames with W_f = 1, its target
 ramped from the latent solved at its tick to the predicted one over the 4 frames), latent-norm
-weight 0.0002, feet above the floor; then up to 10 IK iterations put the tracked pelvis and
-end effectors on their trackers. `dragposer:temporal_weight=0` is the paper's "no temporal
+weight 0.0002, feet above the floor; then the closed-form IK (core/body_ik.py) puts the tracked
+pelvis and end effectors on their trackers. `dragposer:temporal_weight=0` is the paper's "no temporal
 predictor" ablation (only the previous latent's pull).
 
-Runtime choices, measured with these models on the first 10 test clips, four-point
+Runtime choices, measured with these models (and the earlier damped-least-squares IK polish) on the first 10 test clips, four-point
 (`sparse-body eval --estimator dragposer:OPTIONS --sensors four_point --limit 10`):
 
 | prior | MPJPE cm | MPJVE cm/s | Jitter 100 m/s3 | Toe PE cm |

@@ -41,7 +41,7 @@ from ..estimators.reference import standing_pose
 from ..output import body_transforms
 from ..urdf import body_urdf
 from . import messages
-from .spin import ExternalShutdownException, spin_until_shutdown
+from .spin import ExternalShutdownException, init, spin_until_shutdown
 from .tf_input import TfReader
 
 PARAMETERS = {
@@ -341,7 +341,7 @@ class EstimatorNode(LifecycleNode):
 
 
 def main(args=None, node_class=None) -> None:
-    rclpy.init(args=args)
+    init(args)
     try:
         node = (node_class or EstimatorNode)()
         if node.get_parameter("autostart").value:

@@ -1,28 +1,56 @@
-"""Running a node until Ctrl-C or shutdown, the same way for every node's main()."""
+"""Starting and running a node until SIGINT / SIGTERM, the same way for every node's main().
+
+rclpy's own signal handlers shut the context down from the signal, while the executor may be
+taking a message: that race ended nodes with `RuntimeError: Unable to convert call argument`
+and exit status 1. Here the signals only set a flag; the spin loop sees it within a tenth of
+a second and the node is destroyed and the context shut down in order, from the main thread.
+"""
 from __future__ import annotations
+
+import signal
+import threading
 
 import rclpy
 from rclpy.executors import ExternalShutdownException
+from rclpy.signals import SignalHandlerOptions
+
+_STOP = threading.Event()
+
+
+def _on_signal(signum, frame) -> None:
+    _STOP.set()
+
+
+def init(args=None) -> None:
+    """rclpy.init without rclpy's signal handlers; SIGINT and SIGTERM ask spin_until_shutdown
+    (or stop_requested()) to end."""
+    rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(sig, _on_signal)
+
+
+def stop_requested() -> bool:
+    return _STOP.is_set()
 
 
 def spin_until_shutdown(node, threads: int = 1) -> None:
-    """Spin until SIGINT / SIGTERM (rclpy's handlers shut the context down) and end without a
-    traceback: an error raised by a callback that raced the shutdown (its context already
-    gone) is part of stopping, not a failure. threads > 1: a multi-threaded executor, so a
-    callback in its own group can wait without stopping the others."""
+    """Spin until a signal (or an external shutdown), then destroy the node and shut down.
+    threads > 1: a multi-threaded executor, so a callback in its own group can wait without
+    stopping the others. An error raised while stopping is part of stopping, not a failure."""
+    from rclpy.executors import MultiThreadedExecutor, SingleThreadedExecutor
+    executor = MultiThreadedExecutor(num_threads=threads) if threads > 1 else SingleThreadedExecutor()
+    executor.add_node(node)
     try:
-        if threads > 1:
-            from rclpy.executors import MultiThreadedExecutor
-            rclpy.spin(node, executor=MultiThreadedExecutor(num_threads=threads))
-        else:
-            rclpy.spin(node)
+        while not _STOP.is_set() and rclpy.ok():
+            executor.spin_once(timeout_sec=0.1)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
-    except Exception:  # noqa: BLE001 - re-raised unless the context was shut down under it
-        if rclpy.ok():
+    except Exception:  # noqa: BLE001 - re-raised unless the node was being stopped
+        if not _STOP.is_set() and rclpy.ok():
             raise
     finally:
         try:
+            executor.shutdown(timeout_sec=1.0)
             node.destroy_node()
         except Exception:  # noqa: BLE001 - destroying after the context went away
             pass

@@ -34,7 +34,7 @@ from ..adapters.vmc import DEFAULT_PORT, map_device, parse_device_map
 from ..bagio import TF_TOPIC, BagError, typestore
 from ..core.sensors import SensorConfigError, load_sensor_config
 from .messages import to_time
-from .spin import ExternalShutdownException, spin_until_shutdown
+from .spin import ExternalShutdownException, init, spin_until_shutdown
 
 SOURCES = ("bag", "vmc", "serial")
 PARAMETERS = {
@@ -319,7 +319,7 @@ class TrackerBridge(Node):
 
 
 def main(args=None) -> None:
-    rclpy.init(args=args)
+    init(args)
     try:
         node = TrackerBridge()
     except (ValueError, BagError, SensorConfigError, CalibrationError) as err:

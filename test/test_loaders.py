@@ -117,12 +117,13 @@ def test_malformed_bvh_is_a_clear_error_naming_the_file(tmp_path, old, new, prob
 
 
 @pytest.mark.parametrize("old,new,problem", [
-    ("    b c\n", "    b c\n    a a\n", "twice"),                                  # a bone its own child: looped forever
+    ("    b c\n", "    b c\n    a a\n", "second parent"),                          # a bone its own child: looped forever
     ("  length 1.0\n", "  length 0\n", "units length"),                           # ZeroDivisionError
     ("order TX TY TZ RX RY RZ", "order X", "root order"),                         # IndexError
     ("order TX TY TZ RX RY RZ", "order TX TY TW", "root order"),
     ("    dof rz", "    dof rx rx", "dof"),
     ("direction 1 0 0", "direction 1 0", "three finite numbers"),         # found by make fuzz: a matmul error
+    ("    b c\n", "    b c\n    c b\n", "second parent"),                # found by make fuzz: a KeyError
     ("     length 10\n", "     length nan\n", "bone length"),
 ])
 def test_malformed_asf_is_a_clear_error_naming_the_file(tmp_path, old, new, problem):

@@ -135,6 +135,13 @@ def load_asf(path: Path) -> AsfSkeleton:
     unknown = [n for p, cs in children.items() for n in [p, *cs] if n != "root" and n not in bones]
     if unknown:
         raise MotionFileError(path, f"hierarchy names undefined bones: {', '.join(sorted(set(unknown)))}")
+    parents: dict[str, str] = {}
+    for parent, kids in children.items():
+        for kid in kids:
+            if kid in parents or kid == "root":
+                raise MotionFileError(path, f"the hierarchy gives bone {kid!r} a second parent ({parents.get(kid, 'none')} "
+                                            f"and {parent})")
+            parents[kid] = parent
     metres = INCH / length
     for bone in bones.values():
         bone.length *= metres

@@ -30,8 +30,14 @@ def cmd_eval(args) -> int:
     noise = LOBSTR_NOISE if args.noise else NO_NOISE
     if args.faulty:
         noise = replace(noise, fault_probability=args.faulty / 100)
-    results = [evaluate(spec, sensors, _mocap(args), args.split, args.fps, noise, args.limit,
-                        progress=not args.quiet) for spec in specs]
+    if args.motion:
+        from .data.catalog import motion_files
+        files = motion_files(args.motion)
+        results = [evaluate(spec, sensors, None, args.split, args.fps, noise, args.limit, progress=not args.quiet,
+                            motions=files) for spec in specs]
+    else:
+        results = [evaluate(spec, sensors, _mocap(args), args.split, args.fps, noise, args.limit,
+                            progress=not args.quiet) for spec in specs]
     print(format_table(results, reference))
     stem = re.sub(r"[^\w.+-]", "_", "+".join(args.estimator))
     out = Path(args.output or f"sparse_body_eval_{stem}_{sensors.name}.json")
@@ -232,6 +238,9 @@ def build_parser() -> argparse.ArgumentParser:
                    help="DragPoser's faulty sensors: each frame, with this probability (%%), one tracker "
                         "disconnects for 100 frames")
     p.add_argument("--limit", type=_positive_int, help="only the first N clips of the split")
+    p.add_argument("--motion", action="append", metavar="PATH",
+                   help="evaluate on these motion files instead of the CMU split (repeat; a folder stands for its "
+                        ".bvh / .amc / .npz files, an .amc needs its .asf beside it)")
     p.add_argument("--mocap", help="the CMU folder (default: ../shared/mocap/cmu or $SPARSE_BODY_MOCAP)")
     p.add_argument("--output", help="where to write the JSON results")
     p.add_argument("--quiet", action="store_true", help="no progress bar")

@@ -14,7 +14,7 @@ from .core.kinematics import forward_kinematics
 from .core.metrics import sequence_metrics, weighted_mean
 from .core.rotations import quat_to_matrix
 from .core.sensors import SensorConfig
-from .data.catalog import DEFAULT_FPS, load_clip, split_clips
+from .data.catalog import DEFAULT_FPS, load_clip, load_motion_file, split_clips
 from .data.motion import Motion
 from .data.virtual_trackers import NO_NOISE, TrackerNoise, synthesize_trackers
 from .estimators import create_estimator
@@ -97,22 +97,28 @@ COMPARE_WITH = {
 }
 
 
-def evaluate(estimator_spec: str, sensors: SensorConfig, mocap_root: Path, split: str = "test",
+def evaluate(estimator_spec: str, sensors: SensorConfig, mocap_root: Path | None, split: str = "test",
              fps: float = DEFAULT_FPS, noise: TrackerNoise = NO_NOISE, limit: int | None = None,
-             progress: bool = True, **options) -> EvalResult:
-    """estimator_spec: a name, optionally with options ("lobstr:contact_ik=false")."""
+             progress: bool = True, motions: list[Path] | None = None, **options) -> EvalResult:
+    """estimator_spec: a name, optionally with options ("lobstr:contact_ik=false"). The clips
+    of a split of the CMU catalogue, or the motion files given (a user's own: BVH or ASF/AMC
+    of a known layout, sparse_body .npz)."""
     estimator_name, spec_options = parse_estimator_spec(estimator_spec)
     options = {**spec_options, **options}
-    clips = split_clips(mocap_root, split, limit)
+    if motions is not None:
+        items = [(Path(p).name, lambda p=p: load_motion_file(Path(p), fps)) for p in motions[:limit]]
+        split = "files"
+    else:
+        items = [(c.clip_id, lambda c=c: load_clip(c, fps)) for c in split_clips(mocap_root, split, limit)]
     result = EvalResult(estimator_spec, sensors.name, split)
     start = time.perf_counter()
-    iterator = clips
+    iterator = items
     if progress:
         from tqdm import tqdm
-        iterator = tqdm(clips, desc=f"eval {estimator_spec}/{sensors.name}", unit="clip")
-    for k, clip in enumerate(iterator):
-        motion = load_clip(clip, fps)
-        result.clips.append(clip.clip_id)
+        iterator = tqdm(items, desc=f"eval {estimator_spec}/{sensors.name}", unit="clip")
+    for k, (name, load) in enumerate(iterator):
+        motion = load()
+        result.clips.append(name)
         result.frames.append(len(motion))
         result.per_clip.append(evaluate_motion(motion, estimator_name, sensors, noise, seed=k, **options))
     result.seconds = time.perf_counter() - start
@@ -142,7 +148,8 @@ def format_table(results: list[EvalResult], reference: dict[str, dict[str, float
             cells.append(("-" if not np.isfinite(x) else f"{x:.2f}").rjust(colw))
         lines.append(key.ljust(width) + "".join(cells))
     frames = sum(results[0].frames)
-    lines.append(f"({len(results[0].clips)} clips of the {results[0].split} split, {frames} frames)")
+    where = "the motion files given" if results[0].split == "files" else f"the {results[0].split} split"
+    lines.append(f"({len(results[0].clips)} clips of {where}, {frames} frames)")
     return "\n".join(lines + legend)
 
 

@@ -131,3 +131,40 @@ def test_malformed_asf_is_a_clear_error_naming_the_file(tmp_path, old, new, prob
     path = tmp_path / "bad.asf"
     path.write_text(ASF.replace(old, new, 1))
     assert problem in _refused_quickly(load_asf, path)
+
+
+def test_angle_units_are_read_from_the_asf_and_the_amc(tmp_path):
+    """`:units angle rad` (the ASF's axis angles) and `:RADIANS` (the AMC's values) are read,
+    not assumed: the same motion in radians gives the same positions."""
+    (tmp_path / "deg.asf").write_text(ASF)
+    (tmp_path / "deg.amc").write_text(AMC)
+    degrees = load_amc(tmp_path / "deg.amc", load_asf(tmp_path / "deg.asf"))
+    rad = ASF.replace("angle deg", "angle rad").replace("axis 0 0 90 XYZ", f"axis 0 0 {np.pi / 2!r} XYZ")
+    (tmp_path / "rad.asf").write_text(rad)
+    amc_rad = AMC.replace(":DEGREES", ":RADIANS").replace("a 90", f"a {np.pi / 2!r}").replace("b 90", f"b {np.pi / 2!r}")
+    (tmp_path / "rad.amc").write_text(amc_rad)
+    radians = load_amc(tmp_path / "rad.amc", load_asf(tmp_path / "rad.asf"))
+    np.testing.assert_allclose(radians.positions, degrees.positions, atol=1e-12)
+    # an AMC in radians under a degrees ASF: its own header decides
+    (tmp_path / "mixed.amc").write_text(amc_rad)
+    np.testing.assert_allclose(load_amc(tmp_path / "mixed.amc", load_asf(tmp_path / "deg.asf")).positions,
+                               degrees.positions, atol=1e-12)
+    (tmp_path / "bad.asf").write_text(ASF.replace("angle deg", "angle grad"))
+    assert "deg or rad" in _refused_quickly(load_asf, tmp_path / "bad.asf")
+
+
+def test_user_motion_files_upper_case_and_unknown_layouts(tmp_path, mocap_root):
+    import gzip
+    import shutil
+    from sparse_body.data.catalog import load_motion_file, motion_files
+    subject = mocap_root / "asfamc" / "subjects" / "02"
+    if not subject.is_dir():
+        pytest.skip("the CMU ASF/AMC subject 02 is not in ../shared/mocap")
+    shutil.copy(subject / "02.asf", tmp_path / "02.ASF")
+    (tmp_path / "02_05.AMC").write_bytes(gzip.decompress((subject / "02_05.amc.gz").read_bytes()))
+    assert motion_files([tmp_path]) == [tmp_path / "02_05.AMC"]
+    motion = load_motion_file(tmp_path / "02_05.AMC", 60.0)
+    assert len(motion) > 100 and np.all(np.isfinite(motion.positions))
+    (tmp_path / "other.bvh").write_text(BVH)                       # a layout we have no joint map for
+    with pytest.raises(MotionFileError, match=r"other\.bvh: .*known layouts: cmu_asf, cmu_bvh_mb2"):
+        load_motion_file(tmp_path / "other.bvh", 60.0)

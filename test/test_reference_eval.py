@@ -83,3 +83,20 @@ def test_wide_eval_tables_fit_a_terminal_with_their_columns_named_below():
     assert "[2] lobstr:contact_ik=false/four_point" in table and "[5] LoBSTr paper" in table
     narrow = format_table(results[:1])
     assert "lobstr/four_point" in narrow.splitlines()[0]        # a narrow table keeps its names on top
+
+
+def test_eval_takes_a_users_own_motion_files(tmp_path, mocap_root, capsys):
+    import json
+    from sparse_body.cli import main
+    subject = mocap_root / "asfamc" / "subjects" / "02"
+    if not subject.is_dir():
+        pytest.skip("the CMU ASF/AMC subject 02 is not in ../shared/mocap")
+    with pytest.raises(SystemExit) as ended:
+        main(["eval", "--estimator", "ik", "--sensors", "six_point", "--motion", str(subject), "--limit", "2",
+              "--quiet", "--no-compare", "--output", str(tmp_path / "out.json")])
+    assert ended.value.code == 0
+    assert "(2 clips of the motion files given" in capsys.readouterr().out
+    result = json.loads((tmp_path / "out.json").read_text())[0]
+    assert result["split"] == "files" and [c["clip"] for c in result["clips"]] == ["02_01.amc.gz", "02_02.amc.gz"]
+    with pytest.raises(SystemExit, match="no such file or folder"):
+        main(["eval", "--estimator", "ik", "--motion", str(tmp_path / "absent.bvh"), "--quiet"])

@@ -1,7 +1,8 @@
 """Acclaim ASF (skeleton) and AMC (motion) files, as in the CMU database.
 
 Conventions (CMU's, as their viewer applies them): a bone's axis gives its rest frame C; the
-motion angles (degrees) compose as R = Rz @ Ry @ Rx over the bone's dof; the bone's global
+motion angles (degrees; radians after the AMC's `:RADIANS` header, or by default when the ASF
+says `:units angle rad`, which also governs its own axis angles) compose as R = Rz @ Ry @ Rx over the bone's dof; the bone's global
 rotation is R_parent @ C @ R @ C^T and its end is start + rotation @ direction * length.
 Lengths are in units of `:units length` inches/100, converted to metres.
 """
@@ -37,6 +38,7 @@ class AsfSkeleton:
     root_position: np.ndarray
     bones: dict[str, Bone]
     children: dict[str, list[str]]
+    radians: bool = False          # `:units angle rad`: the ASF's angles (and by default the AMC's)
 
     def order(self) -> list[str]:
         """Bones with every parent before its children, starting at root; a bone reached
@@ -56,6 +58,7 @@ class AsfSkeleton:
 
 
 ROOT_CHANNELS = {"TX", "TY", "TZ", "RX", "RY", "RZ"}
+ANGLE_UNITS = {"deg": False, "degree": False, "degrees": False, "rad": True, "radian": True, "radians": True}
 
 
 def _three(path: Path, lineno: int, what: str, values: list[str]) -> np.ndarray:
@@ -65,8 +68,8 @@ def _three(path: Path, lineno: int, what: str, values: list[str]) -> np.ndarray:
     return out
 
 
-def _axis_matrix(values: list[str], order: str) -> np.ndarray:
-    angles = np.deg2rad([float(v) for v in values])
+def _axis_matrix(values: list[str], order: str, radians: bool = False) -> np.ndarray:
+    angles = np.array([float(v) for v in values]) if radians else np.deg2rad([float(v) for v in values])
     return Rotation.from_euler(order.lower(), angles).as_matrix()
 
 
@@ -77,6 +80,7 @@ def load_asf(path: Path) -> AsfSkeleton:
     length = 0.45
     root_order, root_axis, root_position = ["TX", "TY", "TZ", "RX", "RY", "RZ"], np.eye(3), np.zeros(3)
     current: dict | None = None
+    radians = False
     try:
         for lineno, line in enumerate(lines, 1):
             if not line:
@@ -85,7 +89,11 @@ def load_asf(path: Path) -> AsfSkeleton:
             if tok[0].startswith(":"):
                 section = tok[0]
                 continue
-            if section == ":units" and tok[0] == "length":
+            if section == ":units" and tok[0] == "angle":
+                if tok[1].lower() not in ANGLE_UNITS:
+                    raise MotionFileError(path, f"line {lineno}: units angle {tok[1]!r}: deg or rad")
+                radians = ANGLE_UNITS[tok[1].lower()]
+            elif section == ":units" and tok[0] == "length":
                 length = float(tok[1])
                 if not (np.isfinite(length) and length > 0):
                     raise MotionFileError(path, f"line {lineno}: units length must be a positive number, got {tok[1]}")
@@ -118,7 +126,7 @@ def load_asf(path: Path) -> AsfSkeleton:
                         if not (np.isfinite(current["length"]) and current["length"] >= 0):
                             raise MotionFileError(path, f"line {lineno}: bone length must be a number >= 0, got {tok[1]}")
                     elif tok[0] == "axis":
-                        current["axis"] = _axis_matrix(tok[1:4], tok[4] if len(tok) > 4 else "XYZ")
+                        current["axis"] = _axis_matrix(tok[1:4], tok[4] if len(tok) > 4 else "XYZ", radians)
                     elif tok[0] == "dof":
                         current["dof"] = [t.lower() for t in tok[1:]]
                         if not set(current["dof"]) <= {"rx", "ry", "rz"} or len(set(current["dof"])) != len(current["dof"]):
@@ -145,13 +153,15 @@ def load_asf(path: Path) -> AsfSkeleton:
     metres = INCH / length
     for bone in bones.values():
         bone.length *= metres
-    skeleton = AsfSkeleton(path, metres, root_order, root_axis, root_position * metres, bones, children)
+    skeleton = AsfSkeleton(path, metres, root_order, root_axis, root_position * metres, bones, children, radians)
     skeleton.order()     # a cycle is an error here, not a hang later
     return skeleton
 
 
-def _read_amc_frames(path: Path, skeleton: AsfSkeleton) -> dict[str, np.ndarray]:
-    """Per-bone (T, n_values) arrays; every frame must list every moving bone once."""
+def _read_amc_frames(path: Path, skeleton: AsfSkeleton) -> tuple[dict[str, np.ndarray], bool]:
+    """Per-bone (T, n_values) arrays, every frame listing every moving bone once, and whether
+    the angles are radians (the `:RADIANS` / `:DEGREES` header; else the ASF's angle unit)."""
+    radians = skeleton.radians
     expected = {"root": len(skeleton.root_order)}
     expected.update({n: len(b.dof) for n, b in skeleton.bones.items() if b.dof})
     values: dict[str, list[list[float]]] = {n: [] for n in expected}
@@ -164,6 +174,9 @@ def _read_amc_frames(path: Path, skeleton: AsfSkeleton) -> dict[str, np.ndarray]
 
     for lineno, line in enumerate(read_text(path).splitlines(), 1):
         line = line.strip()
+        if line.upper() in (":RADIANS", ":DEGREES"):
+            radians = line.upper() == ":RADIANS"
+            continue
         if not line or line[0] in "#:":
             continue
         tok = line.split()
@@ -190,12 +203,13 @@ def _read_amc_frames(path: Path, skeleton: AsfSkeleton) -> dict[str, np.ndarray]
     if frame_no is None:
         raise MotionFileError(path, "no frames")
     close_frame()
-    return {n: np.asarray(v, dtype=np.float64).reshape(frames, expected[n]) for n, v in values.items()}
+    return {n: np.asarray(v, dtype=np.float64).reshape(frames, expected[n]) for n, v in values.items()}, radians
 
 
 def load_amc(amc_path: Path, skeleton: AsfSkeleton, fps: float = 120.0) -> SourceMotion:
     amc_path = Path(amc_path)
-    frames = _read_amc_frames(amc_path, skeleton)
+    frames, radians = _read_amc_frames(amc_path, skeleton)
+    to_radians = (lambda v: v) if radians else np.deg2rad  # noqa: E731
     order = skeleton.order()
     parent = skeleton.parent_of()
     index = {n: i for i, n in enumerate(order)}
@@ -214,7 +228,7 @@ def load_amc(amc_path: Path, skeleton: AsfSkeleton, fps: float = 120.0) -> Sourc
         if ch.startswith("T"):
             trans[:, "XYZ".index(ch[1])] = root_vals[:, k] * skeleton.length_unit
         else:
-            angles[ch[1].lower()] = np.deg2rad(root_vals[:, k])
+            angles[ch[1].lower()] = to_radians(root_vals[:, k])
     axes = "".join(a for a in "xyz" if a in angles)
     m = Rotation.from_euler(axes, np.stack([angles[a] for a in axes], -1)).as_matrix() if axes else np.eye(3)
     rot[:, 0] = skeleton.root_axis @ m @ skeleton.root_axis.T
@@ -225,7 +239,7 @@ def load_amc(amc_path: Path, skeleton: AsfSkeleton, fps: float = 120.0) -> Sourc
         i, p = index[name], index[parent[name]]
         bone = skeleton.bones[name]
         if bone.dof:
-            vals = np.deg2rad(frames[name])
+            vals = to_radians(frames[name])
             axes = "".join(d[1] for d in bone.dof)  # "rx rz" -> "xz": extrinsic, R = Rz @ Rx
             local = Rotation.from_euler(axes, vals).as_matrix()
             rot[:, i] = rot[:, p] @ (bone.axis @ local @ bone.axis.T)

@@ -144,20 +144,45 @@ def load_clip(clip: Clip, fps: float = DEFAULT_FPS, use_cache: bool = True) -> M
     return motion
 
 
+MOTION_SUFFIXES = (".bvh", ".amc", ".npz")
+
+
+def motion_files(paths) -> list[Path]:
+    """The motion files named, a folder standing for the motion files in it (sorted)."""
+    out = []
+    for path in map(Path, paths):
+        if path.is_dir():
+            out += sorted(p for p in path.iterdir() if p.name.lower().removesuffix(".gz").endswith(MOTION_SUFFIXES))
+        elif path.exists():
+            out.append(path)
+        else:
+            raise MotionFileError(path, "no such file or folder")
+    if not out:
+        raise MotionFileError(Path(", ".join(map(str, paths))), "no motion files (.bvh, .amc, .npz) there")
+    return out
+
+
+def _retargeted(path: Path, source, fps: float) -> Motion:
+    try:
+        return retarget(source, fps)
+    except ValueError as err:     # a skeleton layout with no joint map: say which file
+        raise MotionFileError(path, str(err)) from None
+
+
 def load_motion_file(path: Path, fps: float = DEFAULT_FPS, skeleton: Path | None = None) -> Motion:
     """Any supported motion file: .bvh, .amc (with its .asf, found beside it if not given),
     AMASS .npz (needs an SMPL model, see amass.py) or a sparse_body motion .npz."""
     path = Path(path)
-    name = path.name.removesuffix(".gz")
+    name = path.name.lower().removesuffix(".gz")       # .AMC, .BVH: the same formats
     if name.endswith(".bvh"):
-        return retarget(load_bvh(path), fps)
+        return _retargeted(path, load_bvh(path), fps)
     if name.endswith(".amc"):
         if skeleton is None:
-            found = sorted(path.parent.glob("*.asf"))
+            found = sorted(p for p in path.parent.iterdir() if p.name.lower().removesuffix(".gz").endswith(".asf"))
             if len(found) != 1:
                 raise MotionFileError(path, "an AMC file needs its ASF skeleton: pass it explicitly")
             skeleton = found[0]
-        return retarget(load_amc(path, load_asf(skeleton)), fps)
+        return _retargeted(path, load_amc(path, load_asf(skeleton)), fps)
     if name.endswith(".npz"):
         import numpy as np
         with np.load(path, allow_pickle=False) as z:

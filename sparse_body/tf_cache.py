@@ -70,14 +70,18 @@ class TfCache:
         edge = self._edges.get(child)
         return -np.inf if edge is None else (np.inf if edge.static else edge.stamp)
 
-    def interval(self, child: str) -> float:
-        """The usual time between a child frame's samples (0 when not known yet)."""
+    def budget(self, child: str, stale_after: float) -> float:
+        """How far (s) a child frame's newest sample may lag the newest tracker sample and
+        still count: stale_after, or three of the frame's own sample intervals if longer."""
         edge = self._edges.get(child)
-        return 0.0 if edge is None else edge.interval
+        return max(stale_after, 3.0 * (0.0 if edge is None else edge.interval))
 
     def lookup(self, target: str, source: str):
         """(stamp, translation, rotation xyzw) of source in target, or None when unknown.
         The stamp is the oldest of the dynamic transforms on the way (inf if all static)."""
+        edge = self._edges.get(source)
+        if edge is not None and edge.parent == target:       # the usual tracker: one edge, nothing to compose
+            return (np.inf if edge.static else edge.stamp), edge.translation.copy(), edge.rotation.copy()
         rot, trans, stamp = Rotation.identity(), np.zeros(3), np.inf
         frame, seen = source, set()
         while frame != target:
@@ -99,15 +103,15 @@ class TfCache:
         return max(dynamic) if dynamic else -np.inf
 
 
-def sample_trackers(lookup, config, stamp: float, stale_after: float, intervals=None):
+def sample_trackers(lookup, config, stamp: float, stale_after: float, budget=None):
     """The trackers of a sensor configuration at `stamp` (the newest tracker sample's stamp:
     staleness is judged in the input's own time, so a late delivery is latency, not loss).
 
     lookup(fixed_frame, frame_id) gives (stamp, translation, rotation xyzw) or None (a
     TfCache's lookup). Returns (TrackerFrame, stamps): a site is invalid when its frame is
     unknown, its pose is not finite, or its newest transform is older than `stamp` by more
-    than its budget: stale_after, or three of the tracker's own sample intervals when that
-    is longer (intervals: frame_id -> seconds). stamps[s] is that transform's stamp (-inf
+    than its budget: budget(frame_id) (TfCache.budget: stale_after, or three of the
+    tracker's own sample intervals if longer), else stale_after. stamps[s] is that transform's stamp (-inf
     when unknown, `stamp` when the chain is all static).
     Orientation-only sites get NaN positions, position-only sites NaN orientations."""
     from .core.types import TrackerFrame
@@ -123,8 +127,8 @@ def sample_trackers(lookup, config, stamp: float, stale_after: float, intervals=
         t_stamp, t, q = found
         stamps[s] = t_stamp if np.isfinite(t_stamp) else stamp
         norm = np.linalg.norm(q)
-        budget = max(stale_after, 3.0 * intervals.get(site.frame_id, 0.0)) if intervals else stale_after
-        if stamp - stamps[s] > budget or not (np.all(np.isfinite(t)) and np.isfinite(norm) and norm > 0.5):
+        allowed = budget(site.frame_id) if budget is not None else stale_after
+        if stamp - stamps[s] > allowed or not (np.all(np.isfinite(t)) and np.isfinite(norm) and norm > 0.5):
             continue
         valid[s] = True
         if site.has_position:

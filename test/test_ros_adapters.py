@@ -16,7 +16,7 @@ from diagnostic_msgs.msg import DiagnosticArray  # noqa: E402
 from sensor_msgs.msg import JointState  # noqa: E402
 from tf2_msgs.msg import TFMessage  # noqa: E402
 
-from ros_helpers import Listener, stamp_key, start_node, stop  # noqa: E402
+from ros_helpers import Listener, diagnostic_values, stamp_key, start_node, stop  # noqa: E402
 from sparse_body.core.sensors import load_sensor_config  # noqa: E402
 from sparse_body.data.synthetic import synthetic_walk  # noqa: E402
 from sparse_body.data.virtual_trackers import synthesize_trackers  # noqa: E402
@@ -43,15 +43,6 @@ def to_unity(position, quat):
     x, y, z = position
     qx, qy, qz, qw = quat
     return [float(-y), float(z), float(x)], [float(qy), float(-qz), float(-qx), float(qw)]
-
-
-def _diagnostic_values(listener, name):
-    values = {}
-    for d in listener.received["/diagnostics"]:
-        for st in d.status:
-            if st.name == name:
-                values.update({kv.key: kv.value for kv in st.values})
-    return values
 
 
 def test_vmc_over_loopback_reaches_joint_states(ros_env, tmp_path):
@@ -93,7 +84,7 @@ def test_vmc_over_loopback_reaches_joint_states(ros_env, tmp_path):
     truth = motion.positions[:, 0]
     nearest = np.min(np.linalg.norm(roots[:, None] - truth[None], axis=-1), axis=1)
     assert len(roots) >= 30 and np.percentile(nearest, 95) < 0.01
-    values = _diagnostic_values(listener, "sparse_body: tracker bridge")
+    values = diagnostic_values(listener, "sparse_body: tracker bridge")
     assert values["unmapped devices"] == "con:UNKNOWN"
 
 
@@ -132,7 +123,7 @@ def test_serial_trackers_through_a_pty_reach_joint_states_across_a_reconnect(ros
     assert (arrival[valid] <= gap_at).sum() >= 10 and (arrival[valid] > gap_at).sum() >= 10
     assert last - first > 4.0
     assert all(np.all(np.isfinite(m.position)) for m in listener.received["joint_states"])
-    values = _diagnostic_values(listener, "sparse_body: tracker bridge")
+    values = diagnostic_values(listener, "sparse_body: tracker bridge")
     assert int(values["disconnects"]) >= 1 and int(values["connects"]) >= 2
     assert int(values["bad checksums"]) > 0 and int(values["garbage bytes"]) > 0
 

@@ -46,10 +46,7 @@ LIMBS = {
     J["left_ankle"]: Limb(J["left_hip"], J["left_knee"], Y, (0.0, 2.6), J["left_ankle"]),
     J["right_ankle"]: Limb(J["right_hip"], J["right_knee"], Y, (0.0, 2.6), J["right_ankle"]),
 }
-# what a limb's solution moves, in order (a foot hangs below its ankle)
-_MOVED = {end: [limb.upper, limb.hinge, limb.end] + ([J["left_foot"]] if end == J["left_ankle"] else
-                                                     [J["right_foot"]] if end == J["right_ankle"] else [])
-          for end, limb in LIMBS.items()}
+_FOOT_OF = {J["left_ankle"]: J["left_foot"], J["right_ankle"]: J["right_foot"]}   # hangs below the limb's end
 _ARMS = (J["left_wrist"], J["right_wrist"])
 SPINE_BEND = (J["spine2"], J["spine3"], J["neck"])
 MAX_BEND = 0.6          # radians per spine joint: about 100 degrees over the three
@@ -93,7 +90,7 @@ def reach_angle(a, w, axis, distance: float, current: float, limits: tuple[float
 
 
 def reach(local: np.ndarray, parent_rot: np.ndarray, upper_pos: np.ndarray, offsets: np.ndarray, limb: Limb,
-          target: np.ndarray, end_vector: np.ndarray | None = None, exact_hinge: bool = True) -> None:
+          target: np.ndarray, end_vector: np.ndarray | None = None, exact_hinge: bool = True):
     """Turn the limb's ball joint and hinge (in place in local) so that its end reaches target.
 
     parent_rot: global rotation of the ball joint's parent; upper_pos: the ball joint's
@@ -101,7 +98,8 @@ def reach(local: np.ndarray, parent_rot: np.ndarray, upper_pos: np.ndarray, offs
     joint's offset; the toe's for a foot held on its toe). exact_hinge: the hinge becomes a
     rotation about its axis within its limits (the IK's model of an elbow or knee); else the
     hinge keeps its other components and only turns about its axis (a decoded pose), unless
-    so turned it cannot make the limb long or short enough (within 5 mm)."""
+    so turned it cannot make the limb long or short enough (within 5 mm).
+    Returns the new global rotations of the ball joint and of the hinge."""
     u, h = limb.upper, limb.hinge
     w = offsets[limb.end] if end_vector is None else end_vector
     a = offsets[h]
@@ -115,8 +113,9 @@ def reach(local: np.ndarray, parent_rot: np.ndarray, upper_pos: np.ndarray, offs
         angle = reach_angle(a, w, limb.axis, distance, hinge_angle(local[h], limb.axis), limb.limits)
         local[h] = about(limb.axis, angle)
     upper_rot = parent_rot @ local[u]
-    limb_vector = upper_rot @ (a + local[h] @ w)
-    local[u] = parent_rot.T @ swing(limb_vector, target - upper_pos) @ upper_rot
+    upper_rot = swing(upper_rot @ (a + local[h] @ w), target - upper_pos) @ upper_rot
+    local[u] = parent_rot.T @ upper_rot
+    return upper_rot, upper_rot @ local[h]
 
 
 def fit_spine(local: np.ndarray, root: np.ndarray, offsets: np.ndarray, head_target: np.ndarray,
@@ -204,9 +203,14 @@ def solve_body(local: np.ndarray, root: np.ndarray, offsets: np.ndarray, targets
             continue
         if end in _ARMS:
             _collar_towards(local, glob, pos, offsets, limb, target)
-        reach(local, glob[PARENTS[limb.upper]], pos[limb.upper], offsets, limb, target, exact_hinge=not keep_shape)
-        for j in _MOVED[end]:      # the limbs are independent: update only what this one moved
-            parent = PARENTS[j]
-            glob[j] = glob[parent] @ local[j]
-            pos[j] = pos[parent] + glob[parent] @ offsets[j]
+        upper, hinge = reach(local, glob[PARENTS[limb.upper]], pos[limb.upper], offsets, limb, target,
+                             exact_hinge=not keep_shape)
+        # the limbs are independent: update only what this one moved
+        glob[limb.upper], glob[limb.hinge], glob[end] = upper, hinge, hinge @ local[end]
+        pos[limb.hinge] = pos[limb.upper] + upper @ offsets[limb.hinge]
+        pos[end] = pos[limb.hinge] + hinge @ offsets[end]
+        foot = _FOOT_OF.get(end)
+        if foot is not None:
+            glob[foot] = glob[end] @ local[foot]
+            pos[foot] = pos[end] + glob[end] @ offsets[foot]
     return local, glob, pos

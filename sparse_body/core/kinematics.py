@@ -6,16 +6,21 @@ import numpy as np
 from .skeleton import JOINT_INDEX, NUM_JOINTS, PARENTS
 
 
-def forward_kinematics(local_rot: np.ndarray, root_pos: np.ndarray, offsets: np.ndarray):
+def forward_kinematics(local_rot: np.ndarray, root_pos: np.ndarray, offsets: np.ndarray, joints=None):
     """Global joint rotations and positions.
 
     local_rot: (..., 22, 3, 3) rotation of each joint relative to its parent (the root's is
     global); root_pos: (..., 3); offsets: (22, 3) or (..., 22, 3).
     Returns (global_rot (..., 22, 3, 3), positions (..., 22, 3)).
+    joints (one pose only): compute just these (parents before children, e.g. LEG_JOINTS);
+    the other joints' entries are left undefined.
     """
     local_rot = np.asarray(local_rot, dtype=np.float64)
     if local_rot.ndim == 3 and np.ndim(offsets) == 2:
-        return _forward_kinematics_one(local_rot, np.asarray(root_pos, dtype=np.float64), offsets)
+        return _forward_kinematics_one(local_rot, np.asarray(root_pos, dtype=np.float64), offsets,
+                                       range(1, NUM_JOINTS) if joints is None else joints)
+    if joints is not None:
+        raise ValueError("a joint subset is for one pose with one skeleton")
     lead = local_rot.shape[:-3]
     offsets = np.asarray(offsets, dtype=np.float64)
     shared = offsets.ndim == 2          # one body for the whole batch: a matrix-vector product per joint
@@ -35,21 +40,9 @@ def forward_kinematics(local_rot: np.ndarray, root_pos: np.ndarray, offsets: np.
     return glob, pos
 
 
-_LEGS = tuple(JOINT_INDEX[n] for n in ("left_hip", "right_hip", "left_knee", "right_knee", "left_ankle",
-                                       "right_ankle", "left_foot", "right_foot"))   # parents first
-
-
-def leg_positions(local_rot: np.ndarray, root_pos: np.ndarray, offsets: np.ndarray) -> np.ndarray:
-    """(22, 3) positions of one pose with only the pelvis and the legs filled in (the rest
-    NaN): what a foot's IK needs, at a third of forward_kinematics' cost."""
-    glob = {0: local_rot[0]}
-    pos = np.full((NUM_JOINTS, 3), np.nan)
-    pos[0] = root_pos
-    for j in _LEGS:
-        p = PARENTS[j]
-        glob[j] = glob[p] @ local_rot[j]
-        pos[j] = pos[p] + glob[p] @ offsets[j]
-    return pos
+# the legs, parents before children: what a foot's IK needs, a third of the body's FK
+LEG_JOINTS = tuple(JOINT_INDEX[n] for n in ("left_hip", "right_hip", "left_knee", "right_knee", "left_ankle",
+                                            "right_ankle", "left_foot", "right_foot"))
 
 
 def global_to_local(global_rot: np.ndarray) -> np.ndarray:
@@ -61,13 +54,13 @@ def global_to_local(global_rot: np.ndarray) -> np.ndarray:
     return local
 
 
-def _forward_kinematics_one(local_rot: np.ndarray, root_pos: np.ndarray, offsets: np.ndarray):
+def _forward_kinematics_one(local_rot: np.ndarray, root_pos: np.ndarray, offsets: np.ndarray, joints):
     """One pose: plain matrix products (einsum's per-call cost dominates at this size,
     and IK runs this many times a frame)."""
     glob = np.empty_like(local_rot)
     pos = np.empty((NUM_JOINTS, 3))
     glob[0], pos[0] = local_rot[0], root_pos
-    for j in range(1, NUM_JOINTS):
+    for j in joints:
         p = PARENTS[j]
         glob[j] = glob[p] @ local_rot[j]
         pos[j] = pos[p] + glob[p] @ offsets[j]

@@ -137,9 +137,10 @@ def create_estimator(name: str, sensors: SensorConfig, skeleton: Skeleton, fps: 
         raise ValueError(f"unknown estimator {name!r}; available: {', '.join(sorted(ESTIMATORS))}") from None
     module, cls = target.split(":")
     cls = getattr(importlib.import_module(module), cls)
-    known = [p for p in inspect.signature(cls.__init__).parameters if p not in ("self", "sensors", "skeleton", "fps")
-             and inspect.signature(cls.__init__).parameters[p].kind is inspect.Parameter.POSITIONAL_OR_KEYWORD]
-    takes_more = any(p.kind is inspect.Parameter.VAR_KEYWORD for p in inspect.signature(cls.__init__).parameters.values())
+    parameters = inspect.signature(cls.__init__).parameters.values()
+    known = [p.name for p in parameters if p.kind is inspect.Parameter.POSITIONAL_OR_KEYWORD
+             and p.name not in ("self", "sensors", "skeleton", "fps")]
+    takes_more = any(p.kind is inspect.Parameter.VAR_KEYWORD for p in parameters)   # DragPoser's optimiser options
     unknown = [k for k in options if k not in known]
     if unknown and not takes_more:
         raise ValueError(f"estimator {name!r} has no option {', '.join(map(repr, unknown))}; "

@@ -1,8 +1,8 @@
 """Foot contacts held by IK (LoBSTr, section 3.4.1).
 
 When a foot's contact turns on, its toe's position becomes the contact point, and hip and
-knee are solved (the shared two-bone IK, with the toe as the limb's end) so that the toe stays there while contact lasts. When contact
-ends, the target moves from the contact point to where the network puts the toe over
+knee are solved (the shared two-bone IK, with the toe as the limb's end) so that the toe
+stays there while contact lasts. When contact ends, the target moves from the contact point to where the network puts the toe over
 release_frames frames with a slow-in / slow-out (shifted sine) weight, so the foot does
 not snap. A contact point the leg can no longer reach is let go the same way.
 """
@@ -14,7 +14,7 @@ import numpy as np
 
 from ..core.body_ik import LIMBS, reach
 from ..core.contacts import FOOT_JOINTS
-from ..core.kinematics import leg_positions
+from ..core.kinematics import LEG_JOINTS, forward_kinematics
 from ..core.skeleton import JOINT_INDEX as J
 from ..core.skeleton import Skeleton
 
@@ -51,7 +51,7 @@ class ContactHold:
     def apply(self, local: np.ndarray, root: np.ndarray, contact: np.ndarray) -> np.ndarray:
         """Local rotations (22, 3, 3) with the legs moved to honour the contacts (left, right)."""
         offsets = self.skeleton.offsets
-        pos = leg_positions(local, root, offsets)
+        _, pos = forward_kinematics(local, root, offsets, joints=LEG_JOINTS)
         local = local.copy()
         for side, foot in enumerate(self._feet):
             toe, hip, knee = pos[FOOT_JOINTS[side]], pos[_HIPS[side]], pos[_KNEES[side]]

@@ -243,8 +243,8 @@ class DragPoserEstimator(Estimator):
         reconstruction error cannot always close the last centimetre. The root moves onto the
         pelvis tracker, then the shared closed-form IK turns the spine towards the head and
         reaches each tracked hand and foot, keeping the decoded elbows, knees and spine curve
-        (a decoded elbow is seldom an exact hinge) and only turning them. The latent state stays as the search left it, so this does not steer later
-        frames."""
+        (a decoded elbow is seldom an exact hinge) and only turning them. The latent state
+        stays as the search left it, so this does not steer later frames."""
         root = np.array(root, float)
         positions = [c for c in trackers if isinstance(c, Position)]
         for c in positions:
@@ -252,8 +252,9 @@ class DragPoserEstimator(Estimator):
                 root = np.array(c.target, float)
         goals = {c.joint: np.asarray(c.target, float) for c in positions if c.joint in END_JOINTS}
         if goals:
-            local, _, _ = solve_body(local, root, self.skeleton.offsets, goals, keep_shape=True)
-        glob, _ = forward_kinematics(local, root, self.skeleton.offsets)
+            local, glob, _ = solve_body(local, root, self.skeleton.offsets, goals, keep_shape=True)
+        else:
+            glob, _ = forward_kinematics(local, root, self.skeleton.offsets)
         return local, glob, root
 
     def _solve(self, frame: TrackerFrame, state, z_prior=None, prior_weight=None, observe=False) -> BodyPose:

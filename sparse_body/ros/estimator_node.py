@@ -33,15 +33,14 @@ from sparse_body.msg import EstimateStatus, FootContacts
 
 from ..core.rotations import matrix_to_quat
 from ..core.sensors import SensorConfigError, load_sensor_config
-from ..core.skeleton import Skeleton
+from ..core.skeleton import JOINT_NAMES, Skeleton
 from ..core.types import BodyPose
 from ..estimators import create_estimator
 from ..estimators.base import parse_estimator_spec
 from ..estimators.reference import standing_pose
-from ..output import body_transforms
 from ..urdf import body_urdf
 from . import messages
-from .spin import ExternalShutdownException, init, spin_until_shutdown
+from .spin import init, spin_until_shutdown
 from .tf_input import TfReader
 
 PARAMETERS = {
@@ -146,7 +145,7 @@ class EstimatorNode(LifecycleNode):
             return TransitionCallbackReturn.FAILURE
         self.sensors, self.params = sensors, p
         self._frames = [s.frame_id for s in sensors.sites]
-        own = {t.child for t in body_transforms(self._held(0.0), self.skeleton, sensors.fixed_frame, p["frame_prefix"])}
+        own = {p["frame_prefix"] + name for name in JOINT_NAMES}     # the body's links, as messages.transforms names them
         self.tf_in = TfReader(self, set(self._frames), ignore_frames=own, on_tracker=self._on_tracker)
         self._configure_inputs()
         overrides = QoSOverridingOptions.with_default_policies()
@@ -236,7 +235,7 @@ class EstimatorNode(LifecycleNode):
             return
         newest = dynamic.max()
         stale = self.params["stale_timeout"]
-        budgets = np.array([max(stale, 3.0 * self.tf_in.cache.interval(f)) for f in self._frames])
+        budgets = np.array([self.tf_in.cache.budget(f, stale) for f in self._frames])
         live = np.isfinite(stamps) & (newest - stamps <= budgets)
         if np.all(stamps[live] > self._last_input):
             self._estimate(fallback=False)
@@ -341,19 +340,15 @@ class EstimatorNode(LifecycleNode):
 
 
 def main(args=None, node_class=None) -> None:
-    init(args)
-    try:
-        node = (node_class or EstimatorNode)()
-        if node.get_parameter("autostart").value:
-            if node.trigger_configure() != TransitionCallbackReturn.SUCCESS:
-                node.get_logger().fatal("configure failed; exiting")
-                node.destroy_node()
-                rclpy.try_shutdown()
-                sys.exit(1)
-            node.trigger_activate()
-    except (KeyboardInterrupt, ExternalShutdownException):   # stopped while loading a model: a normal end
-        rclpy.try_shutdown()
-        return
+    init(args)      # a signal while the model loads ends the node as soon as spinning starts
+    node = (node_class or EstimatorNode)()
+    if node.get_parameter("autostart").value:
+        if node.trigger_configure() != TransitionCallbackReturn.SUCCESS:
+            node.get_logger().fatal("configure failed; exiting")
+            node.destroy_node()
+            rclpy.try_shutdown()
+            sys.exit(1)
+        node.trigger_activate()
     spin_until_shutdown(node)
 
 

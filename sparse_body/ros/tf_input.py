@@ -66,8 +66,8 @@ class TfReader:
         return [self.cache.stamp(f) for f in frame_ids]
 
     def sample(self, config, stamp: float, stale_after: float):
-        intervals = {s.frame_id: self.cache.interval(s.frame_id) for s in config.sites}
-        return sample_trackers(self.cache.lookup, config, stamp, stale_after, intervals)
+        return sample_trackers(self.cache.lookup, config, stamp, stale_after,
+                               lambda frame_id: self.cache.budget(frame_id, stale_after))
 
     def destroy(self) -> None:
         for sub in self._subs:

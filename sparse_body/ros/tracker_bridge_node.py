@@ -34,7 +34,7 @@ from ..adapters.vmc import DEFAULT_PORT, map_device, parse_device_map
 from ..bagio import TF_TOPIC, BagError, typestore
 from ..core.sensors import SensorConfigError, load_sensor_config
 from .messages import to_time
-from .spin import ExternalShutdownException, init, spin_until_shutdown
+from .spin import init, spin_until_shutdown
 
 SOURCES = ("bag", "vmc", "serial")
 PARAMETERS = {
@@ -326,9 +326,6 @@ def main(args=None) -> None:
         print(f"sparse_body_tracker_bridge: {err}", flush=True)
         rclpy.try_shutdown()
         raise SystemExit(1)
-    except (KeyboardInterrupt, ExternalShutdownException):   # stopped while loading a bag: a normal end
-        rclpy.try_shutdown()
-        return
     spin_until_shutdown(node, threads=2)
 
 

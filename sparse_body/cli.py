@@ -101,10 +101,13 @@ def cmd_train(args) -> int:
 def cmd_split(args) -> int:
     from .data.catalog import compute_split, read_index, split_path
     clips = read_index(_mocap(args))
-    parts = compute_split([c.clip_id for c in clips])
-    text = ("# Train / validation / test split of the CMU clips in ../shared/mocap, by clip.\n"
-            "# Written by `sparse-body split --write`: a clip's part is its SHA-1 modulo 10\n"
-            "# (0: test, 1: validation, else train). Every estimator trains and evaluates on it.\n")
+    parts = compute_split(clips)
+    subjects = {part: sorted({cid.split("_")[0] for cid in ids}, key=int) for part, ids in parts.items()}
+    text = ("# Train / validation / test split of the CMU clips in ../shared/mocap, by subject: no\n"
+            "# test or validation subject has a take in training, so the test figures are those of\n"
+            "# people the models never saw. Written by `sparse-body split --write` (the rule is in\n"
+            "# sparse_body/data/catalog.py: compute_split). Every estimator trains and evaluates on it.\n"
+            + "".join(f"# {part} subjects: {', '.join(s)}\n" for part, s in subjects.items()))
     for part, ids in parts.items():   # quoted: YAML 1.1 would read 08_01 as a number
         text += f"{part}:\n" + "".join(f'  - "{c}"\n' for c in ids)
     if args.write:
@@ -304,7 +307,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--card-only", action="store_true", help="only rewrite the model card of an existing model")
     p.set_defaults(func=cmd_train)
 
-    p = sub.add_parser("split", help="compute the CMU train/validation/test split")
+    p = sub.add_parser("split", help="compute the CMU train/validation/test split (by subject)")
     p.add_argument("--write", action="store_true", help="write config/splits/cmu.yaml")
     p.add_argument("--mocap", help="the CMU folder")
     p.set_defaults(func=cmd_split)

@@ -17,12 +17,19 @@ def test_index_lists_every_clip_with_its_file(clip_index):
     assert all(c.skeleton_path.is_file() for c in clip_index.values() if c.format == "asf/amc")
 
 
-def test_committed_split_is_the_computed_one_and_partitions_the_clips(clip_index):
+def test_committed_split_is_the_computed_one_and_keeps_people_apart(clip_index):
     split = load_split()
-    assert split == compute_split(list(clip_index))
+    assert split == compute_split(list(clip_index.values()))
     seen = [c for s in SPLITS for c in split[s]]
     assert sorted(seen) == sorted(clip_index) and len(set(seen)) == len(seen)
-    assert 0.05 < len(split["test"]) / len(seen) < 0.2
+    subjects = {s: {clip_index[c].subject for c in split[s]} for s in SPLITS}
+    assert not subjects["train"] & (subjects["test"] | subjects["validation"])
+    assert not subjects["test"] & subjects["validation"]
+    assert len(subjects["test"]) >= 3 and len(subjects["validation"]) >= 3    # several people, not one
+    total = sum(c.seconds for c in clip_index.values())
+    for part in ("test", "validation"):
+        share = sum(clip_index[c].seconds for c in split[part]) / total
+        assert 0.10 <= share <= 0.15, (part, share)
 
 
 def test_second_load_comes_from_the_cache(clip_index, tmp_path, monkeypatch):

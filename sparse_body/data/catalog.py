@@ -32,6 +32,12 @@ class Clip:
     fps: float
     category: str
     description: str
+    seconds: float = 0.0
+
+    @property
+    def subject(self) -> str:
+        """The CMU subject number: the part of the clip id before the take ("16" of "16_05")."""
+        return self.clip_id.split("_")[0]
 
     @property
     def skeleton_path(self) -> Path | None:
@@ -67,7 +73,7 @@ def read_index(root: Path) -> list[Clip]:
         for n, row in enumerate(csv.DictReader(f, delimiter="\t"), 2):
             try:
                 clips.append(Clip(row["clip"], Path(root) / row["file"], row["format"], float(row["fps"]),
-                                  row["category"], row["description"]))
+                                  row["category"], row["description"], float(row.get("seconds") or 0.0)))
             except (KeyError, ValueError, TypeError) as err:
                 raise MotionFileError(path, f"line {n}: malformed row ({err})") from None
     return clips
@@ -77,12 +83,33 @@ def split_path() -> Path:
     return config_dir() / "splits" / "cmu.yaml"
 
 
-def compute_split(clip_ids: list[str]) -> dict[str, list[str]]:
-    """Deterministic split by clip: a clip's SHA-1 picks its part (10 % test, 10 % validation)."""
+# Shares of the recorded time the held-out parts are filled to (and may not pass).
+HELD_OUT_SHARE, HELD_OUT_CAP = 0.10, 0.15
+
+
+def compute_split(clips: list[Clip]) -> dict[str, list[str]]:
+    """Deterministic split by subject: no test or validation subject has a take in training.
+
+    Subjects are taken in the order of their number's SHA-1; each goes to the test part, else
+    the validation part, while that part holds under 10 % of the recorded time and would stay
+    within 15 % with it; the rest train. A subject's size decides nothing but whether it fits,
+    so the held-out people are as arbitrary as a clip-wise hash would make them."""
+    seconds: dict[str, float] = {}
+    for c in clips:
+        seconds[c.subject] = seconds.get(c.subject, 0.0) + c.seconds
+    total = sum(seconds.values())
+    held = {"test": [], "validation": []}
+    filled = {"test": 0.0, "validation": 0.0}
+    for subject in sorted(seconds, key=lambda s: hashlib.sha1(s.encode()).hexdigest()):
+        for part in held:
+            if filled[part] < HELD_OUT_SHARE * total and filled[part] + seconds[subject] <= HELD_OUT_CAP * total:
+                held[part].append(subject)
+                filled[part] += seconds[subject]
+                break
     parts = {s: [] for s in SPLITS}
-    for cid in sorted(clip_ids):
-        bucket = int(hashlib.sha1(cid.encode()).hexdigest(), 16) % 10
-        parts["test" if bucket == 0 else "validation" if bucket == 1 else "train"].append(cid)
+    for c in sorted(clips, key=lambda c: c.clip_id):
+        part = next((p for p, subjects in held.items() if c.subject in subjects), "train")
+        parts[part].append(c.clip_id)
     return parts
 
 

@@ -2,7 +2,8 @@
 
     ros2 launch sparse_body sparse_body.launch.py sensors:=four_point estimator:=lobstr bag:=/path/to/trackers
 
-Arguments: sensors, estimator, model_path, refine, height, bag (the tracker source; empty: trackers come from
+Arguments: sensors, estimator, model_path, refine, height, calibration (a T-pose calibration file: its fitted body
+replaces the height-scaled one), bag (the tracker source; empty: trackers come from
 elsewhere on /tf), rviz, robot_state_publisher. The estimator is a lifecycle node; it is configured and activated
 here through its autostart parameter.
 """
@@ -31,8 +32,13 @@ def _nodes(context):
     share = get_package_share_directory("sparse_body")
     arg = lambda name: LaunchConfiguration(name).perform(context)  # noqa: E731
     height = float(arg("height"))
+    body = Skeleton.canonical(height)
+    if arg("calibration"):
+        from sparse_body.adapters.calibration import Calibration
+        body = Calibration.load(arg("calibration")).body()
     estimator_params = [os.path.join(share, "config", "estimator.yaml"),
                         {"sensors": arg("sensors"), "estimator": arg("estimator"), "height": height,
+                         "calibration": arg("calibration"),
                          "model_path": arg("model_path"),
                          "publish_link_tf": False, "autostart": True}]
     with_rsp = arg("robot_state_publisher").lower() in ("true", "1")
@@ -48,11 +54,12 @@ def _nodes(context):
                            namespace="", output="screen", parameters=estimator_params)]
     if with_rsp:
         nodes.append(Node(package="robot_state_publisher", executable="robot_state_publisher", output="screen",
-                          parameters=[{"robot_description": body_urdf(Skeleton.canonical(height))}]))
+                          parameters=[{"robot_description": body_urdf(body)}]))
     if arg("refine").lower() in ("true", "1"):
         nodes.append(LifecycleNode(package="sparse_body", executable="constraint_node", name="sparse_body_constraint",
                                    namespace="", output="screen",
-                                   parameters=[{"sensors": arg("sensors"), "height": height, "autostart": True}],
+                                   parameters=[{"sensors": arg("sensors"), "height": height,
+                                                "calibration": arg("calibration"), "autostart": True}],
                                    remappings=[("input/joint_states", "joint_states")]))
     if arg("bag"):
         nodes.append(Node(package="sparse_body", executable="tracker_bridge", name="sparse_body_tracker_bridge",
@@ -68,6 +75,8 @@ def generate_launch_description():
         DeclareLaunchArgument("model_path", default_value="",
                               description="model file of a learned estimator (empty: the shipped one)"),
         DeclareLaunchArgument("height", default_value="1.75", description="the person's height in metres"),
+        DeclareLaunchArgument("calibration", default_value="",
+                              description="T-pose calibration file (tracker bridge ~/calibrate): its body is used"),
         DeclareLaunchArgument("bag", default_value="", description="rosbag2 of tracker TF to replay"),
         DeclareLaunchArgument("rviz", default_value="false", description="start RViz"),
         DeclareLaunchArgument("refine", default_value="false",

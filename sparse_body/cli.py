@@ -3,7 +3,6 @@ from __future__ import annotations
 
 import argparse
 import re
-from dataclasses import replace
 import sys
 from pathlib import Path
 
@@ -19,7 +18,7 @@ def _mocap(args) -> Path:
 
 def cmd_eval(args) -> int:
     from .core.sensors import load_sensor_config
-    from .data.virtual_trackers import LOBSTR_NOISE, NO_NOISE
+    from .data.field_protocol import Protocol
     from .evaluation import COMPARE_WITH, evaluate, format_table, paper_figures, write_json
     sensors = load_sensor_config(args.sensors)
     specs, reference = list(args.estimator), {}
@@ -27,16 +26,14 @@ def cmd_eval(args) -> int:
         for name in args.estimator:
             specs += [s for s in COMPARE_WITH.get(name, []) if s not in specs]
             reference.update(paper_figures(name, sensors.name, args.faulty))
-    noise = LOBSTR_NOISE if args.noise else NO_NOISE
-    if args.faulty:
-        noise = replace(noise, fault_probability=args.faulty / 100)
+    protocol = Protocol.named(args.skeleton, args.noise, args.faulty)
     if args.motion:
         from .data.catalog import motion_files
         files = motion_files(args.motion)
-        results = [evaluate(spec, sensors, None, args.split, args.fps, noise, args.limit, progress=not args.quiet,
+        results = [evaluate(spec, sensors, None, args.split, args.fps, protocol, args.limit, progress=not args.quiet,
                             motions=files) for spec in specs]
     else:
-        results = [evaluate(spec, sensors, _mocap(args), args.split, args.fps, noise, args.limit,
+        results = [evaluate(spec, sensors, _mocap(args), args.split, args.fps, protocol, args.limit,
                             progress=not args.quiet) for spec in specs]
     print(format_table(results, reference))
     stem = re.sub(r"[^\w.+-]", "_", "+".join(args.estimator))
@@ -156,8 +153,13 @@ def cmd_process(args) -> int:
     from .offline import process_bag
     name, options = parse_estimator_spec(args.estimator)
     refused: dict[str, int] = {}
+    if args.calibration:
+        from .adapters.calibration import Calibration
+        body = Calibration.load(args.calibration).body()
+    else:
+        body = Skeleton.canonical(args.height)
     poses = process_bag(Path(args.bag_in), Path(args.bag_out), name, load_sensor_config(args.sensors),
-                        Skeleton.canonical(args.height), args.fps, progress=not args.quiet, overwrite=args.overwrite,
+                        body, args.fps, progress=not args.quiet, overwrite=args.overwrite,
                         refused=refused, **options)
     invalid = sum(not p.valid for p in poses)
     rejected = ", ".join(f"{n} {reason}" for reason, n in sorted(refused.items())) or "none"
@@ -236,7 +238,12 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--sensors", default="three_point", help="sensor configuration name or YAML path")
     p.add_argument("--split", default="test", choices=["train", "validation", "test"])
     p.add_argument("--fps", type=float, default=60.0, help="frame rate the clips are resampled to")
-    p.add_argument("--noise", action="store_true", help="add LoBSTr's tracker noise (1 cm, 1.5 deg)")
+    p.add_argument("--skeleton", default="calibrated", choices=["calibrated", "height", "oracle"],
+                   help="the body the estimator gets: fitted by a T-pose calibration (trackers mounted as a user "
+                        "wears them), the canonical body at the calibrated height, or the subject's true skeleton "
+                        "with exact mounting (the lab protocol, with --noise none)")
+    p.add_argument("--noise", default="vr", choices=["vr", "lobstr", "none"],
+                   help="tracker noise: a VR system's (1 mm, 0.5 deg on average), LoBSTr's (1 cm, 1.5 deg) or none")
     p.add_argument("--faulty", type=_percent, default=0.0, metavar="PERCENT",
                    help="DragPoser's faulty sensors: each frame, with this probability (%%), one tracker "
                         "disconnects for 100 frames")
@@ -271,6 +278,8 @@ def build_parser() -> argparse.ArgumentParser:
                    help="estimator, with options: lobstr, refined:base=lobstr (DragPoser refinement after it)")
     p.add_argument("--sensors", default="six_point")
     p.add_argument("--height", type=float, default=1.75, help="the tracked person's height in metres")
+    p.add_argument("--calibration", help="a T-pose calibration file (the bridge's ~/calibrate): its fitted body "
+                                         "instead of the canonical one at --height")
     p.add_argument("--fps", type=float, default=60.0, help="the trackers' nominal rate")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.add_argument("--overwrite", action="store_true", help="replace BAG_OUT if it exists")

@@ -1,4 +1,8 @@
-"""`sparse-body eval`: run an estimator over a split of the CMU clips and tabulate the metrics."""
+"""`sparse-body eval`: run an estimator over a split of the CMU clips and tabulate the metrics.
+
+By default under the field protocol (data/field_protocol.py): the estimator gets the body and
+the tracker samples a user would have, not the subject's true skeleton and clean trackers;
+the lab protocol (LAB) gives the papers' setting for comparison."""
 from __future__ import annotations
 
 import json
@@ -16,7 +20,8 @@ from .core.rotations import quat_to_matrix
 from .core.sensors import SensorConfig
 from .data.catalog import DEFAULT_FPS, load_clip, load_motion_file, split_clips
 from .data.motion import Motion
-from .data.virtual_trackers import NO_NOISE, TrackerNoise, synthesize_trackers
+from .data.field_protocol import FIELD, Protocol, user_view
+from .data.virtual_trackers import TrackerNoise
 from .estimators import create_estimator
 from .estimators.base import parse_estimator_spec  # noqa: F401 - the CLI's import
 
@@ -30,38 +35,50 @@ class EvalResult:
     frames: list[int] = field(default_factory=list)
     per_clip: list[dict[str, float]] = field(default_factory=list)
     seconds: float = 0.0
+    protocol: str = "field"
 
     @property
     def summary(self) -> dict[str, float]:
         return weighted_mean(self.per_clip, self.frames) if self.per_clip else {}
 
     def to_json(self) -> dict:
-        return {"estimator": self.estimator, "sensors": self.sensors, "split": self.split,
+        return {"estimator": self.estimator, "sensors": self.sensors, "split": self.split, "protocol": self.protocol,
                 "frames": int(sum(self.frames)), "seconds": self.seconds, "summary": self.summary,
                 "clips": [{"clip": c, "frames": n, **m} for c, n, m in zip(self.clips, self.frames, self.per_clip)]}
 
 
 def evaluate_motion(motion: Motion, estimator_name: str, sensors: SensorConfig,
-                    noise: TrackerNoise = NO_NOISE, seed: int = 0, **options) -> dict[str, float]:
-    """Metrics of one estimator on one motion, from the motion's own virtual trackers.
+                    protocol: Protocol = FIELD, seed: int = 0, **options) -> dict[str, float]:
+    """Metrics of one estimator on one motion, from the motion's own virtual trackers as the
+    protocol hands them to a user's estimator (its body, mounting, noise).
 
     The motion is first moved so that its floor is z = 0, as in a calibrated VR play space:
-    estimators that need the floor (IK contacts, LoBSTr's reference height) find it there."""
+    estimators that need the floor (IK contacts, LoBSTr's reference height) find it there.
+    The estimate's joints are placed with the body the estimator was given, as a user's
+    avatar or robot would show them."""
     floor = estimate_floor(motion.positions)
     motion = Motion(motion.name, motion.fps, motion.skeleton, motion.local_quats,
                     motion.root_positions - [0.0, 0.0, floor])
-    stream = synthesize_trackers(motion, sensors, noise, seed)
-    estimator = create_estimator(estimator_name, sensors, motion.skeleton, fps=motion.fps, **options)
-    poses = estimator.process(stream)
+    view = user_view(motion, sensors, protocol, seed)
+    options = {**filter_options(protocol.noise), **options}
+    estimator = create_estimator(estimator_name, view.sensors, view.skeleton, fps=motion.fps, **options)
+    poses = estimator.process(view.stream)
     local = quat_to_matrix(np.stack([p.local_quats for p in poses]))
     root = np.stack([p.root_position for p in poses])
-    glob, pos = forward_kinematics(local, root, motion.skeleton.offsets)
+    glob, pos = forward_kinematics(local, root, view.skeleton.offsets)
     pred_contacts = np.stack([p.contact for p in poses])
     floor = 0.0
     gt_contacts = contact_labels(motion.positions, motion.fps, floor)
     tracked = sorted({s.joint_index for s in sensors.sites})
     return sequence_metrics(pos, glob, local, motion.positions, motion.global_rotations, motion.local_rotations,
                             motion.fps, floor, gt_contacts, pred_contacts, tracked)
+
+
+def filter_options(noise: TrackerNoise) -> dict[str, float]:
+    """The tracker filter set for this noise, as a user sets it from their system's
+    specification (no noise: no filter)."""
+    # a rotation by an angle up to M about a random axis has a rotation vector of std M/3 per axis
+    return {"filter_position_noise": noise.position_std, "filter_rotation_noise": noise.rotation_max_deg / 3}
 
 
 # Published figures printed beside an estimator's results, by (estimator, sensors[, faulty %])
@@ -98,7 +115,7 @@ COMPARE_WITH = {
 
 
 def evaluate(estimator_spec: str, sensors: SensorConfig, mocap_root: Path | None, split: str = "test",
-             fps: float = DEFAULT_FPS, noise: TrackerNoise = NO_NOISE, limit: int | None = None,
+             fps: float = DEFAULT_FPS, protocol: Protocol = FIELD, limit: int | None = None,
              progress: bool = True, motions: list[Path] | None = None, **options) -> EvalResult:
     """estimator_spec: a name, optionally with options ("lobstr:contact_ik=false"). The clips
     of a split of the CMU catalogue, or the motion files given (a user's own: BVH or ASF/AMC
@@ -110,7 +127,7 @@ def evaluate(estimator_spec: str, sensors: SensorConfig, mocap_root: Path | None
         split = "files"
     else:
         items = [(c.clip_id, lambda c=c: load_clip(c, fps)) for c in split_clips(mocap_root, split, limit)]
-    result = EvalResult(estimator_spec, sensors.name, split)
+    result = EvalResult(estimator_spec, sensors.name, split, protocol=protocol.label)
     start = time.perf_counter()
     iterator = items
     if progress:
@@ -120,7 +137,7 @@ def evaluate(estimator_spec: str, sensors: SensorConfig, mocap_root: Path | None
         motion = load()
         result.clips.append(name)
         result.frames.append(len(motion))
-        result.per_clip.append(evaluate_motion(motion, estimator_name, sensors, noise, seed=k, **options))
+        result.per_clip.append(evaluate_motion(motion, estimator_name, sensors, protocol, seed=k, **options))
     result.seconds = time.perf_counter() - start
     return result
 
@@ -130,7 +147,8 @@ def format_table(results: list[EvalResult], reference: dict[str, dict[str, float
     """Metrics as rows, one column per result (and per paper figure given in reference).
     Columns whose names would make the table wider than max_width are numbered, and the
     numbers named below the table, so it fits a normal terminal."""
-    columns = [f"{r.estimator}/{r.sensors}" for r in results] + list(reference or {})
+    mixed = len({r.protocol for r in results}) > 1
+    columns = [f"{r.estimator}/{r.sensors}" + (f" ({r.protocol})" if mixed else "") for r in results] + list(reference or {})
     values = [r.summary for r in results] + list((reference or {}).values())
     keys = list(results[0].summary)
     width = max(len(k) for k in keys) + 2
@@ -149,7 +167,8 @@ def format_table(results: list[EvalResult], reference: dict[str, dict[str, float
         lines.append(key.ljust(width) + "".join(cells))
     frames = sum(results[0].frames)
     where = "the motion files given" if results[0].split == "files" else f"the {results[0].split} split"
-    lines.append(f"({len(results[0].clips)} clips of {where}, {frames} frames)")
+    protocol = "protocols as named" if mixed else f"{results[0].protocol} protocol"
+    lines.append(f"({len(results[0].clips)} clips of {where}, {frames} frames; {protocol})")
     return "\n".join(lines + legend)
 
 

@@ -3,7 +3,7 @@ import numpy as np
 import pytest
 
 from conftest import random_rotations
-from sparse_body.core.body_ik import LIMBS, fit_spine, hinge_angle, reach_angle, solve_body
+from sparse_body.core.body_ik import LIMBS, SOFT_REACH, fit_spine, hinge_angle, reach_angle, soft_distance, solve_body
 from sparse_body.core.kinematics import forward_kinematics
 from sparse_body.core.rotations import rotation_about
 from sparse_body.core.skeleton import JOINT_INDEX as J
@@ -96,7 +96,11 @@ def test_the_spine_puts_the_head_on_its_target_and_leaves_the_pelvis(rng):
         before = local.copy()
         fit_spine(local, root, offsets, target)
         _, pos = forward_kinematics(local, root, offsets)
-        assert np.linalg.norm(pos[J["head"]] - target) < 1e-4
+        # exact, but for the soft reach's shortfall near full extension
+        distance = np.linalg.norm(target - s1)
+        short = distance - soft_distance(distance, spine_length)
+        assert short <= 0.63 * SOFT_REACH + 1e-9
+        assert np.linalg.norm(pos[J["head"]] - target) < short + 1e-4
         np.testing.assert_allclose(local[0], before[0])
 
 
@@ -163,11 +167,13 @@ def test_ik_puts_every_tracked_joint_on_its_tracker(sensors):
     config = load_sensor_config(sensors)
     motion = synthetic_walk(3.0)
     stream = synthesize_trackers(motion, config)
-    est = create_estimator("ik", config, motion.skeleton)
+    est = create_estimator("ik", config, motion.skeleton, filter=False)
     errors = []
     for i, frame in enumerate(stream):
         pose = est.step(frame)
         _, pos = forward_kinematics(quat_to_matrix(pose.local_quats), pose.root_position, motion.skeleton.offsets)
         errors.append([np.linalg.norm(pos[J[SITE_JOINTS[s]]] - motion.positions[i, J[SITE_JOINTS[s]]])
                        for s in config.site_names])
-    assert np.max(errors) < 0.005, dict(zip(config.site_names, np.max(errors, axis=0)))
+    # exact but for the soft reach of nearly straight legs and arms (at most 0.63 of it short)
+    assert np.max(errors) < 0.63 * SOFT_REACH + 0.001, dict(zip(config.site_names, np.max(errors, axis=0)))
+    assert np.mean(errors) < 0.002

@@ -217,3 +217,44 @@ def test_the_demo_draws_the_skull_above_the_head_joint_and_its_output_is_not_com
     assert "/sparse_body_demo/" in (root / ".gitignore").read_text().split()
     recipe = (root / "Makefile").read_text().split("\ntest: setup\n")[1].splitlines()[0]
     assert "pytest" in recipe and "-rs" in recipe            # make test says what it skipped and why
+
+
+def test_process_takes_the_body_of_a_calibration_file(tmp_path):
+    """`process --calibration`: the fitted body puts the wrists on the controllers, where the
+    canonical body of the same height misses; a broken file is named."""
+    from sparse_body.adapters.calibration import Calibration
+    from sparse_body.cli import main
+    from sparse_body.core.kinematics import forward_kinematics
+    from sparse_body.core.rotations import euler_to_matrix, quat_to_matrix
+    from sparse_body.core.skeleton import Skeleton
+    from sparse_body.data.motion import Motion
+    walk = synthetic_walk(2.0)
+    offsets = walk.skeleton.offsets.copy()
+    offsets[[J["left_elbow"], J["right_elbow"], J["left_knee"], J["right_knee"]]] *= 1.1     # not the canonical build
+    motion = Motion(walk.name, walk.fps, Skeleton(offsets), walk.local_quats, walk.root_positions)
+    config = load_sensor_config("six_point")
+    make_bag(motion, config, tmp_path / "in")
+    Calibration(motion.skeleton.height(), 0.0, {}, motion.skeleton).save(tmp_path / "cal.yaml")
+    errors = {}
+    for name, args in (("calibrated", ["--calibration", str(tmp_path / "cal.yaml")]),
+                       ("height", ["--height", str(motion.skeleton.height())])):
+        with pytest.raises(SystemExit) as ended:
+            main(["process", str(tmp_path / "in"), str(tmp_path / name), "--quiet", *args])
+        assert ended.value.code == 0
+        body = Calibration.load(tmp_path / "cal.yaml").body() if name == "calibrated" else \
+            Skeleton.canonical(motion.skeleton.height())
+        states, tfs = read_topic(tmp_path / name, JOINT_STATES_TOPIC), read_topic(tmp_path / name, TF_TOPIC)
+        assert len(states) == len(motion)
+        local = np.tile(np.eye(3), (len(states), 22, 1, 1))
+        local[:, 1:] = euler_to_matrix(np.array([s.position for s in states]).reshape(-1, 21, 3), "ZYX")
+        root = [next(t for t in m.transforms if t.child_frame_id == "pelvis").transform for m in tfs]
+        local[:, 0] = quat_to_matrix(np.array([[r.rotation.x, r.rotation.y, r.rotation.z, r.rotation.w] for r in root]))
+        _, pos = forward_kinematics(local, np.array([[r.translation.x, r.translation.y, r.translation.z]
+                                                     for r in root]), body.offsets)
+        errors[name] = np.linalg.norm(pos[:, J["left_wrist"]] - motion.positions[:, J["left_wrist"]], axis=-1).mean()
+    assert errors["calibrated"] < 0.01 and errors["calibrated"] < errors["height"]
+    (tmp_path / "broken.yaml").write_text("height: 1.7\nskeleton: {pelvis: [0, 0, 0]}\n")
+    with pytest.raises(SystemExit) as ended:
+        main(["process", str(tmp_path / "in"), str(tmp_path / "x"), "--quiet", "--calibration",
+              str(tmp_path / "broken.yaml")])
+    assert "broken.yaml: 'skeleton' must give" in str(ended.value.code)

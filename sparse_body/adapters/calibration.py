@@ -1,4 +1,5 @@
-"""T-pose calibration: each tracker's rotation relative to its joint, and the person's height.
+"""T-pose calibration: each tracker's rotation relative to its joint, the person's height and
+body proportions.
 
 In the body's rest pose (a T-pose facing +x) every joint's rotation is the identity, so in
 a T-pose facing yaw psi every joint's rotation is Rz(psi). A tracker's orientation q then
@@ -6,6 +7,11 @@ gives its mounting offset Rz(psi)^-1 q, which absorbs how the controller is held
 tracker strapped on, different each session. Facing comes from the hands (their left-right
 line), else from the headset's forward axis. Height: the headset's height above the floor
 scaled by the body model's stature ratio (LoBSTr's height scale, in metres).
+
+Proportions: with the mounting translations undone, the trackers give the followed joints'
+T-pose positions, and core.body_shape fits the body to them (arm span, shoulder height,
+neck, torso and legs where pelvis and foot trackers show them). The calibration file keeps
+the fitted body, so every node and the offline tools use the same one.
 
 Applying a calibration turns a tracker orientation into its joint's orientation
 (q offset^-1); the bridge publishes that, so estimators see joint-aligned trackers.
@@ -19,8 +25,9 @@ import numpy as np
 import yaml
 from scipy.spatial.transform import Rotation
 
+from ..core.body_shape import arm_span, fit_skeleton, standing_height
 from ..core.rotations import yaw_matrix
-from ..core.skeleton import STATURE_RATIO
+from ..core.skeleton import CANONICAL_HEIGHT, JOINT_NAMES, Skeleton
 
 
 class CalibrationError(ValueError):
@@ -32,6 +39,11 @@ class Calibration:
     height: float
     facing_yaw: float                                      # radians, the facing during calibration
     offsets: dict[str, np.ndarray] = field(default_factory=dict)   # site -> (4,) x y z w
+    skeleton: Skeleton | None = None                       # the fitted body (None: scale by height)
+
+    def body(self) -> Skeleton:
+        """The person's body: the fitted one, else the canonical body at their height."""
+        return self.skeleton if self.skeleton is not None else Skeleton.canonical(self.height)
 
     def apply(self, site: str, quat: np.ndarray) -> np.ndarray:
         """The joint's orientation from its tracker's (unchanged for uncalibrated sites)."""
@@ -42,9 +54,12 @@ class Calibration:
     def save(self, path: str | Path) -> None:
         data = {"height": round(float(self.height), 4), "facing_yaw": round(float(self.facing_yaw), 6),
                 "offsets": {s: [round(float(v), 8) for v in q] for s, q in self.offsets.items()}}
+        if self.skeleton is not None:
+            data["skeleton"] = {n: [round(float(v), 5) for v in o] for n, o in zip(JOINT_NAMES, self.skeleton.offsets)}
         Path(path).parent.mkdir(parents=True, exist_ok=True)
         Path(path).write_text("# T-pose calibration written by sparse_body (rotation offsets x y z w:\n"
-                              "# the tracker's orientation in its joint's frame)\n" + yaml.safe_dump(data, sort_keys=False))
+                              "# the tracker's orientation in its joint's frame; skeleton: each joint's rest\n"
+                              "# offset from its parent, metres)\n" + yaml.safe_dump(data, sort_keys=False))
 
     @classmethod
     def load(cls, path: str | Path) -> "Calibration":
@@ -70,19 +85,41 @@ class Calibration:
             if q.shape != (4,) or not np.all(np.isfinite(q)) or abs(np.linalg.norm(q) - 1) > 1e-3:
                 raise CalibrationError(f"{path}: offset of {site!r} is not a unit quaternion x y z w")
             offsets[site] = q
-        return cls(height, yaw, offsets)
+        return cls(height, yaw, offsets, _read_skeleton(path, data.get("skeleton")))
+
+
+def _read_skeleton(path: Path, data) -> Skeleton | None:
+    if data is None:
+        return None
+    if not isinstance(data, dict) or set(map(str, data)) != set(JOINT_NAMES):
+        raise CalibrationError(f"{path}: 'skeleton' must give the rest offset of each of the 22 joints "
+                               f"({', '.join(JOINT_NAMES)})")
+    try:
+        offsets = np.array([[float(v) for v in data[n]] for n in JOINT_NAMES])
+    except (TypeError, ValueError):
+        offsets = np.zeros(0)
+    if offsets.shape != (len(JOINT_NAMES), 3) or not np.all(np.isfinite(offsets)):
+        raise CalibrationError(f"{path}: every skeleton offset must be three finite numbers (x y z, metres)")
+    lengths = np.linalg.norm(offsets[1:], axis=1)
+    if lengths.max() > 1.0:
+        raise CalibrationError(f"{path}: a skeleton offset of {lengths.max():.2f} m is not a person's bone")
+    skeleton = Skeleton(offsets)
+    if not 0.5 <= skeleton.height() <= 2.5:
+        raise CalibrationError(f"{path}: the skeleton is {skeleton.height():.2f} m tall: not a person's")
+    return skeleton
 
 
 def _mean_rotation(quats: np.ndarray) -> Rotation:
     return Rotation.from_quat(np.asarray(quats)).mean()
 
 
-def calibrate_tpose(samples: dict[str, list[tuple[np.ndarray | None, np.ndarray]]], floor: float = 0.0,
-                    head_offset: np.ndarray | None = None) -> Calibration:
-    """samples: site -> [(position or None, orientation x y z w)] collected during the T-pose.
+def calibrate_tpose(samples: dict[str, list[tuple[np.ndarray | None, np.ndarray | None]]], floor: float = 0.0,
+                    translations: dict[str, np.ndarray] | None = None) -> Calibration:
+    """samples: site -> [(position or None, orientation x y z w or None)] collected during the
+    T-pose (a position-only tracker has no rotation offset to find).
 
-    head_offset: the headset's mounting translation in the head joint's frame (the sensor
-    configuration's), so that the height is measured at the head joint."""
+    translations: each site's mounting translation in its joint's frame (the sensor
+    configuration's), so that heights and lengths are measured at the joints."""
     samples = {s: v for s, v in samples.items() if v}
     if not samples:
         raise CalibrationError("no tracker samples arrived during the calibration")
@@ -96,17 +133,28 @@ def calibrate_tpose(samples: dict[str, list[tuple[np.ndarray | None, np.ndarray]
                                    "(arms straight out to the sides)")
         forward = np.cross(left / np.linalg.norm(left), [0.0, 0.0, 1.0])
         yaw = float(np.arctan2(forward[1], forward[0]))
-    elif "head" in samples:
+    elif "head" in samples and all(q is not None for _, q in samples["head"]):
         fwd = _mean_rotation([q for _, q in samples["head"]]).as_matrix()[:, 0]
         yaw = float(np.arctan2(fwd[1], fwd[0]))
     else:
         raise CalibrationError("facing cannot be found: calibration needs both hands or the headset")
     facing = Rotation.from_matrix(yaw_matrix(yaw))
-    offsets = {s: (facing.inv() * _mean_rotation([q for _, q in v])).as_quat() for s, v in samples.items()}
-    if "head" not in mean_pos:
-        raise CalibrationError("the height needs a headset with a position")
-    head = mean_pos["head"] - facing.apply(np.zeros(3) if head_offset is None else head_offset)
-    height = float((head[2] - floor) * STATURE_RATIO)   # as Skeleton.height(): head joint above the toes
+    offsets = {s: (facing.inv() * _mean_rotation([q for _, q in v])).as_quat() for s, v in samples.items()
+               if all(q is not None for _, q in v)}
+    if "head" not in mean_pos and not {"left_hand", "right_hand"} <= set(mean_pos):
+        raise CalibrationError("the height needs a headset with a position, or both hand trackers")
+    # In the T-pose every joint frame is the facing frame: a tracker sits at its joint plus
+    # the facing-rotated mounting translation.
+    translations = translations or {}
+    joints = {s: facing.inv().apply(p - facing.apply(np.asarray(translations.get(s, np.zeros(3)), float)))
+              - [0.0, 0.0, floor] for s, p in mean_pos.items()}
+    if "head" in joints:
+        height = standing_height(joints["head"][2])    # as Skeleton.height(): head joint above the toes
+        where = f"the headset is {joints['head'][2]:.2f} m above the floor"
+    else:        # no headset: the canonical body's height for this arm span
+        span = float(np.linalg.norm(joints["left_hand"] - joints["right_hand"]))
+        height = span * CANONICAL_HEIGHT / arm_span(Skeleton.canonical())
+        where = f"the hands are {span:.2f} m apart"
     if not 0.5 <= height <= 2.5:
-        raise CalibrationError(f"the headset is {head[2] - floor:.2f} m above the floor: not a standing person")
-    return Calibration(height, yaw, offsets)
+        raise CalibrationError(f"{where}: not a standing person in a T-pose")
+    return Calibration(height, yaw, offsets, fit_skeleton(joints, height))

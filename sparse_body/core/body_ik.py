@@ -50,6 +50,19 @@ _FOOT_OF = {J["left_ankle"]: J["left_foot"], J["right_ankle"]: J["right_foot"]} 
 _ARMS = (J["left_wrist"], J["right_wrist"])
 SPINE_BEND = (J["spine2"], J["spine3"], J["neck"])
 MAX_BEND = 0.6          # radians per spine joint: about 100 degrees over the three
+# Near full extension the bend that gives a length changes like the square root of what is
+# missing: a millimetre of tracker noise swings a nearly straight knee, elbow or spine by
+# degrees. Within SOFT_REACH of the full length the solvers aim for a length that approaches
+# it smoothly instead (soft IK): the end falls short by at most 0.63 * SOFT_REACH there.
+SOFT_REACH = 0.01
+
+
+def soft_distance(distance: float, full: float, soft: float = SOFT_REACH) -> float:
+    """The length to solve for: distance itself up to full - soft, then easing towards full."""
+    start = full - soft
+    if soft <= 0 or distance <= start:
+        return distance
+    return start + soft * (1.0 - math.exp(-(distance - start) / soft))
 
 
 def hinge_angle(m: np.ndarray, axis: np.ndarray) -> float:
@@ -103,7 +116,7 @@ def reach(local: np.ndarray, parent_rot: np.ndarray, upper_pos: np.ndarray, offs
     u, h = limb.upper, limb.hinge
     w = offsets[limb.end] if end_vector is None else end_vector
     a = offsets[h]
-    distance = float(np.linalg.norm(target - upper_pos))
+    distance = soft_distance(float(np.linalg.norm(target - upper_pos)), float(np.linalg.norm(a) + np.linalg.norm(w)))
     if not exact_hinge:   # solve in the hinge's own frame: |L_h^T a + R(t) w|
         base = local[h]
         turned = base @ about(limb.axis, reach_angle(base.T @ a, w, limb.axis, distance, 0.0, None))
@@ -148,6 +161,7 @@ def fit_spine(local: np.ndarray, root: np.ndarray, offsets: np.ndarray, head_tar
         h += xz[0]
         return math.sqrt(abs(h) ** 2 + lateral * lateral)
 
+    distance = soft_distance(distance, length(0.0))
     forward = float((pelvis @ local[s1]).T[0] @ to_target) >= 0.0   # lean direction in spine1's frame
     limit = MAX_BEND if forward else -MAX_BEND
     lo, hi = 0.0, limit

@@ -37,8 +37,8 @@ STATURE_RATIO = 1.10
 # Rest offsets (metres) of each joint from its parent, in the parent's rest frame.
 _CANONICAL_OFFSETS = np.array([
     [0.000, 0.000, 0.000],    # pelvis (root; its position comes from the motion)
-    [-0.047, 0.102, -0.112],  # left_hip
-    [-0.047, -0.102, -0.112], # right_hip
+    [0.047, 0.102, -0.112],   # left_hip (in front of the pelvis joint, as in every CMU subject)
+    [0.047, -0.102, -0.112],  # right_hip
     [0.000, 0.000, 0.000],    # spine1 (at the pelvis: CMU's lower back starts at the root)
     [0.000, 0.000, -0.450],   # left_knee
     [0.000, 0.000, -0.450],   # right_knee
@@ -48,9 +48,9 @@ _CANONICAL_OFFSETS = np.array([
     [0.000, 0.000, 0.132],    # spine3
     [0.132, 0.000, -0.033],   # left_foot (ball of the foot)
     [0.132, 0.000, -0.033],   # right_foot
-    [-0.004, 0.000, 0.133],   # neck (base of the neck)
-    [-0.004, 0.000, 0.133],   # left_collar (where the clavicle starts)
-    [-0.004, 0.000, 0.133],   # right_collar
+    [0.004, 0.000, 0.133],    # neck (base of the neck)
+    [0.004, 0.000, 0.133],    # left_collar (where the clavicle starts)
+    [0.004, 0.000, 0.133],    # right_collar
     [0.000, 0.000, 0.110],    # head (middle of the neck; rotation of the skull)
     [0.000, 0.220, 0.000],    # left_shoulder
     [0.000, -0.220, 0.000],   # right_shoulder

@@ -165,9 +165,14 @@ def load_clip(clip: Clip, fps: float = DEFAULT_FPS, use_cache: bool = True) -> M
                     motion.local_quats.astype(np.float32).astype(np.float64), motion.root_positions)
     if use_cache:
         cached.parent.mkdir(parents=True, exist_ok=True)
-        tmp = cached.with_suffix(".tmp.npz")
-        motion.save(tmp)
-        os.replace(tmp, cached)
+        # a name of this process's own: two trainers filling the cache at once must not
+        # move each other's half-written files
+        tmp = cached.with_name(f"{cached.stem}.{os.getpid()}.tmp.npz")
+        try:
+            motion.save(tmp)
+            os.replace(tmp, cached)
+        finally:
+            tmp.unlink(missing_ok=True)
     return motion
 
 

@@ -36,6 +36,10 @@ class TrackerNoise:
 
 NO_NOISE = TrackerNoise()
 LOBSTR_NOISE = TrackerNoise(position_std=0.01, rotation_max_deg=1.5)
+# A VR system in use (Lighthouse base stations, a headset's inside-out tracking): about a
+# millimetre of position jitter and half a degree of orientation jitter on average.
+VR_NOISE = TrackerNoise(position_std=0.001, rotation_max_deg=1.0)
+NOISE_MODELS = {"vr": VR_NOISE, "lobstr": LOBSTR_NOISE, "none": NO_NOISE}
 FAULTY_1PCT = TrackerNoise(fault_probability=0.01)      # DragPoser's faulty-sensor protocol
 
 

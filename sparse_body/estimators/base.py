@@ -12,6 +12,7 @@ import yaml
 
 from ..core.sensors import SensorConfig
 from ..core.skeleton import Skeleton
+from ..core.tracker_filter import NO_FILTER, FilterConfig, TrackerFilter
 from ..core.types import BodyPose, TrackerFrame, TrackerStream
 
 # name -> "module:Class"; modules are imported on first use so that an estimator's
@@ -29,7 +30,8 @@ class Estimator(ABC):
     """Streaming whole-body estimation: reset(), then step() once per tracker frame.
 
     step() never raises on bad tracker values and never returns non-finite numbers: with too
-    little usable input it returns its last pose with valid=False.
+    little usable input it returns its last pose with valid=False. Every method sees its
+    input through the same tracker filter (core/tracker_filter.py; filter_* options).
     """
 
     name: ClassVar[str]
@@ -44,10 +46,12 @@ class Estimator(ABC):
         self.sensors = sensors
         self.skeleton = skeleton
         self.fps = fps
+        self.input_filter = TrackerFilter(FilterConfig(), sensors.site_names)
 
     def reset(self) -> None:
         """Forget all history (a new take, a clock jump back)."""
         self._last: BodyPose | None = None
+        self.input_filter.reset()
         self._reset()
 
     def _reset(self) -> None:
@@ -57,7 +61,7 @@ class Estimator(ABC):
         """The body at frame.stamp. What every method shares is here: too little input holds
         the last pose (invalid), a non-finite result starts the method over and holds too,
         and the last valid pose is kept for holding."""
-        return self._checked(frame.stamp, self._estimate(frame))
+        return self._checked(frame.stamp, self._estimate(self.input_filter(frame)))
 
     @abstractmethod
     def _estimate(self, frame: TrackerFrame) -> BodyPose | None:
@@ -129,12 +133,27 @@ def parse_estimator_spec(spec: str) -> tuple[str, dict]:
     return name.strip(), options
 
 
+FILTER_PREFIX = "filter_"
+
+
 def create_estimator(name: str, sensors: SensorConfig, skeleton: Skeleton, fps: float = 60.0,
                      **options) -> Estimator:
+    """An estimator by name with its options; filter_<field> options (of FilterConfig) set
+    the tracker filter every estimator has, filter=false turns it off."""
     try:
         target = ESTIMATORS[name]
     except KeyError:
         raise ValueError(f"unknown estimator {name!r}; available: {', '.join(sorted(ESTIMATORS))}") from None
+    filter_on = options.pop("filter", True)
+    filtering = {k.removeprefix(FILTER_PREFIX): options.pop(k) for k in list(options) if k.startswith(FILTER_PREFIX)}
+    if not isinstance(filter_on, bool):
+        raise ValueError(f"estimator option filter must be true or false, got {filter_on!r}")
+    try:
+        filter_config = FilterConfig(**filtering) if filter_on else NO_FILTER
+    except TypeError:
+        fields = ", ".join(FILTER_PREFIX + f for f in FilterConfig.__dataclass_fields__)
+        raise ValueError(f"unknown filter option among {', '.join(FILTER_PREFIX + k for k in filtering)}; "
+                         f"the filter's options are {fields}") from None
     module, cls = target.split(":")
     cls = getattr(importlib.import_module(module), cls)
     parameters = inspect.signature(cls.__init__).parameters.values()
@@ -144,10 +163,12 @@ def create_estimator(name: str, sensors: SensorConfig, skeleton: Skeleton, fps: 
     unknown = [k for k in options if k not in known]
     if unknown and not takes_more:
         raise ValueError(f"estimator {name!r} has no option {', '.join(map(repr, unknown))}; "
-                         f"its options are {', '.join(known) or 'none'}")
+                         f"its options are {', '.join(known) or 'none'} and the filter's ({FILTER_PREFIX}...)")
     try:
-        return cls(sensors, skeleton, fps=fps, **options)
+        estimator = cls(sensors, skeleton, fps=fps, **options)
     except TypeError as err:
         if "unexpected keyword argument" not in str(err):
             raise
         raise ValueError(f"estimator {name!r}: {err}; its options are {', '.join(known)}") from None
+    estimator.input_filter = TrackerFilter(filter_config, sensors.site_names)
+    return estimator

@@ -31,9 +31,11 @@ from std_msgs.msg import String
 
 from sparse_body.msg import EstimateStatus, FootContacts
 
+from ..adapters.calibration import Calibration, CalibrationError
 from ..core.rotations import matrix_to_quat
 from ..core.sensors import SensorConfigError, load_sensor_config
 from ..core.skeleton import JOINT_NAMES, Skeleton
+from ..core.tracker_filter import FilterConfig, TrackerFilter
 from ..core.types import BodyPose
 from ..estimators import create_estimator
 from ..estimators.base import parse_estimator_spec
@@ -49,7 +51,15 @@ PARAMETERS = {
     "estimator": ("ik", "estimation method: ik, reference, lobstr, dragposer, refined:base=NAME"),
     "model_path": ("", "model file for learned estimators; empty: the shipped model"),
     "fixed_frame": ("", "frame the trackers are looked up in; empty: the sensor configuration's"),
-    "height": (1.75, "the tracked person's height in metres (scales the body)"),
+    "height": (1.75, "the tracked person's height in metres (scales the canonical body; unused with a calibration)"),
+    "calibration": ("", "T-pose calibration YAML (the tracker bridge's ~/calibrate writes one): the body it fitted "
+                        "is the one estimated and published; empty: the canonical body at height"),
+    "filter_position_noise": (0.001, "tracker position noise (m, std per axis) the input filter is set for; "
+                                     "0 with filter_rotation_noise 0: no filtering"),
+    "filter_rotation_noise": (0.33, "tracker orientation noise (degrees, std per axis) the input filter is set for"),
+    "filter_acceleration": (1.0, "how hard a tracked body part accelerates (m/s^2/sqrt(Hz)): higher follows faster "
+                                 "motion with less lag and smooths less"),
+    "filter_spin_acceleration": (3.0, "the same for turning (rad/s^2/sqrt(Hz))"),
     "output_rate": (60.0, "estimates per second when the trackers do not drive them (input slow, partial or "
                           "absent); estimates driven by tracker input are limited to twice this"),
     "stale_timeout": (0.1, "a tracker's newest sample no longer counts when it is this many seconds (or three of "
@@ -61,7 +71,8 @@ PARAMETERS = {
     "autostart": (False, "configure and activate on start-up (without a lifecycle manager)"),
 }
 # Numbers outside these bounds are refused with the reason (at configure and on a live set).
-RANGES = {"height": (0.5, 2.5), "output_rate": (0.1, 1000.0), "stale_timeout": (0.001, 10.0),
+RANGES = {"height": (0.5, 2.5), "filter_position_noise": (0.0, 0.1), "filter_rotation_noise": (0.0, 10.0),
+          "filter_acceleration": (0.01, 1000.0), "filter_spin_acceleration": (0.01, 1000.0), "output_rate": (0.1, 1000.0), "stale_timeout": (0.001, 10.0),
           "tracker_timeout": (0.01, 60.0), "input_timeout": (0.01, 60.0), "iterations": (1, 100)}
 # What a configured node applies at once; the rest is refused until it is cleaned up.
 LIVE = {"stale_timeout", "tracker_timeout", "publish_link_tf", "autostart"}
@@ -133,9 +144,12 @@ class EstimatorNode(LifecycleNode):
             sensors = load_sensor_config(p["sensors"])
             if p["fixed_frame"]:
                 sensors = replace(sensors, fixed_frame=p["fixed_frame"])
-            self.skeleton = Skeleton.canonical(p["height"])
+            self.skeleton = self._body(p)
             self.estimator = self._make_estimator(p, sensors)
-        except (SensorConfigError, ValueError, FileNotFoundError) as err:
+            self.estimator.input_filter = TrackerFilter(
+                FilterConfig(p["filter_position_noise"], p["filter_rotation_noise"], p["filter_acceleration"],
+                             p["filter_spin_acceleration"]), sensors.site_names)
+        except (SensorConfigError, CalibrationError, ValueError, FileNotFoundError) as err:
             self.get_logger().error(f"configure failed: {err}")
             self._release()
             return TransitionCallbackReturn.FAILURE
@@ -167,6 +181,15 @@ class EstimatorNode(LifecycleNode):
         self.get_logger().info(f"configured: {p.get('estimator', 'refinement')} on {sensors.name} ({', '.join(sensors.site_names)}) "
                                f"in frame {sensors.fixed_frame!r}")
         return TransitionCallbackReturn.SUCCESS
+
+    def _body(self, p: dict) -> Skeleton:
+        if not p["calibration"]:
+            return Skeleton.canonical(p["height"])
+        calibration = Calibration.load(p["calibration"])
+        body = calibration.body()
+        self.get_logger().info(f"the body of {p['calibration']}: {body.height():.2f} m tall"
+                               + ("" if calibration.skeleton is not None else " (canonical proportions)"))
+        return body
 
     def _make_estimator(self, p: dict, sensors):
         name, options = parse_estimator_spec(p["estimator"])

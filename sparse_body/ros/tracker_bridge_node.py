@@ -267,8 +267,8 @@ class TrackerBridge(Node):
         with self._lock:
             collected, self._collect = self._collect, None
         try:
-            head = self.sensors.site("head").offset_translation if "head" in self.sensors.site_names else None
-            calibration = calibrate_tpose(collected, head_offset=None if head is None else np.array(head))
+            calibration = calibrate_tpose(collected, translations={s.site: np.array(s.offset_translation)
+                                                                   for s in self.sensors.sites})
         except CalibrationError as err:
             response.success, response.message = False, str(err)
             self.get_logger().warn(f"calibration failed: {err}")

@@ -8,15 +8,19 @@ from ..data.catalog import load_split
 
 
 def write_lobstr_card(onnx_path: Path, report: dict, mocap_root: Path, limit: int | None = None) -> Path:
-    """Evaluate the model on the test split (four-point, clean trackers) beside the IK baseline,
-    without its contact IK and the paper's figures, and write <model>.md."""
+    """Evaluate the model on the test split (four-point) beside the IK baseline, without its
+    contact IK and the paper's figures: field protocol, lab protocol beside it, and LoBSTr's
+    tracker noise against none; write <model>.md."""
+    from ..data.field_protocol import FIELD, LAB
     from ..evaluation import evaluate, format_table, paper_figures
     sensors = load_sensor_config("four_point")
-    model = str(Path(onnx_path).resolve())
-    results = [evaluate(spec, sensors, mocap_root, "test", limit=limit, progress=False, **options)
-               for spec, options in [("lobstr", {"model_path": model}),
-                                     ("lobstr:contact_ik=false", {"model_path": model}), ("ik", {})]]
+    model = {"model_path": str(Path(onnx_path).resolve())}
+    runs = [("lobstr", FIELD, model), ("lobstr:contact_ik=false", FIELD, model), ("ik", FIELD, {}),
+            ("lobstr", LAB, model), ("ik", LAB, {})]
+    results = [evaluate(spec, sensors, mocap_root, "test", protocol=protocol, limit=limit, progress=False, **options)
+               for spec, protocol, options in runs]
     table = format_table(results, paper_figures("lobstr", "four_point"))
+    noise_table = noise_results_table(["lobstr", "ik"], sensors, mocap_root, limit, model)
     split = load_split()
     cfg, val = report["config"], report["validation"]
     history = report.get("history", [])
@@ -33,8 +37,8 @@ Runtime: ONNX Runtime, one GRU step per frame (`sparse_body/estimators/lobstr.py
 ## Data
 - CMU motion capture from `../shared/mocap` (its README has the licence), retargeted onto the
   22-joint body at {cfg['fps']:.0f} fps, every clip scaled to the canonical leg length, floor at z = 0.
-- Split `config/splits/cmu.yaml` (by clip): {len(split['train'])} train / {len(split['validation'])} validation /
-  {len(split['test'])} test clips. Trained on {report['train_clips']} train clips ({report['train_frames']} frames),
+- Split `config/splits/cmu.yaml` (by subject: no validation or test person in training):
+  {len(split['train'])} train / {len(split['validation'])} validation / {len(split['test'])} test clips. Trained on {report['train_clips']} train clips ({report['train_frames']} frames),
   each clean plus {cfg['noise_copies']} copies with the paper's tracker noise (1 cm Gaussian per axis,
   rotations up to 1.5 degrees); the best validation score ({report['validation_clips']} clips) is exported.
 - Contact labels: toe within 2 cm of the floor and slower than 0.3 m/s (`core/contacts.py`).
@@ -56,11 +60,22 @@ Validation (exported weights): contact {val['contact_accuracy_pct']:.1f} %, leg 
 
 ## Test split (`sparse-body eval --estimator lobstr --sensors four_point`)
 
+Field protocol (the default: the body from a T-pose calibration, trackers mounted as a user
+wears them, a VR system's noise; see the README) and, beside it, the lab protocol the papers
+use (`--skeleton oracle --noise none`: the subject's true skeleton, clean trackers).
+
 ```
 {table}
 ```
 
-Skate with contact IK: {results[0].summary['Skate [cm/s]']:.2f} cm/s; without: {results[1].summary['Skate [cm/s]']:.2f} cm/s.
+Skate with contact IK: {results[0].summary['Skate [cm/s]']:.2f} cm/s; without: {results[1].summary['Skate [cm/s]']:.2f} cm/s (field protocol).
+
+## Tracker noise (field protocol, `--noise none` against `--noise lobstr`)
+
+LoBSTr's noise (1 cm, 1.5 degrees) with the input filter set for it, against clean trackers
+(no filter):
+
+{noise_table}
 The paper's figures come from its own data (PFNN, CMU and MHAD locomotion at 45 fps) and
 protocol: a guide, not a like-for-like comparison.
 
@@ -81,33 +96,55 @@ REFINED_BASES = ["ik", "lobstr"]                               # refined on four
 
 
 def _evaluate(job):
-    from dataclasses import replace
-
-    from ..data.virtual_trackers import NO_NOISE
     from ..evaluation import evaluate
-    _, spec, sensors_name, faulty, mocap_root, limit, options = job
-    noise = replace(NO_NOISE, fault_probability=faulty / 100)
-    return evaluate(spec, load_sensor_config(sensors_name), mocap_root, "test", noise=noise, limit=limit,
+    _, spec, sensors_name, protocol, mocap_root, limit, options = job
+    return evaluate(spec, load_sensor_config(sensors_name), mocap_root, "test", protocol=protocol, limit=limit,
                     progress=False, **options)
 
 
 def dragposer_results(model_dir: str, mocap_root: Path, limit: int | None = None, workers: int = 2):
     """The card's evaluations, `workers` processes at a time: {(sensors, faulty): [results]} for
-    the setups, and [base, refined base, ...] on four-point."""
+    the setups (field protocol, the lab's beside it), and [base, refined base, ...] on four-point."""
     from concurrent.futures import ProcessPoolExecutor
+
+    from ..data.field_protocol import Protocol
     mine = {"model_dir": model_dir}
     jobs = []
     for setup in DRAGPOSER_SETUPS:
+        sensors_name, faulty = setup
+        field, lab = Protocol.named("calibrated", "vr", faulty), Protocol.named("oracle", "none", faulty)
         specs = ["dragposer"] + (["dragposer:temporal_weight=0"] if setup in ABLATION_SETUPS else [])
-        jobs += [(setup, spec, *setup, mocap_root, limit, mine) for spec in specs]
-        jobs.append((setup, "ik", *setup, mocap_root, limit, {}))
+        jobs += [(setup, spec, sensors_name, field, mocap_root, limit, mine) for spec in specs]
+        jobs.append((setup, "ik", sensors_name, field, mocap_root, limit, {}))
+        jobs += [(setup, "dragposer", sensors_name, lab, mocap_root, limit, mine),
+                 (setup, "ik", sensors_name, lab, mocap_root, limit, {})]
+    field = Protocol.named()
     for base in REFINED_BASES:
-        jobs += [("refined", base, "four_point", 0.0, mocap_root, limit, {}),
-                 ("refined", f"refined:base={base}", "four_point", 0.0, mocap_root, limit, mine)]
+        jobs += [("refined", base, "four_point", field, mocap_root, limit, {}),
+                 ("refined", f"refined:base={base}", "four_point", field, mocap_root, limit, mine)]
     with ProcessPoolExecutor(workers) as pool:
         results = list(pool.map(_evaluate, jobs))
     tables = {setup: [r for j, r in zip(jobs, results) if j[0] == setup] for setup in DRAGPOSER_SETUPS}
     return tables, [r for j, r in zip(jobs, results) if j[0] == "refined"]
+
+
+NOISE_METRICS = ("MPJPE [cm]", "MPJVE [cm/s]", "Jitter [100m/s3]", "End-effector PE [cm]")
+
+
+def noise_results_table(specs: list[str], sensors, mocap_root: Path, limit: int | None, options: dict) -> str:
+    """A Markdown table: each estimator on the test split, field protocol, clean trackers
+    against LoBSTr's noise, and the ratios the noise brings."""
+    from ..data.field_protocol import Protocol
+    from ..evaluation import evaluate
+    rows = ["| estimator | trackers | " + " | ".join(NOISE_METRICS) + " |", "|---|---|" + "---|" * len(NOISE_METRICS)]
+    for spec in specs:
+        mine = options if spec.startswith(("lobstr", "dragposer")) else {}
+        clean, noisy = (evaluate(spec, sensors, mocap_root, "test", protocol=Protocol.named(noise=n), limit=limit,
+                                 progress=False, **mine).summary for n in ("none", "lobstr"))
+        rows.append(f"| {spec}/{sensors.name} | clean | " + " | ".join(f"{clean[m]:.2f}" for m in NOISE_METRICS) + " |")
+        rows.append(f"| | LoBSTr noise, filtered | " + " | ".join(f"{noisy[m]:.2f}" for m in NOISE_METRICS) + " |")
+        rows.append(f"| | ratio | " + " | ".join(f"{noisy[m] / clean[m]:.2f}x" for m in NOISE_METRICS) + " |")
+    return "\n".join(rows)
 
 
 def write_dragposer_card(out_dir: Path, mocap_root: Path, limit: int | None = None) -> Path:
@@ -123,6 +160,8 @@ def write_dragposer_card(out_dir: Path, mocap_root: Path, limit: int | None = No
     temporal = json.loads((out_dir / "dragposer_temporal.train.json").read_text())
     # the refinement's other estimators come from the package (lobstr.onnx)
     tables, refined = dragposer_results(str(out_dir.resolve()), mocap_root, limit)
+    noise_tables = [noise_results_table(["dragposer", "ik"], load_sensor_config(name), mocap_root, limit,
+                                        {"model_dir": str(out_dir.resolve())}) for name in ("six_point", "four_point")]
     text_tables = []
     for (sensors_name, faulty), results in tables.items():
         title = f"{sensors_name}" + (f", faulty {faulty:g} %" if faulty else "")
@@ -150,8 +189,8 @@ Runtime and a damped Gauss-Newton step whose Jacobian comes from one batched dec
 ## Data
 - CMU motion capture from `../shared/mocap` (its README has the licence), retargeted onto the
   22-joint body at 60 fps; rotations on the canonical body, root height scaled by leg length.
-- Split `config/splits/cmu.yaml` (by clip): {len(split['train'])} train / {len(split['validation'])} validation /
-  {len(split['test'])} test clips. Both networks train on the train clips
+- Split `config/splits/cmu.yaml` (by subject: no validation or test person in training):
+  {len(split['train'])} train / {len(split['validation'])} validation / {len(split['test'])} test clips. Both networks train on the train clips
   ({vae['train_frames']} frames); the best validation checkpoint is exported.
 
 ## Pose VAE
@@ -227,10 +266,21 @@ afresh differed from the same clip read back from the parse cache (float32 quate
 about 1e-7, and the optimiser's accept/refuse decisions grow that into such changes; clips now
 load exactly as the cache holds them, and repeated runs give identical figures.
 
+Each setup under the field protocol (the default: the body from a T-pose calibration, trackers
+mounted as a user wears them, a VR system's noise; see the README), and the lab protocol the
+papers use beside it (`--skeleton oracle --noise none`).
+
 {chr(10).join(text_tables)}
 The paper's figures come from its own data and protocol (a guide, not a like-for-like comparison).
 
-## Refining other estimators (four-point, `sparse-body eval --estimator E --estimator refined:base=E`)
+## Tracker noise (field protocol, `--noise none` against `--noise lobstr`)
+
+LoBSTr's noise (1 cm, 1.5 degrees) with the input filter set for it, against clean trackers
+(no filter):
+
+{chr(10).join(noise_tables)}
+
+## Refining other estimators (four-point, field protocol, `sparse-body eval --estimator E --estimator refined:base=E`)
 
 ```
 {format_table(refined)}

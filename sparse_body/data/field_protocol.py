@@ -1,0 +1,151 @@
+"""What an estimator gets in the field, from a motion capture clip: the evaluation protocols.
+
+A user's estimator never sees the true skeleton or clean, perfectly mounted trackers. The
+field protocol gives it only what a user has:
+- trackers strapped on and held a little differently each session: each site's mounting
+  rotation turned by up to 20 degrees (the T-pose calibration has to find it). Mounting
+  translations are the sensor configuration's (the device geometry the user gives); an
+  error in them shows in every joint a tracker places, and can be added with
+  mounting_translation_std to measure what it costs;
+- tracker noise of a VR system (Lighthouse / headset grade unless told otherwise);
+- the body the T-pose calibration fits: the person first stands in a T-pose (synthesized
+  in their own body, held a second, never quite exact), then moves as in the clip.
+The lab protocol is the one the papers report: the true skeleton, exact mounting, no noise.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from ..adapters.calibration import Calibration, calibrate_tpose
+from ..core.sensors import SensorConfig
+from ..core.skeleton import NUM_JOINTS, PARENTS, Skeleton
+from ..core.types import TrackerStream
+from .motion import Motion
+from .virtual_trackers import NO_NOISE, NOISE_MODELS, VR_NOISE, TrackerNoise, synthesize_trackers
+
+SKELETONS = ("calibrated", "height", "oracle")
+
+
+@dataclass(frozen=True)
+class Protocol:
+    skeleton: str = "calibrated"     # calibrated: fitted from the T-pose; height: canonical at the
+    #                                  calibrated height; oracle: the subject's true skeleton
+    noise: TrackerNoise = VR_NOISE
+    mounting_rotation_deg: float = 20.0      # uniform random axis, angle up to this, per site and clip
+    mounting_translation_std: float = 0.0    # metres per axis, per site and clip
+    tpose_wobble_deg: float = 2.0            # each segment of the calibration T-pose off by up to this
+    tpose_seconds: float = 1.0
+
+    def __post_init__(self) -> None:
+        if self.skeleton not in SKELETONS:
+            raise ValueError(f"skeleton must be one of {', '.join(SKELETONS)}, got {self.skeleton!r}")
+
+    @property
+    def label(self) -> str:
+        """What the protocol is, for table footers and JSON results."""
+        if self == LAB:
+            return "lab"
+        noise = next((n for n, v in NOISE_MODELS.items() if v == replace(self.noise, fault_probability=0.0)), "custom")
+        faults = f", {self.noise.fault_probability * 100:g} % faulty" if self.noise.fault_probability else ""
+        name = "field" if replace(self, noise=VR_NOISE) == FIELD else f"{self.skeleton} skeleton"
+        return f"{name}, {noise} noise{faults}"
+
+    @classmethod
+    def named(cls, skeleton: str = "calibrated", noise: str = "vr", faulty_percent: float = 0.0) -> "Protocol":
+        """The protocol of `sparse-body eval --skeleton S --noise N --faulty P`: an oracle
+        skeleton comes with the true mounting (the lab's), the others with a user's."""
+        if noise not in NOISE_MODELS:
+            raise ValueError(f"noise must be one of {', '.join(NOISE_MODELS)}, got {noise!r}")
+        model = replace(NOISE_MODELS[noise], fault_probability=faulty_percent / 100)
+        if skeleton == "oracle":
+            return cls("oracle", model, 0.0, 0.0, 0.0)
+        return cls(skeleton, model)
+
+
+FIELD = Protocol()
+LAB = Protocol("oracle", NO_NOISE, 0.0, 0.0, 0.0)
+
+
+@dataclass
+class UserView:
+    """What the estimator is given for one clip."""
+    skeleton: Skeleton
+    sensors: SensorConfig           # the configuration the user runs with (nominal mounting)
+    stream: TrackerStream           # the clip's tracker samples, calibrated as the bridge does
+    calibration: Calibration | None = None
+
+
+def _random_rotation(rng: np.random.Generator, max_deg: float) -> Rotation:
+    axis = rng.normal(size=3)
+    return Rotation.from_rotvec(axis / np.linalg.norm(axis) * np.deg2rad(rng.uniform(0.0, max_deg)))
+
+
+def mounted_as_worn(sensors: SensorConfig, protocol: Protocol, rng: np.random.Generator) -> SensorConfig:
+    """The configuration with this session's mounting: every site's offsets perturbed."""
+    sites = []
+    for site in sensors.sites:
+        rot = Rotation.from_quat(site.offset_rotation) * _random_rotation(rng, protocol.mounting_rotation_deg)
+        move = rng.normal(0.0, protocol.mounting_translation_std, 3)
+        sites.append(replace(site, offset_translation=tuple(np.add(site.offset_translation, move)),
+                             offset_rotation=tuple(rot.as_quat())))
+    return replace(sensors, sites=tuple(sites))
+
+
+def tpose_motion(motion: Motion, protocol: Protocol, rng: np.random.Generator) -> Motion:
+    """The clip's subject standing in a T-pose where the clip starts, facing its first
+    heading, feet on the floor (z = 0). No one stands in an exact T-pose: each body segment
+    is turned by up to tpose_wobble_deg from it (segments, not joints: a person squares each
+    segment to the room, so the errors do not add up along a limb)."""
+    T = max(2, int(round(protocol.tpose_seconds * motion.fps)))
+    forward = Rotation.from_quat(motion.local_quats[0, 0]).apply([1.0, 0.0, 0.0])
+    facing = Rotation.from_euler("z", np.arctan2(forward[1], forward[0]))
+    glob = [facing * _random_rotation(rng, protocol.tpose_wobble_deg) for _ in range(NUM_JOINTS)]
+    local = [glob[0]] + [glob[PARENTS[j]].inv() * glob[j] for j in range(1, NUM_JOINTS)]
+    quats = np.tile(np.stack([r.as_quat() for r in local]), (T, 1, 1))
+    standing = Motion("tpose", motion.fps, motion.skeleton, quats, np.zeros((T, 3)))
+    root = np.tile(motion.root_positions[0] * [1.0, 1.0, 0.0], (T, 1))
+    root[:, 2] = -standing.positions[0, :, 2].min()
+    return Motion("tpose", motion.fps, motion.skeleton, quats, root)
+
+
+def calibrate_from_tpose(stream: TrackerStream, sensors: SensorConfig) -> Calibration:
+    """The bridge's ~/calibrate on a recorded T-pose."""
+    samples = {}
+    for s, site in enumerate(stream.sites):
+        spec = sensors.site(site)
+        ok = stream.valid[:, s]
+        samples[site] = [(stream.positions[t, s] if spec.has_position else None,
+                          stream.orientations[t, s] if spec.has_orientation else None) for t in np.flatnonzero(ok)]
+    return calibrate_tpose(samples, translations={s.site: np.array(s.offset_translation) for s in sensors.sites})
+
+
+def calibrated_stream(stream: TrackerStream, calibration: Calibration) -> TrackerStream:
+    """Tracker orientations turned into their joints' (what the bridge publishes)."""
+    orientations = stream.orientations.copy()
+    for s, site in enumerate(stream.sites):
+        if site in calibration.offsets:
+            ok = np.all(np.isfinite(orientations[:, s]), axis=1)
+            offset = Rotation.from_quat(calibration.offsets[site]).inv()
+            orientations[ok, s] = (Rotation.from_quat(orientations[ok, s]) * offset).as_quat()
+    return TrackerStream(stream.sites, stream.times, stream.positions, orientations, stream.valid)
+
+
+def user_view(motion: Motion, sensors: SensorConfig, protocol: Protocol = FIELD, seed: int = 0) -> UserView:
+    """What a user's estimator would get for this clip under the protocol."""
+    rng = np.random.default_rng(seed)
+    if protocol.skeleton == "oracle" and protocol.mounting_rotation_deg == 0 and protocol.mounting_translation_std == 0:
+        return UserView(motion.skeleton, sensors, synthesize_trackers(motion, sensors, protocol.noise, seed))
+    worn = mounted_as_worn(sensors, protocol, rng)
+    tpose = synthesize_trackers(tpose_motion(motion, protocol, rng), worn, protocol.noise, seed + 1)
+    calibration = calibrate_from_tpose(tpose, sensors)
+    stream = calibrated_stream(synthesize_trackers(motion, worn, protocol.noise, seed), calibration)
+    # the calibration has absorbed the mounting rotations: the user's configuration keeps
+    # only the nominal translations
+    user_sensors = replace(sensors, sites=tuple(replace(s, offset_rotation=(0.0, 0.0, 0.0, 1.0))
+                                                for s in sensors.sites))
+    skeleton = {"calibrated": calibration.body(), "height": Skeleton.canonical(calibration.height),
+                "oracle": motion.skeleton}[protocol.skeleton]
+    return UserView(skeleton, user_sensors, stream, calibration)

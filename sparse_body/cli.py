@@ -26,7 +26,7 @@ def cmd_eval(args) -> int:
         for name in args.estimator:
             specs += [s for s in COMPARE_WITH.get(name, []) if s not in specs]
             reference.update(paper_figures(name, sensors.name, args.faulty))
-    protocol = Protocol.named(args.skeleton, args.noise, args.faulty)
+    protocol = Protocol.named(args.skeleton, args.noise, args.faulty, args.mounting_error)
     if args.motion:
         from .data.catalog import motion_files
         files = motion_files(args.motion)
@@ -244,6 +244,9 @@ def build_parser() -> argparse.ArgumentParser:
                         "with exact mounting (the lab protocol, with --noise none)")
     p.add_argument("--noise", default="vr", choices=["vr", "lobstr", "none"],
                    help="tracker noise: a VR system's (1 mm, 0.5 deg on average), LoBSTr's (1 cm, 1.5 deg) or none")
+    p.add_argument("--mounting-error", type=float, default=0.0, metavar="METRES",
+                   help="an error no calibration finds in each tracker's mounting translation (std per axis, per "
+                        "clip; not with --skeleton oracle)")
     p.add_argument("--faulty", type=_percent, default=0.0, metavar="PERCENT",
                    help="DragPoser's faulty sensors: each frame, with this probability (%%), one tracker "
                         "disconnects for 100 frames")

@@ -6,11 +6,12 @@ Each site carries position and velocity (per axis) and orientation and angular v
 the three axes share one 2x2 covariance, as the model is the same on each. Two numbers say
 how noisy the trackers are (position_noise, rotation_noise: the system's specification), two
 how hard a body part accelerates (acceleration, spin_acceleration); from them the filter's
-bandwidth follows, about (acceleration / position_noise)^(1/2) rad/s: 5 Hz for a VR system's
-millimetre, 1.6 Hz for LoBSTr's centimetre. Noisier trackers are smoothed more, on their own.
-A constant velocity passes without lag; the cost is lag under acceleration (a / bandwidth^2:
-5 mm at 5 m/s^2 for the default) and the shakes a sudden stop leaves (see the README's
-noise table for what it costs each estimator, measured).
+bandwidth follows, about (acceleration / position_noise)^(1/2) rad/s: 3.6 Hz for a VR
+system's millimetre, 1.1 Hz for LoBSTr's centimetre. Noisier trackers are smoothed more, on
+their own. A constant velocity passes without lag; the cost is lag under acceleration
+(a / bandwidth^2: 1 cm at 5 m/s^2 with the defaults) and the overshoot a sudden stop leaves
+(the README's tables give what it costs each estimator, measured). The defaults were chosen
+on the validation split (six-point IK, field protocol; see the README).
 
 Why not the usual 1-euro filter: measured on the validation split (six-point IK, 1 cm /
 1.5 degree noise) it cut the joints' velocity error from 154 to 111 cm/s at best; this filter
@@ -30,8 +31,8 @@ from .types import TrackerFrame
 class FilterConfig:
     position_noise: float = 0.001       # metres: the trackers' position noise (std per axis); 0: no filter
     rotation_noise: float = 0.33        # degrees: orientation noise (std per axis)
-    acceleration: float = 1.0           # m/s^2 / sqrt(Hz): how hard a tracked body part accelerates
-    spin_acceleration: float = 3.0      # rad/s^2 / sqrt(Hz), the same for turning
+    acceleration: float = 0.5           # m/s^2 / sqrt(Hz): how hard a tracked body part accelerates
+    spin_acceleration: float = 1.5      # rad/s^2 / sqrt(Hz), the same for turning
     jump: float = 0.5                   # metres: a sample this far from the prediction starts the site over
     gap: float = 0.25                   # seconds without a sample after which a site starts over
 

@@ -50,19 +50,27 @@ class Protocol:
             return "lab"
         noise = next((n for n, v in NOISE_MODELS.items() if v == replace(self.noise, fault_probability=0.0)), "custom")
         faults = f", {self.noise.fault_probability * 100:g} % faulty" if self.noise.fault_probability else ""
-        name = "field" if replace(self, noise=VR_NOISE) == FIELD else f"{self.skeleton} skeleton"
-        return f"{name}, {noise} noise{faults}"
+        name = "field" if replace(self, noise=VR_NOISE, mounting_translation_std=0.0) == FIELD \
+            else f"{self.skeleton} skeleton"
+        mounting = f", {self.mounting_translation_std * 1000:g} mm mounting error" if self.mounting_translation_std else ""
+        noise = "no noise" if noise == "none" else f"{noise} noise"
+        return f"{name}, {noise}{faults}{mounting}"
 
     @classmethod
-    def named(cls, skeleton: str = "calibrated", noise: str = "vr", faulty_percent: float = 0.0) -> "Protocol":
-        """The protocol of `sparse-body eval --skeleton S --noise N --faulty P`: an oracle
-        skeleton comes with the true mounting (the lab's), the others with a user's."""
+    def named(cls, skeleton: str = "calibrated", noise: str = "vr", faulty_percent: float = 0.0,
+              mounting_error: float = 0.0) -> "Protocol":
+        """The protocol of `sparse-body eval --skeleton S --noise N --faulty P --mounting-error M`:
+        an oracle skeleton comes with the true mounting (the lab's), the others with a user's."""
         if noise not in NOISE_MODELS:
             raise ValueError(f"noise must be one of {', '.join(NOISE_MODELS)}, got {noise!r}")
+        if not 0.0 <= mounting_error <= 0.1:
+            raise ValueError(f"the mounting error must be between 0 and 0.1 m, got {mounting_error!r}")
         model = replace(NOISE_MODELS[noise], fault_probability=faulty_percent / 100)
         if skeleton == "oracle":
+            if mounting_error:
+                raise ValueError("an oracle skeleton comes with the true mounting: no mounting error")
             return cls("oracle", model, 0.0, 0.0, 0.0)
-        return cls(skeleton, model)
+        return cls(skeleton, model, mounting_translation_std=mounting_error)
 
 
 FIELD = Protocol()

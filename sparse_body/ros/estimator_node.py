@@ -57,9 +57,9 @@ PARAMETERS = {
     "filter_position_noise": (0.001, "tracker position noise (m, std per axis) the input filter is set for; "
                                      "0 with filter_rotation_noise 0: no filtering"),
     "filter_rotation_noise": (0.33, "tracker orientation noise (degrees, std per axis) the input filter is set for"),
-    "filter_acceleration": (1.0, "how hard a tracked body part accelerates (m/s^2/sqrt(Hz)): higher follows faster "
+    "filter_acceleration": (0.5, "how hard a tracked body part accelerates (m/s^2/sqrt(Hz)): higher follows faster "
                                  "motion with less lag and smooths less"),
-    "filter_spin_acceleration": (3.0, "the same for turning (rad/s^2/sqrt(Hz))"),
+    "filter_spin_acceleration": (1.5, "the same for turning (rad/s^2/sqrt(Hz))"),
     "output_rate": (60.0, "estimates per second when the trackers do not drive them (input slow, partial or "
                           "absent); estimates driven by tracker input are limited to twice this"),
     "stale_timeout": (0.1, "a tracker's newest sample no longer counts when it is this many seconds (or three of "

@@ -40,7 +40,8 @@ Runtime: ONNX Runtime, one GRU step per frame (`sparse_body/estimators/lobstr.py
 - Split `config/splits/cmu.yaml` (by subject: no validation or test person in training):
   {len(split['train'])} train / {len(split['validation'])} validation / {len(split['test'])} test clips. Trained on {report['train_clips']} train clips ({report['train_frames']} frames),
   each clean plus {cfg['noise_copies']} copies with the paper's tracker noise (1 cm Gaussian per axis,
-  rotations up to 1.5 degrees); the best validation score ({report['validation_clips']} clips) is exported.
+  rotations up to 1.5 degrees); the checkpoint with the best validation leg rotation + toe
+  position ({report['validation_clips']} clips) is exported.
 - Contact labels: toe within 2 cm of the floor and slower than 0.3 m/s (`core/contacts.py`).
 
 ## Training

@@ -171,7 +171,7 @@ def bench_network(frames: int = 3000) -> None:
 
 def bench_dragposer(frames: int = 600, max_iterations: int = 20, tolerance: float = 0.01,
                     rotation_tolerance: float = 0.087, torch_frames: int = 10) -> None:
-    """DragPoser's pose optimiser, six-point, on CMU test clip 02_05 (the synthetic walk without
+    """DragPoser's pose optimiser, six-point, on the demo's CMU test clip (the synthetic walk without
     ../shared/mocap): milliseconds per frame and iterations until the trackers are met (1 cm,
     5 degrees), for the ONNX Runtime Gauss-Newton runtime and the torch autograd reference
     (Adam, the paper's kind of step), both starting each frame from the runtime's previous

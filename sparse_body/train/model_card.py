@@ -77,6 +77,7 @@ LoBSTr's noise (1 cm, 1.5 degrees) with the input filter set for it, against cle
 (no filter):
 
 {noise_table}
+
 The paper's figures come from its own data (PFNN, CMU and MHAD locomotion at 45 fps) and
 protocol: a guide, not a like-for-like comparison.
 
@@ -279,7 +280,8 @@ The paper's figures come from its own data and protocol (a guide, not a like-for
 LoBSTr's noise (1 cm, 1.5 degrees) with the input filter set for it, against clean trackers
 (no filter):
 
-{chr(10).join(noise_tables)}
+{(chr(10) * 2).join(noise_tables)}
+
 
 ## Refining other estimators (four-point, field protocol, `sparse-body eval --estimator E --estimator refined:base=E`)
 

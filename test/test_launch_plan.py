@@ -28,10 +28,37 @@ def test_a_missing_robot_state_publisher_is_said_and_nothing_is_started_for_it(m
     monkeypatch.setattr(module, "get_package_share_directory", lambda package: str(Path(__file__).resolve().parents[1]))
     context = LaunchContext()
     for name, value in {"sensors": "three_point", "estimator": "reference", "model_path": "", "height": "1.75",
-                        "bag": "", "refine": "false", "robot_state_publisher": "true"}.items():
+                        "calibration": "", "bag": "", "refine": "false", "robot_state_publisher": "true"}.items():
         context.launch_configurations[name] = value
     actions = module._nodes(context)
     assert any(isinstance(a, LogInfo) for a in actions)
     assert not any(isinstance(a, Node) and "robot_state_publisher" in str(getattr(a, "node_package", ""))
                    for a in actions)
     assert not module._installed("robot_state_publisher")
+
+
+def test_a_calibration_file_is_the_body_of_the_estimator_and_of_robot_state_publisher(monkeypatch, tmp_path):
+    from launch import LaunchContext
+    from sparse_body.adapters.calibration import Calibration
+    from sparse_body.core.skeleton import Skeleton
+    from sparse_body.urdf import body_urdf
+    module = _launch_module()
+    monkeypatch.setattr(module, "_installed", lambda package: True)
+    monkeypatch.setattr(module, "get_package_share_directory", lambda package: str(Path(__file__).resolve().parents[1]))
+    # what each node is given, as the launch file gives it
+    monkeypatch.setattr(module, "LifecycleNode", lambda **kw: ("lifecycle", kw))
+    monkeypatch.setattr(module, "Node", lambda **kw: ("node", kw))
+    offsets = Skeleton.canonical(1.62).offsets.copy()
+    offsets[18] *= 1.2                                             # a long left upper arm
+    Calibration(1.62, 0.0, {}, Skeleton(offsets)).save(tmp_path / "me.yaml")
+    context = LaunchContext()
+    for name, value in {"sensors": "six_point", "estimator": "ik", "model_path": "", "height": "1.75",
+                        "calibration": str(tmp_path / "me.yaml"), "bag": "", "refine": "false",
+                        "robot_state_publisher": "true"}.items():
+        context.launch_configurations[name] = value
+    actions = module._nodes(context)
+    estimator = next(kw for kind, kw in actions if kind == "lifecycle")
+    assert estimator["parameters"][1]["calibration"] == str(tmp_path / "me.yaml")
+    rsp = next(kw for kind, kw in actions if kind == "node" and kw["package"] == "robot_state_publisher")
+    assert rsp["parameters"][0]["robot_description"] == body_urdf(Calibration.load(tmp_path / "me.yaml").body())
+    assert rsp["parameters"][0]["robot_description"] != body_urdf(Skeleton.canonical(1.62))

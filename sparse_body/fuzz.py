@@ -111,10 +111,21 @@ TEXT_TARGETS = {"bvh", "asf_amc", "yaml"}
 def text_seeds() -> list[bytes]:
     from sparse_body.resources import config_dir
     return [TINY_BVH.encode(), TINY_ASF.encode() + _SPLIT + TINY_AMC.encode(),
-            (config_dir() / "sensors" / "four_point.yaml").read_bytes() + _SPLIT + _CALIBRATION]
+            (config_dir() / "sensors" / "four_point.yaml").read_bytes() + _SPLIT + _CALIBRATION,
+            (config_dir() / "sensors" / "six_point.yaml").read_bytes() + _SPLIT + _calibration_with_body()]
 
 
 _CALIBRATION = b"height: 1.7\nfacing_yaw: 0.1\noffsets:\n  head: [0, 0, 0, 1]\n"
+
+
+def _calibration_with_body() -> bytes:
+    """A calibration file with a fitted body, as the bridge writes it (its skeleton section)."""
+    from sparse_body.adapters.calibration import Calibration
+    from sparse_body.core.skeleton import Skeleton
+    with tempfile.TemporaryDirectory() as folder:
+        path = Path(folder) / "calibration.yaml"
+        Calibration(1.7, 0.1, {}, Skeleton.canonical(1.7)).save(path)
+        return path.read_bytes()
 
 
 def seeds() -> list[bytes]:

@@ -26,16 +26,13 @@ def _installed(package: str) -> bool:
 
 
 def _nodes(context):
-    from sparse_body.core.skeleton import Skeleton
+    from sparse_body.adapters.calibration import person_body
     from sparse_body.urdf import body_urdf
 
     share = get_package_share_directory("sparse_body")
     arg = lambda name: LaunchConfiguration(name).perform(context)  # noqa: E731
     height = float(arg("height"))
-    body = Skeleton.canonical(height)
-    if arg("calibration"):
-        from sparse_body.adapters.calibration import Calibration
-        body = Calibration.load(arg("calibration")).body()
+    body = person_body(arg("calibration"), height)
     estimator_params = [os.path.join(share, "config", "estimator.yaml"),
                         {"sensors": arg("sensors"), "estimator": arg("estimator"), "height": height,
                          "calibration": arg("calibration"),

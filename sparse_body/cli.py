@@ -147,17 +147,13 @@ def cmd_make_bag(args) -> int:
 
 
 def cmd_process(args) -> int:
+    from .adapters.calibration import person_body
     from .core.sensors import load_sensor_config
-    from .core.skeleton import Skeleton
     from .evaluation import parse_estimator_spec
     from .offline import process_bag
     name, options = parse_estimator_spec(args.estimator)
     refused: dict[str, int] = {}
-    if args.calibration:
-        from .adapters.calibration import Calibration
-        body = Calibration.load(args.calibration).body()
-    else:
-        body = Skeleton.canonical(args.height)
+    body = person_body(args.calibration, args.height)
     poses = process_bag(Path(args.bag_in), Path(args.bag_out), name, load_sensor_config(args.sensors),
                         body, args.fps, progress=not args.quiet, overwrite=args.overwrite,
                         refused=refused, **options)

@@ -46,7 +46,8 @@ class Calibration:
         return self.skeleton if self.skeleton is not None else Skeleton.canonical(self.height)
 
     def apply(self, site: str, quat: np.ndarray) -> np.ndarray:
-        """The joint's orientation from its tracker's (unchanged for uncalibrated sites)."""
+        """The joint's orientation from its tracker's (unchanged for uncalibrated sites); quat
+        (4,) or (N, 4)."""
         if site not in self.offsets:
             return np.asarray(quat, dtype=float)
         return (Rotation.from_quat(quat) * Rotation.from_quat(self.offsets[site]).inv()).as_quat()
@@ -86,6 +87,12 @@ class Calibration:
                 raise CalibrationError(f"{path}: offset of {site!r} is not a unit quaternion x y z w")
             offsets[site] = q
         return cls(height, yaw, offsets, _read_skeleton(path, data.get("skeleton")))
+
+
+def person_body(calibration: str | Path | None, height: float) -> Skeleton:
+    """The body to estimate with: a calibration file's (its fitted body, else its height), or
+    the canonical body at height when no file is given (the node, `process`, the launch file)."""
+    return Calibration.load(calibration).body() if calibration else Skeleton.canonical(height)
 
 
 def _read_skeleton(path: Path, data) -> Skeleton | None:

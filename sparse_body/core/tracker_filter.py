@@ -49,6 +49,21 @@ class FilterConfig:
 
 
 NO_FILTER = FilterConfig(position_noise=0.0, rotation_noise=0.0)
+PREFIX = "filter_"      # how estimator options and node parameters name the fields
+
+
+def filter_config(options: dict) -> FilterConfig:
+    """The filter that options ask for, taking them out: filter=false, or filter_<field>
+    values over the defaults (estimator options, node parameters)."""
+    on = options.pop("filter", True)
+    if not isinstance(on, bool):
+        raise ValueError(f"filter must be true or false, got {on!r}")
+    given = {k.removeprefix(PREFIX): options.pop(k) for k in list(options) if k.startswith(PREFIX)}
+    unknown = [PREFIX + k for k in given if k not in FilterConfig.__dataclass_fields__]
+    if unknown:
+        fields = ", ".join(PREFIX + f for f in FilterConfig.__dataclass_fields__)
+        raise ValueError(f"unknown filter option {', '.join(unknown)}; the filter's options are {fields}")
+    return FilterConfig(**given) if on else NO_FILTER
 
 
 # Plain floats from here: on 3- and 4-vectors of six trackers numpy's per-call cost is most

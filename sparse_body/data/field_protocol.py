@@ -136,8 +136,7 @@ def calibrated_stream(stream: TrackerStream, calibration: Calibration) -> Tracke
     for s, site in enumerate(stream.sites):
         if site in calibration.offsets:
             ok = np.all(np.isfinite(orientations[:, s]), axis=1)
-            offset = Rotation.from_quat(calibration.offsets[site]).inv()
-            orientations[ok, s] = (Rotation.from_quat(orientations[ok, s]) * offset).as_quat()
+            orientations[ok, s] = calibration.apply(site, orientations[ok, s])
     return TrackerStream(stream.sites, stream.times, stream.positions, orientations, stream.valid)
 
 

@@ -12,7 +12,7 @@ import yaml
 
 from ..core.sensors import SensorConfig
 from ..core.skeleton import Skeleton
-from ..core.tracker_filter import NO_FILTER, FilterConfig, TrackerFilter
+from ..core.tracker_filter import FilterConfig, TrackerFilter, filter_config
 from ..core.types import BodyPose, TrackerFrame, TrackerStream
 
 # name -> "module:Class"; modules are imported on first use so that an estimator's
@@ -46,7 +46,11 @@ class Estimator(ABC):
         self.sensors = sensors
         self.skeleton = skeleton
         self.fps = fps
-        self.input_filter = TrackerFilter(FilterConfig(), sensors.site_names)
+        self.use_filter(FilterConfig())
+
+    def use_filter(self, config: FilterConfig) -> None:
+        """Filter the tracker input this way from now on (from the next reset: no history)."""
+        self.input_filter = TrackerFilter(config, self.sensors.site_names)
 
     def reset(self) -> None:
         """Forget all history (a new take, a clock jump back)."""
@@ -133,9 +137,6 @@ def parse_estimator_spec(spec: str) -> tuple[str, dict]:
     return name.strip(), options
 
 
-FILTER_PREFIX = "filter_"
-
-
 def create_estimator(name: str, sensors: SensorConfig, skeleton: Skeleton, fps: float = 60.0,
                      **options) -> Estimator:
     """An estimator by name with its options; filter_<field> options (of FilterConfig) set
@@ -144,16 +145,7 @@ def create_estimator(name: str, sensors: SensorConfig, skeleton: Skeleton, fps: 
         target = ESTIMATORS[name]
     except KeyError:
         raise ValueError(f"unknown estimator {name!r}; available: {', '.join(sorted(ESTIMATORS))}") from None
-    filter_on = options.pop("filter", True)
-    filtering = {k.removeprefix(FILTER_PREFIX): options.pop(k) for k in list(options) if k.startswith(FILTER_PREFIX)}
-    if not isinstance(filter_on, bool):
-        raise ValueError(f"estimator option filter must be true or false, got {filter_on!r}")
-    try:
-        filter_config = FilterConfig(**filtering) if filter_on else NO_FILTER
-    except TypeError:
-        fields = ", ".join(FILTER_PREFIX + f for f in FilterConfig.__dataclass_fields__)
-        raise ValueError(f"unknown filter option among {', '.join(FILTER_PREFIX + k for k in filtering)}; "
-                         f"the filter's options are {fields}") from None
+    filtering = filter_config(options)
     module, cls = target.split(":")
     cls = getattr(importlib.import_module(module), cls)
     parameters = inspect.signature(cls.__init__).parameters.values()
@@ -163,12 +155,12 @@ def create_estimator(name: str, sensors: SensorConfig, skeleton: Skeleton, fps: 
     unknown = [k for k in options if k not in known]
     if unknown and not takes_more:
         raise ValueError(f"estimator {name!r} has no option {', '.join(map(repr, unknown))}; "
-                         f"its options are {', '.join(known) or 'none'} and the filter's ({FILTER_PREFIX}...)")
+                         f"its options are {', '.join(known) or 'none'} and the filter's (filter_...)")
     try:
         estimator = cls(sensors, skeleton, fps=fps, **options)
     except TypeError as err:
         if "unexpected keyword argument" not in str(err):
             raise
         raise ValueError(f"estimator {name!r}: {err}; its options are {', '.join(known)}") from None
-    estimator.input_filter = TrackerFilter(filter_config, sensors.site_names)
+    estimator.use_filter(filtering)
     return estimator

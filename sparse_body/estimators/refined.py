@@ -6,7 +6,7 @@ constraint node does live, packaged as an estimator for `sparse-body eval` and `
 """
 from __future__ import annotations
 
-from ..core.tracker_filter import NO_FILTER, TrackerFilter
+from ..core.tracker_filter import NO_FILTER
 from .base import Estimator, create_estimator
 from .dragposer import DragPoserEstimator
 
@@ -20,7 +20,7 @@ class RefinedEstimator(Estimator):
         if base == "refined":
             raise ValueError("a refined estimator's base cannot be 'refined'")
         self.base = create_estimator(base, sensors, skeleton, fps, **base_options)
-        self.base.input_filter = TrackerFilter(NO_FILTER, sensors.site_names)   # this estimator's filters
+        self.base.use_filter(NO_FILTER)          # this estimator's filter has done it
         self.refiner = DragPoserEstimator(sensors, skeleton, fps, model_dir=model_dir, iterations=iterations,
                                           temporal_weight=0.0)   # the base pose is the prior
 

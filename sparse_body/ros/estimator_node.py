@@ -31,11 +31,12 @@ from std_msgs.msg import String
 
 from sparse_body.msg import EstimateStatus, FootContacts
 
-from ..adapters.calibration import Calibration, CalibrationError
+from ..adapters.calibration import CalibrationError, person_body
 from ..core.rotations import matrix_to_quat
 from ..core.sensors import SensorConfigError, load_sensor_config
 from ..core.skeleton import JOINT_NAMES, Skeleton
-from ..core.tracker_filter import FilterConfig, TrackerFilter
+from ..core.tracker_filter import PREFIX as FILTER
+from ..core.tracker_filter import filter_config
 from ..core.types import BodyPose
 from ..estimators import create_estimator
 from ..estimators.base import parse_estimator_spec
@@ -144,11 +145,11 @@ class EstimatorNode(LifecycleNode):
             sensors = load_sensor_config(p["sensors"])
             if p["fixed_frame"]:
                 sensors = replace(sensors, fixed_frame=p["fixed_frame"])
-            self.skeleton = self._body(p)
+            self.skeleton = person_body(p["calibration"], p["height"])
+            if p["calibration"]:
+                self.get_logger().info(f"the body of {p['calibration']}: {self.skeleton.height():.2f} m tall")
             self.estimator = self._make_estimator(p, sensors)
-            self.estimator.input_filter = TrackerFilter(
-                FilterConfig(p["filter_position_noise"], p["filter_rotation_noise"], p["filter_acceleration"],
-                             p["filter_spin_acceleration"]), sensors.site_names)
+            self.estimator.use_filter(filter_config({k: v for k, v in p.items() if k.startswith(FILTER)}))
         except (SensorConfigError, CalibrationError, ValueError, FileNotFoundError) as err:
             self.get_logger().error(f"configure failed: {err}")
             self._release()
@@ -181,15 +182,6 @@ class EstimatorNode(LifecycleNode):
         self.get_logger().info(f"configured: {p.get('estimator', 'refinement')} on {sensors.name} ({', '.join(sensors.site_names)}) "
                                f"in frame {sensors.fixed_frame!r}")
         return TransitionCallbackReturn.SUCCESS
-
-    def _body(self, p: dict) -> Skeleton:
-        if not p["calibration"]:
-            return Skeleton.canonical(p["height"])
-        calibration = Calibration.load(p["calibration"])
-        body = calibration.body()
-        self.get_logger().info(f"the body of {p['calibration']}: {body.height():.2f} m tall"
-                               + ("" if calibration.skeleton is not None else " (canonical proportions)"))
-        return body
 
     def _make_estimator(self, p: dict, sensors):
         name, options = parse_estimator_spec(p["estimator"])

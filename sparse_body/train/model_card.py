@@ -20,7 +20,7 @@ def write_lobstr_card(onnx_path: Path, report: dict, mocap_root: Path, limit: in
     results = [evaluate(spec, sensors, mocap_root, "test", protocol=protocol, limit=limit, progress=False, **options)
                for spec, protocol, options in runs]
     table = format_table(results, paper_figures("lobstr", "four_point"))
-    noise_table = noise_results_table(["lobstr", "ik"], sensors, mocap_root, limit, model)
+    noise_table = noise_results_table([("lobstr", model), ("ik", {})], sensors, mocap_root, limit)
     split = load_split()
     cfg, val = report["config"], report["validation"]
     history = report.get("history", [])
@@ -133,16 +133,15 @@ def dragposer_results(model_dir: str, mocap_root: Path, limit: int | None = None
 NOISE_METRICS = ("MPJPE [cm]", "MPJVE [cm/s]", "Jitter [100m/s3]", "End-effector PE [cm]")
 
 
-def noise_results_table(specs: list[str], sensors, mocap_root: Path, limit: int | None, options: dict) -> str:
+def noise_results_table(runs: list[tuple[str, dict]], sensors, mocap_root: Path, limit: int | None) -> str:
     """A Markdown table: each estimator on the test split, field protocol, clean trackers
     against LoBSTr's noise, and the ratios the noise brings."""
     from ..data.field_protocol import Protocol
     from ..evaluation import evaluate
     rows = ["| estimator | trackers | " + " | ".join(NOISE_METRICS) + " |", "|---|---|" + "---|" * len(NOISE_METRICS)]
-    for spec in specs:
-        mine = options if spec.startswith(("lobstr", "dragposer")) else {}
+    for spec, options in runs:
         clean, noisy = (evaluate(spec, sensors, mocap_root, "test", protocol=Protocol.named(noise=n), limit=limit,
-                                 progress=False, **mine).summary for n in ("none", "lobstr"))
+                                 progress=False, **options).summary for n in ("none", "lobstr"))
         rows.append(f"| {spec}/{sensors.name} | clean | " + " | ".join(f"{clean[m]:.2f}" for m in NOISE_METRICS) + " |")
         rows.append(f"| | LoBSTr noise, filtered | " + " | ".join(f"{noisy[m]:.2f}" for m in NOISE_METRICS) + " |")
         rows.append(f"| | ratio | " + " | ".join(f"{noisy[m] / clean[m]:.2f}x" for m in NOISE_METRICS) + " |")
@@ -162,8 +161,9 @@ def write_dragposer_card(out_dir: Path, mocap_root: Path, limit: int | None = No
     temporal = json.loads((out_dir / "dragposer_temporal.train.json").read_text())
     # the refinement's other estimators come from the package (lobstr.onnx)
     tables, refined = dragposer_results(str(out_dir.resolve()), mocap_root, limit)
-    noise_tables = [noise_results_table(["dragposer", "ik"], load_sensor_config(name), mocap_root, limit,
-                                        {"model_dir": str(out_dir.resolve())}) for name in ("six_point", "four_point")]
+    mine = {"model_dir": str(out_dir.resolve())}
+    noise_tables = [noise_results_table([("dragposer", mine), ("ik", {})], load_sensor_config(name), mocap_root, limit)
+                    for name in ("six_point", "four_point")]
     text_tables = []
     for (sensors_name, faulty), results in tables.items():
         title = f"{sensors_name}" + (f", faulty {faulty:g} %" if faulty else "")

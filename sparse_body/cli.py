@@ -70,14 +70,14 @@ def cmd_train(args) -> int:
     import torch
 
     parts = _trainers(args)
+    if args.ablate_augment:
+        torch.set_num_threads(args.threads)
+        _ablate_augmentation(args, parts)
+        return 0
     if not args.card_only:
         torch.set_num_threads(args.threads)
-        configs = [config_class.named(args.config) for config_class, *_ in parts]   # errors before training
+        configs = [_config(config_class, args) for config_class, *_ in parts]   # errors before training
         for config, (_, train, out, report_path) in zip(configs, parts):
-            if args.minutes is not None:
-                config.minutes = args.minutes
-            if args.steps is not None:
-                config.steps = args.steps
             report = train(config, _mocap(args), out, seed=args.seed, limit=args.limit)
             report["command"] = "sparse-body " + " ".join(sys.argv[1:])
             report_path.parent.mkdir(parents=True, exist_ok=True)
@@ -93,6 +93,66 @@ def cmd_train(args) -> int:
             card = model_card.write_dragposer_card(out, _mocap(args), limit=args.limit)
         print(f"written {card}")
     return 0
+
+
+def _config(config_class, args):
+    """The named training configuration with the command line's overrides: --minutes,
+    --steps, --augment, and --set FIELD=VALUE (the value read as the field's type)."""
+    from dataclasses import fields
+
+    from .train.augment import Augmentation
+    config = config_class.named(args.config)
+    if args.minutes is not None:
+        config.minutes = args.minutes
+    if args.steps is not None:
+        config.steps = args.steps
+    if args.augment is not None:
+        config.augment = Augmentation.parse(args.augment).spec     # refused here, before any training
+    types = {f.name: type(getattr(config, f.name)) for f in fields(config)}
+    for item in args.set:
+        name, _, value = item.partition("=")
+        if name not in types or not value:
+            raise ValueError(f"--set {item!r}: expected FIELD=VALUE with FIELD one of {', '.join(types)}")
+        kind = types[name]
+        try:
+            setattr(config, name, value.lower() in ("1", "true", "yes") if kind is bool else kind(value))
+        except ValueError:
+            raise ValueError(f"--set {item!r}: {name} takes a {kind.__name__}") from None
+    return config
+
+
+def _ablate_augmentation(args, parts) -> None:
+    """Each part trained anew (same seed and budget) without augmentation, with its
+    configuration's, and with each of those augmentations left out; the validation figures go
+    to <model>.augment.json beside the training report, for the model card."""
+    import json
+    import shutil
+    import tempfile
+
+    from .train.augment import Augmentation
+    for config_class, train, out, report_path in parts:
+        kinds = Augmentation.parse(args.augment or config_class.named(args.config).augment).kinds
+        specs = ["none", ",".join(kinds) or "none"]
+        if len(kinds) > 1:
+            specs += [",".join(k for k in kinds if k != left) for left in kinds]
+        runs = []
+        for spec in dict.fromkeys(specs):
+            config = _config(config_class, args)
+            config.augment = spec
+            with tempfile.TemporaryDirectory() as tmp:
+                for vae_file in ("dragposer_encoder.onnx", "dragposer_decoder.onnx"):   # the predictor's space
+                    if out.is_dir() and (out / vae_file).is_file():
+                        shutil.copy(out / vae_file, tmp)
+                target = Path(tmp) / out.name if out.suffix == ".onnx" else Path(tmp)
+                report = train(config, _mocap(args), target, seed=args.seed, limit=args.limit)
+            runs.append({"augment": spec, "steps": report["steps"], "minutes": report["minutes"],
+                         "validation": report["validation"]})
+            print(f"augment {spec}: {report['validation']}")
+        path = report_path.with_name(report_path.name.replace(".train.json", ".augment.json"))
+        path.parent.mkdir(parents=True, exist_ok=True)
+        path.write_text(json.dumps({"command": "sparse-body " + " ".join(sys.argv[1:]), "seed": args.seed,
+                                    "runs": runs}, indent=1))
+        print(f"written {path}")
 
 
 def cmd_split(args) -> int:
@@ -313,6 +373,15 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--mocap", help="the CMU folder")
     p.add_argument("--no-card", action="store_true", help="skip the test-split evaluation and model card")
     p.add_argument("--card-only", action="store_true", help="only rewrite the model card of an existing model")
+    p.add_argument("--set", action="append", default=[], metavar="FIELD=VALUE",
+                   help="override a field of the configuration (repeatable), e.g. --set dropout=0.2")
+    p.add_argument("--augment", metavar="KINDS",
+                   help="augmentations of the train clips: mirror,speed,proportions (any of them), all or none "
+                        "(default: the configuration's)")
+    p.add_argument("--ablate-augment", action="store_true",
+                   help="instead of training the model: train without augmentation, with the configuration's "
+                        "(or --augment's) and with each of its kinds left out (same seed, --minutes each), and write the "
+                        "validation figures to <model>.augment.json for the model card")
     p.set_defaults(func=cmd_train)
 
     p = sub.add_parser("split", help="compute the CMU train/validation/test split (by subject)")

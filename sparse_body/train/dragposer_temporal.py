@@ -36,6 +36,8 @@ class TemporalConfig:
     limb_noise: float = 0.1       # probability per limb and step
     limb_noise_deg: float = 10.0  # per joint and axis
     noisy_copies: int = 4
+    augment: str = "mirror,speed"  # train/augment.py (proportions: the canonical body hides them)
+    variants: int = 2
     batch: int = 512
     lr: float = 1e-3
     weight_decay: float = 1e-4

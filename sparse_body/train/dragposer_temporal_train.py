@@ -28,6 +28,7 @@ from ..data.catalog import load_clip, split_clips
 from ..estimators.dragposer import PoseVaeRuntime
 from ..estimators.dragposer_pose import HEIGHT_JOINTS, LIMBS, split_heading, temporal_context
 from ..estimators.lobstr_features import body_scale
+from .augment import NO_AUGMENTATION, Augmentation, variants
 from .dragposer_temporal import TemporalConfig, TemporalPredictor, loss
 
 
@@ -124,8 +125,10 @@ def export(model: TemporalPredictor, path: Path, metadata: dict) -> None:
     onnx.save(graph, str(path))
 
 
-def load_clips(mocap_root: Path, split: str, limit: int | None, fps: float = 60.0):
-    return [clip_arrays(load_clip(c, fps)) for c in split_clips(mocap_root, split, limit)]
+def load_clips(mocap_root: Path, split: str, limit: int | None, fps: float = 60.0,
+               augmentation: Augmentation = NO_AUGMENTATION, rng=None):
+    return [clip_arrays(m) for c in split_clips(mocap_root, split, limit)
+            for m in variants(load_clip(c, fps), augmentation, rng)]
 
 
 def train_temporal(config: TemporalConfig, mocap_root: Path, out_dir: Path, seed: int = 0,
@@ -135,7 +138,9 @@ def train_temporal(config: TemporalConfig, mocap_root: Path, out_dir: Path, seed
     rng = np.random.default_rng(seed)
     t0 = time.perf_counter()
     vae = PoseVaeRuntime(out_dir, threads=torch.get_num_threads())
-    train_clips, val_clips = load_clips(mocap_root, "train", limit), load_clips(mocap_root, "validation", limit)
+    augmentation = Augmentation.parse(config.augment, config.variants)
+    train_clips = load_clips(mocap_root, "train", limit, augmentation=augmentation, rng=rng)
+    val_clips = load_clips(mocap_root, "validation", limit)
     train = sequences(train_clips, vae, config, rng)
     val = sequences(val_clips, vae, config, rng, noisy=False, phases=[0])
     log(f"data: {len(train_clips)} train clips, {len(train['starts'])} windows; {len(val['starts'])} validation "
@@ -166,7 +171,8 @@ def train_temporal(config: TemporalConfig, mocap_root: Path, out_dir: Path, seed
     export(model, Path(out_dir) / "dragposer_temporal.onnx",
            {"method": "dragposer", "part": "temporal_predictor", "config": config.to_dict(), "validation": best_val})
     return {"config": config.to_dict(), "steps": step, "minutes": minutes, "validation": best_val,
-            "history": history, "train_clips": len(train_clips), "train_windows": int(len(train["starts"])),
+            "history": history, "train_clips": len(split_clips(mocap_root, "train", limit)),
+            "train_sequences": len(train_clips), "augment": config.augment, "train_windows": int(len(train["starts"])),
             "validation_clips": len(val_clips),
             "parameters": sum(p.numel() for p in model.parameters()),
             "hardware": f"{platform.processor() or platform.machine()}, {torch.get_num_threads()} torch threads",

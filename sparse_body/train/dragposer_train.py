@@ -22,6 +22,7 @@ from ..core.skeleton import Skeleton
 from ..data.catalog import load_clip, split_clips
 from ..estimators.dragposer_pose import dual_quaternions, split_heading
 from ..estimators.lobstr_features import body_scale
+from .augment import NO_AUGMENTATION, Augmentation, variants
 from .dragposer_vae import Decoder, Encoder, PoseVae, VaeConfig, losses
 from .torch_body import sixd_to_matrix
 
@@ -34,9 +35,11 @@ def clip_arrays(motion, offsets: np.ndarray):
     return dq.astype(np.float32), matrix_to_6d(local).reshape(len(motion), -1).astype(np.float32)
 
 
-def load_frames(mocap_root: Path, split: str, fps: float = 60.0, limit: int | None = None):
+def load_frames(mocap_root: Path, split: str, fps: float = 60.0, limit: int | None = None,
+                augmentation: Augmentation = NO_AUGMENTATION, rng=None):
     offsets = Skeleton.canonical().offsets
-    return [clip_arrays(load_clip(c, fps), offsets) for c in split_clips(mocap_root, split, limit)]
+    return [clip_arrays(m, offsets) for c in split_clips(mocap_root, split, limit)
+            for m in variants(load_clip(c, fps), augmentation, rng)]
 
 
 @torch.no_grad()
@@ -72,7 +75,8 @@ def train_vae(config: VaeConfig, mocap_root: Path, out_dir: Path, seed: int = 0,
     torch.manual_seed(seed)
     rng = np.random.default_rng(seed)
     t0 = time.perf_counter()
-    train_clips = load_frames(mocap_root, "train", limit=limit)
+    train_clips = load_frames(mocap_root, "train", limit=limit,
+                              augmentation=Augmentation.parse(config.augment, config.variants), rng=rng)
     val_clips = load_frames(mocap_root, "validation", limit=limit)
     dq = np.concatenate([c[0] for c in train_clips])
     pose = np.concatenate([c[1] for c in train_clips])
@@ -115,7 +119,8 @@ def train_vae(config: VaeConfig, mocap_root: Path, out_dir: Path, seed: int = 0,
     export(vae, out_dir, {"method": "dragposer", "part": "pose_vae", "config": config.to_dict(),
                           "validation": best_val})
     return {"config": config.to_dict(), "steps": step, "minutes": minutes, "validation": best_val,
-            "history": history, "train_clips": len(train_clips), "train_frames": int(len(dq)),
+            "history": history, "train_clips": len(split_clips(mocap_root, "train", limit)),
+            "train_sequences": len(train_clips), "augment": config.augment, "train_frames": int(len(dq)),
             "validation_clips": len(val_clips),
             "hardware": f"{platform.processor() or platform.machine()}, {torch.get_num_threads()} torch threads",
             "torch": torch.__version__}

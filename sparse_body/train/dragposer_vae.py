@@ -28,6 +28,8 @@ class VaeConfig:
     w_fk: float = 100.0
     w_kld: float = 0.001
     w_continuity: float = 1.0
+    augment: str = "mirror"       # train/augment.py; the pose VAE sees single heading-free poses
+    variants: int = 1             # on the canonical body, so only mirroring changes what it sees
     minutes: float = 0.0
     steps: int = 20_000
     steps_per_check: int = 250

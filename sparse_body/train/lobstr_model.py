@@ -25,12 +25,16 @@ class LobstrConfig:
     batch: int = 256              # paper
     lr: float = 1e-3              # paper: Adam, 1e-3, x0.999 per epoch
     lr_decay: float = 0.999
+    weight_decay: float = 0.0     # AdamW's decoupled decay (the paper: none)
+    dropout: float = 0.0          # on the GRU's output, in training only (the paper: none)
     steps_per_epoch: int = 50
     w_pose: float = 1.0           # paper's loss weights
     w_fk: float = 0.1
     w_velocity: float = 0.1
     w_contact: float = 1e-6
     noise_copies: int = 3         # tracker-noise realisations per clip, besides the clean one
+    augment: str = "all"          # train/augment.py: mirror, speed, proportions (all), or none
+    variants: int = 3             # augmented copies per train clip, besides the clip
     minutes: float = 0.0          # stop after this long (0: only steps counts)
     steps: int = 75_000           # paper: 1,500 epochs
 
@@ -41,7 +45,8 @@ class LobstrConfig:
         if name == "small":   # trains in under an hour on 2 CPU cores
             return cls(hidden=256, batch=64, steps_per_epoch=100, minutes=50.0, steps=1_000_000)
         if name == "tiny":    # tests
-            return cls(hidden=16, latent=8, chunk=20, burn_in=5, batch=4, steps=3, noise_copies=1)
+            return cls(hidden=16, latent=8, chunk=20, burn_in=5, batch=4, steps=3, noise_copies=1,
+                       augment="mirror", variants=1)
         raise ValueError(f"unknown LoBSTr configuration {name!r} (paper, small, tiny)")
 
     def to_dict(self) -> dict:
@@ -56,6 +61,7 @@ class LobstrNet(nn.Module):
         self.register_buffer("mean", torch.zeros(FEATURES))
         self.register_buffer("std", torch.ones(FEATURES))
         self.gru = nn.GRU(FEATURES, config.hidden, batch_first=True)
+        self.dropout = nn.Dropout(config.dropout)
         self.to_latent = nn.Sequential(nn.Linear(config.hidden, config.latent), nn.ReLU())
         self.pose_head = nn.Linear(config.latent, OUTPUTS)
         self.contact_head = nn.Linear(config.latent, 2 * 2)   # per foot: (no contact, contact) logits
@@ -63,7 +69,7 @@ class LobstrNet(nn.Module):
     def forward(self, x: torch.Tensor, h: torch.Tensor | None = None):
         """x (B, T, 37) -> pose (B, T, 48) in 6D, contact logits (B, T, 2, 2), state (1, B, H)."""
         out, h = self.gru((x - self.mean) / self.std, h)
-        z = self.to_latent(out)
+        z = self.to_latent(self.dropout(out))
         return self.pose_head(z), self.contact_head(z).unflatten(-1, (2, 2)), h
 
 

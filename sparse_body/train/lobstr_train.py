@@ -24,6 +24,7 @@ from ..data.catalog import load_clip, split_clips
 from ..data.virtual_trackers import LOBSTR_NOISE, _random_rotations
 from ..estimators.lobstr_features import (INPUT_JOINTS, LEG_JOINTS, body_scale, leg_targets,
                                           reference_frames, sequence_features)
+from .augment import NO_AUGMENTATION, Augmentation, variants
 from .lobstr_model import LobstrConfig, LobstrNet, LobstrStep, leg_positions, losses
 from .torch_body import sixd_to_matrix
 
@@ -119,8 +120,11 @@ def export_onnx(net: LobstrNet, path: Path, metadata: dict) -> None:
 
 
 def load_clips(mocap_root: Path, split: str, config: LobstrConfig, rng, limit: int | None = None):
-    return [clip_tensors(load_clip(c, config.fps), config.noise_copies if split == "train" else 0, rng)
-            for c in split_clips(mocap_root, split, limit)]
+    """The split's clips as tensors; train clips with their augmented variants and noisy copies."""
+    augmentation = Augmentation.parse(config.augment, config.variants) if split == "train" else NO_AUGMENTATION
+    return [clip_tensors(m, config.noise_copies if split == "train" else 0, rng)
+            for c in split_clips(mocap_root, split, limit)
+            for m in variants(load_clip(c, config.fps), augmentation, rng)]
 
 
 def train(config: LobstrConfig, mocap_root: Path, out: Path, seed: int = 0, limit: int | None = None,
@@ -141,7 +145,7 @@ def train(config: LobstrConfig, mocap_root: Path, out: Path, seed: int = 0, limi
     offsets = torch.tensor(Skeleton.canonical().offsets, dtype=torch.float32)
     # eps far below the default: the paper's contact weight (1e-6) makes the contact head's
     # gradients ~1e-8, where Adam's default eps would stall it.
-    opt = torch.optim.Adam(net.parameters(), lr=config.lr, eps=1e-12)
+    opt = torch.optim.AdamW(net.parameters(), lr=config.lr, eps=1e-12, weight_decay=config.weight_decay)
     sched = torch.optim.lr_scheduler.ExponentialLR(opt, config.lr_decay)
     best, best_state, history = float("inf"), None, []
     start = time.perf_counter()
@@ -179,6 +183,7 @@ def train(config: LobstrConfig, mocap_root: Path, out: Path, seed: int = 0, limi
                 "validation": best_val}
     export_onnx(net, out, metadata)
     return {"config": config.to_dict(), "steps": step, "minutes": minutes, "validation": best_val,
-            "history": history, "train_clips": len(train_clips), "train_frames": int(len(sampler.legs)),
+            "history": history, "train_clips": len(split_clips(mocap_root, "train", limit)),
+            "train_sequences": len(train_clips), "augment": config.augment, "train_frames": int(len(sampler.legs)),
             "validation_clips": len(val_clips), "hardware": f"{platform.processor() or platform.machine()}, "
             f"{torch.get_num_threads()} torch threads", "torch": torch.__version__}

@@ -7,7 +7,31 @@ from ..core.sensors import load_sensor_config
 from ..data.catalog import load_split
 
 
+def augmentation_table(report_path: Path, columns: dict[str, str]) -> str:
+    """The augmentation ablation (<model>.augment.json, `sparse-body train ... --ablate-augment`)
+    as a Markdown table of validation figures, or a line saying it has not been run."""
+    import json
+    path = Path(str(report_path).replace(".train.json", ".augment.json"))
+    if not path.is_file():
+        return f"(no ablation: `{path.name}` is missing; `sparse-body train ... --ablate-augment` writes it)"
+    report = json.loads(path.read_text())
+    rows = ["| augmentation | steps | minutes | " + " | ".join(columns.values()) + " |",
+            "|---|---:|---:|" + "---:|" * len(columns)]
+    for run in report["runs"]:
+        rows.append(f"| {run['augment']} | {run['steps']} | {run['minutes']:.1f} | "
+                    + " | ".join(f"{run['validation'][key]:.4g}" for key in columns) + " |")
+    return (f"Each row trained anew with the same seed and budget (`{report['command']}`); "
+            "validation split (people the model never saw):\n\n" + "\n".join(rows))
+
+
+LOBSTR_VALIDATION = {"lower_rot_error_deg": "val leg rot [deg]", "toe_error_cm": "val toe [cm]",
+                     "contact_accuracy_pct": "val contact [%]"}
+VAE_VALIDATION = {"position_error_cm": "val position [cm]", "rotation_error_deg": "val rotation [deg]"}
+TEMPORAL_VALIDATION = {"mse": "val MSE", "mse_next": "val MSE, next step", "hold_mse": "holding: MSE"}
+
+
 def write_lobstr_card(onnx_path: Path, report: dict, mocap_root: Path, limit: int | None = None) -> Path:
+    augmentation = augmentation_table(Path(onnx_path).with_suffix(".train.json"), LOBSTR_VALIDATION)
     """Evaluate the model on the test split (four-point) beside the IK baseline, without its
     contact IK and the paper's figures: field protocol, lab protocol beside it, and LoBSTr's
     tracker noise against none; write <model>.md."""
@@ -38,10 +62,12 @@ Runtime: ONNX Runtime, one GRU step per frame (`sparse_body/estimators/lobstr.py
 - CMU motion capture from `../shared/mocap` (its README has the licence), retargeted onto the
   22-joint body at {cfg['fps']:.0f} fps, every clip scaled to the canonical leg length, floor at z = 0.
 - Split `config/splits/cmu.yaml` (by subject: no validation or test person in training):
-  {len(split['train'])} train / {len(split['validation'])} validation / {len(split['test'])} test clips. Trained on {report['train_clips']} train clips ({report['train_frames']} frames),
-  each clean plus {cfg['noise_copies']} copies with the paper's tracker noise (1 cm Gaussian per axis,
-  rotations up to 1.5 degrees); the checkpoint with the best validation leg rotation + toe
-  position ({report['validation_clips']} clips) is exported.
+  {len(split['train'])} train / {len(split['validation'])} validation / {len(split['test'])} test clips. Trained on {report['train_clips']} train clips,
+  augmented ({cfg.get('augment', 'none')}: {cfg.get('variants', 0)} variants of each clip besides itself,
+  `sparse_body/train/augment.py`; {report['train_frames']} frames in all), each clean plus
+  {cfg['noise_copies']} copies with the paper's tracker noise (1 cm Gaussian per axis, rotations up
+  to 1.5 degrees); the checkpoint with the best validation leg rotation + toe position
+  ({report['validation_clips']} clips) is exported.
 - Contact labels: toe within 2 cm of the floor and slower than 0.3 m/s (`core/contacts.py`).
 
 ## Training
@@ -58,6 +84,10 @@ Runtime: ONNX Runtime, one GRU step per frame (`sparse_body/estimators/lobstr.py
 
 Validation (exported weights): contact {val['contact_accuracy_pct']:.1f} %, leg rotation
 {val['lower_rot_error_deg']:.2f} deg, toe position {val['toe_error_cm']:.2f} cm (toe relative to the true pelvis).
+
+### Augmentation, with and without
+
+{augmentation}
 
 ## Test split (`sparse-body eval --estimator lobstr --sensors four_point`)
 
@@ -171,6 +201,8 @@ def write_dragposer_card(out_dir: Path, mocap_root: Path, limit: int | None = No
     split = load_split()
     cfg, val = vae["config"], vae["validation"]
     tcfg, tval = temporal["config"], temporal["validation"]
+    vae_augmentation = augmentation_table(out_dir / "dragposer.train.json", VAE_VALIDATION)
+    temporal_augmentation = augmentation_table(out_dir / "dragposer_temporal.train.json", TEMPORAL_VALIDATION)
 
     def curve(history, columns):
         rows = history[:: max(1, len(history) // 12)]
@@ -193,7 +225,8 @@ Runtime and a damped Gauss-Newton step whose Jacobian comes from one batched dec
   22-joint body at 60 fps; rotations on the canonical body, root height scaled by leg length.
 - Split `config/splits/cmu.yaml` (by subject: no validation or test person in training):
   {len(split['train'])} train / {len(split['validation'])} validation / {len(split['test'])} test clips. Both networks train on the train clips
-  ({vae['train_frames']} frames); the best validation checkpoint is exported.
+  and their augmented variants (below; the VAE on {vae['train_frames']} frames); the best validation
+  checkpoint is exported.
 
 ## Pose VAE
 - Command: `{vae.get('command', 'sparse-body train dragposer')}`
@@ -208,6 +241,11 @@ Runtime and a damped Gauss-Newton step whose Jacobian comes from one batched dec
 {curve(vae.get('history', []), ['step', 'minutes', 'total', 'position_error_cm', 'rotation_error_deg'])}
 
 Validation encode-decode error (exported weights): {val['position_error_cm']:.2f} cm, {val['rotation_error_deg']:.2f} deg.
+
+Augmentation: {cfg.get('augment', 'none')} ({cfg.get('variants', 0)} variant of each clip besides itself; the VAE
+sees single poses on the canonical body without heading, so only mirroring changes them).
+
+{vae_augmentation}
 
 ## Temporal predictor
 - Command: `{temporal.get('command', 'sparse-body train dragposer --part temporal')}` (after the VAE: it learns
@@ -228,6 +266,10 @@ Validation encode-decode error (exported weights): {val['position_error_cm']:.2f
 Validation latent MSE (exported weights; every {tcfg['future']}-step window, teacher-forced):
 {tval['mse']:.4f} over the window, {tval['mse_next']:.4f} for the next step; holding the newest
 latent instead: {tval['hold_mse']:.4f} / {tval['hold_mse_next']:.4f}{extrapolated}.
+
+Augmentation: {tcfg.get('augment', 'none')} ({tcfg.get('variants', 0)} variants of each clip besides itself).
+
+{temporal_augmentation}
 
 ## Test split (`sparse-body eval --estimator dragposer --sensors S [--faulty 1]`)
 

@@ -1,0 +1,118 @@
+"""Augmentation of training motions, one implementation for every trainer.
+
+42 minutes of CMU is little, and the test people move and are built differently from the
+train people. Each augmentation makes a new Motion from a train clip (local rotations, root,
+skeleton), from which a trainer derives its inputs and targets as it does for the clip:
+
+- mirror: the motion reflected left-right (the person's left arm does what the right did);
+- speed: played 0.8-1.25 times as fast (resampled, then read at the original rate);
+- proportions: arms, legs and torso lengthened or shortened, each segment by its own factor,
+  5 % standard deviation: the spread of the 25 CMU bodies relative to their height (arm
+  3.5 %, leg 2.4 %, torso 5.5 %, upper arm / forearm split 5 %; measured on their ASFs).
+
+No random heading: every model here sees the body in a heading-free frame (LoBSTr's
+pelvis-yaw reference, DragPoser's heading-split pose), so turning the clip changes nothing
+they see. Tracker noise and limb noise stay with the trainers that already add them.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..core.skeleton import JOINT_INDEX, JOINT_NAMES, Skeleton
+from ..data.motion import Motion
+
+KINDS = ("mirror", "speed", "proportions")
+SPEED_RANGE = (0.8, 1.25)
+PROPORTION_STD = 0.05
+
+# the mirror image of each joint: left <-> right
+MIRROR = np.array([JOINT_INDEX[n.replace("left_", "@").replace("right_", "left_").replace("@", "right_")]
+                   for n in JOINT_NAMES])
+# segments scaled together (their offsets: the joint at the segment's far end), both sides alike
+SEGMENTS = {
+    "thigh": ("left_knee", "right_knee"), "shin": ("left_ankle", "right_ankle"),
+    "upper_arm": ("left_elbow", "right_elbow"), "forearm": ("left_wrist", "right_wrist"),
+    "clavicle": ("left_shoulder", "right_shoulder"), "torso": ("spine2", "spine3", "neck", "left_collar",
+                                                               "right_collar", "head"),
+    "hips": ("left_hip", "right_hip"),
+}
+
+
+@dataclass(frozen=True)
+class Augmentation:
+    """Which augmentations a trainer applies, and how many variants of each clip it adds."""
+    kinds: tuple[str, ...] = KINDS
+    variants: int = 3             # augmented copies per train clip, besides the clip itself
+
+    @classmethod
+    def parse(cls, spec: str, variants: int = 3) -> "Augmentation":
+        """'mirror,speed,proportions' (any subset), 'all' or 'none'."""
+        spec = spec.strip()
+        kinds = KINDS if spec == "all" else () if spec in ("none", "") else tuple(s.strip() for s in spec.split(","))
+        unknown = [k for k in kinds if k not in KINDS]
+        if unknown:
+            raise ValueError(f"unknown augmentation {', '.join(unknown)}; known: {', '.join(KINDS)}, all, none")
+        return cls(tuple(k for k in KINDS if k in kinds), variants if kinds else 0)
+
+    @property
+    def spec(self) -> str:
+        return ",".join(self.kinds) or "none"
+
+
+NO_AUGMENTATION = Augmentation((), 0)
+
+
+def mirrored(motion: Motion) -> Motion:
+    """The motion reflected in its x-z plane (REP-103: y is left): a rotation R becomes
+    S R S with S = diag(1, -1, 1), i.e. quaternion (x, y, z, w) -> (-x, y, -z, w), and each
+    joint takes its mirror joint's rotation and offset."""
+    q = motion.local_quats[:, MIRROR] * np.array([-1.0, 1.0, -1.0, 1.0])
+    offsets = motion.skeleton.offsets[MIRROR] * np.array([1.0, -1.0, 1.0])
+    root = motion.root_positions * np.array([1.0, -1.0, 1.0])
+    return Motion(motion.name + "/mirror", motion.fps, Skeleton(offsets), q, root)
+
+
+def played_at(motion: Motion, speed: float) -> Motion:
+    """The motion `speed` times as fast, at its own frame rate."""
+    faster = motion.resampled(motion.fps / speed)
+    return Motion(f"{motion.name}/x{speed:.2f}", motion.fps, motion.skeleton, faster.local_quats,
+                  faster.root_positions)
+
+
+def with_proportions(motion: Motion, factors: dict[str, float]) -> Motion:
+    """The same rotations on a body whose SEGMENTS are scaled by factors; the root path is
+    scaled by the legs' change, so that the feet still reach the floor and strides fit."""
+    offsets = motion.skeleton.offsets.copy()
+    for segment, factor in factors.items():
+        offsets[[JOINT_INDEX[j] for j in SEGMENTS[segment]]] *= factor
+    skeleton = Skeleton(offsets)
+    legs = skeleton.leg_length() / motion.skeleton.leg_length()
+    return Motion(motion.name + "/body", motion.fps, skeleton, motion.local_quats, motion.root_positions * legs)
+
+
+def random_variant(motion: Motion, augmentation: Augmentation, rng: np.random.Generator) -> Motion:
+    """One augmented copy: each kind applied at random (mirror with probability 1/2)."""
+    kinds = augmentation.kinds
+    if "mirror" in kinds and rng.random() < 0.5:
+        motion = mirrored(motion)
+    if "proportions" in kinds:
+        draws = np.clip(rng.normal(0.0, PROPORTION_STD, len(SEGMENTS)), -2 * PROPORTION_STD, 2 * PROPORTION_STD)
+        motion = with_proportions(motion, {s: 1.0 + d for s, d in zip(SEGMENTS, draws)})
+    if "speed" in kinds and len(motion) > 2:
+        lo, hi = np.log(SPEED_RANGE)
+        motion = played_at(motion, float(np.exp(rng.uniform(lo, hi))))
+    return motion
+
+
+def variants(motion: Motion, augmentation: Augmentation, rng: np.random.Generator) -> list[Motion]:
+    """The clip and its augmented copies; with mirroring, the first copy is the plain mirror
+    image, so that both sides are always seen."""
+    out = [motion]
+    for k in range(augmentation.variants):
+        if k == 0 and "mirror" in augmentation.kinds:
+            out.append(mirrored(motion))
+        else:
+            out.append(random_variant(motion, augmentation, rng))
+    return out

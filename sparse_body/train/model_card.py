@@ -281,7 +281,7 @@ weight 0.0002, feet above the floor; then the closed-form IK (core/body_ik.py) p
 pelvis and end effectors on their trackers. `dragposer:temporal_weight=0` is the paper's "no temporal
 predictor" ablation (only the previous latent's pull).
 
-Runtime choices, measured with these models (and the earlier damped-least-squares IK polish) on the first 10 test clips, four-point
+Runtime choices, measured with earlier models (clip-wise split, no augmentation) and the earlier damped-least-squares IK polish on the first 10 test clips, four-point
 (`sparse-body eval --estimator dragposer:OPTIONS --sensors four_point --limit 10`):
 
 | prior | MPJPE cm | MPJVE cm/s | Jitter 100 m/s3 | Toe PE cm |

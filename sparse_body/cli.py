@@ -78,7 +78,10 @@ def cmd_train(args) -> int:
         torch.set_num_threads(args.threads)
         configs = [_config(config_class, args) for config_class, *_ in parts]   # errors before training
         for config, (_, train, out, report_path) in zip(configs, parts):
-            report = train(config, _mocap(args), out, seed=args.seed, limit=args.limit)
+            checkpoint = report_path.with_name(report_path.name.replace(".train.json", ".checkpoint.npz"))
+            report = train(config, _mocap(args), out, seed=args.seed, limit=args.limit, checkpoint=checkpoint,
+                           resume=args.resume)
+            checkpoint.unlink(missing_ok=True)       # the model is exported: nothing left to resume
             report["command"] = "sparse-body " + " ".join(sys.argv[1:])
             report_path.parent.mkdir(parents=True, exist_ok=True)
             report_path.write_text(json.dumps(report, indent=1))
@@ -373,6 +376,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--mocap", help="the CMU folder")
     p.add_argument("--no-card", action="store_true", help="skip the test-split evaluation and model card")
     p.add_argument("--card-only", action="store_true", help="only rewrite the model card of an existing model")
+    p.add_argument("--resume", action="store_true",
+                   help="continue an interrupted training from its checkpoint (<model>.checkpoint.npz, written "
+                        "at every validation; weights only, the optimiser starts afresh); --steps counts from the "
+                        "first run")
     p.add_argument("--set", action="append", default=[], metavar="FIELD=VALUE",
                    help="override a field of the configuration (repeatable), e.g. --set dropout=0.2")
     p.add_argument("--augment", metavar="KINDS",
@@ -380,8 +387,8 @@ def build_parser() -> argparse.ArgumentParser:
                         "(default: the configuration's)")
     p.add_argument("--ablate-augment", action="store_true",
                    help="instead of training the model: train without augmentation, with the configuration's "
-                        "(or --augment's) and with each of its kinds left out (same seed, --minutes each), and write the "
-                        "validation figures to <model>.augment.json for the model card")
+                        "(or --augment's) and with each of its kinds left out (same seed, --minutes each), and "
+                        "write the validation figures to <model>.augment.json for the model card")
     p.set_defaults(func=cmd_train)
 
     p = sub.add_parser("split", help="compute the CMU train/validation/test split (by subject)")

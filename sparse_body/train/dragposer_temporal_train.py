@@ -12,8 +12,6 @@ space. Targets are the clean latents. The `small` configuration trains without t
 """
 from __future__ import annotations
 
-import json
-import platform
 import time
 import warnings
 from pathlib import Path
@@ -30,6 +28,7 @@ from ..estimators.dragposer_pose import HEIGHT_JOINTS, LIMBS, split_heading, tem
 from ..estimators.lobstr_features import body_scale
 from .augment import NO_AUGMENTATION, Augmentation, variants
 from .dragposer_temporal import TemporalConfig, TemporalPredictor, loss
+from .harness import add_metadata, fit, machine
 
 
 def clip_arrays(motion) -> dict[str, np.ndarray]:
@@ -110,7 +109,6 @@ def validate(model: TemporalPredictor, data, config: TemporalConfig) -> dict[str
 
 
 def export(model: TemporalPredictor, path: Path, metadata: dict) -> None:
-    import onnx
     c = model.config
     model.eval()
     example = (torch.zeros(1, c.past, c.latent), torch.zeros(1, c.past, c.context), torch.zeros(1, c.future, c.latent))
@@ -119,10 +117,7 @@ def export(model: TemporalPredictor, path: Path, metadata: dict) -> None:
         warnings.simplefilter("ignore", torch.jit.TracerWarning)
         torch.onnx.export(model, example, str(path), input_names=["past_latents", "past_context", "future_latents"],
                           output_names=["predicted_latents"], opset_version=17, dynamo=False)
-    graph = onnx.load(str(path))
-    for key, value in metadata.items():
-        graph.metadata_props.add(key=key, value=json.dumps(value))
-    onnx.save(graph, str(path))
+    add_metadata(path, metadata)
 
 
 def load_clips(mocap_root: Path, split: str, limit: int | None, fps: float = 60.0,
@@ -132,7 +127,8 @@ def load_clips(mocap_root: Path, split: str, limit: int | None, fps: float = 60.
 
 
 def train_temporal(config: TemporalConfig, mocap_root: Path, out_dir: Path, seed: int = 0,
-                   limit: int | None = None, log=print) -> dict:
+                   limit: int | None = None, log=print, checkpoint: Path | None = None,
+                   resume: bool = False) -> dict:
     """Needs the pose VAE in out_dir (dragposer_encoder.onnx): the predictor lives in its space."""
     torch.manual_seed(seed)
     rng = np.random.default_rng(seed)
@@ -149,31 +145,19 @@ def train_temporal(config: TemporalConfig, mocap_root: Path, out_dir: Path, seed
     model.context_mean.copy_(torch.from_numpy(train["context"].mean(0)))
     model.context_std.copy_(torch.from_numpy(train["context"].std(0)).clamp_min(1e-3))
     opt = torch.optim.AdamW(model.parameters(), lr=config.lr, weight_decay=config.weight_decay)
-    best, best_state, history = float("inf"), None, []
-    start, step = time.perf_counter(), 0
-    while step < config.steps and not (config.minutes and time.perf_counter() - start > 60 * config.minutes):
-        model.train()
+
+    def step():
         terms = loss(model, batch(train, rng.choice(train["starts"], size=config.batch), config, rng))
-        opt.zero_grad()
-        terms.backward()
-        opt.step()
-        step += 1
-        if step % config.steps_per_check == 0 or step == config.steps:
-            v = validate(model, val, config)
-            history.append({"step": step, "minutes": (time.perf_counter() - start) / 60, "loss": terms.item(), **v})
-            if v["mse"] < best:
-                best, best_state = v["mse"], {k: t.clone() for k, t in model.state_dict().items()}
-            log(f"step {step} ({history[-1]['minutes']:.1f} min) loss {terms.item():.4f} | val mse {v['mse']:.4f} "
-                f"next {v['mse_next']:.4f} (hold {v['hold_mse']:.4f} / {v['hold_mse_next']:.4f})")
-    model.load_state_dict(best_state or model.state_dict())
-    best_val = validate(model, val, config)
-    minutes = (time.perf_counter() - start) / 60
+        return terms, {"loss": terms.item()}
+
+    fitted = fit(model, opt, step, lambda: validate(model, val, config), lambda v: v["mse"],
+                 steps=config.steps, minutes=config.minutes, check_every=config.steps_per_check,
+                 checkpoint=checkpoint, resume=resume, log=log)
     export(model, Path(out_dir) / "dragposer_temporal.onnx",
-           {"method": "dragposer", "part": "temporal_predictor", "config": config.to_dict(), "validation": best_val})
-    return {"config": config.to_dict(), "steps": step, "minutes": minutes, "validation": best_val,
-            "history": history, "train_clips": len(split_clips(mocap_root, "train", limit)),
-            "train_sequences": len(train_clips), "augment": config.augment, "train_windows": int(len(train["starts"])),
-            "validation_clips": len(val_clips),
-            "parameters": sum(p.numel() for p in model.parameters()),
-            "hardware": f"{platform.processor() or platform.machine()}, {torch.get_num_threads()} torch threads",
-            "torch": torch.__version__}
+           {"method": "dragposer", "part": "temporal_predictor", "config": config.to_dict(),
+            "validation": fitted.validation})
+    return {"config": config.to_dict(), "steps": fitted.steps, "minutes": fitted.minutes,
+            "validation": fitted.validation, "history": fitted.history,
+            "train_clips": len(split_clips(mocap_root, "train", limit)), "train_sequences": len(train_clips),
+            "augment": config.augment, "train_windows": int(len(train["starts"])), "validation_clips": len(val_clips),
+            "parameters": sum(p.numel() for p in model.parameters()), **machine()}

@@ -7,8 +7,6 @@ exported.
 """
 from __future__ import annotations
 
-import json
-import platform
 import time
 from pathlib import Path
 
@@ -24,6 +22,7 @@ from ..estimators.dragposer_pose import dual_quaternions, split_heading
 from ..estimators.lobstr_features import body_scale
 from .augment import NO_AUGMENTATION, Augmentation, variants
 from .dragposer_vae import Decoder, Encoder, PoseVae, VaeConfig, losses
+from .harness import add_metadata, fit, machine
 from .torch_body import sixd_to_matrix
 
 
@@ -64,14 +63,11 @@ def export(vae: PoseVae, out_dir: Path, metadata: dict) -> None:
         path = out_dir / name
         torch.onnx.export(module.eval(), (example,), str(path), input_names=[inp], output_names=[outp],
                           dynamic_axes={inp: {0: "batch"}, outp: {0: "batch"}}, opset_version=17, dynamo=False)
-        model = onnx.load(str(path))
-        for key, value in metadata.items():
-            model.metadata_props.add(key=key, value=json.dumps(value))
-        onnx.save(model, str(path))
+        add_metadata(path, metadata)
 
 
 def train_vae(config: VaeConfig, mocap_root: Path, out_dir: Path, seed: int = 0, limit: int | None = None,
-              log=print) -> dict:
+              log=print, checkpoint: Path | None = None, resume: bool = False) -> dict:
     torch.manual_seed(seed)
     rng = np.random.default_rng(seed)
     t0 = time.perf_counter()
@@ -91,36 +87,18 @@ def train_vae(config: VaeConfig, mocap_root: Path, out_dir: Path, seed: int = 0,
     offsets = torch.tensor(Skeleton.canonical().offsets, dtype=torch.float32)
     vae = PoseVae(config)
     opt = torch.optim.AdamW(vae.parameters(), lr=config.lr, weight_decay=config.weight_decay)
-    best, best_state, history = float("inf"), None, []
-    start, step = time.perf_counter(), 0
-    while step < config.steps and not (config.minutes and time.perf_counter() - start > 60 * config.minutes):
-        vae.train()
+
+    def step():
         idx = rng.choice(starts, size=config.batch)[:, None] + np.arange(2)
         terms = losses(vae, {"dq": torch.from_numpy(dq[idx]), "pose": torch.from_numpy(pose[idx])}, offsets)
-        opt.zero_grad()
-        terms["total"].backward()
-        opt.step()
-        step += 1
-        if step % config.steps_per_check == 0 or step == config.steps:
-            vae.eval()
-            val = validate(vae, val_clips, offsets)
-            history.append({"step": step, "minutes": (time.perf_counter() - start) / 60,
-                            **{k: v.item() for k, v in terms.items()}, **val})
-            if val["position_error_cm"] < best:
-                best, best_state = val["position_error_cm"], {k: v.clone() for k, v in vae.state_dict().items()}
-            log(f"step {step} ({history[-1]['minutes']:.1f} min) loss {terms['total'].item():.4f} "
-                f"rec {terms['reconstruction'].item():.4f} fk {terms['fk'].item():.5f} kld {terms['kld'].item():.2f} "
-                f"cont {terms['continuity'].item():.4f} | val {val['position_error_cm']:.2f} cm "
-                f"{val['rotation_error_deg']:.2f} deg")
-    vae.load_state_dict(best_state or vae.state_dict())
-    vae.eval()
-    best_val = validate(vae, val_clips, offsets)
-    minutes = (time.perf_counter() - start) / 60
+        return terms["total"], {k: v.item() for k, v in terms.items()}
+
+    fitted = fit(vae, opt, step, lambda: validate(vae, val_clips, offsets), lambda val: val["position_error_cm"],
+                 steps=config.steps, minutes=config.minutes, check_every=config.steps_per_check,
+                 checkpoint=checkpoint, resume=resume, log=log)
     export(vae, out_dir, {"method": "dragposer", "part": "pose_vae", "config": config.to_dict(),
-                          "validation": best_val})
-    return {"config": config.to_dict(), "steps": step, "minutes": minutes, "validation": best_val,
-            "history": history, "train_clips": len(split_clips(mocap_root, "train", limit)),
-            "train_sequences": len(train_clips), "augment": config.augment, "train_frames": int(len(dq)),
-            "validation_clips": len(val_clips),
-            "hardware": f"{platform.processor() or platform.machine()}, {torch.get_num_threads()} torch threads",
-            "torch": torch.__version__}
+                          "validation": fitted.validation})
+    return {"config": config.to_dict(), "steps": fitted.steps, "minutes": fitted.minutes,
+            "validation": fitted.validation, "history": fitted.history,
+            "train_clips": len(split_clips(mocap_root, "train", limit)), "train_sequences": len(train_clips),
+            "augment": config.augment, "train_frames": int(len(dq)), "validation_clips": len(val_clips), **machine()}

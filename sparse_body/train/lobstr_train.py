@@ -8,8 +8,6 @@ position is exported.
 """
 from __future__ import annotations
 
-import json
-import platform
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -25,6 +23,7 @@ from ..data.virtual_trackers import LOBSTR_NOISE, _random_rotations
 from ..estimators.lobstr_features import (INPUT_JOINTS, LEG_JOINTS, body_scale, leg_targets,
                                           reference_frames, sequence_features)
 from .augment import NO_AUGMENTATION, Augmentation, variants
+from .harness import add_metadata, fit, machine
 from .lobstr_model import LobstrConfig, LobstrNet, LobstrStep, leg_positions, losses
 from .torch_body import sixd_to_matrix
 
@@ -104,7 +103,6 @@ def validate(net: LobstrNet, clips: list[ClipTensors], offsets: torch.Tensor) ->
 
 
 def export_onnx(net: LobstrNet, path: Path, metadata: dict) -> None:
-    import onnx
     step = LobstrStep(net).eval()
     x, h = torch.zeros(1, net.mean.numel()), torch.zeros(1, 1, net.config.hidden)
     path.parent.mkdir(parents=True, exist_ok=True)
@@ -113,10 +111,7 @@ def export_onnx(net: LobstrNet, path: Path, metadata: dict) -> None:
                       dynamic_axes={"features": {0: "batch"}, "state": {1: "batch"},
                                     "legs_6d": {0: "batch"}, "contact_probability": {0: "batch"},
                                     "next_state": {1: "batch"}}, opset_version=17, dynamo=False)
-    model = onnx.load(str(path))
-    for key, value in metadata.items():
-        model.metadata_props.add(key=key, value=json.dumps(value))
-    onnx.save(model, str(path))
+    add_metadata(path, metadata)
 
 
 def load_clips(mocap_root: Path, split: str, config: LobstrConfig, rng, limit: int | None = None):
@@ -128,7 +123,7 @@ def load_clips(mocap_root: Path, split: str, config: LobstrConfig, rng, limit: i
 
 
 def train(config: LobstrConfig, mocap_root: Path, out: Path, seed: int = 0, limit: int | None = None,
-          log=print) -> dict:
+          log=print, checkpoint: Path | None = None, resume: bool = False) -> dict:
     """Train, export out (an .onnx path) and return what the model card reports."""
     torch.manual_seed(seed)
     rng = np.random.default_rng(seed)
@@ -147,43 +142,26 @@ def train(config: LobstrConfig, mocap_root: Path, out: Path, seed: int = 0, limi
     # gradients ~1e-8, where Adam's default eps would stall it.
     opt = torch.optim.AdamW(net.parameters(), lr=config.lr, eps=1e-12, weight_decay=config.weight_decay)
     sched = torch.optim.lr_scheduler.ExponentialLR(opt, config.lr_decay)
-    best, best_state, history = float("inf"), None, []
-    start = time.perf_counter()
-    step = 0
-    while step < config.steps and not (config.minutes and time.perf_counter() - start > 60 * config.minutes):
-        net.train()
+
+    def step():
         terms = losses(net, sampler.sample(config.batch, rng), offsets)
-        opt.zero_grad()
-        terms["total"].backward()
-        opt.step()
-        step += 1
-        if step % config.steps_per_epoch == 0 or step == config.steps:
-            sched.step()
-            net.eval()
-            val = validate(net, val_clips, offsets)
-            # the legs pick the checkpoint: with the paper's contact weight the contact head
-            # learns last, and its early majority-class accuracy chose a 100-step model once
-            score = val["lower_rot_error_deg"] / 10 + val["toe_error_cm"] / 10
-            history.append({"step": step, "minutes": (time.perf_counter() - start) / 60,
-                            "train_loss": terms["total"].item(), **val})
-            if score < best:
-                best, best_state = score, {k: v.clone() for k, v in net.state_dict().items()}
-            log(f"step {step} ({history[-1]['minutes']:.1f} min) loss {terms['total'].item():.4f} "
-                f"pose {terms['pose'].item():.4f} fk {terms['fk'].item():.4f} vel {terms['velocity'].item():.4f} "
-                f"contact {terms['contact'].item():.3f} | val contact {val['contact_accuracy_pct']:.1f}% "
-                f"rot {val['lower_rot_error_deg']:.2f} deg toe {val['toe_error_cm']:.2f} cm")
-    if best_state is None:
-        best_state = net.state_dict()
-    net.load_state_dict(best_state)
-    net.eval()
-    best_val = validate(net, val_clips, offsets)
-    minutes = (time.perf_counter() - start) / 60
+        return terms["total"], {"train_loss": terms["total"].item(), "pose": terms["pose"].item(),
+                                "fk": terms["fk"].item(), "velocity": terms["velocity"].item(),
+                                "contact": terms["contact"].item()}
+
+    # the legs pick the checkpoint: with the paper's contact weight the contact head learns
+    # last, and its early majority-class accuracy chose a 100-step model once
+    fitted = fit(net, opt, step, lambda: validate(net, val_clips, offsets),
+                 lambda val: val["lower_rot_error_deg"] / 10 + val["toe_error_cm"] / 10,
+                 steps=config.steps, minutes=config.minutes, check_every=config.steps_per_epoch,
+                 after_check=sched.step, checkpoint=checkpoint, resume=resume,
+                 log=log)
     metadata = {"method": "lobstr", "config": config.to_dict(), "feature_version": 1,
-                "canonical_leg_length": Skeleton.canonical().leg_length(), "trained_steps": step,
-                "validation": best_val}
+                "canonical_leg_length": Skeleton.canonical().leg_length(), "trained_steps": fitted.steps,
+                "validation": fitted.validation}
     export_onnx(net, out, metadata)
-    return {"config": config.to_dict(), "steps": step, "minutes": minutes, "validation": best_val,
-            "history": history, "train_clips": len(split_clips(mocap_root, "train", limit)),
-            "train_sequences": len(train_clips), "augment": config.augment, "train_frames": int(len(sampler.legs)),
-            "validation_clips": len(val_clips), "hardware": f"{platform.processor() or platform.machine()}, "
-            f"{torch.get_num_threads()} torch threads", "torch": torch.__version__}
+    return {"config": config.to_dict(), "steps": fitted.steps, "minutes": fitted.minutes,
+            "validation": fitted.validation, "history": fitted.history,
+            "train_clips": len(split_clips(mocap_root, "train", limit)), "train_sequences": len(train_clips),
+            "augment": config.augment, "train_frames": int(len(sampler.legs)), "validation_clips": len(val_clips),
+            **machine()}

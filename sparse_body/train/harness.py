@@ -1,0 +1,103 @@
+"""What every trainer shares: the step loop under a step and time budget with periodic
+validation and the best weights kept, a resumable checkpoint without pickle, ONNX metadata,
+and the facts a model card reports about the machine.
+
+A trainer supplies its own step (a batch -> its loss terms), its validation (-> figures) and
+the figure that picks the checkpoint; fit() does the rest in the same order for all of them.
+"""
+from __future__ import annotations
+
+import json
+import platform
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Callable
+
+import numpy as np
+import torch
+
+
+@dataclass
+class Fitted:
+    steps: int
+    minutes: float
+    validation: dict[str, float]      # of the weights kept
+    history: list[dict] = field(default_factory=list)
+
+
+def fit(model: torch.nn.Module, optimizer: torch.optim.Optimizer,
+        step: Callable[[], tuple[torch.Tensor, dict[str, float]]],
+        validate: Callable[[], dict[str, float]], score: Callable[[dict[str, float]], float], *,
+        steps: int, minutes: float, check_every: int, after_check: Callable[[], None] | None = None,
+        checkpoint: Path | None = None, resume: bool = False, log: Callable[[str], None] = print) -> Fitted:
+    """Train model until `steps` steps or `minutes` minutes (0: no time limit); every
+    check_every steps (and at the last) validate, keep the weights with the lowest score, and
+    log. step() runs the model on a batch and returns (loss, figures for the history);
+    after_check (e.g. a learning-rate schedule) runs before each validation. The kept
+    weights are loaded into model, which is left in eval mode.
+
+    checkpoint: a .npz written at every check (the weights now and the best so far, the step,
+    the history); resume=True starts from it, with `steps` counting from the start of the first
+    run and `minutes` from this one. Weights only: the optimiser's moments start afresh."""
+    best, best_state, history = float("inf"), None, []
+    start, done = time.perf_counter(), 0
+    if resume and checkpoint is not None and Path(checkpoint).is_file():
+        done, best, best_state, history = _restore(model, Path(checkpoint))
+        log(f"resumed from {checkpoint} at step {done}")
+    while done < steps and not (minutes and time.perf_counter() - start > 60 * minutes):
+        model.train()
+        loss, figures = step()
+        optimizer.zero_grad()
+        loss.backward()
+        optimizer.step()
+        done += 1
+        if done % check_every == 0 or done == steps:
+            if after_check is not None:
+                after_check()
+            model.eval()
+            val = validate()
+            history.append({"step": done, "minutes": (time.perf_counter() - start) / 60, **figures, **val})
+            if score(val) < best:
+                best, best_state = score(val), {k: v.clone() for k, v in model.state_dict().items()}
+            log(f"step {done} ({history[-1]['minutes']:.1f} min) "
+                + " ".join(f"{k} {v:.4g}" for k, v in figures.items()) + " | val "
+                + " ".join(f"{k} {v:.4g}" for k, v in val.items()))
+            if checkpoint is not None:
+                _save_checkpoint(Path(checkpoint), model, best_state, done, best, history)
+    model.load_state_dict(best_state or model.state_dict())
+    model.eval()
+    return Fitted(done, (time.perf_counter() - start) / 60, validate(), history)
+
+
+def _save_checkpoint(path: Path, model, best_state, step: int, best: float, history: list[dict]) -> None:
+    arrays = {f"now.{k}": v.detach().cpu().numpy() for k, v in model.state_dict().items()}
+    arrays.update({f"best.{k}": v.cpu().numpy() for k, v in (best_state or {}).items()})
+    state = json.dumps({"step": step, "best": best, "history": history})
+    tmp = path.with_name(path.name + ".tmp.npz")          # a crash mid-write keeps the last one
+    np.savez(tmp, state=np.array(state), **arrays)
+    tmp.replace(path)
+
+
+def _restore(model, path: Path):
+    with np.load(path, allow_pickle=False) as saved:
+        state = json.loads(str(saved["state"]))
+        now = {k[4:]: torch.from_numpy(saved[k]) for k in saved.files if k.startswith("now.")}
+        best = {k[5:]: torch.from_numpy(saved[k]) for k in saved.files if k.startswith("best.")} or None
+    model.load_state_dict(now)
+    return state["step"], state["best"], best, state["history"]
+
+
+def add_metadata(onnx_path: Path, metadata: dict) -> None:
+    """Each value JSON-encoded into the ONNX file's metadata (the runtime's configuration)."""
+    import onnx
+    graph = onnx.load(str(onnx_path))
+    for key, value in metadata.items():
+        graph.metadata_props.add(key=key, value=json.dumps(value))
+    onnx.save(graph, str(onnx_path))
+
+
+def machine() -> dict[str, str]:
+    """What a model card says the model was trained on."""
+    return {"hardware": f"{platform.processor() or platform.machine()}, {torch.get_num_threads()} torch threads",
+            "torch": torch.__version__}

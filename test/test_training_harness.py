@@ -1,0 +1,49 @@
+"""The shared training loop (train/harness.py) through the real LoBSTr trainer on real clips:
+checkpoints without pickle, resuming, the best weights kept."""
+import json
+from dataclasses import replace
+
+import numpy as np
+import onnxruntime as ort
+import pytest
+
+from sparse_body.train.lobstr_model import LobstrConfig
+from sparse_body.train.lobstr_train import train
+
+
+def quiet(*_):
+    pass
+
+
+@pytest.fixture(scope="module")
+def tiny():
+    return replace(LobstrConfig.named("tiny"), steps=4, steps_per_epoch=2)
+
+
+def test_an_interrupted_training_resumes_from_its_checkpoint(tmp_path, mocap_root, tiny):
+    checkpoint = tmp_path / "lobstr.checkpoint.npz"
+    first = train(tiny, mocap_root, tmp_path / "a.onnx", limit=2, log=quiet, checkpoint=checkpoint)
+    assert [h["step"] for h in first["history"]] == [2, 4]
+    with np.load(checkpoint, allow_pickle=False) as saved:      # plain arrays and a JSON state, no pickle
+        state = json.loads(str(saved["state"]))
+        assert state["step"] == 4 and any(k.startswith("best.") for k in saved.files)
+    lines = []
+    second = train(replace(tiny, steps=8), mocap_root, tmp_path / "b.onnx", limit=2, log=lines.append,
+                   checkpoint=checkpoint, resume=True)
+    assert any("resumed" in line and "step 4" in line for line in lines)
+    assert second["steps"] == 8
+    assert [h["step"] for h in second["history"]] == [2, 4, 6, 8]
+    assert second["history"][:2] == first["history"]
+    # the exported model is the best of all four checks, and says how it scored
+    score = [h["lower_rot_error_deg"] / 10 + h["toe_error_cm"] / 10 for h in second["history"]]
+    best = second["history"][int(np.argmin(score))]
+    assert second["validation"]["toe_error_cm"] == pytest.approx(best["toe_error_cm"], rel=1e-5)
+    meta = ort.InferenceSession(str(tmp_path / "b.onnx"), providers=["CPUExecutionProvider"]).get_modelmeta()
+    assert json.loads(meta.custom_metadata_map["trained_steps"]) == 8
+
+
+def test_without_resume_a_checkpoint_is_overwritten_not_read(tmp_path, mocap_root, tiny):
+    checkpoint = tmp_path / "lobstr.checkpoint.npz"
+    train(tiny, mocap_root, tmp_path / "a.onnx", limit=2, log=quiet, checkpoint=checkpoint)
+    again = train(tiny, mocap_root, tmp_path / "b.onnx", limit=2, log=quiet, checkpoint=checkpoint)
+    assert [h["step"] for h in again["history"]] == [2, 4]

@@ -378,8 +378,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--card-only", action="store_true", help="only rewrite the model card of an existing model")
     p.add_argument("--resume", action="store_true",
                    help="continue an interrupted training from its checkpoint (<model>.checkpoint.npz, written "
-                        "at every validation; weights only, the optimiser starts afresh); --steps counts from the "
-                        "first run")
+                        "at every validation; weights only, the optimiser and its schedule start afresh); "
+                        "--steps counts from the first run")
     p.add_argument("--set", action="append", default=[], metavar="FIELD=VALUE",
                    help="override a field of the configuration (repeatable), e.g. --set dropout=0.2")
     p.add_argument("--augment", metavar="KINDS",

@@ -47,3 +47,11 @@ def test_without_resume_a_checkpoint_is_overwritten_not_read(tmp_path, mocap_roo
     train(tiny, mocap_root, tmp_path / "a.onnx", limit=2, log=quiet, checkpoint=checkpoint)
     again = train(tiny, mocap_root, tmp_path / "b.onnx", limit=2, log=quiet, checkpoint=checkpoint)
     assert [h["step"] for h in again["history"]] == [2, 4]
+
+
+def test_a_checkpoint_of_another_configuration_is_refused_by_name(tmp_path, mocap_root, tiny):
+    checkpoint = tmp_path / "lobstr.checkpoint.npz"
+    train(tiny, mocap_root, tmp_path / "a.onnx", limit=2, log=quiet, checkpoint=checkpoint)
+    with pytest.raises(ValueError, match="lobstr.checkpoint.npz: the checkpoint does not fit"):
+        train(replace(tiny, hidden=24), mocap_root, tmp_path / "b.onnx", limit=2, log=quiet,
+              checkpoint=checkpoint, resume=True)

@@ -39,7 +39,8 @@ def fit(model: torch.nn.Module, optimizer: torch.optim.Optimizer,
 
     checkpoint: a .npz written at every check (the weights now and the best so far, the step,
     the history); resume=True starts from it, with `steps` counting from the start of the first
-    run and `minutes` from this one. Weights only: the optimiser's moments start afresh."""
+    run and `minutes` from this one. Weights only: the optimiser (its moments, its learning-rate
+    schedule) starts afresh."""
     best, best_state, history = float("inf"), None, []
     start, done = time.perf_counter(), 0
     if resume and checkpoint is not None and Path(checkpoint).is_file():
@@ -84,7 +85,11 @@ def _restore(model, path: Path):
         state = json.loads(str(saved["state"]))
         now = {k[4:]: torch.from_numpy(saved[k]) for k in saved.files if k.startswith("now.")}
         best = {k[5:]: torch.from_numpy(saved[k]) for k in saved.files if k.startswith("best.")} or None
-    model.load_state_dict(now)
+    try:
+        model.load_state_dict(now)
+    except RuntimeError as err:      # another configuration's weights (sizes, names)
+        raise ValueError(f"{path}: the checkpoint does not fit this configuration "
+                         f"(train it afresh without --resume): {str(err).splitlines()[0]}") from None
     return state["step"], state["best"], best, state["history"]
 
 

@@ -55,3 +55,15 @@ def test_a_checkpoint_of_another_configuration_is_refused_by_name(tmp_path, moca
     with pytest.raises(ValueError, match="lobstr.checkpoint.npz: the checkpoint does not fit"):
         train(replace(tiny, hidden=24), mocap_root, tmp_path / "b.onnx", limit=2, log=quiet,
               checkpoint=checkpoint, resume=True)
+
+
+def test_the_dragposer_card_renders_its_runtime_choices_from_the_measured_file(tmp_path):
+    from sparse_body.resources import models_dir
+    from sparse_body.train.model_card import RUNTIME_METRICS, runtime_choices_table
+    measured = json.loads((models_dir() / "dragposer.runtime.json").read_text())
+    table = runtime_choices_table(models_dir() / "dragposer.runtime.json")
+    assert table.count("\n| `dragposer") == len(measured) >= 2
+    default = next(r for r in measured if r["estimator"] == "dragposer")
+    assert f"| `dragposer` | {len(default['clips'])} | {default['summary'][RUNTIME_METRICS[0]]:.2f} |" in table
+    assert "validation split" in table
+    assert "missing" in runtime_choices_table(tmp_path / "dragposer.runtime.json")

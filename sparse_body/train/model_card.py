@@ -24,6 +24,26 @@ def augmentation_table(report_path: Path, columns: dict[str, str]) -> str:
             "validation split (people the model never saw):\n\n" + "\n".join(rows))
 
 
+RUNTIME_METRICS = ("MPJPE [cm]", "MPJVE [cm/s]", "Jitter [100m/s3]", "Toe PE [cm]")
+RUNTIME_COMMAND = ("sparse-body eval --sensors four_point --split validation --no-compare "
+                   "--output models/dragposer.runtime.json --estimator dragposer:OPTIONS ...")
+
+
+def runtime_choices_table(results_path: Path) -> str:
+    """The runtime options compared in one `sparse-body eval --output` file, as a Markdown
+    table (estimator specs as rows), or a line saying how to measure them."""
+    import json
+    path = Path(results_path)
+    if not path.is_file():
+        return f"(not measured: `{path.name}` is missing; `{RUNTIME_COMMAND}` writes it)"
+    results = json.loads(path.read_text())
+    rows = ["| estimator | clips | " + " | ".join(RUNTIME_METRICS) + " |", "|---|---:|" + "---:|" * len(RUNTIME_METRICS)]
+    for r in results:
+        rows.append(f"| `{r['estimator']}` | {len(r['clips'])} | "
+                    + " | ".join(f"{r['summary'][m]:.2f}" for m in RUNTIME_METRICS) + " |")
+    return f"`{RUNTIME_COMMAND}` ({results[0]['split']} split, {results[0]['protocol']}):\n\n" + "\n".join(rows)
+
+
 LOBSTR_VALIDATION = {"lower_rot_error_deg": "val leg rot [deg]", "toe_error_cm": "val toe [cm]",
                      "contact_accuracy_pct": "val contact [%]"}
 VAE_VALIDATION = {"position_error_cm": "val position [cm]", "rotation_error_deg": "val rotation [deg]"}
@@ -202,6 +222,7 @@ def write_dragposer_card(out_dir: Path, mocap_root: Path, limit: int | None = No
     cfg, val = vae["config"], vae["validation"]
     tcfg, tval = temporal["config"], temporal["validation"]
     vae_augmentation = augmentation_table(out_dir / "dragposer.train.json", VAE_VALIDATION)
+    runtime_table = runtime_choices_table(out_dir / "dragposer.runtime.json")
     temporal_augmentation = augmentation_table(out_dir / "dragposer_temporal.train.json", TEMPORAL_VALIDATION)
 
     def curve(history, columns):
@@ -281,30 +302,24 @@ weight 0.0002, feet above the floor; then the closed-form IK (core/body_ik.py) p
 pelvis and end effectors on their trackers. `dragposer:temporal_weight=0` is the paper's "no temporal
 predictor" ablation (only the previous latent's pull).
 
-Runtime choices, measured with earlier models (clip-wise split, no augmentation) and the earlier damped-least-squares IK polish on the first 10 test clips, four-point
-(`sparse-body eval --estimator dragposer:OPTIONS --sensors four_point --limit 10`):
+Runtime choices, measured on the validation people (field protocol, four-point; the default
+is `dragposer`; `prior_weight=0` drops the previous latent's pull, `temporal_ramp=false` holds
+each prediction for the 4 frames instead of ramping to it):
 
-| prior | MPJPE cm | MPJVE cm/s | Jitter 100 m/s3 | Toe PE cm |
-|---|---|---|---|---|
-| previous latent only (`temporal_weight=0`) | 5.65 | 28.66 | 10.38 | 20.93 |
-| prediction only, held for 4 frames | 5.53 | 29.86 | 15.99 | 20.23 |
-| prediction only, ramped | 5.53 | 29.07 | 14.88 | 20.23 |
-| previous latent + ramped prediction (default) | 5.54 | 28.29 | 12.54 | 20.28 |
-| the same, weight 0.004 | 5.58 | 28.61 | 13.10 | 20.22 |
-| the same, W_f = 4 (`ahead=4`) | 5.93 | 31.38 | 16.41 | 21.63 |
-| the same, W_f = 16 (`ahead=16`) | 6.20 | 34.67 | 19.36 | 22.77 |
+{runtime_table}
 
-Also tried, and not kept (same clips): the predictor fed the final pose re-encoded instead of
-the search's latent (MPJPE 5.66); a more regularised predictor (dropout 0.3, 2+2 layers,
-feed-forward 128, weight decay 0.05, 12 minutes; validation next-step MSE 0.0743) gave 5.64
-here and 1.05 against 1.07 cm at six-point; the paper's limb noise (probability 0.1, 10 degrees)
+Also tried with earlier models (clip-wise split, on the first 10 test clips), and not kept:
+the predictor fed the final pose re-encoded instead of the search's latent (MPJPE 5.66 against
+5.54); a more regularised predictor (dropout 0.3, 2+2 layers, feed-forward 128, weight decay
+0.05, 12 minutes; validation next-step MSE 0.0743) gave 5.64 there and 1.05 against 1.07 cm at
+six-point; the paper's limb noise (probability 0.1, 10 degrees)
 made the validation error rise from the first check (0.089 -> 0.100 over 1,000 steps).
 
-On the whole test split (tables below) the predictor leaves joint errors within a few
-hundredths of a centimetre of the optimiser alone and raises jitter: on validation it
-predicts the next latent about as well as carrying on half the last step's change, so there
-is little for it to add. Feeding it its own predictions (the paper's W_f = 16 for four
-sensors) drifts. Read differences of a few hundredths with care: `dragposer:temporal_weight=0`
+On the whole test split (tables below) the predictor moves joint errors by up to about 0.2 cm
+either way (better at three-point and with faulty sensors, worse at hip and hands) and raises
+jitter: on validation it predicts the next latent only a little better than holding the newest
+one, so there is little for it to add. Feeding it its own predictions (the paper's W_f = 16
+for four sensors) drifts. Read differences of a few hundredths with care: `dragposer:temporal_weight=0`
 gave six-point MPJVE 6.05 cm/s in an earlier card run and 6.38 in this one. A clip parsed
 afresh differed from the same clip read back from the parse cache (float32 quaternions) by
 about 1e-7, and the optimiser's accept/refuse decisions grow that into such changes; clips now

@@ -69,6 +69,7 @@ def cmd_train(args) -> int:
 
     import torch
 
+    from .train.harness import beside
     parts = _trainers(args)
     if args.ablate_augment:
         torch.set_num_threads(args.threads)
@@ -78,7 +79,7 @@ def cmd_train(args) -> int:
         torch.set_num_threads(args.threads)
         configs = [_config(config_class, args) for config_class, *_ in parts]   # errors before training
         for config, (_, train, out, report_path) in zip(configs, parts):
-            checkpoint = report_path.with_name(report_path.name.replace(".train.json", ".checkpoint.npz"))
+            checkpoint = beside(report_path, ".checkpoint.npz")
             report = train(config, _mocap(args), out, seed=args.seed, limit=args.limit, checkpoint=checkpoint,
                            resume=args.resume)
             checkpoint.unlink(missing_ok=True)       # the model is exported: nothing left to resume
@@ -133,6 +134,7 @@ def _ablate_augmentation(args, parts) -> None:
     import tempfile
 
     from .train.augment import Augmentation
+    from .train.harness import beside
     for config_class, train, out, report_path in parts:
         kinds = Augmentation.parse(args.augment or config_class.named(args.config).augment).kinds
         specs = ["none", ",".join(kinds) or "none"]
@@ -143,15 +145,14 @@ def _ablate_augmentation(args, parts) -> None:
             config = _config(config_class, args)
             config.augment = spec
             with tempfile.TemporaryDirectory() as tmp:
-                for vae_file in ("dragposer_encoder.onnx", "dragposer_decoder.onnx"):   # the predictor's space
-                    if out.is_dir() and (out / vae_file).is_file():
-                        shutil.copy(out / vae_file, tmp)
+                if out.is_dir():   # what an earlier part left there (the predictor trains in the VAE's space)
+                    shutil.copytree(out, tmp, dirs_exist_ok=True)
                 target = Path(tmp) / out.name if out.suffix == ".onnx" else Path(tmp)
                 report = train(config, _mocap(args), target, seed=args.seed, limit=args.limit)
             runs.append({"augment": spec, "steps": report["steps"], "minutes": report["minutes"],
                          "validation": report["validation"]})
             print(f"augment {spec}: {report['validation']}")
-        path = report_path.with_name(report_path.name.replace(".train.json", ".augment.json"))
+        path = beside(report_path, ".augment.json")
         path.parent.mkdir(parents=True, exist_ok=True)
         path.write_text(json.dumps({"command": "sparse-body " + " ".join(sys.argv[1:]), "seed": args.seed,
                                     "runs": runs}, indent=1))

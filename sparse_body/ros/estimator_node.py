@@ -36,7 +36,7 @@ from ..core.rotations import matrix_to_quat
 from ..core.sensors import SensorConfigError, load_sensor_config
 from ..core.skeleton import JOINT_NAMES, Skeleton
 from ..core.tracker_filter import PREFIX as FILTER
-from ..core.tracker_filter import filter_config
+from ..core.tracker_filter import FilterConfig, filter_config
 from ..core.types import BodyPose
 from ..estimators import create_estimator
 from ..estimators.base import parse_estimator_spec
@@ -45,6 +45,8 @@ from ..urdf import body_urdf
 from . import messages
 from .spin import init, spin_until_shutdown
 from .tf_input import TfReader
+
+FILTER_DEFAULTS = FilterConfig()      # the filter's defaults are the estimators' (core/tracker_filter.py)
 
 PARAMETERS = {
     # name: (default, description)
@@ -55,12 +57,12 @@ PARAMETERS = {
     "height": (1.75, "the tracked person's height in metres (scales the canonical body; unused with a calibration)"),
     "calibration": ("", "T-pose calibration YAML (the tracker bridge's ~/calibrate writes one): the body it fitted "
                         "is the one estimated and published; empty: the canonical body at height"),
-    "filter_position_noise": (0.001, "tracker position noise (m, std per axis) the input filter is set for; "
+    "filter_position_noise": (FILTER_DEFAULTS.position_noise, "tracker position noise (m, std per axis) the input filter is set for; "
                                      "0 with filter_rotation_noise 0: no filtering"),
-    "filter_rotation_noise": (0.33, "tracker orientation noise (degrees, std per axis) the input filter is set for"),
-    "filter_acceleration": (0.5, "how hard a tracked body part accelerates (m/s^2/sqrt(Hz)): higher follows faster "
+    "filter_rotation_noise": (FILTER_DEFAULTS.rotation_noise, "tracker orientation noise (degrees, std per axis) the input filter is set for"),
+    "filter_acceleration": (FILTER_DEFAULTS.acceleration, "how hard a tracked body part accelerates (m/s^2/sqrt(Hz)): higher follows faster "
                                  "motion with less lag and smooths less"),
-    "filter_spin_acceleration": (1.5, "the same for turning (rad/s^2/sqrt(Hz))"),
+    "filter_spin_acceleration": (FILTER_DEFAULTS.spin_acceleration, "the same for turning (rad/s^2/sqrt(Hz))"),
     "output_rate": (60.0, "estimates per second when the trackers do not drive them (input slow, partial or "
                           "absent); estimates driven by tracker input are limited to twice this"),
     "stale_timeout": (0.1, "a tracker's newest sample no longer counts when it is this many seconds (or three of "

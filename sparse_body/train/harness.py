@@ -93,6 +93,12 @@ def _restore(model, path: Path):
     return state["step"], state["best"], best, state["history"]
 
 
+def beside(report_path: Path, suffix: str) -> Path:
+    """A file kept with a training report: <model>.train.json -> <model><suffix> (the
+    ablation's .augment.json, the .checkpoint.npz)."""
+    return Path(report_path).with_name(Path(report_path).name.removesuffix(".train.json") + suffix)
+
+
 def add_metadata(onnx_path: Path, metadata: dict) -> None:
     """Each value JSON-encoded into the ONNX file's metadata (the runtime's configuration)."""
     import onnx

@@ -11,7 +11,8 @@ def augmentation_table(report_path: Path, columns: dict[str, str]) -> str:
     """The augmentation ablation (<model>.augment.json, `sparse-body train ... --ablate-augment`)
     as a Markdown table of validation figures, or a line saying it has not been run."""
     import json
-    path = Path(str(report_path).replace(".train.json", ".augment.json"))
+    from .harness import beside
+    path = beside(report_path, ".augment.json")
     if not path.is_file():
         return f"(no ablation: `{path.name}` is missing; `sparse-body train ... --ablate-augment` writes it)"
     report = json.loads(path.read_text())

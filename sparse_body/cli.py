@@ -25,8 +25,8 @@ def cmd_eval(args) -> int:
     if not args.no_compare:
         for name in args.estimator:
             specs += [s for s in COMPARE_WITH.get(name, []) if s not in specs]
-            reference.update(paper_figures(name, sensors.name, args.faulty))
-    protocol = Protocol.named(args.skeleton, args.noise, args.faulty, args.mounting_error)
+            reference.update(paper_figures(name, sensors.name, args.faulty, args.occlusion))
+    protocol = Protocol.named(args.skeleton, args.noise, args.faulty, args.mounting_error, args.occlusion)
     if args.motion:
         from .data.catalog import motion_files
         files = motion_files(args.motion)
@@ -51,6 +51,12 @@ def _trainers(args) -> list[tuple]:
         from .train.lobstr_train import train
         out = Path(args.out or models_dir() / "lobstr.onnx")
         return [(LobstrConfig, train, out, out.with_suffix(".train.json"))]
+    if args.method == "dtp":         # models/dtp.onnx (online) or dtp_lookahead.onnx (future frames)
+        from .train.dtp_model import DtpConfig
+        from .train.dtp_train import train
+        name = "dtp_lookahead.onnx" if _config(DtpConfig, args).future else "dtp.onnx"
+        out = Path(args.out or models_dir() / name)
+        return [(DtpConfig, train, out, out.with_suffix(".train.json"))]
     out = Path(args.out or models_dir())   # a folder: dragposer_{encoder,decoder,temporal}.onnx
     parts = []
     if args.part in ("all", "vae"):
@@ -93,6 +99,9 @@ def cmd_train(args) -> int:
         if args.method == "lobstr":
             card = model_card.write_lobstr_card(out, json.loads(parts[0][3].read_text()), _mocap(args),
                                                 limit=args.limit)
+        elif args.method == "dtp":      # one card for the online, lookahead and pre-trained models
+            from .train.dtp_card import write_dtp_card
+            card = write_dtp_card(out.with_name("dtp.onnx"), _mocap(args), limit=args.limit)
         else:
             card = model_card.write_dragposer_card(out, _mocap(args), limit=args.limit)
         print(f"written {card}")
@@ -310,6 +319,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--faulty", type=_percent, default=0.0, metavar="PERCENT",
                    help="DragPoser's faulty sensors: each frame, with this probability (%%), one tracker "
                         "disconnects for 100 frames")
+    p.add_argument("--occlusion", type=_percent, default=0.0, metavar="PERCENT",
+                   help="DTP's foot occlusion: in about this share (%%) of the frames one or both foot trackers "
+                        "lose sight for half a second and report the origin with the identity rotation or noise "
+                        "within a leg's length")
     p.add_argument("--limit", type=_positive_int, help="only the first N clips of the split")
     p.add_argument("--motion", action="append", metavar="PATH",
                    help="evaluate on these motion files instead of the CMU split (repeat; a folder stands for its "
@@ -361,13 +374,15 @@ def build_parser() -> argparse.ArgumentParser:
     p.set_defaults(func=cmd_bench)
 
     p = sub.add_parser("train", help="train a learned estimator on the CMU train split (ONNX + model card)")
-    p.add_argument("method", choices=["lobstr", "dragposer"])
+    p.add_argument("method", choices=["lobstr", "dragposer", "dtp"])
     p.add_argument("--config", default="small",
                    help="lobstr: paper, small (under an hour on 2 CPU cores) or tiny; dragposer: small (30 "
-                        "minutes a part) or tiny, and paper for its temporal predictor")
+                        "minutes a part) or tiny, and paper for its temporal predictor; dtp: small (pre-training "
+                        "and occlusion fine-tuning in under an hour on 2 CPU cores), lookahead (small with 5 "
+                        "future frames: models/dtp_lookahead.onnx), paper or tiny")
     p.add_argument("--part", choices=["all", "vae", "temporal"], default="all",
                    help="dragposer: train the pose VAE, then the temporal predictor on its latents (all), or one")
-    p.add_argument("--out", help="lobstr: the .onnx file to write; dragposer: the folder for its encoder, decoder and "
+    p.add_argument("--out", help="lobstr, dtp: the .onnx file to write; dragposer: the folder for its encoder, decoder and "
                                  "temporal predictor (default: the package's models/)")
     p.add_argument("--minutes", type=float, help="stop training after this long")
     p.add_argument("--steps", type=int, help="stop training after this many steps")

@@ -34,16 +34,10 @@ def process_bag(bag_in: Path, bag_out: Path, estimator: str, sensors: SensorConf
         warnings.warn(f"{bag_in}: the configured tracker(s) {', '.join(never)} of {sensors.name!r} never appear "
                       f"with a usable pose (wrong --sensors?)", stacklevel=2)
     est = create_estimator(estimator, sensors, skeleton, fps=fps, **options)
-    est.reset()
     frames = iter(stream)
     if progress:
         from tqdm import tqdm
         frames = tqdm(frames, total=len(stream), desc=f"{estimator} {Path(bag_in).name}", unit="frame")
-    poses, last_stamp = [], None
-    for frame in frames:
-        if last_stamp is not None and frame.stamp < last_stamp - 1.0:
-            est.reset()   # the recording jumped back (a concatenated or looping take)
-        last_stamp = frame.stamp
-        poses.append(est.step(frame))
+    poses = est.process(frames)      # offline: an estimator that can look ahead does here
     write_estimate_bag(bag_out, poses, skeleton, sensors.fixed_frame, overwrite=overwrite)
     return poses

@@ -8,6 +8,8 @@ field protocol gives it only what a user has:
   error in them shows in every joint a tracker places, and can be added with
   mounting_translation_std to measure what it costs;
 - tracker noise of a VR system (Lighthouse / headset grade unless told otherwise);
+- feet trackers occluded in a share of the frames when asked (DTP's occlusion model; not by
+  default);
 - the body the T-pose calibration fits: the person first stands in a T-pose (synthesized
   in their own body, held a second, never quite exact), then moves as in the clip.
 The lab protocol is the one the papers report: the true skeleton, exact mounting, no noise.
@@ -48,8 +50,12 @@ class Protocol:
         """What the protocol is, for table footers and JSON results."""
         if self == LAB:
             return "lab"
-        noise = next((n for n, v in NOISE_MODELS.items() if v == replace(self.noise, fault_probability=0.0)), "custom")
+        plain = replace(self.noise, fault_probability=0.0, occlusion_probability=0.0, occlusion_frames=30,
+                        occlusion_mode="origin")
+        noise = next((n for n, v in NOISE_MODELS.items() if v == plain), "custom")
         faults = f", {self.noise.fault_probability * 100:g} % faulty" if self.noise.fault_probability else ""
+        if self.noise.occlusion_probability:
+            faults += f", feet occluded in {self.noise.occluded_percent:.3g} % of frames"
         name = "field" if replace(self, noise=VR_NOISE, mounting_translation_std=0.0) == FIELD \
             else f"{self.skeleton} skeleton"
         mounting = f", {self.mounting_translation_std * 1000:g} mm mounting error" if self.mounting_translation_std else ""
@@ -58,14 +64,17 @@ class Protocol:
 
     @classmethod
     def named(cls, skeleton: str = "calibrated", noise: str = "vr", faulty_percent: float = 0.0,
-              mounting_error: float = 0.0) -> "Protocol":
-        """The protocol of `sparse-body eval --skeleton S --noise N --faulty P --mounting-error M`:
-        an oracle skeleton comes with the true mounting (the lab's), the others with a user's."""
+              mounting_error: float = 0.0, occluded_percent: float = 0.0) -> "Protocol":
+        """The protocol of `sparse-body eval --skeleton S --noise N --faulty P --mounting-error M
+        --occlusion O`: an oracle skeleton comes with the true mounting (the lab's), the others
+        with a user's."""
         if noise not in NOISE_MODELS:
             raise ValueError(f"noise must be one of {', '.join(NOISE_MODELS)}, got {noise!r}")
         if not 0.0 <= mounting_error <= 0.1:
             raise ValueError(f"the mounting error must be between 0 and 0.1 m, got {mounting_error!r}")
         model = replace(NOISE_MODELS[noise], fault_probability=faulty_percent / 100)
+        if occluded_percent:
+            model = model.occluding(occluded_percent)
         if skeleton == "oracle":
             if mounting_error:
                 raise ValueError("an oracle skeleton comes with the true mounting: no mounting error")
@@ -146,7 +155,9 @@ def user_view(motion: Motion, sensors: SensorConfig, protocol: Protocol = FIELD,
     if protocol.skeleton == "oracle" and protocol.mounting_rotation_deg == 0 and protocol.mounting_translation_std == 0:
         return UserView(motion.skeleton, sensors, synthesize_trackers(motion, sensors, protocol.noise, seed))
     worn = mounted_as_worn(sensors, protocol, rng)
-    tpose = synthesize_trackers(tpose_motion(motion, protocol, rng), worn, protocol.noise, seed + 1)
+    # the T-pose is taken standing in full view of the base stations: no foot occluded
+    visible = replace(protocol.noise, occlusion_probability=0.0)
+    tpose = synthesize_trackers(tpose_motion(motion, protocol, rng), worn, visible, seed + 1)
     calibration = calibrate_from_tpose(tpose, sensors)
     stream = calibrated_stream(synthesize_trackers(motion, worn, protocol.noise, seed), calibration)
     # the calibration has absorbed the mounting rotations: the user's configuration keeps

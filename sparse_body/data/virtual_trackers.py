@@ -2,7 +2,7 @@
 mounting offset, with optional noise, dropped samples and occlusion."""
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from scipy.spatial.transform import Rotation
@@ -12,26 +12,48 @@ from ..core.types import TrackerStream
 from .motion import Motion
 
 
+OCCLUSION_MODES = ("origin", "bounded", "either")
+
+
 @dataclass(frozen=True)
 class TrackerNoise:
     position_std: float = 0.0          # metres, Gaussian per axis
     rotation_max_deg: float = 0.0      # uniform random axis, angle up to this
     drop_probability: float = 0.0      # per sample: no sample at all (valid = False)
-    # Occlusion (DTP): a tracker keeps reporting, but garbage. Per frame, an unoccluded
-    # tracker on an occludable site becomes occluded with this probability, for
-    # occlusion_frames frames.
+    # Occlusion (DTP): a foot tracker loses the base stations and keeps reporting garbage.
+    # In each frame without an occlusion, one starts with this probability and lasts
+    # occlusion_frames frames; it takes one of the configured occlusion_sites or all of them
+    # (equal chances) and reads as the origin with the identity rotation ("origin"), as
+    # noise within a leg's length of the joint with a random rotation ("bounded"), or
+    # either of the two, chosen per occlusion ("either").
     occlusion_probability: float = 0.0
     occlusion_frames: int = 30
     occlusion_sites: tuple[str, ...] = ("left_foot", "right_foot")
-    occlusion_mode: str = "origin"     # "origin": origin and identity; "bounded": noise within a leg length
+    occlusion_mode: str = "origin"
     # Faulty sensors (DragPoser): each frame, with this probability, one random tracker
     # disconnects (valid = False, no values) for fault_frames frames.
     fault_probability: float = 0.0
     fault_frames: int = 100
 
     def __post_init__(self) -> None:
-        if self.occlusion_mode not in ("origin", "bounded"):
-            raise ValueError(f"occlusion_mode must be 'origin' or 'bounded', got {self.occlusion_mode!r}")
+        if self.occlusion_mode not in OCCLUSION_MODES:
+            raise ValueError(f"occlusion_mode must be one of {', '.join(OCCLUSION_MODES)}, got {self.occlusion_mode!r}")
+
+    def occluding(self, percent: float, frames: int = 30) -> "TrackerNoise":
+        """This noise with feet occluded in about `percent` % of the frames, for `frames`
+        frames at a time, both ways of failing (`sparse-body eval --occlusion`)."""
+        if not 0.0 <= percent < 100.0:
+            raise ValueError(f"the occluded share must be from 0 to under 100 %, got {percent!r}")
+        share = percent / 100
+        # an occlusion starts in a free frame with probability p: the occluded share is pL / (1 + pL)
+        return replace(self, occlusion_probability=share / (frames * (1.0 - share)), occlusion_frames=frames,
+                       occlusion_mode="either")
+
+    @property
+    def occluded_percent(self) -> float:
+        """The share of frames with an occluded foot (%), as occluding() sets it."""
+        p, n = self.occlusion_probability, self.occlusion_frames
+        return 100 * p * n / (1 + p * n)
 
 
 NO_NOISE = TrackerNoise()
@@ -50,6 +72,27 @@ def _random_rotations(rng: np.random.Generator, n: int, max_deg: float) -> Rotat
     return Rotation.from_rotvec(axis * angle)
 
 
+def _occlusions(T: int, sites: list[str], noise: TrackerNoise, rng: np.random.Generator):
+    """site -> (occluded (T,), bounded (T,)): which frames each site is occluded in, and
+    which of those read as bounded noise rather than the origin."""
+    out = {site: (np.zeros(T, dtype=bool), np.zeros(T, dtype=bool)) for site in sites}
+    if not sites or noise.occlusion_probability <= 0:
+        return {}
+    subsets = [[site] for site in sites] + ([sites] if len(sites) > 1 else [])
+    t = 0
+    while t < T:
+        if rng.random() < noise.occlusion_probability:
+            span = slice(t, t + noise.occlusion_frames)
+            bounded = noise.occlusion_mode == "bounded" or (noise.occlusion_mode == "either" and rng.random() < 0.5)
+            for site in subsets[rng.integers(len(subsets))]:
+                out[site][0][span] = True
+                out[site][1][span] = bounded
+            t += noise.occlusion_frames
+        else:
+            t += 1
+    return out
+
+
 def synthesize_trackers(motion: Motion, config: SensorConfig, noise: TrackerNoise = NO_NOISE,
                         seed: int = 0) -> TrackerStream:
     rng = np.random.default_rng(seed)
@@ -59,6 +102,7 @@ def synthesize_trackers(motion: Motion, config: SensorConfig, noise: TrackerNois
     valid = np.ones((T, S), dtype=bool)
     glob_rot, glob_pos = motion.global_rotations, motion.positions
     leg = motion.skeleton.leg_length()
+    occlusions = _occlusions(T, [s.site for s in config.sites if s.site in noise.occlusion_sites], noise, rng)
     for s, site in enumerate(config.sites):
         j = site.joint_index
         rot = Rotation.from_matrix(glob_rot[:, j])
@@ -69,23 +113,14 @@ def synthesize_trackers(motion: Motion, config: SensorConfig, noise: TrackerNois
         if noise.rotation_max_deg > 0:
             rot = _random_rotations(rng, T, noise.rotation_max_deg) * rot
         pos, quat = pos.copy(), rot.as_quat()
-        if noise.occlusion_probability > 0 and site.site in noise.occlusion_sites:
-            occluded = np.zeros(T, dtype=bool)
-            t = 0
-            while t < T:
-                if rng.random() < noise.occlusion_probability:
-                    occluded[t:t + noise.occlusion_frames] = True
-                    t += noise.occlusion_frames
-                else:
-                    t += 1
-            n = int(occluded.sum())
-            if noise.occlusion_mode == "origin":
-                pos[occluded], quat[occluded] = 0.0, [0.0, 0.0, 0.0, 1.0]
-            else:
-                direction = rng.normal(size=(n, 3))
-                direction /= np.linalg.norm(direction, axis=1, keepdims=True)
-                pos[occluded] += direction * rng.uniform(0.0, leg, size=(n, 1))
-                quat[occluded] = Rotation.random(n, random_state=rng).as_quat()
+        if site.site in occlusions:
+            occluded, bounded = occlusions[site.site]
+            pos[occluded & ~bounded], quat[occluded & ~bounded] = 0.0, [0.0, 0.0, 0.0, 1.0]
+            n = int((occluded & bounded).sum())
+            direction = rng.normal(size=(n, 3))
+            direction /= np.linalg.norm(direction, axis=1, keepdims=True)
+            pos[occluded & bounded] += direction * rng.uniform(0.0, leg, size=(n, 1))
+            quat[occluded & bounded] = Rotation.random(n, random_state=rng).as_quat()
         if site.has_position:
             positions[:, s] = pos
         if site.has_orientation:

@@ -5,7 +5,7 @@ import importlib
 import inspect
 import math
 from abc import ABC, abstractmethod
-from typing import ClassVar
+from typing import ClassVar, Iterable
 
 import numpy as np
 import yaml
@@ -23,6 +23,7 @@ ESTIMATORS: dict[str, str] = {
     "lobstr": "sparse_body.estimators.lobstr:LobstrEstimator",
     "dragposer": "sparse_body.estimators.dragposer:DragPoserEstimator",
     "refined": "sparse_body.estimators.refined:RefinedEstimator",
+    "dtp": "sparse_body.estimators.dtp:DtpEstimator",
 }
 
 
@@ -120,9 +121,17 @@ class Estimator(ABC):
                             valid=False)
         return last.held(stamp)
 
-    def process(self, stream: TrackerStream) -> list[BodyPose]:
+    def process(self, stream: TrackerStream | Iterable[TrackerFrame]) -> list[BodyPose]:
+        """One pose per frame of a recording (offline). A recording that jumps back in time by
+        more than a second (a concatenated or looping take) starts over there."""
         self.reset()
-        return [self.step(frame) for frame in stream]
+        poses, last = [], None
+        for frame in stream:
+            if last is not None and frame.stamp < last - 1.0:
+                self.reset()
+            last = frame.stamp
+            poses.append(self.step(frame))
+        return poses
 
 
 def parse_estimator_spec(spec: str) -> tuple[str, dict]:

@@ -2,7 +2,7 @@
 VENV ?= .venv
 PY := $(VENV)/bin/python
 
-.PHONY: setup test test-busy demo eval bench fuzz train-lobstr train-dragposer clean
+.PHONY: setup test test-busy demo eval bench fuzz train-lobstr train-dragposer train-dtp clean
 
 setup:
 	bash scripts/setup.sh
@@ -40,6 +40,13 @@ train-lobstr: setup
 # minutes on 2 CPU cores), and rewrite the model card.
 train-dragposer: setup
 	$(VENV)/bin/sparse-body train dragposer --config small
+
+# Retrain the shipped DTP models: the lookahead one, then the online one (pre-training and
+# occlusion fine-tuning, about 45 minutes each on 2 CPU cores), and rewrite the model card
+# (which evaluates them; the online model's run does).
+train-dtp: setup
+	$(VENV)/bin/sparse-body train dtp --config lookahead --no-card
+	$(VENV)/bin/sparse-body train dtp --config small
 
 clean:
 	rm -rf build $(VENV)

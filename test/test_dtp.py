@@ -217,7 +217,7 @@ def test_shipped_fine_tuning_pays_off_on_occluded_feet(clip_index):
     motion = load_clip(clip_index["16_17"])
     protocol = Protocol.named(occluded_percent=20)
     tuned = evaluate_motion(motion, "dtp", SIX, protocol)
-    pretrained = evaluate_motion(motion, "dtp:model=pretrained", SIX, protocol)
+    pretrained = evaluate_motion(motion, "dtp", SIX, protocol, model="pretrained")
     assert tuned["MPJPE [cm]"] < pretrained["MPJPE [cm]"]
     assert tuned["Lower PE [cm]"] < pretrained["Lower PE [cm]"]
 

@@ -30,19 +30,20 @@ RUNTIME_COMMAND = ("sparse-body eval --sensors four_point --split validation --n
                    "--output models/dragposer.runtime.json --estimator dragposer:OPTIONS ...")
 
 
-def runtime_choices_table(results_path: Path) -> str:
-    """The runtime options compared in one `sparse-body eval --output` file, as a Markdown
-    table (estimator specs as rows), or a line saying how to measure them."""
+def runtime_choices_table(results_path: Path, command: str = RUNTIME_COMMAND) -> str:
+    """The runtime options compared in one `sparse-body eval --output` file (written by
+    `command`), as a Markdown table (estimator specs as rows), or a line saying how to
+    measure them."""
     import json
     path = Path(results_path)
     if not path.is_file():
-        return f"(not measured: `{path.name}` is missing; `{RUNTIME_COMMAND}` writes it)"
+        return f"(not measured: `{path.name}` is missing; `{command}` writes it)"
     results = json.loads(path.read_text())
     rows = ["| estimator | clips | " + " | ".join(RUNTIME_METRICS) + " |", "|---|---:|" + "---:|" * len(RUNTIME_METRICS)]
     for r in results:
         rows.append(f"| `{r['estimator']}` | {len(r['clips'])} | "
                     + " | ".join(f"{r['summary'][m]:.2f}" for m in RUNTIME_METRICS) + " |")
-    return f"`{RUNTIME_COMMAND}` ({results[0]['split']} split, {results[0]['protocol']}):\n\n" + "\n".join(rows)
+    return f"`{command}` ({results[0]['split']} split, {results[0]['protocol']}):\n\n" + "\n".join(rows)
 
 
 LOBSTR_VALIDATION = {"lower_rot_error_deg": "val leg rot [deg]", "toe_error_cm": "val toe [cm]",

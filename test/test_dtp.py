@@ -206,6 +206,33 @@ def test_train_dtp_is_one_command(tmp_path, mocap_root):
     assert report["stages"]["pretrain"]["steps"] == 2 and report["train_clips"] == 1
 
 
+def test_resume_after_the_pre_training_goes_on_with_the_fine_tuning(tmp_path, mocap_root, monkeypatch):
+    import sparse_body.train.dtp_train as dtp_train
+    from sparse_body.train.dtp_model import DtpConfig
+    config = replace(DtpConfig.named("tiny"), finetune_steps=4)
+    checkpoint, out, fit = tmp_path / "dtp.checkpoint.npz", tmp_path / "dtp.onnx", dtp_train.fit
+    calls = []
+
+    def interrupted_in_the_fine_tuning(*args, **kwargs):
+        calls.append(kwargs["steps"])
+        if len(calls) == 2:
+            fit(*args, **{**kwargs, "steps": 2})
+            raise KeyboardInterrupt
+        return fit(*args, **kwargs)
+    monkeypatch.setattr(dtp_train, "fit", interrupted_in_the_fine_tuning)
+    with pytest.raises(KeyboardInterrupt):
+        dtp_train.train(config, mocap_root, out, limit=1, checkpoint=checkpoint, log=lambda *_: None)
+    assert (tmp_path / "dtp.pretrained.onnx").is_file() and not out.is_file()
+    calls.clear()
+    monkeypatch.setattr(dtp_train, "fit", fit)
+    lines = []
+    report = dtp_train.train(config, mocap_root, out, limit=1, checkpoint=checkpoint, resume=True, log=lines.append)
+    assert any("pretrain: finished before" in line for line in lines)
+    assert any("finetune: resumed" in line and "at step 2" in line for line in lines)
+    assert report["stages"]["pretrain"]["steps"] == config.steps and report["stages"]["finetune"]["steps"] == 4
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["dtp.onnx", "dtp.pretrained.onnx"]
+
+
 @pytest.mark.skipif(not (models_dir() / "dtp.onnx").is_file() or not (models_dir() / "dtp.pretrained.onnx").is_file(),
                     reason="no shipped DTP models")
 def test_shipped_fine_tuning_pays_off_on_occluded_feet(clip_index):

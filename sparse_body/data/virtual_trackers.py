@@ -75,9 +75,9 @@ def _random_rotations(rng: np.random.Generator, n: int, max_deg: float) -> Rotat
 def _occlusions(T: int, sites: list[str], noise: TrackerNoise, rng: np.random.Generator):
     """site -> (occluded (T,), bounded (T,)): which frames each site is occluded in, and
     which of those read as bounded noise rather than the origin."""
-    out = {site: (np.zeros(T, dtype=bool), np.zeros(T, dtype=bool)) for site in sites}
     if not sites or noise.occlusion_probability <= 0:
         return {}
+    out = {site: (np.zeros(T, dtype=bool), np.zeros(T, dtype=bool)) for site in sites}
     subsets = [[site] for site in sites] + ([sites] if len(sites) > 1 else [])
     t = 0
     while t < T:

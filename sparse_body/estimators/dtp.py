@@ -122,8 +122,8 @@ class DtpEstimator(Estimator):
                 targets[1 + k] = self.sensors.site(LEAF_SITES[k]).joint_pose(np.zeros(3), IDENTITY)
         pos = (np.stack([t[0] for t in targets]) - [0.0, 0.0, self.floor]) * self.scale
         rot = np.stack([t[1] for t in targets])
-        return Sample(frame.stamp, pos[0], rot[0], leaf_features(pos[0], rot[0], pos[1:], rot[1:]), np.asarray(targets[0][0], float),
-                      goals)
+        return Sample(frame.stamp, pos[0], rot[0], leaf_features(pos[0], rot[0], pos[1:], rot[1:]),
+                      np.asarray(targets[0][0], float), goals)
 
     def _estimate(self, frame: TrackerFrame) -> BodyPose | None:
         sample = self.sample(frame)
@@ -204,7 +204,8 @@ class DtpEstimator(Estimator):
         # runs of usable frames without a gap longer than max_gap: a window stays within one
         run_of, run = [], 0
         for i, s in enumerate(samples):
-            if s is not None and i and (samples[i - 1] is None or not 0 < frames[i].stamp - frames[i - 1].stamp <= self.max_gap):
+            if s is not None and i and (samples[i - 1] is None
+                                        or not 0 < frames[i].stamp - frames[i - 1].stamp <= self.max_gap):
                 run += 1
             run_of.append(run if s is not None else -1)
         poses = []

@@ -10,6 +10,7 @@ measured on the same streams (`sparse-body eval --occlusion`).
 """
 from __future__ import annotations
 
+import json
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -27,7 +28,7 @@ from ..estimators.dtp_features import FOOT_LEAVES, INPUT_JOINTS, leaf_features, 
 from ..estimators.lobstr_features import body_scale
 from .augment import NO_AUGMENTATION, Augmentation, variants
 from .dtp_model import DtpConfig, DtpNet, body_positions, losses
-from .harness import add_metadata, fit, machine
+from .harness import add_metadata, fit, load_best, machine
 from .torch_body import sixd_to_matrix
 
 MOUNTING_RESIDUAL_DEG = 25.0    # how far from identity an occluded tracker's calibrated rotation can be
@@ -185,7 +186,15 @@ def train(config: DtpConfig, mocap_root: Path, out: Path, seed: int = 0, limit: 
             terms = losses(net, sampler.sample(config.batch, rng, share), offsets)
             return terms["total"], {k: v.item() for k, v in terms.items()}
 
+        # each stage keeps its checkpoint, and a finished stage its report, until both are done:
+        # --resume after the pre-training has finished goes straight on with the fine-tuning
         stage_checkpoint = checkpoint.with_name(f"{checkpoint.stem}.{stage}.npz") if checkpoint else None
+        finished = stage_checkpoint.with_suffix(".json") if checkpoint else None
+        if resume and finished is not None and finished.is_file() and stage_checkpoint.is_file():
+            stages[stage] = json.loads(finished.read_text())
+            load_best(net, stage_checkpoint)
+            log(f"{stage}: finished before, its best weights taken from {stage_checkpoint}")
+            continue
         fitted = fit(net, opt, step, lambda: validate(net, val_batches, offsets), score, steps=steps,
                      minutes=minutes, check_every=config.steps_per_check, after_check=sched.step,
                      checkpoint=stage_checkpoint, resume=resume, log=lambda m, s=stage: log(f"{s}: {m}"))
@@ -195,8 +204,11 @@ def train(config: DtpConfig, mocap_root: Path, out: Path, seed: int = 0, limit: 
                     "canonical_leg_length": Skeleton.canonical().leg_length(), "trained_steps": fitted.steps,
                     "validation": fitted.validation}
         export_onnx(net, pretrained_path(out) if stage == "pretrain" else out, metadata)
-        if stage_checkpoint is not None:
-            stage_checkpoint.unlink(missing_ok=True)
+        if finished is not None:
+            finished.write_text(json.dumps(stages[stage]))
+    for path in ([checkpoint.with_name(f"{checkpoint.stem}.{stage}{suffix}") for stage in stages
+                  for suffix in (".npz", ".json")] if checkpoint else []):
+        path.unlink(missing_ok=True)
     return {"config": config.to_dict(), "stages": stages, "validation": stages["finetune"]["validation"],
             "steps": sum(s["steps"] for s in stages.values()), "minutes": sum(s["minutes"] for s in stages.values()),
             "train_clips": len(split_clips(mocap_root, "train", limit)), "augment": config.augment,

@@ -93,6 +93,13 @@ def _restore(model, path: Path):
     return state["step"], state["best"], best, state["history"]
 
 
+def load_best(model: torch.nn.Module, checkpoint: Path) -> None:
+    """The best weights a checkpoint kept, into model (a stage already finished)."""
+    _, _, best_state, _ = _restore(model, Path(checkpoint))
+    model.load_state_dict(best_state or model.state_dict())
+    model.eval()
+
+
 def beside(report_path: Path, suffix: str) -> Path:
     """A file kept with a training report: <model>.train.json -> <model><suffix> (the
     ablation's .augment.json, the .checkpoint.npz)."""

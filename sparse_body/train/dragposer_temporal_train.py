@@ -13,7 +13,6 @@ space. Targets are the clean latents. The `small` configuration trains without t
 from __future__ import annotations
 
 import time
-import warnings
 from pathlib import Path
 
 import numpy as np
@@ -28,7 +27,7 @@ from ..estimators.dragposer_pose import HEIGHT_JOINTS, LIMBS, split_heading, tem
 from ..estimators.lobstr_features import body_scale
 from .augment import NO_AUGMENTATION, Augmentation, variants
 from .dragposer_temporal import TemporalConfig, TemporalPredictor, loss
-from .harness import add_metadata, fit, machine
+from .harness import export_onnx, fit, machine
 
 
 def clip_arrays(motion) -> dict[str, np.ndarray]:
@@ -110,14 +109,9 @@ def validate(model: TemporalPredictor, data, config: TemporalConfig) -> dict[str
 
 def export(model: TemporalPredictor, path: Path, metadata: dict) -> None:
     c = model.config
-    model.eval()
     example = (torch.zeros(1, c.past, c.latent), torch.zeros(1, c.past, c.context), torch.zeros(1, c.future, c.latent))
-    path.parent.mkdir(parents=True, exist_ok=True)
-    with warnings.catch_warnings():   # the tracer's notes on nn.MultiheadAttention's shape checks
-        warnings.simplefilter("ignore", torch.jit.TracerWarning)
-        torch.onnx.export(model, example, str(path), input_names=["past_latents", "past_context", "future_latents"],
-                          output_names=["predicted_latents"], opset_version=17, dynamo=False)
-    add_metadata(path, metadata)
+    export_onnx(model, example, path, ["past_latents", "past_context", "future_latents"], ["predicted_latents"],
+                metadata)
 
 
 def load_clips(mocap_root: Path, split: str, limit: int | None, fps: float = 60.0,

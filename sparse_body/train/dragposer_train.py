@@ -22,7 +22,7 @@ from ..estimators.dragposer_pose import dual_quaternions, split_heading
 from ..estimators.lobstr_features import body_scale
 from .augment import NO_AUGMENTATION, Augmentation, variants
 from .dragposer_vae import Decoder, Encoder, PoseVae, VaeConfig, losses
-from .harness import add_metadata, fit, machine
+from .harness import export_onnx, fit, machine
 from .torch_body import sixd_to_matrix
 
 
@@ -55,15 +55,11 @@ def validate(vae: PoseVae, clips, offsets: torch.Tensor) -> dict[str, float]:
 
 
 def export(vae: PoseVae, out_dir: Path, metadata: dict) -> None:
-    import onnx
-    out_dir.mkdir(parents=True, exist_ok=True)
     for name, module, example, inp, outp in [
             ("dragposer_decoder.onnx", Decoder(vae), torch.zeros(1, vae.config.latent), "latent", "local_rotations"),
             ("dragposer_encoder.onnx", Encoder(vae), torch.zeros(1, 176), "dual_quaternions", "latent")]:
-        path = out_dir / name
-        torch.onnx.export(module.eval(), (example,), str(path), input_names=[inp], output_names=[outp],
-                          dynamic_axes={inp: {0: "batch"}, outp: {0: "batch"}}, opset_version=17, dynamo=False)
-        add_metadata(path, metadata)
+        export_onnx(module, (example,), out_dir / name, [inp], [outp], metadata,
+                    {inp: {0: "batch"}, outp: {0: "batch"}})
 
 
 def train_vae(config: VaeConfig, mocap_root: Path, out_dir: Path, seed: int = 0, limit: int | None = None,

@@ -28,7 +28,8 @@ from ..estimators.dtp_features import FOOT_LEAVES, INPUT_JOINTS, leaf_features, 
 from ..estimators.lobstr_features import body_scale
 from .augment import NO_AUGMENTATION, Augmentation, variants
 from .dtp_model import DtpConfig, DtpNet, body_positions, losses
-from .harness import add_metadata, fit, load_best, machine
+from .harness import export_onnx as export
+from .harness import fit, load_best, machine
 from .torch_body import sixd_to_matrix
 
 MOUNTING_RESIDUAL_DEG = 25.0    # how far from identity an occluded tracker's calibrated rotation can be
@@ -140,13 +141,9 @@ def _angle(a: torch.Tensor, b: torch.Tensor) -> torch.Tensor:
 
 
 def export_onnx(net: DtpNet, path: Path, metadata: dict) -> None:
-    net = net.eval()
     x = torch.zeros(1, net.config.window, net.mean.numel())
-    path.parent.mkdir(parents=True, exist_ok=True)
-    torch.onnx.export(net, (x,), str(path), input_names=["window"], output_names=["pose_6d"],
-                      dynamic_axes={"window": {0: "batch", 1: "frames"}, "pose_6d": {0: "batch", 1: "frames"}},
-                      opset_version=17, dynamo=False)
-    add_metadata(path, metadata)
+    export(net, (x,), path, ["window"], ["pose_6d"], metadata,
+           {"window": {0: "batch", 1: "frames"}, "pose_6d": {0: "batch", 1: "frames"}})
 
 
 def pretrained_path(out: Path) -> Path:

@@ -106,6 +106,22 @@ def beside(report_path: Path, suffix: str) -> Path:
     return Path(report_path).with_name(Path(report_path).name.removesuffix(".train.json") + suffix)
 
 
+def export_onnx(module: torch.nn.Module, example: tuple, path: Path, inputs: list[str], outputs: list[str],
+                metadata: dict, dynamic_axes: dict | None = None) -> None:
+    """module (in eval mode) traced on the example inputs into an ONNX file (opset 17) with the
+    metadata a runtime reads its configuration from: the one way every trainer exports."""
+    import warnings
+    module.eval()
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    with warnings.catch_warnings():   # the tracer's notes on shape checks, the legacy exporter's notice
+        warnings.simplefilter("ignore", torch.jit.TracerWarning)
+        warnings.simplefilter("ignore", DeprecationWarning)
+        torch.onnx.export(module, example, str(path), input_names=inputs, output_names=outputs,
+                          dynamic_axes=dynamic_axes, opset_version=17, dynamo=False)
+    add_metadata(path, metadata)
+
+
 def add_metadata(onnx_path: Path, metadata: dict) -> None:
     """Each value JSON-encoded into the ONNX file's metadata (the runtime's configuration)."""
     import onnx

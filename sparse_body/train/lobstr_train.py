@@ -23,7 +23,8 @@ from ..data.virtual_trackers import LOBSTR_NOISE, _random_rotations
 from ..estimators.lobstr_features import (INPUT_JOINTS, LEG_JOINTS, body_scale, leg_targets,
                                           reference_frames, sequence_features)
 from .augment import NO_AUGMENTATION, Augmentation, variants
-from .harness import add_metadata, fit, machine
+from .harness import export_onnx as export
+from .harness import fit, machine
 from .lobstr_model import LobstrConfig, LobstrNet, LobstrStep, leg_positions, losses
 from .torch_body import sixd_to_matrix
 
@@ -103,15 +104,10 @@ def validate(net: LobstrNet, clips: list[ClipTensors], offsets: torch.Tensor) ->
 
 
 def export_onnx(net: LobstrNet, path: Path, metadata: dict) -> None:
-    step = LobstrStep(net).eval()
     x, h = torch.zeros(1, net.mean.numel()), torch.zeros(1, 1, net.config.hidden)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    torch.onnx.export(step, (x, h), str(path), input_names=["features", "state"],
-                      output_names=["legs_6d", "contact_probability", "next_state"],
-                      dynamic_axes={"features": {0: "batch"}, "state": {1: "batch"},
-                                    "legs_6d": {0: "batch"}, "contact_probability": {0: "batch"},
-                                    "next_state": {1: "batch"}}, opset_version=17, dynamo=False)
-    add_metadata(path, metadata)
+    export(LobstrStep(net), (x, h), path, ["features", "state"], ["legs_6d", "contact_probability", "next_state"],
+           metadata, {"features": {0: "batch"}, "state": {1: "batch"}, "legs_6d": {0: "batch"},
+                      "contact_probability": {0: "batch"}, "next_state": {1: "batch"}})
 
 
 def load_clips(mocap_root: Path, split: str, config: LobstrConfig, rng, limit: int | None = None):

@@ -5,8 +5,9 @@ arrived) go through the transformer, and the current frame's token gives the 21 
 rotations; the pelvis's rotation and position are the pelvis tracker's. A stream's first
 frames run as a shorter window (the network is trained for that: its attention is causal).
 Then (polish=true, ours) the closed-form IK brings the head, the hands and each foot whose
-tracker agrees with the network's foot (near it, not jumping) onto their trackers;
-polish=false is the paper's network output as it is.
+tracker agrees with the network's foot (near it, not jumping) onto their trackers, and those
+joints take their trackers' orientation (end_orientations=true); polish=false is the paper's
+network output as it is.
 
 A foot tracker with no usable sample (dropped, invalid, non-finite) is fed as an occluded
 Lighthouse tracker reads: the origin and the identity rotation, which the fine-tuned network
@@ -36,7 +37,7 @@ from ..core.contacts import toe_contacts
 from ..core.kinematics import forward_kinematics
 from ..core.rotations import rotations_to_quat, sixd_to_matrix
 from ..core.sensors import SITE_JOINTS
-from ..core.skeleton import JOINT_INDEX
+from ..core.skeleton import JOINT_INDEX, PARENTS
 from ..core.types import BodyPose, TrackerFrame, TrackerStream
 from .base import Estimator
 from .dtp_features import FEATURES, FOOT_LEAVES, INPUT_SITES, LEAF_SITES, leaf_features, window_features
@@ -87,6 +88,7 @@ class Sample:
     leaves: np.ndarray              # (60,) leaf_features
     root: np.ndarray                # the pelvis joint as tracked (the person's scale)
     goals: dict[int, np.ndarray]    # joint -> tracked position: head, hands, and the feet with a sample
+    turns: dict[int, np.ndarray]    # joint -> tracked rotation, for the same joints
 
 
 class DtpEstimator(Estimator):
@@ -94,12 +96,13 @@ class DtpEstimator(Estimator):
     required_sites = frozenset(INPUT_SITES)
 
     def __init__(self, sensors, skeleton, fps: float = 60.0, model: str = "online", model_path: str | None = None,
-                 polish: bool = True, foot_trust: float = 0.4, foot_speed: float = 8.0, floor_height: float = 0.0,
-                 max_gap: float = 0.5, threads: int = 1) -> None:
+                 polish: bool = True, foot_trust: float = 0.4, foot_speed: float = 8.0, end_orientations: bool = True,
+                 floor_height: float = 0.0, max_gap: float = 0.5, threads: int = 1) -> None:
         super().__init__(sensors, skeleton, fps)
         self.model = DtpModel(model_path or shipped_model_path(model), threads)
         self.scale = body_scale(skeleton)
         self.polish, self.foot_trust, self.foot_speed = polish, foot_trust, foot_speed
+        self.end_orientations = end_orientations
         self.floor, self.max_gap = floor_height, max_gap
         self._joints = [sensors.site(s).joint_index for s in INPUT_SITES]
         self.reset()
@@ -114,8 +117,10 @@ class DtpEstimator(Estimator):
         targets = [self.joint_target(frame, s) for s in INPUT_SITES]
         if any(t is None or t[0] is None or t[1] is None for t in targets[:4]):
             return None
-        goals = {j: np.asarray(t[0], float) for j, t in zip(self._joints[1:], targets[1:])
-                 if t is not None and t[0] is not None and t[1] is not None}
+        usable = [(j, t) for j, t in zip(self._joints[1:], targets[1:])
+                  if t is not None and t[0] is not None and t[1] is not None]
+        goals = {j: np.asarray(t[0], float) for j, t in usable}
+        turns = {j: np.asarray(t[1], float) for j, t in usable}
         for k in FOOT_LEAVES:        # a foot without a usable sample reads as an occluded tracker
             t = targets[1 + k]
             if t is None or t[0] is None or t[1] is None:
@@ -123,7 +128,7 @@ class DtpEstimator(Estimator):
         pos = (np.stack([t[0] for t in targets]) - [0.0, 0.0, self.floor]) * self.scale
         rot = np.stack([t[1] for t in targets])
         return Sample(frame.stamp, pos[0], rot[0], leaf_features(pos[0], rot[0], pos[1:], rot[1:]),
-                      np.asarray(targets[0][0], float), goals)
+                      np.asarray(targets[0][0], float), goals, turns)
 
     def _estimate(self, frame: TrackerFrame) -> BodyPose | None:
         sample = self.sample(frame)
@@ -175,12 +180,13 @@ class DtpEstimator(Estimator):
         elbows and knees. A foot tracker is followed fully within foot_trust of where the
         network put that foot, less and less out to twice that, and not at all when it jumped
         faster than foot_speed (m/s) since the previous frame: an occluded tracker reads far
-        off, or jumps about. (Chosen on the validation people, clean and occluded:
-        models/dtp.runtime*.json.)"""
+        off, or jumps about. Head, hands and fully followed feet then take their trackers'
+        orientation (end_orientations). (Chosen on the validation people, clean and
+        occluded: models/dtp.runtime*.json.)"""
         offsets = self.skeleton.offsets
         _, pos = forward_kinematics(local, sample.root, offsets)
         previous, self._previous = self._previous, sample
-        goals = {}
+        goals, followed = {}, []
         for j, p in sample.goals.items():
             if j in FOOT_JOINTS:
                 w = np.clip(2.0 - np.linalg.norm(p - pos[j]) / self.foot_trust, 0.0, 1.0)
@@ -191,7 +197,13 @@ class DtpEstimator(Estimator):
                     continue
                 p = pos[j] + w * (p - pos[j])
             goals[j] = p
-        return solve_body(local, sample.root, offsets, goals, keep_shape=True)[0]
+            if j not in FOOT_JOINTS or w == 1.0:
+                followed.append(j)
+        local, glob, _ = solve_body(local, sample.root, offsets, goals, keep_shape=True)
+        if self.end_orientations:   # the tracked joints take their trackers' orientation, as the IK's do
+            for j in followed:
+                local[j] = glob[PARENTS[j]].T @ sample.turns[j]
+        return local
 
     def process(self, stream: TrackerStream) -> list[BodyPose]:
         """One pose per frame; with a lookahead model each frame also sees the `future`

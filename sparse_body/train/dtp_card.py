@@ -70,7 +70,8 @@ def write_dtp_card(onnx_path: Path, mocap_root: Path, limit: int | None = None, 
     cfg, split = report["config"], load_split()
 
     def stage_lines(r: dict) -> str:
-        return "\n".join(f"- {stage}: {s['steps']} steps in {s['minutes']:.1f} minutes; validation (exported weights) "
+        return "\n".join(f"- {stage}: {s['steps']} steps in {s['minutes']:.1f} minutes; validation (exported weights, the network "
+                         f"alone, joints in the pelvis frame) "
                          f"clean {s['validation']['clean_mpjpe_cm']:.2f} cm / {s['validation']['clean_mpjre_deg']:.2f} deg, "
                          f"feet occluded {s['validation']['occluded_mpjpe_cm']:.2f} cm / "
                          f"{s['validation']['occluded_mpjre_deg']:.2f} deg" for stage, s in r["stages"].items())
@@ -149,7 +150,8 @@ chances). Every estimator gets the same corrupted streams:
 ## The polish, chosen on the validation people
 
 The network's pose, then (ours, not the paper's) the closed-form IK brings head, hands and
-the feet whose trackers agree with the network onto their trackers. Its options were chosen
+the feet whose trackers agree with the network onto their trackers, and they take their
+trackers' orientation. Its options were chosen
 on the validation split, clean and with feet occluded (the test people were not looked at):
 
 {runtime_choices_table(onnx_path.with_name('dtp.runtime.json'), RUNTIME_COMMAND)}

@@ -363,7 +363,7 @@ def build_parser() -> argparse.ArgumentParser:
 
     p = sub.add_parser("bench", help="step times and end-to-end latency over DDS, beside their goals")
     p.add_argument("--estimator", action="append",
-                   help="estimator(s) to measure on --sensors (default: the goal table: ik, lobstr, dragposer "
+                   help="estimator(s) to measure on --sensors (default: the goal table: ik, lobstr, dragposer, dtp "
                         "step times and ik's TF -> JointState latency)")
     p.add_argument("--sensors", default="six_point")
     p.add_argument("--no-latency", action="store_true", help="only the offline speed (no ROS needed)")

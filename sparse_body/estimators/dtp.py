@@ -166,15 +166,16 @@ class DtpEstimator(Estimator):
 
     def _pose(self, sample: Sample, local_1_21: np.ndarray) -> BodyPose:
         local = np.concatenate([sample.pelvis_rot[None], local_1_21])
+        glob, pos = forward_kinematics(local, sample.root, self.skeleton.offsets)
         if self.polish:
-            local = self._polished(local, sample)
-        # no contact model: toes low and still, as the IK judges them
-        toes = forward_kinematics(local, sample.root, self.skeleton.offsets)[1][list(TOE_JOINTS)]
+            local, glob, pos = self._polished(local, glob, pos, sample)
+        # no contact model: toes low and still, as the IK judges them (toes under the ankles' final turn)
+        toes = np.stack([pos[PARENTS[t]] + glob[PARENTS[t]] @ self.skeleton.offsets[t] for t in TOE_JOINTS])
         contact = toe_contacts(toes, self._last_toes, self.fps, self.floor)
         self._last_toes = toes
         return BodyPose(sample.stamp, rotations_to_quat(local), sample.root.copy(), contact.astype(float), contact)
 
-    def _polished(self, local: np.ndarray, sample: Sample) -> np.ndarray:
+    def _polished(self, local: np.ndarray, glob: np.ndarray, pos: np.ndarray, sample: Sample):
         """Ours, not the paper's: the network's pose with the head, the hands and the feet
         brought onto their trackers by the closed-form IK, keeping the network's spine curve,
         elbows and knees. A foot tracker is followed fully within foot_trust of where the
@@ -184,7 +185,6 @@ class DtpEstimator(Estimator):
         orientation (end_orientations). (Chosen on the validation people, clean and
         occluded: models/dtp.runtime*.json.)"""
         offsets = self.skeleton.offsets
-        _, pos = forward_kinematics(local, sample.root, offsets)
         previous, self._previous = self._previous, sample
         goals, followed = {}, []
         for j, p in sample.goals.items():
@@ -199,11 +199,12 @@ class DtpEstimator(Estimator):
             goals[j] = p
             if j not in FOOT_JOINTS or w == 1.0:
                 followed.append(j)
-        local, glob, _ = solve_body(local, sample.root, offsets, goals, keep_shape=True)
+        local, glob, pos = solve_body(local, sample.root, offsets, goals, keep_shape=True)
         if self.end_orientations:   # the tracked joints take their trackers' orientation, as the IK's do
             for j in followed:
                 local[j] = glob[PARENTS[j]].T @ sample.turns[j]
-        return local
+                glob[j] = sample.turns[j]      # (what hangs below, a toe, is placed from it by the caller)
+        return local, glob, pos
 
     def process(self, stream: TrackerStream) -> list[BodyPose]:
         """One pose per frame; with a lookahead model each frame also sees the `future`

@@ -7,7 +7,7 @@ from pathlib import Path
 
 from ..data.catalog import load_split
 from .dtp_train import pretrained_path
-from .model_card import _evaluate, runtime_choices_table
+from .model_card import evaluate_jobs, runtime_choices_table
 
 RUNTIME_COMMAND = ("sparse-body eval --sensors six_point --split validation --no-compare [--occlusion 20] "
                    "--output models/dtp.runtime[_occluded].json --estimator dtp:OPTIONS ...")
@@ -34,15 +34,12 @@ def _model_options(spec: str, onnx_path: Path) -> dict:
 def evaluate_dtp(onnx_path: Path, mocap_root: Path, limit: int | None = None, workers: int = 2) -> Path:
     """Run the card's evaluations (six-point, test split) two processes at a time and write
     them to <model>.eval.json: {setup: [sparse-body eval JSON of each run]}."""
-    from concurrent.futures import ProcessPoolExecutor
-
     from ..data.field_protocol import LAB, Protocol
     onnx_path = Path(onnx_path)
     protocols = {"field": Protocol.named(), "lab": LAB, "occluded": Protocol.named(occluded_percent=OCCLUSION_PERCENT)}
     jobs = [(setup, spec, "six_point", protocols[setup], mocap_root, limit, _model_options(spec, onnx_path))
             for setup, specs in SETUPS.items() for spec in specs]
-    with ProcessPoolExecutor(workers) as pool:
-        results = list(pool.map(_evaluate, jobs))
+    results = evaluate_jobs(jobs, workers)
     measured = {setup: [r.to_json() for j, r in zip(jobs, results) if j[0] == setup] for setup in SETUPS}
     path = onnx_path.with_suffix(".eval.json")
     path.write_text(json.dumps(measured, indent=1))

@@ -16,6 +16,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+import roma
 import torch
 from scipy.spatial.transform import Rotation
 
@@ -129,15 +130,11 @@ def validate(net: DtpNet, batches: list[dict[str, torch.Tensor]], offsets: torch
     for name, windows in zip(("clean", "occluded"), batches):
         pose, target = net(windows["x"])[:, q], windows["pose"][:, q]
         err = (body_positions(pose, offsets) - body_positions(target, offsets)).norm(dim=-1)
-        angle = _angle(sixd_to_matrix(pose.unflatten(-1, (-1, 6))), sixd_to_matrix(target.unflatten(-1, (-1, 6))))
+        angle = roma.rotmat_geodesic_distance(sixd_to_matrix(pose.unflatten(-1, (-1, 6))),
+                                              sixd_to_matrix(target.unflatten(-1, (-1, 6))))
         out[f"{name}_mpjpe_cm"] = float(err.mean() * 100)
         out[f"{name}_mpjre_deg"] = float(torch.rad2deg(angle).mean())
     return out
-
-
-def _angle(a: torch.Tensor, b: torch.Tensor) -> torch.Tensor:
-    cos = ((a.transpose(-1, -2) @ b).diagonal(dim1=-2, dim2=-1).sum(-1) - 1) / 2
-    return torch.arccos(cos.clamp(-1.0, 1.0))
 
 
 def export_onnx(net: DtpNet, path: Path, metadata: dict) -> None:
@@ -161,7 +158,7 @@ def train(config: DtpConfig, mocap_root: Path, out: Path, seed: int = 0, limit: 
     train_frames = load_frames(mocap_root, "train", config, rng, limit)
     val_frames = load_frames(mocap_root, "validation", config, rng, limit)
     sampler, val_sampler = WindowSampler(train_frames, config), WindowSampler(val_frames, config)
-    n_val = 4 * config.batch if config.batch < 16 else 2048
+    n_val = min(2048, 64 * config.batch)     # fixed validation windows (tiny configurations: fewer)
     val_batches = [val_sampler.sample(n_val, np.random.default_rng(seed + 1), clean=True),
                    val_sampler.sample(n_val, np.random.default_rng(seed + 1), occluded_share=1.0, clean=True)]
     log(f"data: {len(train_frames.pose)} train frames x {train_frames.leaves.shape[0]} copies, "

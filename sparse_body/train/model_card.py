@@ -156,11 +156,17 @@ def _evaluate(job):
                     progress=False, **options)
 
 
+def evaluate_jobs(jobs: list[tuple], workers: int = 2) -> list:
+    """A card's test-split evaluations, `workers` processes at a time, in order. A job is
+    (tag, estimator spec, sensor configuration name, protocol, mocap root, limit, options)."""
+    from concurrent.futures import ProcessPoolExecutor
+    with ProcessPoolExecutor(workers) as pool:
+        return list(pool.map(_evaluate, jobs))
+
+
 def dragposer_results(model_dir: str, mocap_root: Path, limit: int | None = None, workers: int = 2):
     """The card's evaluations, `workers` processes at a time: {(sensors, faulty): [results]} for
     the setups (field protocol, the lab's beside it), and [base, refined base, ...] on four-point."""
-    from concurrent.futures import ProcessPoolExecutor
-
     from ..data.field_protocol import Protocol
     mine = {"model_dir": model_dir}
     jobs = []
@@ -176,8 +182,7 @@ def dragposer_results(model_dir: str, mocap_root: Path, limit: int | None = None
     for base in REFINED_BASES:
         jobs += [("refined", base, "four_point", field, mocap_root, limit, {}),
                  ("refined", f"refined:base={base}", "four_point", field, mocap_root, limit, mine)]
-    with ProcessPoolExecutor(workers) as pool:
-        results = list(pool.map(_evaluate, jobs))
+    results = evaluate_jobs(jobs, workers)
     tables = {setup: [r for j, r in zip(jobs, results) if j[0] == setup] for setup in DRAGPOSER_SETUPS}
     return tables, [r for j, r in zip(jobs, results) if j[0] == "refined"]
 

@@ -2,7 +2,7 @@
 VENV ?= .venv
 PY := $(VENV)/bin/python
 
-.PHONY: setup test test-busy demo eval bench fuzz train-lobstr train-dragposer train-dtp clean
+.PHONY: setup test test-busy demo eval bench fuzz train-lobstr train-dragposer train-dtp train-avatarjlm clean
 
 setup:
 	bash scripts/setup.sh
@@ -47,6 +47,12 @@ train-dragposer: setup
 train-dtp: setup
 	$(VENV)/bin/sparse-body train dtp --config lookahead --no-card
 	$(VENV)/bin/sparse-body train dtp --config small
+
+# the three- and four-point models side by side, a core each, then one card for both
+train-avatarjlm: setup
+	$(VENV)/bin/sparse-body train avatarjlm --config four_point --threads 1 --no-card & \
+	$(VENV)/bin/sparse-body train avatarjlm --config small --threads 1 --no-card; wait
+	$(VENV)/bin/sparse-body train avatarjlm --card-only
 
 clean:
 	rm -rf build $(VENV)

@@ -69,7 +69,7 @@ def generate_launch_description():
     return LaunchDescription([
         DeclareLaunchArgument("sensors", default_value="six_point", description="sensor configuration"),
         DeclareLaunchArgument("estimator", default_value="ik",
-                              description="estimation method: ik, lobstr, dragposer, dtp (options as NAME:key=value)"),
+                              description="estimation method: ik, lobstr, dragposer, dtp, avatarjlm (options as NAME:key=value)"),
         DeclareLaunchArgument("model_path", default_value="",
                               description="model file of a learned estimator (empty: the shipped one)"),
         DeclareLaunchArgument("height", default_value="1.75", description="the person's height in metres"),

@@ -57,6 +57,12 @@ def _trainers(args) -> list[tuple]:
         name = "dtp_lookahead.onnx" if _config(DtpConfig, args).future else "dtp.onnx"
         out = Path(args.out or models_dir() / name)
         return [(DtpConfig, train, out, out.with_suffix(".train.json"))]
+    if args.method == "avatarjlm":   # models/avatarjlm.onnx (three-point) or avatarjlm_four_point.onnx
+        from .train.avatarjlm_model import AvatarJlmConfig
+        from .train.avatarjlm_train import train
+        sensors = _config(AvatarJlmConfig, args).sensors
+        out = Path(args.out or models_dir() / ("avatarjlm.onnx" if sensors == "three_point" else f"avatarjlm_{sensors}.onnx"))
+        return [(AvatarJlmConfig, train, out, out.with_suffix(".train.json"))]
     out = Path(args.out or models_dir())   # a folder: dragposer_{encoder,decoder,temporal}.onnx
     parts = []
     if args.part in ("all", "vae"):
@@ -102,6 +108,9 @@ def cmd_train(args) -> int:
         elif args.method == "dtp":      # one card for the online, lookahead and pre-trained models
             from .train.dtp_card import write_dtp_card
             card = write_dtp_card(out.with_name("dtp.onnx"), _mocap(args), limit=args.limit)
+        elif args.method == "avatarjlm":   # one card for the three- and four-point models
+            from .train.avatarjlm_card import write_avatarjlm_card
+            card = write_avatarjlm_card(out.with_name("avatarjlm.onnx"), _mocap(args), limit=args.limit)
         else:
             card = model_card.write_dragposer_card(out, _mocap(args), limit=args.limit)
         print(f"written {card}")
@@ -363,7 +372,7 @@ def build_parser() -> argparse.ArgumentParser:
 
     p = sub.add_parser("bench", help="step times and end-to-end latency over DDS, beside their goals")
     p.add_argument("--estimator", action="append",
-                   help="estimator(s) to measure on --sensors (default: the goal table: ik, lobstr, dragposer, dtp "
+                   help="estimator(s) to measure on --sensors (default: the goal table: ik, lobstr, dragposer, dtp, avatarjlm "
                         "step times and ik's TF -> JointState latency)")
     p.add_argument("--sensors", default="six_point")
     p.add_argument("--no-latency", action="store_true", help="only the offline speed (no ROS needed)")
@@ -374,15 +383,17 @@ def build_parser() -> argparse.ArgumentParser:
     p.set_defaults(func=cmd_bench)
 
     p = sub.add_parser("train", help="train a learned estimator on the CMU train split (ONNX + model card)")
-    p.add_argument("method", choices=["lobstr", "dragposer", "dtp"])
+    p.add_argument("method", choices=["lobstr", "dragposer", "dtp", "avatarjlm"])
     p.add_argument("--config", default="small",
                    help="lobstr: paper, small (under an hour on 2 CPU cores) or tiny; dragposer: small (30 "
                         "minutes a part) or tiny, and paper for its temporal predictor; dtp: small (pre-training "
                         "and occlusion fine-tuning in under an hour on 2 CPU cores), lookahead (small with 5 "
-                        "future frames: models/dtp_lookahead.onnx), paper or tiny")
+                        "future frames: models/dtp_lookahead.onnx), paper or tiny; avatarjlm: small (three-point, 52 "
+                        "minutes on one core), four_point (the same with the pelvis: models/avatarjlm_four_point.onnx), "
+                        "paper (d1 1024, d2 512, 6 loops: for a GPU) or tiny")
     p.add_argument("--part", choices=["all", "vae", "temporal"], default="all",
                    help="dragposer: train the pose VAE, then the temporal predictor on its latents (all), or one")
-    p.add_argument("--out", help="lobstr, dtp: the .onnx file to write; dragposer: the folder for its encoder, decoder and "
+    p.add_argument("--out", help="lobstr, dtp, avatarjlm: the .onnx file to write; dragposer: the folder for its encoder, decoder and "
                                  "temporal predictor (default: the package's models/)")
     p.add_argument("--minutes", type=float, help="stop training after this long")
     p.add_argument("--steps", type=int, help="stop training after this many steps")

@@ -99,6 +99,9 @@ PAPER_FIGURES = {
                                                      "End-effector PE [cm]": 1.77}},
     # DTP, Table 2 (online, TotalCapture): mean joint position error, global rotation error, jerk
     ("dtp", "six_point"): {"DTP paper": {"MPJPE [cm]": 1.04, "MPJRE [deg]": 4.22, "Jitter [100m/s3]": 2.31}},
+    # AvatarJLM, Table 1 (AMASS Protocol 1: 90 % of CMU, BMLrub, HDM05 for training)
+    ("avatarjlm", "three_point"): {"AvatarJLM paper": {"MPJPE [cm]": 3.35, "MPJRE [deg]": 2.90, "MPJVE [cm/s]": 20.79}},
+    ("avatarjlm", "four_point"): {"AvatarJLM paper": {"MPJPE [cm]": 2.09, "MPJRE [deg]": 2.40, "MPJVE [cm/s]": 17.82}},
     ("dragposer", "six_point", 1.0): {"DragPoser paper": {"MPJPE [cm]": 6.55, "MPJRE [deg]": 12.0,
                                                           "MPJVE [cm/s]": 21.1, "End-effector PE [cm]": 10.2}},
 }
@@ -116,6 +119,7 @@ COMPARE_WITH = {
     "lobstr": ["lobstr:contact_ik=false", "ik"],
     "dragposer": ["dragposer:temporal_weight=0", "ik"],   # the paper's Table 3 ablation, the baseline
     "dtp": ["dtp:model=pretrained", "dtp:model=lookahead", "dragposer", "lobstr", "ik"],
+    "avatarjlm": ["avatarjlm:polish=false", "dragposer", "ik"],
 }
 
 

@@ -46,7 +46,7 @@ def test_bad_tracker_samples_give_finite_invalid_poses():
 
 def test_unknown_estimator_and_missing_sites_are_clear_errors():
     config = load_sensor_config("three_point")
-    with pytest.raises(ValueError, match="unknown estimator 'lobstr2'; available: dragposer, dtp, ik, lobstr, reference, refined"):
+    with pytest.raises(ValueError, match="unknown estimator 'lobstr2'; available: avatarjlm, dragposer, dtp, ik, lobstr, reference, refined"):
         create_estimator("lobstr2", config, synthetic_walk(0.1).skeleton)
     hands = config.subset(["left_hand", "right_hand"])
     with pytest.raises(ValueError, match="needs a head or a pelvis tracker"):

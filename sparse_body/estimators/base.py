@@ -24,6 +24,7 @@ ESTIMATORS: dict[str, str] = {
     "dragposer": "sparse_body.estimators.dragposer:DragPoserEstimator",
     "refined": "sparse_body.estimators.refined:RefinedEstimator",
     "dtp": "sparse_body.estimators.dtp:DtpEstimator",
+    "avatarjlm": "sparse_body.estimators.avatarjlm:AvatarJlmEstimator",
 }
 
 

@@ -51,7 +51,7 @@ FILTER_DEFAULTS = FilterConfig()      # the filter's defaults are the estimators
 PARAMETERS = {
     # name: (default, description)
     "sensors": ("six_point", "sensor configuration: a name under config/sensors or a YAML path"),
-    "estimator": ("ik", "estimation method: ik, reference, lobstr, dragposer, dtp, refined:base=NAME (options as NAME:key=value,...)"),
+    "estimator": ("ik", "estimation method: ik, reference, lobstr, dragposer, dtp, avatarjlm, refined:base=NAME (options as NAME:key=value,...)"),
     "model_path": ("", "model file for learned estimators; empty: the shipped model"),
     "fixed_frame": ("", "frame the trackers are looked up in; empty: the sensor configuration's"),
     "height": (1.75, "the tracked person's height in metres (scales the canonical body; unused with a calibration)"),

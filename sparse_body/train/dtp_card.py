@@ -7,7 +7,7 @@ from pathlib import Path
 
 from ..data.catalog import load_split
 from .dtp_train import pretrained_path
-from .model_card import evaluate_jobs, runtime_choices_table
+from .model_card import evaluate_jobs, results_table, runtime_choices_table
 
 RUNTIME_COMMAND = ("sparse-body eval --sensors six_point --split validation --no-compare [--occlusion 20] "
                    "--output models/dtp.runtime[_occluded].json --estimator dtp:OPTIONS ...")
@@ -18,8 +18,6 @@ FIELD_RUNS = ("dtp", "dtp:polish=false", "dtp:model=lookahead", "dtp:model=pretr
 LAB_RUNS = ("dtp", "dtp:polish=false", "ik")
 OCCLUDED_RUNS = ("dtp", "dtp:polish=false", "dtp:model=pretrained", "dtp:model=lookahead", "dragposer", "lobstr", "ik")
 SETUPS = {"field": FIELD_RUNS, "lab": LAB_RUNS, "occluded": OCCLUDED_RUNS}
-COLUMNS = ("MPJPE [cm]", "MPJRE [deg]", "MPJVE [cm/s]", "Jitter [100m/s3]", "Lower PE [cm]", "Toe PE [cm]",
-           "End-effector PE [cm]")
 
 
 def _model_options(spec: str, onnx_path: Path) -> dict:
@@ -44,14 +42,6 @@ def evaluate_dtp(onnx_path: Path, mocap_root: Path, limit: int | None = None, wo
     path = onnx_path.with_suffix(".eval.json")
     path.write_text(json.dumps(measured, indent=1))
     return path
-
-
-def results_table(results: list[dict], columns=COLUMNS) -> str:
-    rows = ["| estimator | " + " | ".join(columns) + " |", "|---|" + "---:|" * len(columns)]
-    for r in results:
-        rows.append(f"| `{r['estimator']}` | " + " | ".join(f"{r['summary'][c]:.2f}" for c in columns) + " |")
-    first = results[0]
-    return "\n".join(rows) + f"\n\n({len(first['clips'])} clips, {first['frames']} frames; {first['protocol']} protocol)"
 
 
 def write_dtp_card(onnx_path: Path, mocap_root: Path, limit: int | None = None, evaluate: bool = True) -> Path:

@@ -76,6 +76,7 @@ def _save_checkpoint(path: Path, model, best_state, step: int, best: float, hist
     arrays.update({f"best.{k}": v.cpu().numpy() for k, v in (best_state or {}).items()})
     state = json.dumps({"step": step, "best": best, "history": history})
     tmp = path.with_name(path.name + ".tmp.npz")          # a crash mid-write keeps the last one
+    path.parent.mkdir(parents=True, exist_ok=True)
     np.savez(tmp, state=np.array(state), **arrays)
     tmp.replace(path)
 

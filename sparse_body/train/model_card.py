@@ -46,6 +46,19 @@ def runtime_choices_table(results_path: Path, command: str = RUNTIME_COMMAND) ->
     return f"`{command}` ({results[0]['split']} split, {results[0]['protocol']}):\n\n" + "\n".join(rows)
 
 
+COLUMNS = ("MPJPE [cm]", "MPJRE [deg]", "MPJVE [cm/s]", "Jitter [100m/s3]", "Lower PE [cm]", "Toe PE [cm]",
+           "End-effector PE [cm]")
+
+
+def results_table(results: list[dict], columns=COLUMNS) -> str:
+    """`sparse-body eval` JSON results as a Markdown table, one estimator a row."""
+    rows = ["| estimator | " + " | ".join(columns) + " |", "|---|" + "---:|" * len(columns)]
+    for r in results:
+        rows.append(f"| `{r['estimator']}` | " + " | ".join(f"{r['summary'][c]:.2f}" for c in columns) + " |")
+    first = results[0]
+    return "\n".join(rows) + f"\n\n({len(first['clips'])} clips, {first['frames']} frames; {first['protocol']} protocol)"
+
+
 LOBSTR_VALIDATION = {"lower_rot_error_deg": "val leg rot [deg]", "toe_error_cm": "val toe [cm]",
                      "contact_accuracy_pct": "val contact [%]"}
 VAE_VALIDATION = {"position_error_cm": "val position [cm]", "rotation_error_deg": "val rotation [deg]"}

@@ -1,0 +1,160 @@
+"""AvatarJLM at runtime: ONNX Runtime, one streaming step per frame over the kept past.
+
+The network (train/avatarjlm_model.py) attends causally over a window of `window` frames,
+and a frame's keys and values in its temporal blocks never change once computed; so each
+frame runs once, against the keys and values of the frames before it (up to window - 1 of
+them, by their age in model frames), and gives what the whole window would give. A
+stream's first frames see fewer frames, as in training.
+
+The pose: the network's local rotations on the person's (calibrated) skeleton, its root
+rotation turned from the head's heading frame into the world; the body placed by head
+alignment (the paper's), or on the pelvis tracker with the four-point model. Then
+(polish=true, ours: the paper relies on its hand-alignment loss alone) the closed-form IK
+brings the head and hands onto their trackers, keeping the network's spine curve and
+elbows, and they take their trackers' orientation.
+
+Without a usable head or hand sample (or the pelvis, four-point) there is no pose (held,
+invalid); a gap longer than max_gap, or time going back, starts the network's past over.
+The network runs at its training rate: a stream at another rate has its velocities scaled
+to it and its past looked up by age in model frames.
+
+Shipped models (model=NAME): three_point (models/avatarjlm.onnx) and four_point
+(avatarjlm_four_point.onnx, with the pelvis tracker: the paper's four-input row); auto (the
+default) takes four_point when the sensor configuration has a pelvis tracker.
+"""
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from ..core.body_ik import solve_body
+from ..core.contacts import FOOT_JOINTS as TOE_JOINTS
+from ..core.contacts import toe_contacts
+from ..core.kinematics import forward_kinematics
+from ..core.rotations import rotations_to_quat, sixd_to_matrix
+from ..core.skeleton import JOINT_INDEX, PARENTS
+from ..core.types import BodyPose, TrackerFrame
+from .avatarjlm_features import SITES, features, reference
+from .base import Estimator
+from .lobstr_features import body_scale
+from .onnx_model import load_model
+
+HEAD = JOINT_INDEX["head"]
+MODELS = {"three_point": "avatarjlm.onnx", "four_point": "avatarjlm_four_point.onnx"}
+
+
+def shipped_model_path(name: str) -> Path:
+    from ..resources import models_dir
+    if name not in MODELS:
+        raise ValueError(f"unknown AvatarJLM model {name!r}; shipped: {', '.join(MODELS)}, auto (or model_path:=FILE)")
+    return models_dir() / MODELS[name]
+
+
+class AvatarJlmModel:
+    """The exported streaming step, what it was trained with, and its kept past."""
+
+    def __init__(self, path: str | Path, threads: int = 1) -> None:
+        self.path = Path(path)
+        self.session, meta = load_model(self.path, ("method", "avatarjlm"), {"x": None, "past_k": None},
+                                        "train one with `sparse-body train avatarjlm`", threads)
+        try:
+            c = meta["config"]
+            self.sites = SITES[c["sensors"]]
+            self.past, self.fps = int(c["window"]) - 1, float(c["fps"])
+            self.cache_shape = (int(c["loops"]), 44, int(c["heads"]), self.past, int(c["d_model"]) // int(c["heads"]))
+        except (KeyError, ValueError, TypeError):
+            raise ValueError(f"{self.path}: not an AvatarJLM model (its metadata lacks a usable config)") from None
+        self.start()
+
+    def start(self) -> None:
+        """Forget the past (a new stream, a gap)."""
+        self.keys = np.zeros(self.cache_shape, np.float32)
+        self.values = np.zeros(self.cache_shape, np.float32)
+        self.stamps = np.full(self.past, np.nan)     # of the frame in each slot (a ring)
+        self.slot = 0
+
+    def step(self, x: np.ndarray, stamp: float) -> np.ndarray:
+        """One frame's features (F,) -> (22, 3, 3): the root's rotation in the heading frame,
+        the other joints' local rotations. The frame joins the past."""
+        age = np.rint((stamp - self.stamps) * self.fps)
+        kept = np.isfinite(age) & (age >= 1) & (age <= self.past)
+        pose, key, value = self.session.run(None, {
+            "x": x[None].astype(np.float32), "past_k": self.keys, "past_v": self.values,
+            "past_age": np.where(kept, age, 1).astype(np.int64),
+            "past_mask": np.where(kept, 0.0, -np.inf).astype(np.float32)})
+        self.keys[:, :, :, self.slot] = key[:, :, :, 0]
+        self.values[:, :, :, self.slot] = value[:, :, :, 0]
+        self.stamps[self.slot] = stamp
+        self.slot = (self.slot + 1) % self.past
+        return sixd_to_matrix(pose[0].astype(np.float64))
+
+
+class AvatarJlmEstimator(Estimator):
+    name = "avatarjlm"
+    required_sites = frozenset(SITES["three_point"])
+
+    def __init__(self, sensors, skeleton, fps: float = 60.0, model: str = "auto", model_path: str | None = None,
+                 polish: bool = True, end_orientations: bool = True, floor_height: float = 0.0,
+                 max_gap: float = 0.5, threads: int = 1) -> None:
+        super().__init__(sensors, skeleton, fps)
+        if model == "auto":
+            model = "four_point" if "pelvis" in sensors.site_names else "three_point"
+        self.model = AvatarJlmModel(model_path or shipped_model_path(model), threads)
+        missing = set(self.model.sites) - set(sensors.site_names)
+        if missing:
+            raise ValueError(f"{self.model.path} needs trackers on {', '.join(sorted(missing))}; sensor configuration "
+                             f"{sensors.name!r} has {', '.join(sensors.site_names)} (use model:=three_point)")
+        self.scale = body_scale(skeleton)
+        self.polish, self.end_orientations = polish, end_orientations
+        self.floor, self.max_gap = floor_height, max_gap
+        self._joints = [sensors.site(s).joint_index for s in self.model.sites]
+        self.reset()
+
+    def _reset(self) -> None:
+        self.model.start()
+        self._previous: tuple[float, np.ndarray, np.ndarray] | None = None    # stamp, scaled positions, rotations
+        self._last_toes: np.ndarray | None = None
+
+    def _estimate(self, frame: TrackerFrame) -> BodyPose | None:
+        targets = [self.joint_target(frame, s) for s in self.model.sites]
+        if any(t is None or t[0] is None or t[1] is None for t in targets):
+            return None
+        world = np.stack([np.asarray(t[0], float) for t in targets])
+        rot = np.stack([np.asarray(t[1], float) for t in targets])
+        pos = (world - [0.0, 0.0, self.floor]) * self.scale
+        previous = self._previous
+        if previous is not None and not 0 < frame.stamp - previous[0] <= self.max_gap:
+            self.model.start()
+            previous = None
+        step = 1.0 if previous is None else (frame.stamp - previous[0]) * self.model.fps
+        x = features(pos, rot, pos if previous is None else previous[1], rot if previous is None else previous[2],
+                     step if abs(step - 1.0) > 0.05 else 1.0)
+        self._previous = (frame.stamp, pos, rot)
+        out = self.model.step(x, frame.stamp)
+        return self._pose(frame.stamp, out, world, rot)
+
+    def _pose(self, stamp: float, out: np.ndarray, world: np.ndarray, rot: np.ndarray) -> BodyPose:
+        local = out.copy()
+        offsets = self.skeleton.offsets
+        if "pelvis" in self.model.sites:      # the root on its tracker
+            k = self.model.sites.index("pelvis")
+            local[0], root = rot[k], world[k]
+        else:                                 # head alignment
+            local[0] = reference(world[0], rot[0])[1] @ out[0]
+            _, pos = forward_kinematics(local, np.zeros(3), offsets)
+            root = world[0] - pos[HEAD]
+        if self.polish:
+            goals = dict(zip(self._joints, world))
+            local, glob, pos = solve_body(local, root, offsets, goals, keep_shape=True)
+            if self.end_orientations:
+                for j, r in zip(self._joints, rot):
+                    if j:                     # the pelvis is the root already
+                        local[j] = glob[PARENTS[j]].T @ r
+                        glob[j] = r
+        else:
+            glob, pos = forward_kinematics(local, root, offsets)
+        toes = np.stack([pos[PARENTS[t]] + glob[PARENTS[t]] @ offsets[t] for t in TOE_JOINTS])
+        contact = toe_contacts(toes, self._last_toes, self.fps, self.floor)
+        self._last_toes = toes
+        return BodyPose(stamp, rotations_to_quat(local), np.asarray(root, float).copy(), contact.astype(float), contact)

@@ -1,0 +1,167 @@
+"""AvatarJLM: features, the streaming ONNX step against the torch model over a whole window,
+the estimator on real clips (hands on their trackers, missing trackers, gaps, four-point),
+training in one command, and the node over DDS."""
+import json
+import subprocess
+import sys
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from sparse_body.core.kinematics import forward_kinematics
+from sparse_body.core.rotations import quat_to_matrix, yaw_matrix
+from sparse_body.core.sensors import load_sensor_config
+from sparse_body.core.skeleton import JOINT_INDEX as J
+from sparse_body.data.catalog import load_clip
+from sparse_body.data.virtual_trackers import VR_NOISE, synthesize_trackers
+from sparse_body.estimators import create_estimator
+from sparse_body.estimators.avatarjlm_features import SITES, input_joints, sequence_features
+
+torch = pytest.importorskip("torch")
+THREE, FOUR = load_sensor_config("three_point"), load_sensor_config("four_point")
+WRISTS = [J["left_wrist"], J["right_wrist"]]
+
+
+@pytest.fixture(scope="module")
+def clip(clip_index):
+    return load_clip(clip_index["02_05"]).slice(0, 240)
+
+
+@pytest.fixture(scope="module")
+def tiny_models(tmp_path_factory, mocap_root):
+    """Tiny three- and four-point models trained for a few steps by the real training code."""
+    from sparse_body.train.avatarjlm_model import AvatarJlmConfig
+    from sparse_body.train.avatarjlm_train import train
+    folder = tmp_path_factory.mktemp("avatarjlm")
+    for sensors in ("three_point", "four_point"):
+        train(replace(AvatarJlmConfig.named("tiny"), sensors=sensors), mocap_root, folder / f"{sensors}.onnx",
+              limit=2, log=lambda *_: None)
+    return folder
+
+
+def _features(motion, sites=SITES["three_point"]):
+    joints = list(input_joints(sites))
+    return sequence_features(motion.positions[:, joints], motion.global_rotations[:, joints])
+
+
+def _joints(pose, skeleton):
+    return forward_kinematics(quat_to_matrix(pose.local_quats), pose.root_position, skeleton.offsets)[1]
+
+
+def test_features_do_not_depend_on_where_the_person_stands_or_faces(clip):
+    from scipy.spatial.transform import Rotation
+    turn = yaw_matrix(np.array(-2.1))
+    quats = clip.local_quats.copy()
+    quats[:, 0] = (Rotation.from_matrix(turn) * Rotation.from_quat(quats[:, 0])).as_quat()
+    moved = replace(clip, root_positions=clip.root_positions @ turn.T + [3.0, -2.0, 0.0], local_quats=quats)
+    np.testing.assert_allclose(_features(moved), _features(clip), atol=1e-9)
+    x = _features(clip)
+    assert x.shape == (len(clip), 54) and np.abs(x[1:, 9:12]).max() > 1e-3   # it sees the head move
+
+
+def test_streaming_onnx_step_gives_the_torch_models_output_over_the_window(tmp_path, clip):
+    """Frame by frame through the runtime's kept past (AvatarJlmModel) against the torch
+    network on the whole stream so far: at a stream's start and long after the past is full
+    (each block sees window - 1 frames back, the stacked blocks further)."""
+    from sparse_body.estimators.avatarjlm import AvatarJlmModel
+    from sparse_body.train.avatarjlm_model import AvatarJlmConfig, AvatarJlmNet
+    from sparse_body.train.avatarjlm_train import export_onnx
+    config = AvatarJlmConfig(d_embed=32, d_model=16, heads=4, loops=2, feedforward=32, window=9, dropout=0.0)
+    torch.manual_seed(0)
+    net = AvatarJlmNet(config).eval()
+    with torch.no_grad():
+        for block in net.temporal:
+            block.attention.age_bias.normal_(0.0, 1.0)      # ages must line up, not just be ignored
+    x = _features(clip.slice(0, 30)).astype(np.float32)
+    net.mean.copy_(torch.from_numpy(x.mean(0)))
+    net.std.copy_(torch.from_numpy(x.std(0) + 1e-3))
+    path = tmp_path / "avatarjlm.onnx"
+    export_onnx(net, path, {"method": "avatarjlm", "config": config.to_dict()})
+    model = AvatarJlmModel(path)
+    stamps = np.arange(len(x)) / config.fps
+    streamed = [model.step(x[t], stamps[t]) for t in range(len(x))]
+    from sparse_body.core.rotations import sixd_to_matrix
+    for t in (0, 3, config.window - 1, 20, len(x) - 1):
+        with torch.no_grad():
+            full = net(torch.from_numpy(x[None, :t + 1]))[0][0, -1].numpy()
+        np.testing.assert_allclose(streamed[t], sixd_to_matrix(full.astype(np.float64)), atol=1e-4)
+
+
+def test_hands_reach_their_trackers_and_missing_ones_hold_the_pose(tiny_models, clip):
+    stream = synthesize_trackers(clip, THREE, VR_NOISE, seed=3)
+    head = stream.sites.index("head")
+    stream.positions[160:165, head] = np.nan            # the headset gone: no pose
+    stream.valid[100:103, stream.sites.index("left_hand")] = False
+    path = str(tiny_models / "three_point.onnx")
+    est = create_estimator("avatarjlm", THREE, clip.skeleton, model_path=path, filter=False)
+    poses = est.process(stream)
+    assert len(poses) == len(stream) and all(p.is_finite() for p in poses)
+    valid = np.array([p.valid for p in poses])
+    assert not valid[160:165].any() and not valid[100:103].any()
+    assert valid[:100].all() and valid[103:160].all() and valid[165:].all()
+    raw = create_estimator("avatarjlm", THREE, clip.skeleton, model_path=path, filter=False, polish=False).process(stream)
+    for t in (30, 120, 200):
+        polished = np.linalg.norm(_joints(poses[t], clip.skeleton)[WRISTS] - clip.positions[t, WRISTS], axis=-1)
+        network = np.linalg.norm(_joints(raw[t], clip.skeleton)[WRISTS] - clip.positions[t, WRISTS], axis=-1)
+        assert np.all(polished < 0.5 * network), (t, polished, network)
+    # head alignment: the network's head sits on the tracked head
+    np.testing.assert_allclose(_joints(raw[50], clip.skeleton)[J["head"]], clip.positions[50, J["head"]], atol=0.01)
+
+
+def test_a_gap_starts_the_past_over(tiny_models, clip):
+    stream = synthesize_trackers(clip, THREE, seed=1)
+    path = str(tiny_models / "three_point.onnx")
+    est = create_estimator("avatarjlm", THREE, clip.skeleton, model_path=path, filter=False)
+    est.reset()
+    for t in range(100):
+        est.step(stream.frame(t))
+    late = replace(stream.frame(150), stamp=stream.frame(150).stamp + 5.0)
+    after_gap = est.step(late)
+    fresh = create_estimator("avatarjlm", THREE, clip.skeleton, model_path=path, filter=False)
+    fresh.reset()
+    np.testing.assert_allclose(after_gap.local_quats, fresh.step(late).local_quats, atol=1e-6)
+    # without the gap the past counts
+    est.reset()
+    for t in range(100):
+        est.step(stream.frame(t))
+    assert not np.allclose(est.step(stream.frame(100)).local_quats, fresh.step(stream.frame(100)).local_quats,
+                           atol=1e-6)
+
+
+def test_four_point_model_stands_on_the_pelvis_tracker_and_needs_it(tiny_models, clip):
+    stream = synthesize_trackers(clip, FOUR, seed=2)
+    path = str(tiny_models / "four_point.onnx")
+    poses = create_estimator("avatarjlm", FOUR, clip.skeleton, model_path=path, filter=False).process(stream)
+    assert all(p.valid and p.is_finite() for p in poses)
+    np.testing.assert_allclose(poses[80].root_position, clip.positions[80, 0], atol=1e-6)
+    with pytest.raises(ValueError, match="needs trackers on pelvis"):
+        create_estimator("avatarjlm", THREE, clip.skeleton, model_path=path)
+    with pytest.raises(ValueError, match="not a avatarjlm model"):
+        from sparse_body.resources import models_dir
+        create_estimator("avatarjlm", THREE, clip.skeleton, model_path=str(models_dir() / "lobstr.onnx"))
+
+
+def test_train_avatarjlm_is_one_command(tmp_path, mocap_root):
+    import onnxruntime as ort
+    out = tmp_path / "avatarjlm.onnx"
+    subprocess.run([sys.executable, "-m", "sparse_body.cli", "train", "avatarjlm", "--config", "tiny", "--steps", "2",
+                    "--limit", "1", "--out", str(out), "--no-card"], check=True, capture_output=True)
+    report = json.loads(out.with_suffix(".train.json").read_text())
+    assert report["steps"] == 2 and report["train_clips"] == 1 and "mpjpe_cm" in report["validation"]
+    meta = ort.InferenceSession(str(out), providers=["CPUExecutionProvider"]).get_modelmeta().custom_metadata_map
+    assert json.loads(meta["config"]) == report["config"] and json.loads(meta["method"]) == "avatarjlm"
+
+
+def test_estimator_node_runs_avatarjlm_over_dds(tiny_models, tmp_path, clip, ros_env):
+    """estimator:=avatarjlm with the three-point configuration, fed by the tracker bridge from a bag."""
+    import rclpy
+    pytest.importorskip("tf2_msgs.msg")
+    from ros_helpers import during_playback, replay_bag
+    listener = replay_bag(rclpy, ros_env, tmp_path, clip.slice(0, 180), THREE,
+                          {"estimator": "avatarjlm", "model_path": str(tiny_models / "three_point.onnx"),
+                           "height": clip.skeleton.height()})
+    statuses = during_playback(listener, "estimate_status")
+    valid = sum(s.valid for s in statuses)
+    assert valid >= 0.9 * len(statuses) and valid >= 30, (tmp_path / "sparse_body_estimator.log").read_text()
+    assert all(np.all(np.isfinite(m.position)) for m in listener.received["joint_states"])

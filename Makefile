@@ -21,6 +21,8 @@ eval: setup
 	$(VENV)/bin/sparse-body eval --estimator reference --estimator ik --sensors six_point
 	$(VENV)/bin/sparse-body eval --estimator lobstr --sensors four_point
 	$(VENV)/bin/sparse-body eval --estimator dragposer --sensors six_point
+	$(VENV)/bin/sparse-body eval --estimator dtp --sensors six_point
+	$(VENV)/bin/sparse-body eval --estimator avatarjlm --sensors three_point
 
 bench: setup
 	$(VENV)/bin/sparse-body bench
@@ -48,7 +50,8 @@ train-dtp: setup
 	$(VENV)/bin/sparse-body train dtp --config lookahead --no-card
 	$(VENV)/bin/sparse-body train dtp --config small
 
-# the three- and four-point models side by side, a core each, then one card for both
+# Retrain the shipped AvatarJLM models: the three- and four-point ones side by side, a core
+# each (under an hour), then one card for both (which evaluates them).
 train-avatarjlm: setup
 	$(VENV)/bin/sparse-body train avatarjlm --config four_point --threads 1 --no-card & \
 	$(VENV)/bin/sparse-body train avatarjlm --config small --threads 1 --no-card; wait

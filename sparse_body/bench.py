@@ -22,6 +22,7 @@ from .core.sensors import load_sensor_config
 from .data.synthetic import synthetic_walk
 from .data.virtual_trackers import synthesize_trackers
 from .estimators import create_estimator
+from .estimators.base import parse_estimator_spec
 
 
 # (figure, estimator, goal for its p99 in ms); the latency goal is 3 ms plus the step's p99
@@ -40,7 +41,8 @@ def bench_offline(estimators, sensors_name: str, seconds: float = 20.0) -> dict[
     print(f"offline: {len(stream)} frames of a synthetic walk, {sensors_name}")
     out = {}
     for name in estimators:
-        est = create_estimator(name, config, motion.skeleton)
+        method, options = parse_estimator_spec(name)     # a spec: "avatarjlm:model_path=FILE"
+        est = create_estimator(method, config, motion.skeleton, **options)
         est.reset()
         times = []
         for frame in stream:

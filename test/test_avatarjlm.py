@@ -17,6 +17,7 @@ from sparse_body.data.catalog import load_clip
 from sparse_body.data.virtual_trackers import VR_NOISE, synthesize_trackers
 from sparse_body.estimators import create_estimator
 from sparse_body.estimators.avatarjlm_features import SITES, input_joints, sequence_features
+from sparse_body.resources import models_dir
 
 torch = pytest.importorskip("torch")
 THREE, FOUR = load_sensor_config("three_point"), load_sensor_config("four_point")
@@ -138,7 +139,6 @@ def test_four_point_model_stands_on_the_pelvis_tracker_and_needs_it(tiny_models,
     with pytest.raises(ValueError, match="needs trackers on pelvis"):
         create_estimator("avatarjlm", THREE, clip.skeleton, model_path=path)
     with pytest.raises(ValueError, match="not a avatarjlm model"):
-        from sparse_body.resources import models_dir
         create_estimator("avatarjlm", THREE, clip.skeleton, model_path=str(models_dir() / "lobstr.onnx"))
 
 
@@ -151,6 +151,21 @@ def test_train_avatarjlm_is_one_command(tmp_path, mocap_root):
     assert report["steps"] == 2 and report["train_clips"] == 1 and "mpjpe_cm" in report["validation"]
     meta = ort.InferenceSession(str(out), providers=["CPUExecutionProvider"]).get_modelmeta().custom_metadata_map
     assert json.loads(meta["config"]) == report["config"] and json.loads(meta["method"]) == "avatarjlm"
+
+
+@pytest.mark.skipif(not (models_dir() / "avatarjlm.onnx").is_file(), reason="no shipped AvatarJLM model")
+def test_shipped_three_point_model_beats_ik_on_a_held_out_walk(clip_index):
+    """A test person's walk, field protocol, headset and controllers only: the body is
+    closer than the IK's and the hands stay on their controllers."""
+    from sparse_body.data.catalog import load_split
+    from sparse_body.data.field_protocol import FIELD
+    from sparse_body.evaluation import evaluate_motion
+    assert "16_17" in load_split()["test"]
+    motion = load_clip(clip_index["16_17"])
+    learned = evaluate_motion(motion, "avatarjlm", THREE, FIELD)
+    ik = evaluate_motion(motion, "ik", THREE, FIELD)
+    assert learned["MPJPE [cm]"] < ik["MPJPE [cm]"] and learned["Lower PE [cm]"] < ik["Lower PE [cm]"]
+    assert learned["Hand PE [cm]"] < 1.0
 
 
 def test_estimator_node_runs_avatarjlm_over_dds(tiny_models, tmp_path, clip, ros_env):

@@ -59,6 +59,11 @@ class AvatarJlmConfig:
     lr: float = 1e-4              # paper: 1e-4, 1e-5 after 60 % of the steps
     lr_drop_at: float = 0.6
     masked_tokens: int = 2        # paper: 2 tokens other than the trackers' masked in training
+    # both pose heads start near the identity (the root facing the head's heading). From random
+    # rotations and at the paper's beta, training settled with the root half a turn about its own
+    # axis and its children turned back: right positions from wrong local rotations, which a
+    # tracked pelvis (four_point: the root is the tracker's) cannot live with
+    identity_start: bool = False
     # the paper's loss weights: L_first + beta L_ori + gamma L_rot + delta L_pos + eps L_h + zeta L_mot + L_p + alpha L_fh
     alpha: float = 0.5
     beta: float = 0.02
@@ -84,9 +89,13 @@ class AvatarJlmConfig:
     def named(cls, name: str) -> "AvatarJlmConfig":
         if name == "paper":
             return cls()
-        if name in ("small", "four_point"):   # under an hour each, side by side on 2 CPU cores (one each)
-            return cls(sensors="three_point" if name == "small" else "four_point", d_embed=256, d_model=64, heads=4,
-                       loops=3, feedforward=128, dropout=0.0, batch=6, lr=5e-4, minutes=52.0, steps=1_000_000)
+        if name == "small":        # under an hour on one CPU core (beside four_point on the other)
+            return cls(d_embed=256, d_model=64, heads=4, loops=3, feedforward=128, dropout=0.0, batch=6, lr=5e-4,
+                       minutes=52.0, steps=1_000_000)
+        if name == "four_point":   # the same size with the pelvis; the root's own rotation weighs as much as the rest
+            config = cls.named("small")
+            config.sensors, config.minutes, config.beta, config.identity_start = "four_point", 42.0, 1.0, True
+            return config
         if name == "tiny":    # tests
             return cls(d_embed=16, d_model=8, heads=2, loops=1, feedforward=16, window=6, sequence=8, batch=3, steps=3,
                        steps_per_check=2, augment="mirror", variants=1)
@@ -187,6 +196,10 @@ class AvatarJlmNet(nn.Module):
                                             config.feedforward, config.dropout) for _ in range(config.loops))
         self.norm = nn.LayerNorm(d2)
         self.regress = nn.Linear(TOKENS * d2, NUM_JOINTS * 6)
+        for head in (self.initial[-1], self.regress) if config.identity_start else ():
+            with torch.no_grad():
+                head.weight.mul_(0.1)
+                head.bias.copy_(torch.tensor([1.0, 0.0, 0.0, 0.0, 1.0, 0.0]).repeat(NUM_JOINTS))
 
     def stage1(self, x: torch.Tensor):
         """x (..., F) -> (initial pose (..., 22, 6), tokens (..., 44, d2), input token (..., 1, d2))."""

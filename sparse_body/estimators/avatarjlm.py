@@ -1,10 +1,10 @@
 """AvatarJLM at runtime: ONNX Runtime, one streaming step per frame over the kept past.
 
-The network (train/avatarjlm_model.py) attends causally over a window of `window` frames,
-and a frame's keys and values in its temporal blocks never change once computed; so each
-frame runs once, against the keys and values of the frames before it (up to window - 1 of
-them, by their age in model frames), and gives what the whole window would give. A
-stream's first frames see fewer frames, as in training.
+The network (train/avatarjlm_model.py) attends causally, each temporal block to the last
+window - 1 frames, and a frame's keys and values never change once computed; so each frame
+runs once, against the kept keys and values of the frames before it (by their age in model
+frames), and gives what the network gives on the whole stream. A stream's first frames see
+fewer frames, as in training.
 
 The pose: the network's local rotations on the person's (calibrated) skeleton, its root
 rotation turned from the head's heading frame into the world; the body placed by head

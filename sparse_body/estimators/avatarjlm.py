@@ -38,17 +38,10 @@ from ..core.types import BodyPose, TrackerFrame
 from .avatarjlm_features import SITES, features, reference
 from .base import Estimator
 from .lobstr_features import body_scale
-from .onnx_model import load_model
+from .onnx_model import load_model, shipped_model_path
 
 HEAD = JOINT_INDEX["head"]
 MODELS = {"three_point": "avatarjlm.onnx", "four_point": "avatarjlm_four_point.onnx"}
-
-
-def shipped_model_path(name: str) -> Path:
-    from ..resources import models_dir
-    if name not in MODELS:
-        raise ValueError(f"unknown AvatarJLM model {name!r}; shipped: {', '.join(MODELS)}, auto (or model_path:=FILE)")
-    return models_dir() / MODELS[name]
 
 
 class AvatarJlmModel:
@@ -100,7 +93,7 @@ class AvatarJlmEstimator(Estimator):
         super().__init__(sensors, skeleton, fps)
         if model == "auto":
             model = "four_point" if "pelvis" in sensors.site_names else "three_point"
-        self.model = AvatarJlmModel(model_path or shipped_model_path(model), threads)
+        self.model = AvatarJlmModel(model_path or shipped_model_path("AvatarJLM", MODELS, model, "auto"), threads)
         missing = set(self.model.sites) - set(sensors.site_names)
         if missing:
             raise ValueError(f"{self.model.path} needs trackers on {', '.join(sorted(missing))}; sensor configuration "
@@ -137,13 +130,12 @@ class AvatarJlmEstimator(Estimator):
     def _pose(self, stamp: float, out: np.ndarray, world: np.ndarray, rot: np.ndarray) -> BodyPose:
         local = out.copy()
         offsets = self.skeleton.offsets
-        if "pelvis" in self.model.sites:      # the root on its tracker
-            k = self.model.sites.index("pelvis")
-            local[0], root = rot[k], world[k]
-        else:                                 # head alignment
-            local[0] = reference(world[0], rot[0])[1] @ out[0]
-            _, pos = forward_kinematics(local, np.zeros(3), offsets)
-            root = world[0] - pos[HEAD]
+        four = "pelvis" in self.model.sites
+        local[0] = rot[self.model.sites.index("pelvis")] if four else reference(world[0], rot[0])[1] @ out[0]
+        glob, pos = forward_kinematics(local, np.zeros(3), offsets)
+        # the root on its tracker, or where the head lands on the tracked head (head alignment)
+        root = world[self.model.sites.index("pelvis")] if four else world[0] - pos[HEAD]
+        pos = pos + root
         if self.polish:
             goals = dict(zip(self._joints, world))
             local, glob, pos = solve_body(local, root, offsets, goals, keep_shape=True)
@@ -152,8 +144,6 @@ class AvatarJlmEstimator(Estimator):
                     if j:                     # the pelvis is the root already
                         local[j] = glob[PARENTS[j]].T @ r
                         glob[j] = r
-        else:
-            glob, pos = forward_kinematics(local, root, offsets)
         toes = np.stack([pos[PARENTS[t]] + glob[PARENTS[t]] @ offsets[t] for t in TOE_JOINTS])
         contact = toe_contacts(toes, self._last_toes, self.fps, self.floor)
         self._last_toes = toes

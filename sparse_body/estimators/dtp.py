@@ -42,7 +42,7 @@ from ..core.types import BodyPose, TrackerFrame, TrackerStream
 from .base import Estimator
 from .dtp_features import FEATURES, FOOT_LEAVES, INPUT_SITES, LEAF_SITES, leaf_features, window_features
 from .lobstr_features import body_scale
-from .onnx_model import load_model
+from .onnx_model import load_model, shipped_model_path
 
 IDENTITY = np.array([0.0, 0.0, 0.0, 1.0])
 FOOT_JOINTS = frozenset(JOINT_INDEX[SITE_JOINTS[s]] for s in ("left_foot", "right_foot"))   # the ankles
@@ -50,13 +50,6 @@ FOOT_JOINTS = frozenset(JOINT_INDEX[SITE_JOINTS[s]] for s in ("left_foot", "righ
 
 # the shipped models: model:=NAME
 MODELS = {"online": "dtp.onnx", "lookahead": "dtp_lookahead.onnx", "pretrained": "dtp.pretrained.onnx"}
-
-
-def shipped_model_path(name: str = "online") -> Path:
-    from ..resources import models_dir
-    if name not in MODELS:
-        raise ValueError(f"unknown DTP model {name!r}; shipped: {', '.join(MODELS)} (or model_path:=FILE)")
-    return models_dir() / MODELS[name]
 
 
 class DtpModel:
@@ -99,7 +92,7 @@ class DtpEstimator(Estimator):
                  polish: bool = True, foot_trust: float = 0.4, foot_speed: float = 8.0, end_orientations: bool = True,
                  floor_height: float = 0.0, max_gap: float = 0.5, threads: int = 1) -> None:
         super().__init__(sensors, skeleton, fps)
-        self.model = DtpModel(model_path or shipped_model_path(model), threads)
+        self.model = DtpModel(model_path or shipped_model_path("DTP", MODELS, model), threads)
         self.scale = body_scale(skeleton)
         self.polish, self.foot_trust, self.foot_speed = polish, foot_trust, foot_speed
         self.end_orientations = end_orientations

@@ -42,3 +42,13 @@ def load_model(path: str | Path, kind: tuple[str, str], inputs: dict[str, int | 
         if last is not None and have[name] and have[name][-1] not in (last, None) and not isinstance(have[name][-1], str):
             raise ValueError(f"{path}: input {name!r} has last dimension {have[name][-1]}, a {value} model's is {last}")
     return session, meta
+
+
+def shipped_model_path(method: str, models: dict[str, str], name: str, others: str = "") -> Path:
+    """The package's model file for `model:=name` of a method's shipped models (name -> file);
+    others: further names the estimator accepts, for the error."""
+    from ..resources import models_dir
+    if name not in models:
+        raise ValueError(f"unknown {method} model {name!r}; shipped: {', '.join([*models, *filter(None, [others])])} "
+                         "(or model_path:=FILE)")
+    return models_dir() / models[name]

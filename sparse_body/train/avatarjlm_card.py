@@ -6,7 +6,7 @@ import json
 from pathlib import Path
 
 from ..data.catalog import load_split
-from .model_card import evaluate_jobs, results_table, runtime_choices_table
+from .model_card import evaluate_jobs, measured_results, results_table, runtime_choices_table
 
 COLUMNS = ("MPJPE [cm]", "MPJRE [deg]", "MPJVE [cm/s]", "Jitter [100m/s3]", "Hand PE [cm]", "Lower PE [cm]",
            "Toe PE [cm]")
@@ -72,10 +72,7 @@ def _curve(report: dict) -> str:
 def write_avatarjlm_card(onnx_path: Path, mocap_root: Path, limit: int | None = None, evaluate: bool = True) -> Path:
     """Evaluate (unless evaluate=False and <model>.eval.json exists) and write <model>.md."""
     onnx_path = Path(onnx_path)
-    measured_path = onnx_path.with_suffix(".eval.json")
-    if evaluate or not measured_path.is_file():
-        evaluate_avatarjlm(onnx_path, mocap_root, limit)
-    measured = json.loads(measured_path.read_text())
+    measured = measured_results(onnx_path, evaluate_avatarjlm, mocap_root, limit, evaluate)
     report = json.loads(onnx_path.with_suffix(".train.json").read_text())
     four_report_path = four_point_path(onnx_path).with_suffix(".train.json")
     four = json.loads(four_report_path.read_text()) if four_report_path.is_file() else None

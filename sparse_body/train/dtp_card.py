@@ -7,7 +7,7 @@ from pathlib import Path
 
 from ..data.catalog import load_split
 from .dtp_train import pretrained_path
-from .model_card import evaluate_jobs, results_table, runtime_choices_table
+from .model_card import evaluate_jobs, measured_results, results_table, runtime_choices_table
 
 RUNTIME_COMMAND = ("sparse-body eval --sensors six_point --split validation --no-compare [--occlusion 20] "
                    "--output models/dtp.runtime[_occluded].json --estimator dtp:OPTIONS ...")
@@ -47,10 +47,7 @@ def evaluate_dtp(onnx_path: Path, mocap_root: Path, limit: int | None = None, wo
 def write_dtp_card(onnx_path: Path, mocap_root: Path, limit: int | None = None, evaluate: bool = True) -> Path:
     """Evaluate (unless evaluate=False and <model>.eval.json exists) and write <model>.md."""
     onnx_path = Path(onnx_path)
-    measured_path = onnx_path.with_suffix(".eval.json")
-    if evaluate or not measured_path.is_file():
-        evaluate_dtp(onnx_path, mocap_root, limit)
-    measured = json.loads(measured_path.read_text())
+    measured = measured_results(onnx_path, evaluate_dtp, mocap_root, limit, evaluate)
     report = json.loads(onnx_path.with_suffix(".train.json").read_text())
     lookahead_path = onnx_path.with_name("dtp_lookahead.train.json")
     lookahead = json.loads(lookahead_path.read_text()) if lookahead_path.is_file() else None

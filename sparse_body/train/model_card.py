@@ -50,6 +50,16 @@ COLUMNS = ("MPJPE [cm]", "MPJRE [deg]", "MPJVE [cm/s]", "Jitter [100m/s3]", "Low
            "End-effector PE [cm]")
 
 
+def measured_results(onnx_path: Path, evaluate_model, mocap_root: Path, limit: int | None, evaluate: bool) -> dict:
+    """A card's measured JSON (<model>.eval.json): evaluate_model(onnx_path, mocap_root, limit)
+    writes it, unless evaluate=False and it is there already (rewriting the text only)."""
+    import json
+    path = Path(onnx_path).with_suffix(".eval.json")
+    if evaluate or not path.is_file():
+        evaluate_model(onnx_path, mocap_root, limit)
+    return json.loads(path.read_text())
+
+
 def results_table(results: list[dict], columns=COLUMNS) -> str:
     """`sparse-body eval` JSON results as a Markdown table, one estimator a row."""
     rows = ["| estimator | " + " | ".join(columns) + " |", "|---|" + "---:|" * len(columns)]

@@ -234,6 +234,8 @@ def cmd_process(args) -> int:
     from .evaluation import parse_estimator_spec
     from .offline import process_bag
     name, options = parse_estimator_spec(args.estimator)
+    if args.smooth:
+        options["smooth"] = True
     refused: dict[str, int] = {}
     body = person_body(args.calibration, args.height)
     poses = process_bag(Path(args.bag_in), Path(args.bag_out), name, load_sensor_config(args.sensors),
@@ -366,6 +368,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--calibration", help="a T-pose calibration file (the bridge's ~/calibrate): its fitted body "
                                          "instead of the canonical one at --height")
     p.add_argument("--fps", type=float, default=60.0, help="the trackers' nominal rate")
+    p.add_argument("--smooth", action="store_true",
+                   help="smooth the tracker input over the whole recording, forwards and backwards (the "
+                        "estimator option smooth=true): far less shaking under noise than the live filter")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.add_argument("--overwrite", action="store_true", help="replace BAG_OUT if it exists")
     p.set_defaults(func=cmd_process)

@@ -46,7 +46,8 @@ def test_process_writes_one_estimate_per_frame(tmp_path):
     assert err.mean() < 0.01
 
 
-def test_bad_tracker_samples_keep_one_finite_output_per_frame(tmp_path):
+@pytest.mark.parametrize("smooth", [False, True], ids=["live filter", "smoothed"])
+def test_bad_tracker_samples_keep_one_finite_output_per_frame(tmp_path, smooth):
     motion = synthetic_walk(3.0)
     config = load_sensor_config("four_point")
     stream = synthesize_trackers(motion, config)
@@ -61,7 +62,8 @@ def test_bad_tracker_samples_keep_one_finite_output_per_frame(tmp_path):
     back = read_tracker_stream(tmp_path / "bad", config)
     # Frame 90 carried no transform at all, so it is no input frame; every other one is.
     assert len(back) == len(motion) - 1
-    poses = process_bag(tmp_path / "bad", tmp_path / "out", "ik", config, motion.skeleton, progress=False)
+    poses = process_bag(tmp_path / "bad", tmp_path / "out", "ik", config, motion.skeleton, progress=False,
+                        smooth=smooth)
     assert len(poses) == len(back)
     assert all(p.is_finite() for p in poses)
     valid = np.array([p.valid for p in poses])

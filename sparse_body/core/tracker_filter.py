@@ -36,6 +36,10 @@ class FilterConfig:
     spin_acceleration: float = 1.5      # rad/s^2 / sqrt(Hz), the same for turning
     jump: float = 0.5                   # metres: a sample this far from the prediction starts the site over
     gap: float = 0.25                   # seconds without a sample after which a site starts over
+    # the offline smoother's (core/tracker_smoother.py, estimator option smooth=true): with the
+    # future in view there is no lag to trade, so it follows harder accelerations
+    smooth_acceleration: float = 0.7
+    smooth_spin_acceleration: float = 2.0
 
     def __post_init__(self) -> None:
         for name in self.__dataclass_fields__:

@@ -13,6 +13,7 @@ import yaml
 from ..core.sensors import SensorConfig
 from ..core.skeleton import Skeleton
 from ..core.tracker_filter import FilterConfig, TrackerFilter, filter_config
+from ..core.tracker_smoother import smooth_frames
 from ..core.types import BodyPose, TrackerFrame, TrackerStream
 
 # name -> "module:Class"; modules are imported on first use so that an estimator's
@@ -50,9 +51,19 @@ class Estimator(ABC):
         self.fps = fps
         self.use_filter(FilterConfig())
 
-    def use_filter(self, config: FilterConfig) -> None:
-        """Filter the tracker input this way from now on (from the next reset: no history)."""
+    def use_filter(self, config: FilterConfig, smooth: bool = False) -> None:
+        """Filter the tracker input this way from now on (from the next reset: no history).
+        smooth: process() smooths a whole recording forwards and backwards instead
+        (core/tracker_smoother.py); live steps keep the causal filter."""
         self.input_filter = TrackerFilter(config, self.sensors.site_names)
+        self.smooth = smooth
+
+    def filtered(self, frames: Iterable[TrackerFrame]) -> Iterable[TrackerFrame]:
+        """A recording's frames as the method sees them: through the live filter one by one,
+        or, with smooth, the whole recording smoothed at once."""
+        if self.smooth:
+            return smooth_frames(list(frames), self.input_filter.config)
+        return (self.input_filter(frame) for frame in frames)
 
     def reset(self) -> None:
         """Forget all history (a new take, a clock jump back)."""
@@ -68,6 +79,9 @@ class Estimator(ABC):
         the last pose (invalid), a non-finite result starts the method over and holds too,
         and the last valid pose is kept for holding."""
         return self._checked(frame.stamp, self._estimate(self.input_filter(frame)))
+
+    def _step_filtered(self, frame: TrackerFrame) -> BodyPose:
+        return self._checked(frame.stamp, self._estimate(frame))
 
     @abstractmethod
     def _estimate(self, frame: TrackerFrame) -> BodyPose | None:
@@ -127,11 +141,12 @@ class Estimator(ABC):
         more than a second (a concatenated or looping take) starts over there."""
         self.reset()
         poses, last = [], None
-        for frame in stream:
+        for frame in self.filtered(stream):     # the filter starts over by itself where time goes back
             if last is not None and frame.stamp < last - 1.0:
-                self.reset()
+                self._last = None
+                self._reset()
             last = frame.stamp
-            poses.append(self.step(frame))
+            poses.append(self._step_filtered(frame))
         return poses
 
 
@@ -150,12 +165,16 @@ def parse_estimator_spec(spec: str) -> tuple[str, dict]:
 def create_estimator(name: str, sensors: SensorConfig, skeleton: Skeleton, fps: float = 60.0,
                      **options) -> Estimator:
     """An estimator by name with its options; filter_<field> options (of FilterConfig) set
-    the tracker filter every estimator has, filter=false turns it off."""
+    the tracker filter every estimator has, filter=false turns it off; smooth=true smooths
+    a whole recording in process() (offline) instead."""
     try:
         target = ESTIMATORS[name]
     except KeyError:
         raise ValueError(f"unknown estimator {name!r}; available: {', '.join(sorted(ESTIMATORS))}") from None
     filtering = filter_config(options)
+    smooth = options.pop("smooth", False)
+    if not isinstance(smooth, bool):
+        raise ValueError(f"smooth must be true or false, got {smooth!r}")
     module, cls = target.split(":")
     cls = getattr(importlib.import_module(module), cls)
     parameters = inspect.signature(cls.__init__).parameters.values()
@@ -172,5 +191,5 @@ def create_estimator(name: str, sensors: SensorConfig, skeleton: Skeleton, fps: 
         if "unexpected keyword argument" not in str(err):
             raise
         raise ValueError(f"estimator {name!r}: {err}; its options are {', '.join(known)}") from None
-    estimator.use_filter(filtering)
+    estimator.use_filter(filtering, smooth)
     return estimator

@@ -206,7 +206,7 @@ class DtpEstimator(Estimator):
             return super().process(stream)
         self.reset()
         frames = list(stream)
-        samples = [self.sample(self.input_filter(f)) for f in frames]
+        samples = [self.sample(f) for f in self.filtered(frames)]
         # runs of usable frames without a gap longer than max_gap: a window stays within one
         run_of, run = [], 0
         for i, s in enumerate(samples):

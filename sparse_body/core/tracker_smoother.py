@@ -1,0 +1,131 @@
+"""Offline smoothing of a whole recording of tracker input (`sparse-body process`, `sparse-body
+eval --smooth`): the tracker filter's constant-velocity model run forwards over each site's
+samples and then backwards (a Rauch-Tung-Striebel smoother), so each sample is estimated from
+the samples on both sides of it.
+
+Why: a live filter only has the past, and under a centimetre of noise it must choose between
+lag and shake (the README's noise tables). A recording has the future as well. Measured on the
+true tracked joints of the test split with LoBSTr's noise (1 cm per axis at 60 Hz): the best
+causal setting leaves 51 cm/s of velocity error, this smoother 19 (jitter 1.5 instead of 30).
+
+The smoother uses the filter's noise levels (FilterConfig.position_noise, rotation_noise) and
+its own accelerations (smooth_acceleration, smooth_spin_acceleration): a two-sided estimate
+has no lag to trade, so it follows harder accelerations best. Orientations are smoothed in the
+filter's error state (world-frame rotation vectors about the forward estimate). A site's
+samples split into runs where the filter would start over (a gap longer than config.gap, time
+going back, a jump of more than config.jump); invalid and non-finite samples pass untouched.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from .tracker_filter import FilterConfig, _qmul, _quat_rotvec, _rotvec_quat
+from .types import TrackerFrame
+
+
+def _inverse(q):
+    return (-q[0], -q[1], -q[2], q[3])
+
+
+class _Vector:
+    """Positions: plain vectors."""
+
+    @staticmethod
+    def advance(value, rate, dt):
+        return value + rate * dt
+
+    @staticmethod
+    def plus(value, delta):
+        return value + delta
+
+    @staticmethod
+    def minus(a, b):
+        return a - b
+
+
+class _Rotation:
+    """Orientations (x, y, z, w), moved by world-frame rotation vectors."""
+
+    @staticmethod
+    def advance(value, rate, dt):
+        return np.array(_qmul(_rotvec_quat(*(rate * dt)), value))
+
+    @staticmethod
+    def plus(value, delta):
+        q = np.array(_qmul(_rotvec_quat(*delta), value))
+        return q / np.linalg.norm(q)
+
+    @staticmethod
+    def minus(a, b):
+        return np.array(_quat_rotvec(_qmul(a, _inverse(b))))
+
+
+def _smooth_run(stamps: np.ndarray, samples: np.ndarray, q: float, r: float, space) -> np.ndarray:
+    """The smoothed values of one run of samples (n, 3 or 4)."""
+    n = len(stamps)
+    values, rates = [samples[0]], [np.zeros(3)]
+    covs, pred_values, pred_rates, pred_covs, steps = [np.diag([r, 1e4 * r])], [None], [None], [None], [None]
+    for k in range(1, n):        # forwards: the live filter's recursion, every state kept
+        dt = stamps[k] - stamps[k - 1]
+        f = np.array([[1.0, dt], [0.0, 1.0]])
+        p = f @ covs[-1] @ f.T + q * np.array([[dt ** 3 / 3, dt ** 2 / 2], [dt ** 2 / 2, dt]])
+        value, rate = space.advance(values[-1], rates[-1], dt), rates[-1]
+        gain = p[:, 0] / (p[0, 0] + r)
+        e = space.minus(samples[k], value)
+        pred_values.append(value), pred_rates.append(rate), pred_covs.append(p), steps.append(f)
+        values.append(space.plus(value, gain[0] * e))
+        rates.append(rate + gain[1] * e)
+        covs.append(p - np.outer(gain, p[0]))
+    out = [None] * n
+    out[-1], rate = values[-1], rates[-1]
+    for k in range(n - 2, -1, -1):   # backwards: each state corrected by what came after it
+        c = covs[k] @ steps[k + 1].T @ np.linalg.inv(pred_covs[k + 1])
+        d_value, d_rate = space.minus(out[k + 1], pred_values[k + 1]), rate - pred_rates[k + 1]
+        out[k] = space.plus(values[k], c[0, 0] * d_value + c[0, 1] * d_rate)
+        rate = rates[k] + c[1, 0] * d_value + c[1, 1] * d_rate
+    return np.array(out)
+
+
+def _runs(stamps: np.ndarray, samples: np.ndarray, config: FilterConfig, jump: bool) -> list[slice]:
+    """Where the live filter would start a site over: runs of samples between those places."""
+    dt = np.diff(stamps)
+    cut = (dt <= 0) | (dt > config.gap)
+    if jump:
+        cut |= np.linalg.norm(np.diff(samples, axis=0), axis=-1) > config.jump
+    edges = [0, *(np.flatnonzero(cut) + 1).tolist(), len(stamps)]
+    return [slice(a, b) for a, b in zip(edges[:-1], edges[1:]) if b > a]
+
+
+def smooth_frames(frames: list[TrackerFrame], config: FilterConfig) -> list[TrackerFrame]:
+    """The frames of a recording with each site's usable samples smoothed (one frame out per
+    frame in; what is not smoothed is as it came)."""
+    if not config.enabled or not frames:
+        return list(frames)
+    positions = [np.array(f.positions, dtype=float) for f in frames]
+    orientations = [np.array(f.orientations, dtype=float) for f in frames]
+    stamps = np.array([f.stamp for f in frames], dtype=float)
+    for site in dict.fromkeys(s for f in frames for s in f.sites):
+        rows = [(k, f.index(site)) for k, f in enumerate(frames) if site in f.sites and f.valid[f.index(site)]]
+        quantities = []
+        if config.position_noise > 0:
+            quantities.append((positions, config.position_noise ** 2, config.smooth_acceleration ** 2, _Vector,
+                               lambda v: np.isfinite(v).all(), True))
+        if config.rotation_noise > 0:
+            quantities.append((orientations, math.radians(config.rotation_noise) ** 2,
+                               config.smooth_spin_acceleration ** 2, _Rotation,
+                               lambda v: np.isfinite(v).all() and 0.81 < v @ v < 1.21, False))
+        for arrays, r, q, space, usable, jump in quantities:
+            kept = [(k, s) for k, s in rows if usable(arrays[k][s])]
+            if len(kept) < 2:
+                continue
+            times = stamps[[k for k, _ in kept]]
+            samples = np.array([arrays[k][s] for k, s in kept])
+            if space is _Rotation:
+                samples /= np.linalg.norm(samples, axis=-1, keepdims=True)
+            for run in _runs(times, samples, config, jump):
+                smoothed = _smooth_run(times[run], samples[run], q, r, space)
+                for (k, s), value in zip(kept[run], smoothed):
+                    arrays[k][s] = value
+    return [TrackerFrame(f.stamp, f.sites, p, o, f.valid) for f, p, o in zip(frames, positions, orientations)]

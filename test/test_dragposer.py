@@ -364,3 +364,35 @@ def test_missing_temporal_predictor_names_the_file_and_the_way_out(tiny_vae, tmp
     est = create_estimator("dragposer", load_sensor_config("six_point"), Skeleton.canonical(), model_dir=str(tmp_path),
                            temporal_weight=0)
     assert est.temporal is None
+
+
+def test_polished_root_turns_with_the_pelvis_tracker_and_untracked_legs_keep_their_direction(clip_index):
+    """With the shipped model on a test person's walk (16_15): the root takes the pelvis
+    tracker's orientation; six-point, the tracked legs then reach from the hips it places (the
+    hips and knees closer to the truth than with the search's pelvis); four-point, an untracked
+    thigh keeps the direction the search decoded."""
+    from sparse_body.core.rotations import quat_to_matrix
+    from sparse_body.data.catalog import load_clip
+    motion = load_clip(clip_index["16_15"]).slice(0, 90)
+    lower = [J[j] for j in ("left_hip", "right_hip", "left_knee", "right_knee")]
+    for sensors in ("six_point", "four_point"):
+        config = load_sensor_config(sensors)
+        stream = list(synthesize_trackers(motion, config))
+        glob, error = {}, {}
+        for follow in (True, False):
+            est = create_estimator("dragposer", config, motion.skeleton, pelvis_orientation=follow, filter=False)
+            glob[follow], error[follow] = [], []
+            for i, frame in enumerate(stream):
+                pose = est.step(frame)
+                g, pos = forward_kinematics(quat_to_matrix(pose.local_quats), pose.root_position, motion.skeleton.offsets)
+                if follow:
+                    pelvis = [c.target for c in est.tracker_constraints(frame)
+                              if isinstance(c, Orientation) and c.joint == J["pelvis"]][0]
+                    np.testing.assert_allclose(g[0], pelvis, atol=1e-9)
+                glob[follow].append(g)
+                error[follow].append(np.linalg.norm(pos[lower] - motion.positions[i, lower], axis=-1).mean())
+        if sensors == "six_point":
+            assert np.mean(error[True]) < np.mean(error[False])
+        else:
+            thighs = [J["left_hip"], J["right_hip"]]
+            np.testing.assert_allclose(np.array(glob[True])[:, thighs], np.array(glob[False])[:, thighs], atol=1e-9)

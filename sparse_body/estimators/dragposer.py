@@ -39,6 +39,8 @@ from .onnx_model import load_model
 
 HEIGHT_INDEX = [J[j] for j in HEIGHT_JOINTS]
 MODEL_FILES = ("dragposer_encoder.onnx", "dragposer_decoder.onnx", "dragposer_temporal.onnx")
+# the root's children and the tracked end that the IK reaches through each
+ROOT_CHAINS = {J["left_hip"]: J["left_ankle"], J["right_hip"]: J["right_ankle"], J["spine1"]: J["head"]}
 END_JOINTS = frozenset(J[j] for j in ("head", "left_wrist", "right_wrist", "left_ankle", "right_ankle"))
 
 
@@ -146,7 +148,7 @@ class DragPoserEstimator(Estimator):
                  position_weight: float = 1.0, orientation_weight: float = 0.1, floor_height: float | None = 0.0,
                  tolerance: float = 0.01, rotation_tolerance: float = 0.087, threads: int = 1,
                  temporal_weight: float = 0.002, ahead: int = 1, temporal_ramp: bool = True,
-                 polish: bool = True,
+                 polish: bool = True, pelvis_orientation: bool = True,
                  **optimizer) -> None:
         if iterations < 1:
             raise ValueError(f"iterations must be at least 1, got {iterations}")
@@ -165,6 +167,7 @@ class DragPoserEstimator(Estimator):
         self.iterations, self.tolerance, self.rotation_tolerance = iterations, tolerance, rotation_tolerance
         self.weights = (position_weight, orientation_weight)
         self.polish = polish
+        self.pelvis_orientation = pelvis_orientation
         self.floor = floor_height
         self.constraints = ConstraintSet()      # the user's, kept across frames
         if floor_height is not None:
@@ -241,16 +244,27 @@ class DragPoserEstimator(Estimator):
         """Put the tracked pelvis and end effectors exactly on their trackers (ours, not the
         paper's): the latent search stops within its tolerance and a VAE with 1.6 cm
         reconstruction error cannot always close the last centimetre. The root moves onto the
-        pelvis tracker, then the shared closed-form IK turns the spine towards the head and
-        reaches each tracked hand and foot, keeping the decoded elbows, knees and spine curve
-        (a decoded elbow is seldom an exact hinge) and only turning them. The latent state
-        stays as the search left it, so this does not steer later frames."""
+        pelvis tracker and (pelvis_orientation) takes its orientation: the search weighs
+        orientations at a tenth of positions, and a pelvis a few degrees off moves the hips by
+        centimetres (chosen on the validation people: models/dragposer.runtime_pelvis.json).
+        A leg or spine whose end is not tracked keeps its decoded direction; the shared
+        closed-form IK then turns the spine towards the head and reaches each tracked hand and
+        foot, keeping the decoded elbows, knees and spine curve (a decoded elbow is seldom an
+        exact hinge) and only turning them. The latent state stays as the search left it, so
+        this does not steer later frames."""
         root = np.array(root, float)
         positions = [c for c in trackers if isinstance(c, Position)]
         for c in positions:
             if c.joint == J["pelvis"]:
                 root = np.array(c.target, float)
         goals = {c.joint: np.asarray(c.target, float) for c in positions if c.joint in END_JOINTS}
+        for c in trackers if self.pelvis_orientation else ():   # and turns with it: the hips hang from it
+            if isinstance(c, Orientation) and c.joint == J["pelvis"]:
+                local = local.copy()
+                for child, end in ROOT_CHAINS.items():
+                    if end not in goals:     # an untracked leg or spine keeps its decoded direction
+                        local[child] = c.target.T @ local[0] @ local[child]
+                local[0] = c.target          # a tracked one turns with the pelvis, then reaches
         if goals:
             local, glob, _ = solve_body(local, root, self.skeleton.offsets, goals, keep_shape=True)
         else:

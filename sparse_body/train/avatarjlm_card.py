@@ -6,10 +6,12 @@ import json
 from pathlib import Path
 
 from ..data.catalog import load_split
-from .model_card import evaluate_jobs, measured_results, results_table, runtime_choices_table
+from .model_card import augmentation_table, evaluate_jobs, measured_results, results_table, runtime_choices_table
 
 COLUMNS = ("MPJPE [cm]", "MPJRE [deg]", "MPJVE [cm/s]", "Jitter [100m/s3]", "Hand PE [cm]", "Lower PE [cm]",
            "Toe PE [cm]")
+VALIDATION = {"mpjpe_cm": "val MPJPE [cm]", "lower_pe_cm": "val lower PE [cm]", "hand_pe_cm": "val hands [cm]",
+              "mpjre_deg": "val MPJRE [deg]"}
 RUNTIME_COMMAND = ("sparse-body eval --sensors three_point --split validation --no-compare "
                    "--output models/avatarjlm.runtime.json --estimator avatarjlm:OPTIONS ...")
 # (sensors, protocol) -> the estimator specs measured there
@@ -126,6 +128,10 @@ network output as it is).
 | step | minutes | train loss | val MPJPE [cm] | val hands [cm] |
 |---|---|---|---|---|
 {_curve(report)}
+
+## Augmentation (three-point, the network alone, clean trackers)
+
+{augmentation_table(onnx_path.with_suffix('.train.json'), VALIDATION)}
 
 ## Test split, three-point (`sparse-body eval --estimator avatarjlm --sensors three_point`)
 

@@ -7,12 +7,14 @@ from pathlib import Path
 
 from ..data.catalog import load_split
 from .dtp_train import pretrained_path
-from .model_card import evaluate_jobs, measured_results, results_table, runtime_choices_table
+from .model_card import augmentation_table, evaluate_jobs, measured_results, results_table, runtime_choices_table
 
 RUNTIME_COMMAND = ("sparse-body eval --sensors six_point --split validation --no-compare [--occlusion 20] "
                    "--output models/dtp.runtime[_occluded].json --estimator dtp:OPTIONS ...")
 
 OCCLUSION_PERCENT = 20.0
+VALIDATION = {"clean_mpjpe_cm": "val MPJPE [cm]", "clean_mpjre_deg": "val MPJRE [deg]",
+              "occluded_mpjpe_cm": "val feet occluded: MPJPE [cm]", "occluded_mpjre_deg": "MPJRE [deg]"}
 # (setup, estimator spec): each DTP model, then the six-point estimators it is compared with
 FIELD_RUNS = ("dtp", "dtp:polish=false", "dtp:model=lookahead", "dtp:model=pretrained", "dragposer", "lobstr", "ik")
 LAB_RUNS = ("dtp", "dtp:polish=false", "ik")
@@ -108,6 +110,10 @@ window each frame (`sparse_body/estimators/dtp.py`); no torch.
 | stage | step | minutes | train loss | val clean [cm] | val feet occluded [cm] |
 |---|---|---|---|---|---|
 {curve(report)}
+
+## Augmentation (the network alone, per-window errors in the pelvis frame)
+
+{augmentation_table(onnx_path.with_suffix('.train.json'), VALIDATION)}
 
 ## Test split, six-point (`sparse-body eval --estimator dtp --sensors six_point`)
 

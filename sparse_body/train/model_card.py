@@ -30,7 +30,7 @@ RUNTIME_COMMAND = ("sparse-body eval --sensors four_point --split validation --n
                    "--output models/dragposer.runtime.json --estimator dragposer:OPTIONS ...")
 
 
-def runtime_choices_table(results_path: Path, command: str = RUNTIME_COMMAND) -> str:
+def runtime_choices_table(results_path: Path, command: str = RUNTIME_COMMAND, metrics=RUNTIME_METRICS) -> str:
     """The runtime options compared in one `sparse-body eval --output` file (written by
     `command`), as a Markdown table (estimator specs as rows), or a line saying how to
     measure them."""
@@ -39,10 +39,10 @@ def runtime_choices_table(results_path: Path, command: str = RUNTIME_COMMAND) ->
     if not path.is_file():
         return f"(not measured: `{path.name}` is missing; `{command}` writes it)"
     results = json.loads(path.read_text())
-    rows = ["| estimator | clips | " + " | ".join(RUNTIME_METRICS) + " |", "|---|---:|" + "---:|" * len(RUNTIME_METRICS)]
+    rows = ["| estimator | clips | " + " | ".join(metrics) + " |", "|---|---:|" + "---:|" * len(metrics)]
     for r in results:
         rows.append(f"| `{r['estimator']}` | {len(r['clips'])} | "
-                    + " | ".join(f"{r['summary'][m]:.2f}" for m in RUNTIME_METRICS) + " |")
+                    + " | ".join(f"{r['summary'][m]:.2f}" for m in metrics) + " |")
     return f"`{command}` ({results[0]['split']} split, {results[0]['protocol']}):\n\n" + "\n".join(rows)
 
 
@@ -76,10 +76,10 @@ TEMPORAL_VALIDATION = {"mse": "val MSE", "mse_next": "val MSE, next step", "hold
 
 
 def write_lobstr_card(onnx_path: Path, report: dict, mocap_root: Path, limit: int | None = None) -> Path:
-    augmentation = augmentation_table(Path(onnx_path).with_suffix(".train.json"), LOBSTR_VALIDATION)
     """Evaluate the model on the test split (four-point) beside the IK baseline, without its
     contact IK and the paper's figures: field protocol, lab protocol beside it, and LoBSTr's
     tracker noise against none; write <model>.md."""
+    augmentation = augmentation_table(Path(onnx_path).with_suffix(".train.json"), LOBSTR_VALIDATION)
     from ..data.field_protocol import FIELD, LAB
     from ..evaluation import evaluate, format_table, paper_figures
     sensors = load_sensor_config("four_point")
@@ -148,8 +148,11 @@ Skate with contact IK: {results[0].summary['Skate [cm/s]']:.2f} cm/s; without: {
 
 ## Tracker noise (field protocol, `--noise none` against `--noise lobstr`)
 
-LoBSTr's noise (1 cm, 1.5 degrees) with the input filter set for it, against clean trackers
-(no filter):
+LoBSTr's noise (1 cm, 1.5 degrees) with the input filter set for it, and smoothed over the
+whole clip as `sparse-body process --smooth` does (`E:smooth=true`), against clean trackers (no
+filter). No live filter can take this noise out without lag: on the tracked points alone the
+best one leaves about 51 cm/s of velocity error (`scripts/noise_floor.py`; the README's
+"Offline smoothing").
 
 {noise_table}
 
@@ -215,16 +218,20 @@ NOISE_METRICS = ("MPJPE [cm]", "MPJVE [cm/s]", "Jitter [100m/s3]", "End-effector
 
 def noise_results_table(runs: list[tuple[str, dict]], sensors, mocap_root: Path, limit: int | None) -> str:
     """A Markdown table: each estimator on the test split, field protocol, clean trackers
-    against LoBSTr's noise, and the ratios the noise brings."""
+    against LoBSTr's noise (through the live filter, and smoothed offline), and the ratios the
+    noise brings."""
     from ..data.field_protocol import Protocol
     from ..evaluation import evaluate
     rows = ["| estimator | trackers | " + " | ".join(NOISE_METRICS) + " |", "|---|---|" + "---|" * len(NOISE_METRICS)]
     for spec, options in runs:
-        clean, noisy = (evaluate(spec, sensors, mocap_root, "test", protocol=Protocol.named(noise=n), limit=limit,
-                                 progress=False, **options).summary for n in ("none", "lobstr"))
+        clean, live, smoothed = (
+            evaluate(spec, sensors, mocap_root, "test", protocol=Protocol.named(noise=noise), limit=limit,
+                     progress=False, **options, **extra).summary
+            for noise, extra in (("none", {}), ("lobstr", {}), ("lobstr", {"smooth": True})))
         rows.append(f"| {spec}/{sensors.name} | clean | " + " | ".join(f"{clean[m]:.2f}" for m in NOISE_METRICS) + " |")
-        rows.append(f"| | LoBSTr noise, filtered | " + " | ".join(f"{noisy[m]:.2f}" for m in NOISE_METRICS) + " |")
-        rows.append(f"| | ratio | " + " | ".join(f"{noisy[m] / clean[m]:.2f}x" for m in NOISE_METRICS) + " |")
+        for label, noisy in (("LoBSTr noise, live filter", live), ("LoBSTr noise, smoothed offline", smoothed)):
+            rows.append(f"| | {label} | " + " | ".join(f"{noisy[m]:.2f}" for m in NOISE_METRICS) + " |")
+            rows.append("| | ratio | " + " | ".join(f"{noisy[m] / clean[m]:.2f}x" for m in NOISE_METRICS) + " |")
     return "\n".join(rows)
 
 
@@ -253,6 +260,12 @@ def write_dragposer_card(out_dir: Path, mocap_root: Path, limit: int | None = No
     tcfg, tval = temporal["config"], temporal["validation"]
     vae_augmentation = augmentation_table(out_dir / "dragposer.train.json", VAE_VALIDATION)
     runtime_table = runtime_choices_table(out_dir / "dragposer.runtime.json")
+    pelvis_tables = "\n\n".join(
+        runtime_choices_table(out_dir / f"dragposer.pelvis_{name}.json",
+                              f"sparse-body eval --split validation --no-compare --sensors {name} --estimator dragposer "
+                              f"--estimator dragposer:pelvis_orientation=false --output models/dragposer.pelvis_{name}.json",
+                              ("MPJPE [cm]", "MPJRE [deg]", "Lower PE [cm]", "MPJVE [cm/s]", "Jitter [100m/s3]"))
+        for name in ("six_point", "four_point"))
     temporal_augmentation = augmentation_table(out_dir / "dragposer_temporal.train.json", TEMPORAL_VALIDATION)
 
     def curve(history, columns):
@@ -338,6 +351,12 @@ each prediction for the 4 frames instead of ramping to it):
 
 {runtime_table}
 
+The polish's root takes the pelvis tracker's orientation (`pelvis_orientation`, the default;
+false: the orientation the search found), a leg or the spine whose end is not tracked keeping
+its decoded direction; measured on the validation people:
+
+{pelvis_tables}
+
 Also tried with earlier models (clip-wise split, on the first 10 test clips), and not kept:
 the predictor fed the final pose re-encoded instead of the search's latent (MPJPE 5.66 against
 5.54); a more regularised predictor (dropout 0.3, 2+2 layers, feed-forward 128, weight decay
@@ -364,8 +383,11 @@ The paper's figures come from its own data and protocol (a guide, not a like-for
 
 ## Tracker noise (field protocol, `--noise none` against `--noise lobstr`)
 
-LoBSTr's noise (1 cm, 1.5 degrees) with the input filter set for it, against clean trackers
-(no filter):
+LoBSTr's noise (1 cm, 1.5 degrees) with the input filter set for it, and smoothed over the
+whole clip as `sparse-body process --smooth` does (`E:smooth=true`), against clean trackers (no
+filter). No live filter can take this noise out without lag: on the tracked points alone the
+best one leaves about 51 cm/s of velocity error (`scripts/noise_floor.py`; the README's
+"Offline smoothing").
 
 {(chr(10) * 2).join(noise_tables)}
 

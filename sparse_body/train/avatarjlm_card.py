@@ -133,6 +133,9 @@ network output as it is).
 
 {augmentation_table(onnx_path.with_suffix('.train.json'), VALIDATION)}
 
+These runs are short (the steps column; the shipped model trained {report['steps']} steps), so they show
+the early effect only; read small differences with care.
+
 ## Test split, three-point (`sparse-body eval --estimator avatarjlm --sensors three_point`)
 
 Field protocol (the default: the body from a T-pose calibration, trackers mounted as a user

@@ -115,6 +115,9 @@ window each frame (`sparse_body/estimators/dtp.py`); no torch.
 
 {augmentation_table(onnx_path.with_suffix('.train.json'), VALIDATION)}
 
+Shorter runs than the shipped model's (the steps column: pre-training and fine-tuning
+together), so they show the early effect; read small differences with care.
+
 ## Test split, six-point (`sparse-body eval --estimator dtp --sensors six_point`)
 
 Field protocol (the default: the body from a T-pose calibration, trackers mounted as a user

@@ -141,9 +141,9 @@ class Estimator(ABC):
         more than a second (a concatenated or looping take) starts over there."""
         self.reset()
         poses, last = [], None
-        for frame in self.filtered(stream):     # the filter starts over by itself where time goes back
-            if last is not None and frame.stamp < last - 1.0:
-                self._last = None
+        for frame in self.filtered(stream):
+            if last is not None and frame.stamp < last - 1.0:   # the method starts over (the
+                self._last = None                                # filter did so by itself)
                 self._reset()
             last = frame.stamp
             poses.append(self._step_filtered(frame))

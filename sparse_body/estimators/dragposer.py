@@ -246,7 +246,7 @@ class DragPoserEstimator(Estimator):
         reconstruction error cannot always close the last centimetre. The root moves onto the
         pelvis tracker and (pelvis_orientation) takes its orientation: the search weighs
         orientations at a tenth of positions, and a pelvis a few degrees off moves the hips by
-        centimetres (chosen on the validation people: models/dragposer.runtime_pelvis.json).
+        centimetres (chosen on the validation people: models/dragposer.pelvis_*.json).
         A leg or spine whose end is not tracked keeps its decoded direction; the shared
         closed-form IK then turns the spine towards the head and reaches each tracked hand and
         foot, keeping the decoded elbows, knees and spine curve (a decoded elbow is seldom an

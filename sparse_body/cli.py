@@ -31,10 +31,10 @@ def cmd_eval(args) -> int:
         from .data.catalog import motion_files
         files = motion_files(args.motion)
         results = [evaluate(spec, sensors, None, args.split, args.fps, protocol, args.limit, progress=not args.quiet,
-                            motions=files) for spec in specs]
+                            motions=files, per_joint=args.per_joint) for spec in specs]
     else:
         results = [evaluate(spec, sensors, _mocap(args), args.split, args.fps, protocol, args.limit,
-                            progress=not args.quiet) for spec in specs]
+                            progress=not args.quiet, per_joint=args.per_joint) for spec in specs]
     print(format_table(results, reference))
     stem = re.sub(r"[^\w.+-]", "_", "+".join(args.estimator))
     out = Path(args.output or f"sparse_body_eval_{stem}_{sensors.name}.json")
@@ -335,6 +335,9 @@ def build_parser() -> argparse.ArgumentParser:
                         "lose sight for half a second and report the origin with the identity rotation or noise "
                         "within a leg's length")
     p.add_argument("--limit", type=_positive_int, help="only the first N clips of the split")
+    p.add_argument("--per-joint", action="store_true",
+                   help="also each joint's position and rotation error (rows 'PE <joint> [cm]', 'RE <joint> [deg]'): "
+                        "where an estimator's error sits")
     p.add_argument("--motion", action="append", metavar="PATH",
                    help="evaluate on these motion files instead of the CMU split (repeat; a folder stands for its "
                         ".bvh / .amc / .npz files, an .amc needs its .asf beside it)")

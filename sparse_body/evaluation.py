@@ -15,7 +15,7 @@ import yaml
 
 from .core.contacts import contact_labels, estimate_floor
 from .core.kinematics import forward_kinematics
-from .core.metrics import sequence_metrics, weighted_mean
+from .core.metrics import per_joint_metrics, sequence_metrics, weighted_mean
 from .core.rotations import quat_to_matrix
 from .core.sensors import SensorConfig
 from .data.catalog import DEFAULT_FPS, load_clip, load_motion_file, split_clips
@@ -48,14 +48,16 @@ class EvalResult:
 
 
 def evaluate_motion(motion: Motion, estimator_name: str, sensors: SensorConfig,
-                    protocol: Protocol = FIELD, seed: int = 0, **options) -> dict[str, float]:
+                    protocol: Protocol = FIELD, seed: int = 0, per_joint: bool = False,
+                    **options) -> dict[str, float]:
     """Metrics of one estimator on one motion, from the motion's own virtual trackers as the
     protocol hands them to a user's estimator (its body, mounting, noise).
 
     The motion is first moved so that its floor is z = 0, as in a calibrated VR play space:
     estimators that need the floor (IK contacts, LoBSTr's reference height) find it there.
     The estimate's joints are placed with the body the estimator was given, as a user's
-    avatar or robot would show them."""
+    avatar or robot would show them. per_joint: each joint's errors as well
+    (core/metrics.py: per_joint_metrics)."""
     floor = estimate_floor(motion.positions)
     motion = Motion(motion.name, motion.fps, motion.skeleton, motion.local_quats,
                     motion.root_positions - [0.0, 0.0, floor])
@@ -70,8 +72,11 @@ def evaluate_motion(motion: Motion, estimator_name: str, sensors: SensorConfig,
     floor = 0.0
     gt_contacts = contact_labels(motion.positions, motion.fps, floor)
     tracked = sorted({s.joint_index for s in sensors.sites})
-    return sequence_metrics(pos, glob, local, motion.positions, motion.global_rotations, motion.local_rotations,
-                            motion.fps, floor, gt_contacts, pred_contacts, tracked)
+    metrics = sequence_metrics(pos, glob, local, motion.positions, motion.global_rotations, motion.local_rotations,
+                               motion.fps, floor, gt_contacts, pred_contacts, tracked)
+    if per_joint:
+        metrics.update(per_joint_metrics(pos, motion.positions, local, motion.local_rotations))
+    return metrics
 
 
 def filter_options(noise: TrackerNoise) -> dict[str, float]:
@@ -125,7 +130,8 @@ COMPARE_WITH = {
 
 def evaluate(estimator_spec: str, sensors: SensorConfig, mocap_root: Path | None, split: str = "test",
              fps: float = DEFAULT_FPS, protocol: Protocol = FIELD, limit: int | None = None,
-             progress: bool = True, motions: list[Path] | None = None, **options) -> EvalResult:
+             progress: bool = True, motions: list[Path] | None = None, per_joint: bool = False,
+             **options) -> EvalResult:
     """estimator_spec: a name, optionally with options ("lobstr:contact_ik=false"). The clips
     of a split of the CMU catalogue, or the motion files given (a user's own: BVH or ASF/AMC
     of a known layout, sparse_body .npz)."""
@@ -146,7 +152,8 @@ def evaluate(estimator_spec: str, sensors: SensorConfig, mocap_root: Path | None
         motion = load()
         result.clips.append(name)
         result.frames.append(len(motion))
-        result.per_clip.append(evaluate_motion(motion, estimator_name, sensors, protocol, seed=k, **options))
+        result.per_clip.append(evaluate_motion(motion, estimator_name, sensors, protocol, seed=k,
+                                               per_joint=per_joint, **options))
     result.seconds = time.perf_counter() - start
     return result
 

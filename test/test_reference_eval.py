@@ -67,6 +67,22 @@ def test_eval_command_prints_the_table_and_writes_json(mocap_root, tmp_path):
     assert result["summary"]["Root PE [cm]"] < 10.0      # the pelvis tracker places the root
 
 
+def test_eval_per_joint_rows_say_where_the_error_sits_and_average_to_the_totals(mocap_root, tmp_path):
+    out = tmp_path / "eval.json"
+    proc = subprocess.run([sys.executable, "-m", "sparse_body.cli", "eval", "--estimator", "ik", "--sensors",
+                           "four_point", "--limit", "2", "--quiet", "--per-joint", "--output", str(out)],
+                          capture_output=True, text=True, timeout=600, env={**os.environ, "SPARSE_BODY_MOCAP": str(mocap_root)})
+    assert proc.returncode == 0, proc.stderr
+    assert "PE left_knee [cm]" in proc.stdout and "RE right_elbow [deg]" in proc.stdout
+    summary = json.loads(out.read_text())[0]["summary"]
+    from sparse_body.core.skeleton import JOINT_NAMES
+    pe = [summary[f"PE {j} [cm]"] for j in JOINT_NAMES]
+    re = [summary[f"RE {j} [deg]"] for j in JOINT_NAMES]
+    assert np.isclose(np.mean(pe), summary["MPJPE [cm]"]) and np.isclose(np.mean(re), summary["MPJRE [deg]"])
+    # four-point IK: the tracked wrists sit on their controllers, the untracked knees stand still
+    assert summary["PE left_wrist [cm]"] < 1.0 < summary["PE left_knee [cm]"]
+
+
 def test_eval_without_mocap_says_where_to_point(tmp_path):
     proc = subprocess.run([sys.executable, "-m", "sparse_body.cli", "eval", "--estimator", "reference",
                            "--mocap", str(tmp_path)], capture_output=True, text=True, timeout=120)

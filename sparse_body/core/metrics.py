@@ -9,7 +9,7 @@ import numpy as np
 
 from .contacts import FOOT_JOINTS
 from .rotations import angle_between
-from .skeleton import HANDS, LOWER_BODY, UPPER_BODY, joint_indices
+from .skeleton import HANDS, JOINT_NAMES, LOWER_BODY, UPPER_BODY, joint_indices
 
 LOWER = joint_indices(LOWER_BODY)
 UPPER = joint_indices(UPPER_BODY)
@@ -90,6 +90,16 @@ def sequence_metrics(pred_pos, pred_glob, pred_local, gt_pos, gt_glob, gt_local,
         "Contact acc [%]": contact_accuracy(pred_contacts, gt_contacts) if pred_contacts is not None else float("nan"),
     }
     return out
+
+
+def per_joint_metrics(pred_pos, gt_pos, pred_local, gt_local) -> dict[str, float]:
+    """Each joint's position and rotation error (local rotation, as MPJRE), keyed
+    "PE <joint> [cm]" and "RE <joint> [deg]": where a method's error sits. Their means over the
+    joints are MPJPE and MPJRE."""
+    pe = np.linalg.norm(pred_pos - gt_pos, axis=-1).mean(axis=0) * 100
+    re = np.rad2deg(angle_between(pred_local, gt_local)).mean(axis=0)
+    return {**{f"PE {name} [cm]": float(e) for name, e in zip(JOINT_NAMES, pe)},
+            **{f"RE {name} [deg]": float(e) for name, e in zip(JOINT_NAMES, re)}}
 
 
 def weighted_mean(rows: list[dict[str, float]], weights: list[float]) -> dict[str, float]:

@@ -168,6 +168,32 @@ def test_shipped_three_point_model_beats_ik_on_a_held_out_walk(clip_index):
     assert learned["Hand PE [cm]"] < 1.0
 
 
+def _knee_twist_deg(local, offsets) -> float:
+    """The largest turn of a shin about its own length in the knees' local rotations."""
+    from sparse_body.core.rotations import angle_between, rotation_between
+    turns = [angle_between(rotation_between(offsets[ankle], r[knee] @ offsets[ankle]), r[knee])
+             for r in local for knee, ankle in ((J["left_knee"], J["left_ankle"]), (J["right_knee"], J["right_ankle"]))]
+    return float(np.rad2deg(np.max(turns)))
+
+
+def test_shipped_three_point_knees_are_hinges_and_the_ankles_stay(clip_index):
+    """The three-point network turns a shin about its own length by up to 175 degrees
+    (validation person 05's walk, 05_02): hinge_knees takes that turn out of the knees and
+    moves no ankle; without it the knees keep it."""
+    motion = load_clip(clip_index["05_02"]).slice(0, 120)
+    stream = list(synthesize_trackers(motion, THREE))
+    ankles, twists = {}, {}
+    for hinge in (True, False):
+        est = create_estimator("avatarjlm", THREE, motion.skeleton, hinge_knees=hinge, filter=False)
+        poses = [est.step(f) for f in stream]
+        local = quat_to_matrix(np.stack([p.local_quats for p in poses]))
+        _, pos = forward_kinematics(local, np.stack([p.root_position for p in poses]), motion.skeleton.offsets)
+        ankles[hinge] = pos[:, [J["left_ankle"], J["right_ankle"]]]
+        twists[hinge] = _knee_twist_deg(local, motion.skeleton.offsets)
+    assert twists[True] < 0.01 and twists[False] > 90
+    np.testing.assert_allclose(ankles[True], ankles[False], atol=1e-9)
+
+
 def test_estimator_node_runs_avatarjlm_over_dds(tiny_models, tmp_path, clip, ros_env):
     """estimator:=avatarjlm with the three-point configuration, fed by the tracker bridge from a bag."""
     import rclpy

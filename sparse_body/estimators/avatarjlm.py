@@ -8,7 +8,10 @@ fewer frames, as in training.
 
 The pose: the network's local rotations on the person's (calibrated) skeleton, its root
 rotation turned from the head's heading frame into the world; the body placed by head
-alignment (the paper's), or on the pelvis tracker with the four-point model. Then
+alignment (the paper's), or on the pelvis tracker with the four-point model. The knees are
+hinges (hinge_knees, ours): the three-point network turns a shin about its own length by up
+to 175 degrees, the ankle partly turning back, which leaves positions near right and the
+joint angles a user drives a robot or an avatar with broken. Then
 (polish=true, ours: the paper relies on its hand-alignment loss alone) the closed-form IK
 brings the head and hands onto their trackers, keeping the network's spine curve and
 elbows, and they take their trackers' orientation.
@@ -32,7 +35,7 @@ from ..core.body_ik import solve_body
 from ..core.contacts import FOOT_JOINTS as TOE_JOINTS
 from ..core.contacts import toe_contacts
 from ..core.kinematics import forward_kinematics
-from ..core.rotations import rotations_to_quat, sixd_to_matrix
+from ..core.rotations import rotation_between, rotations_to_quat, sixd_to_matrix
 from ..core.skeleton import JOINT_INDEX, PARENTS
 from ..core.types import BodyPose, TrackerFrame
 from .avatarjlm_features import SITES, features, reference
@@ -41,6 +44,7 @@ from .lobstr_features import body_scale
 from .onnx_model import load_model, shipped_model_path
 
 HEAD = JOINT_INDEX["head"]
+KNEES = {JOINT_INDEX["left_knee"]: JOINT_INDEX["left_ankle"], JOINT_INDEX["right_knee"]: JOINT_INDEX["right_ankle"]}
 MODELS = {"three_point": "avatarjlm.onnx", "four_point": "avatarjlm_four_point.onnx"}
 
 
@@ -88,8 +92,8 @@ class AvatarJlmEstimator(Estimator):
     required_sites = frozenset(SITES["three_point"])
 
     def __init__(self, sensors, skeleton, fps: float = 60.0, model: str = "auto", model_path: str | None = None,
-                 polish: bool = True, end_orientations: bool = True, floor_height: float = 0.0,
-                 max_gap: float = 0.5, threads: int = 1) -> None:
+                 polish: bool = True, end_orientations: bool = True, hinge_knees: bool = True,
+                 floor_height: float = 0.0, max_gap: float = 0.5, threads: int = 1) -> None:
         super().__init__(sensors, skeleton, fps)
         if model == "auto":
             model = "four_point" if "pelvis" in sensors.site_names else "three_point"
@@ -99,7 +103,7 @@ class AvatarJlmEstimator(Estimator):
             raise ValueError(f"{self.model.path} needs trackers on {', '.join(sorted(missing))}; sensor configuration "
                              f"{sensors.name!r} has {', '.join(sensors.site_names)} (use model:=three_point)")
         self.scale = body_scale(skeleton)
-        self.polish, self.end_orientations = polish, end_orientations
+        self.polish, self.end_orientations, self.hinge_knees = polish, end_orientations, hinge_knees
         self.floor, self.max_gap = floor_height, max_gap
         self._joints = [sensors.site(s).joint_index for s in self.model.sites]
         self.reset()
@@ -130,6 +134,9 @@ class AvatarJlmEstimator(Estimator):
     def _pose(self, stamp: float, out: np.ndarray, world: np.ndarray, rot: np.ndarray) -> BodyPose:
         local = out.copy()
         offsets = self.skeleton.offsets
+        if self.hinge_knees:    # a knee is a hinge: no turn of the shin about its own length
+            for knee, ankle in KNEES.items():
+                local[knee] = rotation_between(offsets[ankle], local[knee] @ offsets[ankle])
         four = "pelvis" in self.model.sites
         local[0] = rot[self.model.sites.index("pelvis")] if four else reference(world[0], rot[0])[1] @ out[0]
         glob, pos = forward_kinematics(local, np.zeros(3), offsets)

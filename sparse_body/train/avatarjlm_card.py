@@ -102,8 +102,9 @@ heads starting at the identity (`identity_start`). From random rotations and at 
 root settles half a turn about its own axis with its children turned back: right positions
 from wrong local rotations. The three-point model was trained that way and kept, being
 better on the validation people than its retrained twin (12.44 against 12.57 cm MPJPE,
-32.8 against 44.1 degrees MPJRE); its local rotations (MPJRE) carry that turn; a
-closed-form IK polish of head and hands after the network (`polish=false` is the paper's
+32.8 against 44.1 degrees MPJRE, both before the knees were made hinges); its local rotations
+carry its own artefact, a shin turned about its own length by up to 175 degrees, which the
+runtime takes out (`hinge_knees`, chosen below); a closed-form IK polish of head and hands after the network (`polish=false` is the paper's
 network output as it is).
 
 ## Data

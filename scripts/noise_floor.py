@@ -32,31 +32,32 @@ def main() -> None:
         clean = synthesize_trackers(motion, sensors, NO_NOISE)
         clips.append((clean.positions, list(synthesize_trackers(motion, sensors, LOBSTR_NOISE, seed=1)), motion.fps))
 
-    def figures(run, site: int | None = None) -> tuple[float, float]:
-        rows = []
+    def figures(run) -> tuple[float, float, list[float]]:
+        """Velocity error and jitter over all trackers, and the velocity error of each."""
+        rows, per_site = [], []
         for truth, noisy, fps in clips:
             est = np.array([f.positions for f in run(noisy)])
-            if site is not None:
-                est, truth = est[:, [site]], truth[:, [site]]
             rows.append((len(truth), mpjve(est, truth, fps), jitter(est, fps)))
+            per_site.append([mpjve(est[:, [s]], truth[:, [s]], fps) for s in range(est.shape[1])])
         n, v, j = np.array(rows).T
-        return float(np.average(v, weights=n)), float(np.average(j, weights=n))
+        return float(np.average(v, weights=n)), float(np.average(j, weights=n)), np.average(per_site, axis=0, weights=n)
 
     print(f"{args.sensors} tracker positions, {args.split} split ({len(clips)} clips), LoBSTr noise")
     print("clean trackers: jitter %.1f" % np.average([jitter(t, f) for t, _, f in clips],
                                                      weights=[len(t) for t, _, _ in clips]))
-    print("raw noisy: velocity error %.1f cm/s, jitter %.1f" % figures(lambda frames: frames))
+    print("raw noisy: velocity error %.1f cm/s, jitter %.1f" % figures(lambda frames: frames)[:2])
     for a in (0.1, 0.2, 0.35, 0.5, 1.0):
         config = FilterConfig(position_noise=0.01, rotation_noise=0.0, acceleration=a)
         def live(frames, config=config):
             each = TrackerFilter(config, sensors.site_names)
             return [each(f) for f in frames]
-        print("live filter, acceleration %.2f: velocity error %.1f cm/s, jitter %.1f" % (a, *figures(live)))
-        print("  per site: " + ", ".join(f"{name} {figures(live, s)[0]:.1f}" for s, name in enumerate(sensors.site_names)))
+        velocity, shake, per_site = figures(live)
+        print("live filter, acceleration %.2f: velocity error %.1f cm/s, jitter %.1f" % (a, velocity, shake))
+        print("  per site: " + ", ".join(f"{name} {v:.1f}" for name, v in zip(sensors.site_names, per_site)))
     for a in (0.3, 0.5, 0.7, 1.0, 1.5, 3.0):
         config = FilterConfig(position_noise=0.01, rotation_noise=0.0, smooth_acceleration=a)
         print("offline smoother, acceleration %.2f: velocity error %.1f cm/s, jitter %.1f"
-              % (a, *figures(lambda frames: smooth_frames(frames, config))))
+              % (a, *figures(lambda frames: smooth_frames(frames, config))[:2]))
 
 
 if __name__ == "__main__":

@@ -93,6 +93,18 @@ def _quat_rotvec(q):
     return (x * scale, y * scale, z * scale)
 
 
+def covariance_step(p: tuple[float, float, float], dt: float, q: float, r: float):
+    """One step of the constant-velocity model's shared 2x2 covariance (p00, p01, p11): the
+    prediction by dt (process noise q), the gains (value, rate) of a sample with variance r,
+    and the covariance after it. The live filter and the offline smoother both step this way."""
+    p00, p01, p11 = p
+    a = p00 + 2 * dt * p01 + dt * dt * p11 + q * dt ** 3 / 3
+    b = p01 + dt * p11 + q * dt * dt / 2
+    c = p11 + q * dt
+    k0, k1 = a / (a + r), b / (a + r)
+    return (a, b, c), (k0, k1), ((1 - k0) * a, (1 - k0) * b, c - k1 * b)
+
+
 class _Track:
     """One site's constant-velocity Kalman state for one quantity (a position or an
     orientation): the value, its rate per axis, the 2x2 covariance the axes share."""
@@ -104,12 +116,8 @@ class _Track:
 
     def gains(self, dt: float, q: float, r: float) -> tuple[float, float]:
         """Predict the covariance by dt; the gains (value, rate) of this sample's innovation."""
-        a = self.p00 + 2 * dt * self.p01 + dt * dt * self.p11 + q * dt ** 3 / 3
-        b = self.p01 + dt * self.p11 + q * dt * dt / 2
-        c = self.p11 + q * dt
-        k0, k1 = a / (a + r), b / (a + r)
-        self.p00, self.p01, self.p11 = (1 - k0) * a, (1 - k0) * b, c - k1 * b
-        return k0, k1
+        _, gains, (self.p00, self.p01, self.p11) = covariance_step((self.p00, self.p01, self.p11), dt, q, r)
+        return gains
 
     def start(self, value, stamp: float, r: float) -> None:
         """From this sample: the value as measured, the rate unknown (zero, wide)."""

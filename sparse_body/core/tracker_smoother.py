@@ -22,7 +22,7 @@ import math
 
 import numpy as np
 
-from .tracker_filter import FilterConfig, _qmul, _quat_rotvec, _rotvec_quat
+from .tracker_filter import FilterConfig, _qmul, _quat_rotvec, _rotvec_quat, covariance_step
 from .types import TrackerFrame
 
 
@@ -66,26 +66,27 @@ class _Rotation:
 def _smooth_run(stamps: np.ndarray, samples: np.ndarray, q: float, r: float, space) -> np.ndarray:
     """The smoothed values of one run of samples (n, 3 or 4)."""
     n = len(stamps)
-    values, rates = [samples[0]], [np.zeros(3)]
-    covs, pred_values, pred_rates, pred_covs, steps = [np.diag([r, 1e4 * r])], [None], [None], [None], [None]
-    for k in range(1, n):        # forwards: the live filter's recursion, every state kept
+    values, rates, covs = [samples[0]], [np.zeros(3)], [(r, 0.0, 1e4 * r)]     # as _Track.start
+    predicted = [None]                  # (value, rate, covariance) before each sample
+    for k in range(1, n):               # forwards: the live filter's recursion, every state kept
         dt = stamps[k] - stamps[k - 1]
-        f = np.array([[1.0, dt], [0.0, 1.0]])
-        p = f @ covs[-1] @ f.T + q * np.array([[dt ** 3 / 3, dt ** 2 / 2], [dt ** 2 / 2, dt]])
         value, rate = space.advance(values[-1], rates[-1], dt), rates[-1]
-        gain = p[:, 0] / (p[0, 0] + r)
+        cov, (k0, k1), updated = covariance_step(covs[-1], dt, q, r)
         e = space.minus(samples[k], value)
-        pred_values.append(value), pred_rates.append(rate), pred_covs.append(p), steps.append(f)
-        values.append(space.plus(value, gain[0] * e))
-        rates.append(rate + gain[1] * e)
-        covs.append(p - np.outer(gain, p[0]))
+        predicted.append((value, rate, cov))
+        values.append(space.plus(value, k0 * e))
+        rates.append(rate + k1 * e)
+        covs.append(updated)
     out = [None] * n
     out[-1], rate = values[-1], rates[-1]
-    for k in range(n - 2, -1, -1):   # backwards: each state corrected by what came after it
-        c = covs[k] @ steps[k + 1].T @ np.linalg.inv(pred_covs[k + 1])
-        d_value, d_rate = space.minus(out[k + 1], pred_values[k + 1]), rate - pred_rates[k + 1]
-        out[k] = space.plus(values[k], c[0, 0] * d_value + c[0, 1] * d_rate)
-        rate = rates[k] + c[1, 0] * d_value + c[1, 1] * d_rate
+    for k in range(n - 2, -1, -1):      # backwards: each state corrected by what came after it
+        (p00, p01, p11), (value, pred_rate, (a, b, c)) = covs[k], predicted[k + 1]
+        dt = stamps[k + 1] - stamps[k]
+        # C = P F^T inv(P predicted), F = [[1, dt], [0, 1]]
+        gain = np.array([[p00 + dt * p01, p01], [p01 + dt * p11, p11]]) @ np.array([[c, -b], [-b, a]]) / (a * c - b * b)
+        d_value, d_rate = space.minus(out[k + 1], value), rate - pred_rate
+        out[k] = space.plus(values[k], gain[0, 0] * d_value + gain[0, 1] * d_rate)
+        rate = rates[k] + gain[1, 0] * d_value + gain[1, 1] * d_rate
     return np.array(out)
 
 
@@ -107,16 +108,17 @@ def smooth_frames(frames: list[TrackerFrame], config: FilterConfig) -> list[Trac
     positions = [np.array(f.positions, dtype=float) for f in frames]
     orientations = [np.array(f.orientations, dtype=float) for f in frames]
     stamps = np.array([f.stamp for f in frames], dtype=float)
+    quantities = []     # (values, sample variance, process noise, space, usable sample, cut at jumps)
+    if config.position_noise > 0:
+        quantities.append((positions, config.position_noise ** 2, config.smooth_acceleration ** 2, _Vector,
+                           lambda v: np.isfinite(v).all(), True))
+    if config.rotation_noise > 0:
+        quantities.append((orientations, math.radians(config.rotation_noise) ** 2,
+                           config.smooth_spin_acceleration ** 2, _Rotation,
+                           lambda v: np.isfinite(v).all() and 0.81 < v @ v < 1.21, False))
     for site in dict.fromkeys(s for f in frames for s in f.sites):
-        rows = [(k, f.index(site)) for k, f in enumerate(frames) if site in f.sites and f.valid[f.index(site)]]
-        quantities = []
-        if config.position_noise > 0:
-            quantities.append((positions, config.position_noise ** 2, config.smooth_acceleration ** 2, _Vector,
-                               lambda v: np.isfinite(v).all(), True))
-        if config.rotation_noise > 0:
-            quantities.append((orientations, math.radians(config.rotation_noise) ** 2,
-                               config.smooth_spin_acceleration ** 2, _Rotation,
-                               lambda v: np.isfinite(v).all() and 0.81 < v @ v < 1.21, False))
+        rows = [(k, f.sites.index(site)) for k, f in enumerate(frames) if site in f.sites]
+        rows = [(k, i) for k, i in rows if frames[k].valid[i]]
         for arrays, r, q, space, usable, jump in quantities:
             kept = [(k, s) for k, s in rows if usable(arrays[k][s])]
             if len(kept) < 2:

@@ -78,9 +78,10 @@ class Estimator(ABC):
         """The body at frame.stamp. What every method shares is here: too little input holds
         the last pose (invalid), a non-finite result starts the method over and holds too,
         and the last valid pose is kept for holding."""
-        return self._checked(frame.stamp, self._estimate(self.input_filter(frame)))
+        return self._step_filtered(self.input_filter(frame))
 
     def _step_filtered(self, frame: TrackerFrame) -> BodyPose:
+        """step() on a frame the filter (or the offline smoother) has already seen."""
         return self._checked(frame.stamp, self._estimate(frame))
 
     @abstractmethod

@@ -258,13 +258,13 @@ class DragPoserEstimator(Estimator):
             if c.joint == J["pelvis"]:
                 root = np.array(c.target, float)
         goals = {c.joint: np.asarray(c.target, float) for c in positions if c.joint in END_JOINTS}
-        for c in trackers if self.pelvis_orientation else ():   # and turns with it: the hips hang from it
-            if isinstance(c, Orientation) and c.joint == J["pelvis"]:
-                local = local.copy()
-                for child, end in ROOT_CHAINS.items():
-                    if end not in goals:     # an untracked leg or spine keeps its decoded direction
-                        local[child] = c.target.T @ local[0] @ local[child]
-                local[0] = c.target          # a tracked one turns with the pelvis, then reaches
+        pelvis = next((c.target for c in trackers if isinstance(c, Orientation) and c.joint == J["pelvis"]), None)
+        if self.pelvis_orientation and pelvis is not None:   # and turns with it: the hips hang from it
+            local = local.copy()
+            for child, end in ROOT_CHAINS.items():
+                if end not in goals:     # an untracked leg or spine keeps its decoded direction
+                    local[child] = pelvis.T @ local[0] @ local[child]
+            local[0] = pelvis            # a tracked one turns with the pelvis, then reaches
         if goals:
             local, glob, _ = solve_body(local, root, self.skeleton.offsets, goals, keep_shape=True)
         else:

@@ -118,6 +118,26 @@ def test_keep_shape_only_turns_a_decoded_elbow_about_its_axis(rng):
     np.testing.assert_allclose(turn @ limb.axis, limb.axis, atol=1e-9)
 
 
+@pytest.mark.parametrize("beyond", [0.005, 0.03, 0.08])
+def test_keep_shape_turns_the_collar_as_far_as_a_hand_just_out_of_reach_needs(beyond):
+    """A predicted pose's shoulder a few centimetres off: the hand still lands (the IK's own
+    single collar turn, kept for the baseline, leaves it short by centimetres)."""
+    offsets = Skeleton.canonical().offsets
+    root = np.zeros(3)
+    local = standing_pose()
+    limb = LIMBS[J["left_wrist"]]
+    _, pos = forward_kinematics(local, root, offsets)
+    down = np.array([0.0, 0.0, -1.0])                          # a hanging arm, the hand just too far
+    target = pos[limb.upper] + down * (_limb_length(offsets, limb) + beyond)
+    solved, glob, solved_pos = solve_body(local, root, offsets, {limb.end: target}, keep_shape=True)
+    assert np.linalg.norm(solved_pos[limb.end] - target) < 1e-6
+    collar = J["left_collar"]
+    turned = np.degrees(np.arccos(np.clip((np.trace(local[collar].T @ solved[collar]) - 1) / 2, -1, 1)))
+    assert 0 < turned < 45                                     # the collar did it, and no more than needed
+    _, _, ik_pos = solve_body(local, root, offsets, {limb.end: target})
+    assert np.linalg.norm(ik_pos[limb.end] - target) > 0.5 * beyond
+
+
 def test_the_estimator_template_holds_the_last_pose_and_starts_over_after_a_non_finite_result():
     from sparse_body.core.sensors import load_sensor_config
     from sparse_body.core.types import BodyPose

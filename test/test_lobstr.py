@@ -16,7 +16,8 @@ from sparse_body.data.catalog import load_clip
 from sparse_body.data.virtual_trackers import TrackerNoise, synthesize_trackers
 from sparse_body.estimators import create_estimator
 from sparse_body.estimators.contact_ik import ContactHold, release_weight
-from sparse_body.estimators.lobstr_features import (INPUT_JOINTS, apply_legs, leg_targets, sequence_features)
+from sparse_body.estimators.lobstr_features import (INPUT_JOINTS, apply_legs, apply_upper, leg_targets,
+                                                    sequence_features, upper_targets)
 from sparse_body.estimators.reference import standing_pose
 from sparse_body.resources import models_dir
 
@@ -52,25 +53,41 @@ def test_features_do_not_depend_on_where_the_person_stands_or_faces(clip):
     np.testing.assert_allclose(lifted[:, 36] - a[:, 36], 0.5)
     # the first frame has no velocity: identity rotations, zero translations
     assert np.allclose(a[0, 0:3], 0) and np.allclose(a[0, 3:9], [1, 0, 0, 0, 1, 0])
+    # the learned upper body's inputs: the same 37, then the pose, which does not depend on
+    # where the person stands or faces either, but does on where the hands are
+    c, d = sequence_features(pos, rot, pose=True), sequence_features(moved_pos, moved_rot, pose=True)
+    assert c.shape == (len(clip), 70)
+    np.testing.assert_allclose(c[:, :37], a, atol=1e-12)
+    np.testing.assert_allclose(c, d, atol=1e-9)
+    raised = pos.copy()
+    raised[:, 2, 2] += 0.3                                 # the left hand 30 cm higher
+    e = sequence_features(raised, rot, pose=True)
+    np.testing.assert_allclose(e[:, 37 + 9:37 + 18] - c[:, 37 + 9:37 + 18], np.tile([0, 0, 0.3, 0, 0, 0, 0, 0, 0], (len(clip), 1)),
+                               atol=1e-9)
 
 
 def test_leg_targets_round_trip_through_apply_legs(clip):
     glob, local = clip.global_rotations, clip.local_rotations
     targets = leg_targets(glob, local)
+    upper = upper_targets(local)
     for t in (0, 150, len(clip) - 1):
         np.testing.assert_allclose(apply_legs(local[t], targets[t]), local[t], atol=1e-9)
+        np.testing.assert_allclose(apply_upper(local[t], upper[t]), local[t], atol=1e-9)
+        assert not np.allclose(apply_upper(local[t], upper[t + 1 - 2 * (t > 0)]), local[t], atol=1e-3)
 
 
-def test_streaming_onnx_equals_the_recurrent_net_over_the_window(tmp_path, clip):
+@pytest.mark.parametrize("learned_upper", [False, True])
+def test_streaming_onnx_equals_the_recurrent_net_over_the_window(tmp_path, clip, learned_upper):
     """The runtime carries the GRU state; running the exported step frame by frame must give
     what the training graph gives for the whole window at once."""
     import onnxruntime as ort
     from sparse_body.train.lobstr_model import LobstrConfig, LobstrNet
     from sparse_body.train.lobstr_train import export_onnx
     torch.manual_seed(0)
-    config = LobstrConfig(hidden=32, latent=16)
+    config = LobstrConfig(hidden=32, latent=16, learned_upper=learned_upper)
     net = LobstrNet(config).eval()
-    x = sequence_features(clip.positions[:90, INPUT_JOINTS], clip.global_rotations[:90, INPUT_JOINTS])
+    x = sequence_features(clip.positions[:90, INPUT_JOINTS], clip.global_rotations[:90, INPUT_JOINTS],
+                          pose=learned_upper)
     x = x.astype(np.float32)
     net.mean.copy_(torch.from_numpy(x.mean(0)))
     net.std.copy_(torch.from_numpy(x.std(0) + 1e-3))
@@ -116,6 +133,38 @@ def test_estimator_gives_one_finite_pose_per_frame_and_survives_bad_samples(tiny
     local = quat_to_matrix(poses[50].local_quats)
     _, pos = forward_kinematics(local, poses[50].root_position, clip.skeleton.offsets)
     np.testing.assert_allclose(pos[J["left_wrist"]], clip.positions[50, J["left_wrist"]], atol=0.01)
+
+
+def test_learned_upper_body_is_the_networks_put_on_the_trackers_and_false_is_the_papers_ik(tiny_model, clip):
+    """The network's upper body, turned onto the headset and hands (learned_upper, the
+    default with a model trained with it); learned_upper=false is the paper's: the IK's."""
+    from sparse_body.core.skeleton import UPPER_BODY
+    path, report = tiny_model
+    assert report["config"]["learned_upper"]
+    config = load_sensor_config("four_point")
+    stream = synthesize_trackers(clip, config, TrackerNoise(), seed=1)
+    learned = create_estimator("lobstr", config, clip.skeleton, model_path=str(path)).process(stream)
+    paper = create_estimator("lobstr", config, clip.skeleton, model_path=str(path), learned_upper=False).process(stream)
+    ik = create_estimator("ik", config, clip.skeleton).process(stream)
+    upper = [J[n] for n in UPPER_BODY]
+    differ = 0
+    for a, b, c in zip(learned, paper, ik):
+        pa, pb, pc = (quat_to_matrix(p.local_quats)[upper] for p in (a, b, c))
+        np.testing.assert_allclose(pb, pc, atol=1e-9)
+        differ += not np.allclose(pa, pc, atol=1e-3)
+    assert differ > 0.9 * len(learned)
+    # the head and hands sit on their trackers within the IK's soft reach (a frame whose
+    # predicted torso leaves a hand out of reach is the IK's)
+    misses = []
+    for t, pose in enumerate(learned):
+        _, pos = forward_kinematics(quat_to_matrix(pose.local_quats), pose.root_position, clip.skeleton.offsets)
+        misses.append(max(np.linalg.norm(pos[J[j]] - clip.positions[t, J[j]]) for j in ("head", "left_wrist", "right_wrist")))
+    paper_misses = []
+    for t, pose in enumerate(paper):
+        _, pos = forward_kinematics(quat_to_matrix(pose.local_quats), pose.root_position, clip.skeleton.offsets)
+        paper_misses.append(max(np.linalg.norm(pos[J[j]] - clip.positions[t, J[j]]) for j in ("head", "left_wrist", "right_wrist")))
+    assert np.median(misses) < 0.01 and np.mean(np.array(misses) > 0.02) < 0.2
+    assert np.mean(paper_misses) < 0.01
 
 
 def test_estimator_refuses_a_missing_or_foreign_model(tmp_path, clip, tiny_model):

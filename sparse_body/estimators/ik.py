@@ -53,14 +53,17 @@ class IKEstimator(Estimator):
         self._last_toes = toes
         return BodyPose(frame.stamp, rotations_to_quat(local), np.asarray(root, float), contact.astype(float), contact)
 
-    def solve(self, frame: TrackerFrame):
+    def solve(self, frame: TrackerFrame, start: np.ndarray | None = None):
         """(local rotations, root, global rotations, positions) from this frame's trackers, or
         None without a usable head or pelvis; the pose is kept as the next frame's start.
-        Global rotations and positions hold for every joint but the feet."""
+        Global rotations and positions hold for every joint but the feet.
+        start: a pose (22, 3, 3) to begin from instead of the previous frame's, e.g. a
+        network's; its spine curve, elbows and knees are kept and only turned, and the
+        result is not kept (the IK's own pose stays its next start)."""
         targets = {s: self.joint_target(frame, s) for s in self._sites}
         pelvis = self.joint_target(frame, "pelvis")
         head = targets.get("head")
-        local = self._local.copy()
+        local = (self._local if start is None else start).copy()
         pelvis_pose = pelvis is not None and pelvis[0] is not None and pelvis[1] is not None
         if pelvis_pose:
             local[0], root = pelvis[1], pelvis[0]
@@ -74,7 +77,7 @@ class IKEstimator(Estimator):
         goals = {J[SITE_JOINTS[site]]: t[0] for site, t in targets.items() if t is not None and t[0] is not None}
         if not pelvis_pose:   # the root already hangs from the head: leave the spine alone
             goals.pop(J["head"], None)
-        local, glob, pos = solve_body(local, root, self.skeleton.offsets, goals)
+        local, glob, pos = solve_body(local, root, self.skeleton.offsets, goals, keep_shape=start is not None)
         for site, target in targets.items():
             if target is not None and target[1] is not None:   # the end joint takes the tracker's orientation
                 end = J[SITE_JOINTS[site]]
@@ -83,5 +86,6 @@ class IKEstimator(Estimator):
         if not (np.all(np.isfinite(local)) and np.all(np.isfinite(root))):
             self._reset()
             return None
-        self._local = local
+        if start is None:
+            self._local = local
         return local, root, glob, pos

@@ -1,11 +1,15 @@
 """LoBSTr (Yang et al. 2021) at runtime: ONNX Runtime, one GRU step per frame.
 
-The legs come from the network, driven by the velocities of pelvis, head and hands; the
-upper body is solved by IK from the same trackers (the paper uses Final IK); contacts are
-held by IK (contact_ik.py). The GRU state is carried from frame to frame: the network sees
-the whole past instead of re-running a one-second window each frame (the model is trained
-on 1.5 s chunks and test_lobstr shows streaming equals running the recurrent net over the
-window). A gap in the input longer than max_gap, or time going back, starts the state over.
+The legs come from the network, driven by the velocities of pelvis, head and hands; contacts
+are held by IK (contact_ik.py). The paper solves the upper body by IK from the same trackers
+(Final IK); a model trained with the learned upper body (lobstr_features.py) predicts it,
+and the same IK then only turns its spine and arms onto the headset and hands, keeping the
+predicted spine curve, elbow bends and swivels (learned_upper=false: the paper's IK).
+
+The GRU state is carried from frame to frame: the network sees the whole past instead of
+re-running a one-second window each frame (the model is trained on 1.5 s chunks and
+test_lobstr shows streaming equals running the recurrent net over the window). A gap in the
+input longer than max_gap, or time going back, starts the state over.
 """
 from __future__ import annotations
 
@@ -14,12 +18,21 @@ from pathlib import Path
 import numpy as np
 
 from ..core.rotations import axis_angle_to_matrix, matrix_to_6d, matrix_to_axis_angle, rotations_to_quat, sixd_to_matrix
+from ..core.sensors import SITE_JOINTS
+from ..core.skeleton import JOINT_INDEX as J
 from ..core.types import BodyPose, TrackerFrame
 from .base import Estimator
 from .contact_ik import ContactHold
 from .ik import IKEstimator
-from .lobstr_features import FEATURES, INPUT_SITES, apply_legs, body_scale, features
+from .lobstr_features import INPUT_SITES, OUTPUTS, apply_legs, apply_upper, body_scale, feature_count, features
 from .onnx_model import load_model
+from .reference import standing_pose
+
+
+_ENDS = {site: J[SITE_JOINTS[site]] for site in ("head", "left_hand", "right_hand")}
+# metres: the IK's soft reach leaves an end at most 0.63 cm short; beyond this the predicted
+# torso put a tracker out of the arm's or the spine's reach (0.4 % of the validation frames)
+REACHED = 0.02
 
 
 def default_model_path() -> Path:
@@ -32,21 +45,27 @@ class LobstrModel:
 
     def __init__(self, path: str | Path | None = None, threads: int = 1) -> None:
         self.path = Path(path) if path else default_model_path()
-        self.session, meta = load_model(self.path, ("method", "lobstr"), {"features": FEATURES, "state": None},
+        self.session, meta = load_model(self.path, ("method", "lobstr"), {"features": None, "state": None},
                                         "train one with `sparse-body train lobstr`", threads)
         try:
             self.config = meta["config"]
             self.hidden, self.fps = int(self.config["hidden"]), float(self.config["fps"])
-        except (KeyError, ValueError, TypeError):
+            self.learned_upper = bool(self.config.get("learned_upper", False))
+        except (KeyError, ValueError, TypeError, AttributeError):
             raise ValueError(f"{self.path}: not a LoBSTr model (its metadata lacks config)") from None
+        self.features = feature_count(self.learned_upper)
+        width = {i.name: i.shape for i in self.session.get_inputs()}["features"][-1]
+        if isinstance(width, int) and width != self.features:
+            raise ValueError(f"{self.path}: input 'features' has last dimension {width}, "
+                             f"this LoBSTr model's configuration needs {self.features}")
 
     def initial_state(self) -> np.ndarray:
         return np.zeros((1, 1, self.hidden), dtype=np.float32)
 
     def step(self, x: np.ndarray, state: np.ndarray):
-        legs, prob, state = self.session.run(None, {"features": x.reshape(1, FEATURES).astype(np.float32),
+        pose, prob, state = self.session.run(None, {"features": x.reshape(1, self.features).astype(np.float32),
                                                     "state": state})
-        return legs[0], prob[0], state
+        return pose[0], prob[0], state
 
 
 def _retime(x: np.ndarray, ratio: float) -> np.ndarray:
@@ -65,9 +84,12 @@ class LobstrEstimator(Estimator):
 
     def __init__(self, sensors, skeleton, fps: float = 60.0, model_path: str | None = None,
                  contact_ik: bool = True, contact_threshold: float = 0.5, release_frames: int = 10,
-                 floor_height: float = 0.0, max_gap: float = 0.5, threads: int = 1) -> None:
+                 floor_height: float = 0.0, max_gap: float = 0.5, learned_upper: bool = True,
+                 threads: int = 1) -> None:
         super().__init__(sensors, skeleton, fps)
         self.model = LobstrModel(model_path, threads)
+        self.learned_upper = learned_upper and self.model.learned_upper
+        self._start = standing_pose()   # the network replaces all but the pelvis, and the legs after
         self.scale = body_scale(skeleton)
         self.floor, self.max_gap, self.threshold = floor_height, max_gap, contact_threshold
         # Feet trackers, if configured, are not LoBSTr's input: the upper body sees only its four.
@@ -82,6 +104,14 @@ class LobstrEstimator(Estimator):
         self._state = self.model.initial_state()
         self._prev: tuple[float, np.ndarray, np.ndarray] | None = None
 
+    def _reached(self, frame: TrackerFrame, positions: np.ndarray) -> bool:
+        """Whether the solved head and hands are within REACHED of their targets."""
+        for site, joint in _ENDS.items():
+            target = self.joint_target(frame, site)[0]
+            if np.linalg.norm(positions[joint] - target) > REACHED:
+                return False
+        return True
+
     def _estimate(self, frame: TrackerFrame) -> BodyPose | None:
         targets = [self.joint_target(frame, s) for s in INPUT_SITES]
         if any(t is None or t[0] is None or t[1] is None for t in targets):
@@ -94,16 +124,21 @@ class LobstrEstimator(Estimator):
                 self.contacts.reset()
             self._prev = (frame.stamp - 1.0 / self.model.fps, pos, rot)
         dt = frame.stamp - self._prev[0]
-        x = features(pos, rot, self._prev[1], self._prev[2])
+        x = features(pos, rot, self._prev[1], self._prev[2], pose=self.model.learned_upper)
         ratio = 1.0 / (self.model.fps * dt)
         if abs(ratio - 1.0) > 0.02:
             x = _retime(x, ratio)
-        upper = self.upper.solve(frame)
+        out, prob, state = self.model.step(x, self._state)
+        upper = None
+        if self.learned_upper:
+            upper = self.upper.solve(frame, apply_upper(self._start, out[OUTPUTS:]))
+            if upper is not None and not self._reached(frame, upper[3]):
+                upper = None    # a predicted torso that leaves a tracker out of reach: the IK's frame
+        upper = upper or self.upper.solve(frame)
         if upper is None:
             return None
         upper_local, root = upper[0], np.asarray(upper[1], float)
-        legs, prob, state = self.model.step(x, self._state)
-        local = apply_legs(upper_local, legs)
+        local = apply_legs(upper_local, out[:OUTPUTS])
         contact = prob > self.threshold
         if self.contacts:
             local = self.contacts.apply(local, root, contact)

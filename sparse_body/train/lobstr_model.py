@@ -11,7 +11,7 @@ import torch
 from torch import nn
 
 from ..core.skeleton import JOINT_INDEX, PARENTS
-from ..estimators.lobstr_features import FEATURES, LEG_JOINTS, OUTPUTS
+from ..estimators.lobstr_features import LEG_JOINTS, OUTPUTS, feature_count, output_count
 from .torch_body import sixd_to_matrix
 
 
@@ -27,6 +27,7 @@ class LobstrConfig:
     lr_decay: float = 0.999
     weight_decay: float = 0.0     # AdamW's decoupled decay (the paper: none)
     dropout: float = 0.0          # on the GRU's output, in training only (the paper: none)
+    learned_upper: bool = False   # predict the upper body too (lobstr_features; the paper: IK)
     steps_per_epoch: int = 50
     w_pose: float = 1.0           # paper's loss weights
     w_fk: float = 0.1
@@ -43,10 +44,11 @@ class LobstrConfig:
         if name == "paper":
             return cls()
         if name == "small":   # trains in under an hour on 2 CPU cores
-            return cls(hidden=256, batch=64, steps_per_epoch=100, minutes=50.0, steps=1_000_000)
+            return cls(hidden=256, batch=64, steps_per_epoch=100, minutes=50.0, steps=1_000_000,
+                       learned_upper=True)
         if name == "tiny":    # tests
             return cls(hidden=16, latent=8, chunk=20, burn_in=5, batch=4, steps=3, noise_copies=1,
-                       augment="mirror", variants=1)
+                       augment="mirror", variants=1, learned_upper=True)
         raise ValueError(f"unknown LoBSTr configuration {name!r} (paper, small, tiny)")
 
     def to_dict(self) -> dict:
@@ -58,24 +60,26 @@ class LobstrNet(nn.Module):
         super().__init__()
         self.config = config
         # Input standardisation, fitted on the training set and exported with the weights.
-        self.register_buffer("mean", torch.zeros(FEATURES))
-        self.register_buffer("std", torch.ones(FEATURES))
-        self.gru = nn.GRU(FEATURES, config.hidden, batch_first=True)
+        features = feature_count(config.learned_upper)
+        self.register_buffer("mean", torch.zeros(features))
+        self.register_buffer("std", torch.ones(features))
+        self.gru = nn.GRU(features, config.hidden, batch_first=True)
         self.dropout = nn.Dropout(config.dropout)
         self.to_latent = nn.Sequential(nn.Linear(config.hidden, config.latent), nn.ReLU())
-        self.pose_head = nn.Linear(config.latent, OUTPUTS)
+        self.pose_head = nn.Linear(config.latent, output_count(config.learned_upper))
         self.contact_head = nn.Linear(config.latent, 2 * 2)   # per foot: (no contact, contact) logits
 
     def forward(self, x: torch.Tensor, h: torch.Tensor | None = None):
-        """x (B, T, 37) -> pose (B, T, 48) in 6D, contact logits (B, T, 2, 2), state (1, B, H)."""
+        """x (B, T, 37 or 70) -> pose (B, T, 48 or 126) in 6D (legs, then the upper body),
+        contact logits (B, T, 2, 2), state (1, B, H)."""
         out, h = self.gru((x - self.mean) / self.std, h)
         z = self.to_latent(self.dropout(out))
         return self.pose_head(z), self.contact_head(z).unflatten(-1, (2, 2)), h
 
 
 class LobstrStep(nn.Module):
-    """One streaming step, the graph that is exported: (x (B, 37), state (1, B, H)) ->
-    (pose (B, 48), contact probability (B, 2), state)."""
+    """One streaming step, the graph that is exported: (x (B, 37 or 70), state (1, B, H)) ->
+    (pose (B, 48 or 126), contact probability (B, 2), state)."""
 
     def __init__(self, net: LobstrNet) -> None:
         super().__init__()
@@ -112,14 +116,17 @@ def leg_positions(legs6d: torch.Tensor, pelvis_in_ref: torch.Tensor, offsets: to
 
 
 def losses(net: LobstrNet, batch: dict[str, torch.Tensor], offsets: torch.Tensor) -> dict[str, torch.Tensor]:
-    """The paper's four terms on the frames after the burn-in, and their weighted sum."""
+    """The paper's four terms on the frames after the burn-in, and their weighted sum; with
+    the learned upper body, its pose term too (weighted as the legs')."""
     cfg = net.config
-    pose, logits, _ = net(batch["x"])
+    out, logits, _ = net(batch["x"])
     s = slice(cfg.burn_in, None)
-    pose, logits = pose[:, s], logits[:, s]
+    out, logits = out[:, s], logits[:, s]
+    pose = out[..., :OUTPUTS]
     target, pelvis, yaw = batch["legs"][:, s], batch["pelvis_in_ref"][:, s], batch["yaw"][:, s]
     contact = batch["contact"][:, s]
     l_pose = ((pose - target) ** 2).mean()
+    l_upper = ((out[..., OUTPUTS:] - batch["upper"][:, s]) ** 2).mean() if cfg.learned_upper else out.new_zeros(())
     p_hat, p = leg_positions(pose, pelvis, offsets), leg_positions(target, pelvis, offsets)
     l_fk = (p_hat - p).norm(dim=-1).mean()
     # Toe velocity in the world (yaw only: the pelvis translation cancels between prediction
@@ -135,7 +142,7 @@ def losses(net: LobstrNet, batch: dict[str, torch.Tensor], offsets: torch.Tensor
     ce = nn.functional.cross_entropy(logits.reshape(-1, 2), contact.reshape(-1).long(), reduction="none")
     ce = ce.view(*contact.shape).mean(dim=(0, 1))   # (2,) left, right
     l_contact = ce.sum() / 2
-    total = cfg.w_pose * l_pose + cfg.w_fk * l_fk + cfg.w_velocity * l_vel + cfg.w_contact * l_contact
+    total = cfg.w_pose * (l_pose + l_upper) + cfg.w_fk * l_fk + cfg.w_velocity * l_vel + cfg.w_contact * l_contact
     accuracy = ((logits.argmax(-1) == contact.long()).float().mean())
-    return {"total": total, "pose": l_pose, "fk": l_fk, "velocity": l_vel, "contact": l_contact,
+    return {"total": total, "pose": l_pose, "upper": l_upper, "fk": l_fk, "velocity": l_vel, "contact": l_contact,
             "contact_accuracy": accuracy}

@@ -20,7 +20,8 @@ def augmentation_table(report_path: Path, columns: dict[str, str]) -> str:
             "|---|---:|---:|" + "---:|" * len(columns)]
     for run in report["runs"]:
         rows.append(f"| {run['augment']} | {run['steps']} | {run['minutes']:.1f} | "
-                    + " | ".join(f"{run['validation'][key]:.4g}" for key in columns) + " |")
+                    + " | ".join(f"{run['validation'][key]:.4g}" if key in run["validation"] else "-"
+                                 for key in columns) + " |")
     return (f"Each row trained anew with the same seed and budget (`{report['command']}`); "
             "validation split (people the model never saw):\n\n" + "\n".join(rows))
 
@@ -70,7 +71,12 @@ def results_table(results: list[dict], columns=COLUMNS) -> str:
 
 
 LOBSTR_VALIDATION = {"lower_rot_error_deg": "val leg rot [deg]", "toe_error_cm": "val toe [cm]",
-                     "contact_accuracy_pct": "val contact [%]"}
+                     "contact_accuracy_pct": "val contact [%]", "upper_rot_error_deg": "val upper rot [deg]"}
+LOBSTR_RUNTIME_COMMAND = ("sparse-body eval --sensors four_point --split validation --no-compare "
+                          "--output models/lobstr.runtime.json --estimator lobstr --estimator lobstr:learned_upper=false "
+                          "--estimator ik")
+LOBSTR_RUNTIME_METRICS = ("MPJPE [cm]", "MPJRE [deg]", "Upper PE [cm]", "Lower PE [cm]", "MPJVE [cm/s]",
+                          "Jitter [100m/s3]", "Hand PE [cm]")
 VAE_VALIDATION = {"position_error_cm": "val position [cm]", "rotation_error_deg": "val rotation [deg]"}
 TEMPORAL_VALIDATION = {"mse": "val MSE", "mse_next": "val MSE, next step", "hold_mse": "holding: MSE"}
 
@@ -84,8 +90,8 @@ def write_lobstr_card(onnx_path: Path, report: dict, mocap_root: Path, limit: in
     from ..evaluation import evaluate, format_table, paper_figures
     sensors = load_sensor_config("four_point")
     model = {"model_path": str(Path(onnx_path).resolve())}
-    runs = [("lobstr", FIELD, model), ("lobstr:contact_ik=false", FIELD, model), ("ik", FIELD, {}),
-            ("lobstr", LAB, model), ("ik", LAB, {})]
+    runs = [("lobstr", FIELD, model), ("lobstr:contact_ik=false", FIELD, model),
+            ("lobstr:learned_upper=false", FIELD, model), ("ik", FIELD, {}), ("lobstr", LAB, model), ("ik", LAB, {})]
     results = [evaluate(spec, sensors, mocap_root, "test", protocol=protocol, limit=limit, progress=False, **options)
                for spec, protocol, options in runs]
     table = format_table(results, paper_figures("lobstr", "four_point"))
@@ -94,13 +100,15 @@ def write_lobstr_card(onnx_path: Path, report: dict, mocap_root: Path, limit: in
     cfg, val = report["config"], report["validation"]
     history = report.get("history", [])
     curve = "\n".join(f"| {h['step']} | {h['minutes']:.1f} | {h['train_loss']:.4f} | {h['contact_accuracy_pct']:.1f} "
-                      f"| {h['lower_rot_error_deg']:.2f} | {h['toe_error_cm']:.2f} |"
+                      f"| {h['lower_rot_error_deg']:.2f} | {h['toe_error_cm']:.2f} | {h.get('upper_rot_error_deg', float('nan')):.2f} |"
                       for h in history[:: max(1, len(history) // 12)])
+    learned = cfg.get("learned_upper", False)
     text = f"""# LoBSTr model card: `{Path(onnx_path).name}`
 
 LoBSTr (Yang et al., Eurographics 2021): a GRU over the velocities of pelvis, head and hands
 (4 x 9 + 1 inputs per frame, in the pelvis's yaw-only reference frame) predicting the 8 leg
-joints in 6D and the two feet's contact probabilities. Upper body by IK, contacts held by IK.
+joints in 6D and the two feet's contact probabilities; contacts held by IK.
+{"Ours, not the paper's (`learned_upper`): the network also sees the current pose (head and hands relative to the pelvis, and the pelvis's tilt: 33 more inputs) and predicts the 13 upper-body joints too, which the closed-form IK then turns onto the headset and hands; the paper solves the upper body by IK alone (`lobstr:learned_upper=false` below)." if learned else "Upper body by IK (the paper's)."}
 Runtime: ONNX Runtime, one GRU step per frame (`sparse_body/estimators/lobstr.py`).
 
 ## Data
@@ -111,7 +119,7 @@ Runtime: ONNX Runtime, one GRU step per frame (`sparse_body/estimators/lobstr.py
   augmented ({cfg.get('augment', 'none')}: {cfg.get('variants', 0)} variants of each clip besides itself,
   `sparse_body/train/augment.py`; {report['train_frames']} frames in all), each clean plus
   {cfg['noise_copies']} copies with the paper's tracker noise (1 cm Gaussian per axis, rotations up
-  to 1.5 degrees); the checkpoint with the best validation leg rotation + toe position
+  to 1.5 degrees); the checkpoint with the best validation leg rotation + toe position{" + upper-body rotation" if learned else ""}
   ({report['validation_clips']} clips) is exported.
 - Contact labels: toe within 2 cm of the floor and slower than 0.3 m/s (`core/contacts.py`).
 
@@ -123,12 +131,12 @@ Runtime: ONNX Runtime, one GRU step per frame (`sparse_body/estimators/lobstr.py
   {cfg['w_contact']:g} contact (the paper's weights).
 - {report['steps']} steps in {report['minutes']:.1f} minutes on {report['hardware']} (torch {report['torch']}).
 
-| step | minutes | train loss | val contact [%] | val leg rot [deg] | val toe [cm] |
-|---|---|---|---|---|---|
+| step | minutes | train loss | val contact [%] | val leg rot [deg] | val toe [cm] | val upper rot [deg] |
+|---|---|---|---|---|---|---|
 {curve}
 
 Validation (exported weights): contact {val['contact_accuracy_pct']:.1f} %, leg rotation
-{val['lower_rot_error_deg']:.2f} deg, toe position {val['toe_error_cm']:.2f} cm (toe relative to the true pelvis).
+{val['lower_rot_error_deg']:.2f} deg, toe position {val['toe_error_cm']:.2f} cm (toe relative to the true pelvis){f", upper-body local rotation {val['upper_rot_error_deg']:.2f} deg (before the IK turns it onto the trackers)" if learned else ""}.
 
 ### Augmentation, with and without
 
@@ -145,6 +153,10 @@ use (`--skeleton oracle --noise none`: the subject's true skeleton, clean tracke
 ```
 
 Skate with contact IK: {results[0].summary['Skate [cm/s]']:.2f} cm/s; without: {results[1].summary['Skate [cm/s]']:.2f} cm/s (field protocol).
+
+## The learned upper body, chosen on the validation people
+
+{runtime_choices_table(Path(onnx_path).with_name('lobstr.runtime.json'), LOBSTR_RUNTIME_COMMAND, LOBSTR_RUNTIME_METRICS)}
 
 ## Tracker noise (field protocol, `--noise none` against `--noise lobstr`)
 

@@ -15,7 +15,7 @@ from sparse_body.core.skeleton import Skeleton
 from sparse_body.data.synthetic import synthetic_walk
 from sparse_body.data.virtual_trackers import TrackerNoise, synthesize_trackers
 from sparse_body.estimators import create_estimator
-from sparse_body.estimators.constraints import (AboveFloor, AngleLimit, ConstraintSet, LookAt, Orientation,
+from sparse_body.estimators.constraints import (AboveFloor, AngleLimit, ConstraintSet, LookAt, Orientation, OverPoint,
                                                 Position)
 from sparse_body.estimators.dragposer_pose import dual_quaternions, split_heading
 from sparse_body.resources import models_dir
@@ -69,10 +69,12 @@ def test_constraints_give_the_same_residuals_in_numpy_and_torch(rng):
     set_.add(AboveFloor("left_foot", 1.0, height=10.0))
     set_.add(LookAt("head", 0.5, target=(3.0, 1.0, 1.5)))
     set_.add(AngleLimit("left_knee", 2.0, max_angle=0.1))
+    set_.add(OverPoint("pelvis", 0.3, target=(0.2, -0.1)))
     r_np = set_.residual(glob, pos, local)
     t = lambda a: torch.as_tensor(a, dtype=torch.float64)  # noqa: E731
     r_t = set_.residual(t(glob), t(pos), t(local), xp=torch).numpy()
-    assert r_np.shape == (3 + 3 + 1 + 3 + 1,)
+    assert r_np.shape == (3 + 3 + 1 + 3 + 1 + 2,)
+    np.testing.assert_allclose(r_np[-2:], 0.3 * (pos[0, :2] - [0.2, -0.1]))   # at any height
     np.testing.assert_allclose(r_np, r_t, atol=1e-12)
     np.testing.assert_allclose(r_np[:3], pos[20] - target_pos[20])
     assert r_np[6] == pytest.approx(10.0 - pos[10, 2])
@@ -81,8 +83,9 @@ def test_constraints_give_the_same_residuals_in_numpy_and_torch(rng):
     done.add(Position("left_wrist", target=tuple(pos[20])))
     done.add(Orientation("head", target=glob[15]))
     done.add(AboveFloor("left_foot", height=pos[10, 2] - 0.1))
+    done.add(OverPoint("pelvis", target=tuple(pos[0, :2])))
     assert np.abs(done.residual(glob, pos, local)).max() < 1e-12
-    assert set_.remove("lookat:15") and not set_.remove("lookat:15") and len(set_) == 4
+    assert set_.remove("lookat:15") and not set_.remove("lookat:15") and len(set_) == 5
 
 
 def test_gauss_newton_reaches_a_decodable_pose_like_the_autograd_reference(tiny_vae, rng):
@@ -396,3 +399,34 @@ def test_polished_root_turns_with_the_pelvis_tracker_and_untracked_legs_keep_the
         else:
             thighs = [J["left_hip"], J["right_hip"]]
             np.testing.assert_allclose(np.array(glob[True])[:, thighs], np.array(glob[False])[:, thighs], atol=1e-9)
+
+
+def test_root_prior_pulls_an_untracked_root_below_the_headset_and_only_then(clip_index):
+    """With the shipped model on a validation person's take (49_22, where the search alone
+    slid the root 30-40 cm off): three-point, the root sits nearer the point below the
+    headset than without the prior; with a pelvis tracker, or root_prior=0, there is no such
+    constraint; a weight that is not one is refused."""
+    from sparse_body.data.catalog import load_clip
+    motion = load_clip(clip_index["49_22"]).slice(0, 180)
+    config = load_sensor_config("three_point")
+    stream = list(synthesize_trackers(motion, config))
+    distance = {}
+    for weight in (0.3, 0.0):
+        est = create_estimator("dragposer", config, motion.skeleton, root_prior=weight, filter=False)
+        distance[weight] = []
+        for frame in stream:
+            pose = est.step(frame)
+            prior = [c for c in est.tracker_constraints(frame) if isinstance(c, OverPoint)]
+            assert len(prior) == (1 if weight else 0)
+            if prior:    # the point below the headset, kept for the run without the prior
+                distance.setdefault("under", []).append(np.asarray(prior[0].target))
+            distance[weight].append(pose.root_position[:2])
+    for weight in (0.3, 0.0):
+        distance[weight] = np.linalg.norm(np.array(distance[weight]) - distance["under"], axis=-1)
+    assert np.mean(distance[0.3]) < np.mean(distance[0.0])
+    four = create_estimator("dragposer", load_sensor_config("four_point"), motion.skeleton)
+    frame = next(iter(synthesize_trackers(motion, load_sensor_config("four_point"))))
+    assert not any(isinstance(c, OverPoint) for c in four.tracker_constraints(frame))
+    for bad in (-0.1, float("nan")):
+        with pytest.raises(ValueError, match="root_prior"):
+            create_estimator("dragposer", config, motion.skeleton, root_prior=bad)

@@ -64,6 +64,17 @@ class Position(Constraint):
 
 
 @dataclass
+class OverPoint(Constraint):
+    """The joint over a point on the floor plane (x, y in metres), at any height: a soft
+    prior where no tracker says where the joint is (DragPoser's root_prior)."""
+    size = 2
+    target: tuple = (0.0, 0.0)
+
+    def residual(self, glob, pos, local, xp=np):
+        return self.weight * (pos[..., self.joint, :2] - _as(xp, pos, self.target))
+
+
+@dataclass
 class Orientation(Constraint):
     """The joint's global rotation (3x3): a 6-DoF or an orientation-only (IMU) tracker.
     Residual: sin(angle) x axis of the difference, so 1 rad weighs like 0.84 m at weight 1."""

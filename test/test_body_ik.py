@@ -104,6 +104,28 @@ def test_the_spine_puts_the_head_on_its_target_and_leaves_the_pelvis(rng):
         np.testing.assert_allclose(local[0], before[0])
 
 
+def test_a_kept_spine_curve_stays_while_it_leaves_the_head_within_the_tolerance():
+    """A bent spine whose head would land 1 cm short of the target: with the IK's 5 mm
+    tolerance it is bent anew and the head reaches; with 1.5 cm (LoBSTr's) the curve is kept,
+    only turned, and the head is the centimetre short."""
+    offsets = Skeleton.canonical().offsets
+    root = np.array([0.0, 0.0, 1.0])
+    curved = standing_pose()
+    for j in ("spine2", "spine3", "neck"):
+        curved[J[j]] = rotation_about(np.array([0.0, 1.0, 0.0]), 0.25)
+    _, pos = forward_kinematics(curved, root, offsets)
+    s1 = pos[J["spine1"]]
+    reach = pos[J["head"]] - s1
+    target = s1 + rotation_about(np.array([1.0, 0.0, 0.0]), 0.3) @ reach * (1 + 0.01 / np.linalg.norm(reach))
+    for tolerance, kept in ((0.005, False), (0.015, True)):
+        local = curved.copy()
+        fit_spine(local, root, offsets, target, keep_bend=True, tolerance=tolerance)
+        _, solved = forward_kinematics(local, root, offsets)
+        miss = np.linalg.norm(solved[J["head"]] - target)
+        bends = [np.allclose(local[J[j]], curved[J[j]]) for j in ("spine2", "spine3", "neck")]
+        assert all(bends) == kept and (miss == pytest.approx(0.01, abs=1e-6) if kept else miss < 1e-3), tolerance
+
+
 def test_keep_shape_only_turns_a_decoded_elbow_about_its_axis(rng):
     offsets = Skeleton.canonical().offsets
     root = np.zeros(3)

@@ -176,6 +176,9 @@ def test_estimator_refuses_a_missing_or_foreign_model(tmp_path, clip, tiny_model
         create_estimator("lobstr", config, clip.skeleton, model_path=str(tmp_path / "junk.onnx"))
     with pytest.raises(ValueError, match="needs trackers on pelvis"):
         create_estimator("lobstr", load_sensor_config("three_point"), clip.skeleton, model_path=str(tiny_model[0]))
+    for bad in (-0.01, 0.05, float("nan")):     # a tolerance the fallback's 2 cm would override
+        with pytest.raises(ValueError, match="spine_tolerance"):
+            create_estimator("lobstr", config, clip.skeleton, model_path=str(tiny_model[0]), spine_tolerance=bad)
     # metadata that claims LoBSTr over a graph with other inputs: refused when loaded, not at every step
     import onnx
     from onnx import TensorProto, helper

@@ -131,11 +131,18 @@ def reach(local: np.ndarray, parent_rot: np.ndarray, upper_pos: np.ndarray, offs
     return upper_rot, upper_rot @ local[h]
 
 
+# metres: how far short or long of the headset a kept spine curve may leave the head
+KEEP_BEND_TOLERANCE = 0.005
+
+
 def fit_spine(local: np.ndarray, root: np.ndarray, offsets: np.ndarray, head_target: np.ndarray,
-              keep_bend: bool = False) -> None:
+              keep_bend: bool = False, tolerance: float = KEEP_BEND_TOLERANCE) -> None:
     """Bend and turn the spine (in place in local) so that the head joint reaches head_target,
     the pelvis (local[0], root) staying where it is. keep_bend: only turn the spine as it is
-    curved (a decoded pose), unless that curve leaves the head more than 5 mm short or long."""
+    curved (a decoded pose), unless that curve leaves the head more than tolerance short or
+    long; then it is bent anew, uniformly. A curve that changes every frame crosses that
+    line often, and the spine flips between the two (jitter): a wider tolerance trades
+    millimetres at the head for a calmer spine."""
     pelvis = local[0]
     s1 = J["spine1"]
     s1_pos = root + pelvis @ offsets[s1]
@@ -144,7 +151,7 @@ def fit_spine(local: np.ndarray, root: np.ndarray, offsets: np.ndarray, head_tar
         b = [local[j] for j in SPINE_BEND]
         head_vector = offsets[SPINE_BEND[0]] + b[0] @ (offsets[SPINE_BEND[1]] + b[1] @ (
             offsets[SPINE_BEND[2]] + b[2] @ offsets[J["head"]]))
-        if abs(math.sqrt(head_vector @ head_vector) - math.sqrt(to_target @ to_target)) < 0.005:
+        if abs(math.sqrt(head_vector @ head_vector) - math.sqrt(to_target @ to_target)) < tolerance:
             s1_rot = pelvis @ local[s1]
             local[s1] = pelvis.T @ swing(s1_rot @ head_vector, to_target) @ s1_rot
             return
@@ -230,16 +237,17 @@ def _collar_within_reach(local, glob, pos, offsets, limb: Limb, target: np.ndarr
 
 
 def solve_body(local: np.ndarray, root: np.ndarray, offsets: np.ndarray, targets: dict[int, np.ndarray],
-               keep_shape: bool = False):
+               keep_shape: bool = False, spine_tolerance: float = KEEP_BEND_TOLERANCE):
     """A copy of local (22, 3, 3) with the spine fitted to a head target and each limb with
     a target (wrist or ankle joint index -> position) reaching it. The root stays.
     keep_shape: the pose's own spine curve, elbows and knees are kept and only turned (a
-    decoded pose); else elbows and knees are exact hinges within their limits.
+    decoded pose; the curve while it leaves the head within spine_tolerance, fit_spine);
+    else elbows and knees are exact hinges within their limits.
     Returns (local, global rotations, positions) of the solved pose."""
     local = local.copy()
     head = targets.get(J["head"])
     if head is not None:
-        fit_spine(local, root, offsets, head, keep_bend=keep_shape)
+        fit_spine(local, root, offsets, head, keep_bend=keep_shape, tolerance=spine_tolerance)
     glob, pos = forward_kinematics(local, root, offsets)
     for end, target in targets.items():
         limb = LIMBS.get(end)

@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..core.body_ik import solve_body
+from ..core.body_ik import KEEP_BEND_TOLERANCE, solve_body
 from ..core.contacts import FOOT_JOINTS, toe_contacts
 from ..core.rotations import axis_angle_to_matrix, heading, rotations_to_quat, yaw_matrix
 from ..core.sensors import SITE_JOINTS
@@ -53,12 +53,13 @@ class IKEstimator(Estimator):
         self._last_toes = toes
         return BodyPose(frame.stamp, rotations_to_quat(local), np.asarray(root, float), contact.astype(float), contact)
 
-    def solve(self, frame: TrackerFrame, start: np.ndarray | None = None):
+    def solve(self, frame: TrackerFrame, start: np.ndarray | None = None, spine_tolerance: float = KEEP_BEND_TOLERANCE):
         """(local rotations, root, global rotations, positions) from this frame's trackers, or
         None without a usable head or pelvis; the pose is kept as the next frame's start.
         Global rotations and positions hold for every joint but the feet.
         start: a pose (22, 3, 3) to begin from instead of the previous frame's, e.g. a
-        network's; its spine curve, elbows and knees are kept and only turned, and the
+        network's; its spine curve, elbows and knees are kept and only turned (the curve
+        while it leaves the head within spine_tolerance metres: body_ik.fit_spine), and the
         result is not kept (the IK's own pose stays its next start)."""
         targets = {s: self.joint_target(frame, s) for s in self._sites}
         pelvis = self.joint_target(frame, "pelvis")
@@ -77,7 +78,8 @@ class IKEstimator(Estimator):
         goals = {J[SITE_JOINTS[site]]: t[0] for site, t in targets.items() if t is not None and t[0] is not None}
         if not pelvis_pose:   # the root already hangs from the head: leave the spine alone
             goals.pop(J["head"], None)
-        local, glob, pos = solve_body(local, root, self.skeleton.offsets, goals, keep_shape=start is not None)
+        local, glob, pos = solve_body(local, root, self.skeleton.offsets, goals, keep_shape=start is not None,
+                                      spine_tolerance=spine_tolerance)
         for site, target in targets.items():
             if target is not None and target[1] is not None:   # the end joint takes the tracker's orientation
                 end = J[SITE_JOINTS[site]]

@@ -33,6 +33,10 @@ _ENDS = {site: J[SITE_JOINTS[site]] for site in ("head", "left_hand", "right_han
 # metres: the IK's soft reach leaves an end at most 0.63 cm short; beyond this the predicted
 # torso put a tracker out of the arm's or the spine's reach (0.4 % of the validation frames)
 REACHED = 0.02
+# metres: the predicted spine curve is kept while it leaves the head this close to the
+# headset (body_ik.fit_spine); at the IK's 5 mm the spine flipped between the network's curve
+# and a uniform bend, and validation jitter was 22.8 against 16.6 here (models/lobstr.runtime.json)
+SPINE_TOLERANCE = 0.015
 
 
 def default_model_path() -> Path:
@@ -85,10 +89,13 @@ class LobstrEstimator(Estimator):
     def __init__(self, sensors, skeleton, fps: float = 60.0, model_path: str | None = None,
                  contact_ik: bool = True, contact_threshold: float = 0.5, release_frames: int = 10,
                  floor_height: float = 0.0, max_gap: float = 0.5, learned_upper: bool = True,
-                 threads: int = 1) -> None:
+                 spine_tolerance: float = SPINE_TOLERANCE, threads: int = 1) -> None:
         super().__init__(sensors, skeleton, fps)
         self.model = LobstrModel(model_path, threads)
         self.learned_upper = learned_upper and self.model.learned_upper
+        if not (np.isfinite(spine_tolerance) and 0.0 <= spine_tolerance < REACHED):
+            raise ValueError(f"spine_tolerance must be between 0 and {REACHED} m, got {spine_tolerance}")
+        self.spine_tolerance = spine_tolerance
         self._start = standing_pose()   # the network replaces all but the pelvis, and the legs after
         self.scale = body_scale(skeleton)
         self.floor, self.max_gap, self.threshold = floor_height, max_gap, contact_threshold
@@ -131,7 +138,7 @@ class LobstrEstimator(Estimator):
         out, prob, state = self.model.step(x, self._state)
         upper = None
         if self.learned_upper:
-            upper = self.upper.solve(frame, apply_upper(self._start, out[OUTPUTS:]))
+            upper = self.upper.solve(frame, apply_upper(self._start, out[OUTPUTS:]), self.spine_tolerance)
             if upper is not None and not self._reached(frame, upper[3]):
                 upper = None    # a predicted torso that leaves a tracker out of reach: the IK's frame
         upper = upper or self.upper.solve(frame)

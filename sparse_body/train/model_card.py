@@ -73,8 +73,8 @@ def results_table(results: list[dict], columns=COLUMNS) -> str:
 LOBSTR_VALIDATION = {"lower_rot_error_deg": "val leg rot [deg]", "toe_error_cm": "val toe [cm]",
                      "contact_accuracy_pct": "val contact [%]", "upper_rot_error_deg": "val upper rot [deg]"}
 LOBSTR_RUNTIME_COMMAND = ("sparse-body eval --sensors four_point --split validation --no-compare "
-                          "--output models/lobstr.runtime.json --estimator lobstr --estimator lobstr:learned_upper=false "
-                          "--estimator ik")
+                          "--output models/lobstr.runtime.json --estimator lobstr --estimator lobstr:spine_tolerance=0.005 "
+                          "--estimator lobstr:learned_upper=false --estimator ik")
 LOBSTR_RUNTIME_METRICS = ("MPJPE [cm]", "MPJRE [deg]", "Upper PE [cm]", "Lower PE [cm]", "MPJVE [cm/s]",
                           "Jitter [100m/s3]", "Hand PE [cm]")
 ROOT_PRIOR_COMMAND = ("sparse-body eval --split validation --no-compare --sensors three_point --estimator dragposer "

@@ -29,7 +29,7 @@ from .onnx_model import load_model
 from .reference import standing_pose
 
 
-_ENDS = {site: J[SITE_JOINTS[site]] for site in ("head", "left_hand", "right_hand")}
+_ENDS = [J[SITE_JOINTS[site]] for site in INPUT_SITES[1:]]   # head and hands, in input order
 # metres: the IK's soft reach leaves an end at most 0.63 cm short; beyond this the predicted
 # torso put a tracker out of the arm's or the spine's reach (0.4 % of the validation frames)
 REACHED = 0.02
@@ -111,13 +111,12 @@ class LobstrEstimator(Estimator):
         self._state = self.model.initial_state()
         self._prev: tuple[float, np.ndarray, np.ndarray] | None = None
 
-    def _reached(self, frame: TrackerFrame, positions: np.ndarray) -> bool:
-        """Whether the solved head and hands are within REACHED of their targets."""
-        for site, joint in _ENDS.items():
-            target = self.joint_target(frame, site)[0]
-            if np.linalg.norm(positions[joint] - target) > REACHED:
-                return False
-        return True
+    @staticmethod
+    def _reached(targets, positions: np.ndarray) -> bool:
+        """Whether the solved head and hands are within REACHED of their targets (the
+        INPUT_SITES targets of this frame)."""
+        return all(np.linalg.norm(positions[joint] - target[0]) <= REACHED
+                   for joint, target in zip(_ENDS, targets[1:]))
 
     def _estimate(self, frame: TrackerFrame) -> BodyPose | None:
         targets = [self.joint_target(frame, s) for s in INPUT_SITES]
@@ -139,7 +138,7 @@ class LobstrEstimator(Estimator):
         upper = None
         if self.learned_upper:
             upper = self.upper.solve(frame, apply_upper(self._start, out[OUTPUTS:]), self.spine_tolerance)
-            if upper is not None and not self._reached(frame, upper[3]):
+            if upper is not None and not self._reached(targets, upper[3]):
                 upper = None    # a predicted torso that leaves a tracker out of reach: the IK's frame
         upper = upper or self.upper.solve(frame)
         if upper is None:

@@ -63,7 +63,7 @@ def _trainers(args) -> list[tuple]:
         sensors = _config(AvatarJlmConfig, args).sensors
         out = Path(args.out or models_dir() / ("avatarjlm.onnx" if sensors == "three_point" else f"avatarjlm_{sensors}.onnx"))
         return [(AvatarJlmConfig, train, out, out.with_suffix(".train.json"))]
-    out = Path(args.out or models_dir())   # a folder: dragposer_{encoder,decoder,temporal}.onnx
+    out = Path(args.out or models_dir())   # a folder: dragposer_{encoder,decoder,temporal,tracker_prior}.onnx
     parts = []
     if args.part in ("all", "vae"):
         from .train.dragposer_train import train_vae
@@ -73,6 +73,9 @@ def _trainers(args) -> list[tuple]:
         from .train.dragposer_temporal import TemporalConfig
         from .train.dragposer_temporal_train import train_temporal
         parts.append((TemporalConfig, train_temporal, out, out / "dragposer_temporal.train.json"))
+    if args.part in ("all", "tracker_prior"):   # also in the VAE's latent space
+        from .train.dragposer_tracker_prior import TrackerPriorConfig, train_tracker_prior
+        parts.append((TrackerPriorConfig, train_tracker_prior, out, out / "dragposer_tracker_prior.train.json"))
     return parts
 
 
@@ -399,8 +402,9 @@ def build_parser() -> argparse.ArgumentParser:
                         "future frames: models/dtp_lookahead.onnx), paper or tiny; avatarjlm: small (three-point, 52 "
                         "minutes on one core), four_point (the same with the pelvis: models/avatarjlm_four_point.onnx), "
                         "paper (d1 1024, d2 512, 6 loops: for a GPU) or tiny")
-    p.add_argument("--part", choices=["all", "vae", "temporal"], default="all",
-                   help="dragposer: train the pose VAE, then the temporal predictor on its latents (all), or one")
+    p.add_argument("--part", choices=["all", "vae", "temporal", "tracker_prior"], default="all",
+                   help="dragposer: train the pose VAE, then the temporal predictor and the tracker prior on its "
+                        "latents (all), or one")
     p.add_argument("--out", help="lobstr, dtp, avatarjlm: the .onnx file to write; dragposer: the folder for its encoder, decoder and "
                                  "temporal predictor (default: the package's models/)")
     p.add_argument("--minutes", type=float, help="stop training after this long")

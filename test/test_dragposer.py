@@ -34,6 +34,8 @@ def tiny_vae(tmp_path_factory, mocap_root):
     from sparse_body.train.dragposer_temporal import TemporalConfig
     from sparse_body.train.dragposer_temporal_train import train_temporal
     train_temporal(TemporalConfig.named("tiny"), mocap_root, out, limit=2, log=lambda *_: None)
+    from sparse_body.train.dragposer_tracker_prior import TrackerPriorConfig, train_tracker_prior
+    train_tracker_prior(TrackerPriorConfig.named("tiny"), mocap_root, out, limit=2, log=lambda *_: None)
     return out
 
 
@@ -165,9 +167,10 @@ def test_missing_model_is_a_clear_error(tmp_path):
 def test_train_dragposer_is_one_command(tmp_path, mocap_root):
     subprocess.run([sys.executable, "-m", "sparse_body.cli", "train", "dragposer", "--config", "tiny", "--steps", "2",
                     "--limit", "1", "--out", str(tmp_path), "--no-card"], check=True, capture_output=True)
-    for report in ("dragposer.train.json", "dragposer_temporal.train.json"):   # the VAE, then the predictor
+    for report in ("dragposer.train.json", "dragposer_temporal.train.json",      # the VAE, then the priors
+                   "dragposer_tracker_prior.train.json"):
         assert json.loads((tmp_path / report).read_text())["steps"] == 2
-    for part in ("decoder", "encoder", "temporal"):
+    for part in ("decoder", "encoder", "temporal", "tracker_prior"):
         assert (tmp_path / f"dragposer_{part}.onnx").is_file()
 
 
@@ -364,9 +367,15 @@ def test_missing_temporal_predictor_names_the_file_and_the_way_out(tiny_vae, tmp
         (tmp_path / f"dragposer_{part}.onnx").write_bytes((tiny_vae / f"dragposer_{part}.onnx").read_bytes())
     with pytest.raises(FileNotFoundError, match="dragposer_temporal.onnx.*temporal_weight to 0"):
         create_estimator("dragposer", load_sensor_config("six_point"), Skeleton.canonical(), model_dir=str(tmp_path))
+    with pytest.raises(FileNotFoundError, match="dragposer_tracker_prior.onnx.*tracker_prior to 0"):
+        create_estimator("dragposer", load_sensor_config("six_point"), Skeleton.canonical(), model_dir=str(tmp_path),
+                         temporal_weight=0)
     est = create_estimator("dragposer", load_sensor_config("six_point"), Skeleton.canonical(), model_dir=str(tmp_path),
-                           temporal_weight=0)
-    assert est.temporal is None
+                           temporal_weight=0, tracker_prior=0)
+    assert est.temporal is None and est.guesser is None
+    with pytest.raises(ValueError, match="tracker_prior must be a finite weight"):
+        create_estimator("dragposer", load_sensor_config("six_point"), Skeleton.canonical(), model_dir=str(tmp_path),
+                         temporal_weight=0, tracker_prior=-1)
 
 
 def test_polished_root_turns_with_the_pelvis_tracker_and_untracked_legs_keep_their_direction(clip_index):
@@ -430,3 +439,84 @@ def test_root_prior_pulls_an_untracked_root_below_the_headset_and_only_then(clip
     for bad in (-0.1, float("nan")):
         with pytest.raises(ValueError, match="root_prior"):
             create_estimator("dragposer", config, motion.skeleton, root_prior=bad)
+
+
+def test_tracker_prior_features_ignore_where_the_person_stands_and_faces_and_stream_as_a_batch(rng):
+    from scipy.spatial.transform import Rotation
+
+    from sparse_body.estimators.dragposer_tracker_prior import SITE_FEATURES, SITES, sequence_features
+    T, S = 6, len(SITES)
+    pos = rng.normal(0, 0.5, (T, S, 3)) + [0, 0, 1]
+    rot = Rotation.random(T * S, random_state=1).as_matrix().reshape(T, S, 3, 3)
+    present = np.ones((T, S), bool)
+    present[2:4, SITES.index("pelvis")] = False            # a pelvis sample lost for two frames
+    present[:, SITES.index("left_foot")] = False           # no feet tracker on this side
+    x = sequence_features(pos, rot, present, 60.0)
+    turn = yaw_matrix(1.3)
+    moved = sequence_features(pos @ turn.T + [2.0, -1.0, 0.0], turn @ rot, present, 60.0)
+    np.testing.assert_allclose(moved, x, atol=1e-9)
+    blocks = x[:, :-1].reshape(T, S, SITE_FEATURES)
+    assert not blocks[:, SITES.index("left_foot")].any()
+    assert not blocks[2:4, SITES.index("pelvis")].any() and blocks[1, SITES.index("pelvis"), -1] == 1
+    # the pelvis's first sample after the gap has no velocity (no previous one), later ones do
+    assert not blocks[4, SITES.index("pelvis"), 9:12].any() and blocks[5, SITES.index("pelvis"), 9:12].any()
+    stream = [sequence_features(pos[:1], rot[:1], present[:1], 60.0)]
+    for t in range(1, T):
+        from sparse_body.core.rotations import heading
+        stream.append(sequence_features(pos[t:t + 1], rot[t:t + 1], present[t:t + 1], 60.0, pos[t - 1],
+                                        present[t - 1], float(heading(rot[t - 1, 0]))))
+    np.testing.assert_allclose(np.concatenate(stream), x, atol=1e-9)
+
+
+def test_tracker_prior_onnx_matches_torch_step_by_step(tiny_vae, rng):
+    import onnxruntime as ort
+
+    from sparse_body.estimators.dragposer_tracker_prior import FEATURES
+    from sparse_body.train.dragposer_tracker_prior import TrackerPriorConfig, TrackerPriorNet, export
+    net = TrackerPriorNet(TrackerPriorConfig.named("tiny")).eval()   # random weights: the graph is under test
+    path = tiny_vae / "check_tracker_prior.onnx"
+    export(net, path, {"method": "dragposer", "part": "tracker_prior"})
+    x = rng.normal(size=(1, 12, FEATURES)).astype(np.float32)
+    with torch.no_grad():
+        ref = net(torch.from_numpy(x))[0][0].numpy()
+    session = ort.InferenceSession(str(path))
+    state = np.zeros((1, 1, net.config.hidden), np.float32)
+    for t in range(x.shape[1]):
+        z, state = session.run(None, {"features": x[:, t], "state": state})
+        np.testing.assert_allclose(z[0], ref[t], atol=1e-5)
+
+
+def test_tracker_prior_pulls_the_latent_towards_its_guess_and_leaves_the_trackers_reached(tiny_vae):
+    from sparse_body.core.rotations import quat_to_matrix
+    motion = synthetic_walk(1.0)
+    config = load_sensor_config("four_point")
+    stream = list(synthesize_trackers(motion, config))[:30]
+    gaps, reach = {}, {}
+    for weight in (1e-6, 1.0):
+        est = create_estimator("dragposer", config, motion.skeleton, model_dir=str(tiny_vae), tracker_prior=weight)
+        guesses, predict = [], est.guesser.predict
+        est.guesser.predict = lambda targets: guesses.append(predict(targets)) or guesses[-1]   # a spy
+        gap, miss = [], []
+        for frame in stream:
+            pose = est.step(frame)
+            assert pose.is_finite()
+            gap.append(np.linalg.norm(est._state[0] - guesses[-1]))
+            _, pos = forward_kinematics(quat_to_matrix(pose.local_quats), pose.root_position, motion.skeleton.offsets)
+            miss += [np.linalg.norm(pos[c.joint] - c.target) for c in est.tracker_constraints(frame)
+                     if isinstance(c, Position)]
+        assert len(guesses) == len(stream)                  # the GRU reads every frame
+        gaps[weight], reach[weight] = np.mean(gap[1:]), np.mean(miss)
+    assert gaps[1.0] < 0.5 * gaps[1e-6]
+    assert reach[1.0] < 0.01                                # the polish still puts them on their trackers
+    prior = create_estimator("dragposer", config, motion.skeleton, model_dir=str(tiny_vae)).guesser
+    assert prior.predict({"head": None}) is None            # no headset: no guess
+
+
+def test_tracker_prior_trains_through_the_shipped_decoder_as_onnx_runs_it(tiny_vae, rng):
+    from sparse_body.estimators.dragposer import PoseVaeRuntime
+    from sparse_body.train.dragposer_tracker_prior import frozen_decoder
+    z = rng.normal(size=(5, 24)).astype(np.float32)
+    decoder = frozen_decoder(tiny_vae)
+    assert not any(p.requires_grad for p in decoder.parameters())
+    with torch.no_grad():   # float32 Gram-Schmidt of a barely trained decoder's columns: 1e-4 apart
+        np.testing.assert_allclose(decoder(torch.from_numpy(z)).numpy(), PoseVaeRuntime(tiny_vae).decode(z), atol=1e-3)

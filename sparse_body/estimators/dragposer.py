@@ -3,9 +3,10 @@ each frame until the constraints hold. No torch: the decoder runs in ONNX Runtim
 
 Variables: the latent z (24), the root position (3) and the heading (1). Each iteration is
 one Levenberg-Marquardt (damped Gauss-Newton) step on the weighted constraint residuals,
-plus priors that keep z plausible: stay near the previous frame's z and the temporal
-predictor's latent for this frame (dragposer_temporal.py; from a second of history on), and
-near the Gaussian's centre. The Jacobian comes from
+plus priors that keep z plausible: stay near the previous frame's z, the temporal
+predictor's latent for this frame (dragposer_temporal.py; from a second of history on) and
+the tracker prior's guess from the trackers' recent motion (dragposer_tracker_prior.py;
+ours), and near the Gaussian's centre. The Jacobian comes from
 ONE batched decoder pass over z and its 24 perturbations (forward differences), and batched
 numpy FK; the paper backpropagates through the decoder instead, one gradient step per
 iteration (train/dragposer_reference.py keeps that as the reference).
@@ -32,15 +33,19 @@ from .constraints import AboveFloor, ConstraintSet, Orientation, OverPoint, Posi
 from ..core.skeleton import Skeleton
 from .dragposer_pose import HEIGHT_JOINTS, LATENT, dual_quaternions, split_heading
 from .dragposer_temporal import TemporalPrior
+from .dragposer_tracker_prior import FILE as TRACKER_PRIOR_FILE
+from .dragposer_tracker_prior import TrackerPrior
 from ..core.body_ik import solve_body
 from .lobstr_features import body_scale
 from .onnx_model import load_model
 
 
 HEIGHT_INDEX = [J[j] for j in HEIGHT_JOINTS]
-MODEL_FILES = ("dragposer_encoder.onnx", "dragposer_decoder.onnx", "dragposer_temporal.onnx")
+MODEL_FILES = ("dragposer_encoder.onnx", "dragposer_decoder.onnx", "dragposer_temporal.onnx", TRACKER_PRIOR_FILE)
 # the root's children and the tracked end that the IK reaches through each
 ROOT_CHAINS = {J["left_hip"]: J["left_ankle"], J["right_hip"]: J["right_ankle"], J["spine1"]: J["head"]}
+# the tracker prior's pull, chosen on the validation people (models/dragposer.tracker_prior_*.json)
+TRACKER_PRIOR_WEIGHT = 0.001
 END_JOINTS = frozenset(J[j] for j in ("head", "left_wrist", "right_wrist", "left_ankle", "right_ankle"))
 
 
@@ -149,7 +154,7 @@ class DragPoserEstimator(Estimator):
                  tolerance: float = 0.01, rotation_tolerance: float = 0.087, threads: int = 1,
                  temporal_weight: float = 0.002, ahead: int = 1, temporal_ramp: bool = True,
                  polish: bool = True, pelvis_orientation: bool = True, root_prior: float = 0.3,
-                 **optimizer) -> None:
+                 tracker_prior: float = TRACKER_PRIOR_WEIGHT, **optimizer) -> None:
         if iterations < 1:
             raise ValueError(f"iterations must be at least 1, got {iterations}")
         super().__init__(sensors, skeleton, fps)
@@ -162,6 +167,11 @@ class DragPoserEstimator(Estimator):
         # the temporal predictor's pull on the latent (the paper's lambda_T); 0: without it
         self.temporal_weight = temporal_weight
         self.temporal = TemporalPrior(self.vae.dir, ahead, threads, temporal_ramp) if temporal_weight > 0 else None
+        # the tracker prior's pull on the latent (ours; dragposer_tracker_prior.py); 0: without it
+        if not (np.isfinite(tracker_prior) and tracker_prior >= 0):
+            raise ValueError(f"tracker_prior must be a finite weight, 0 or more, got {tracker_prior}")
+        self.tracker_weight = tracker_prior
+        self.guesser = TrackerPrior(self.vae.dir, fps, threads) if tracker_prior > 0 else None
         self.optimizer = LatentOptimizer(self.vae, skeleton.offsets, **optimizer)
         # the paper's stopping rule: positional and rotational thresholds on the trackers
         self.iterations, self.tolerance, self.rotation_tolerance = iterations, tolerance, rotation_tolerance
@@ -187,10 +197,16 @@ class DragPoserEstimator(Estimator):
         self._last_toes = None
         if self.temporal is not None:
             self.temporal.reset()
+        if self.guesser is not None:
+            self.guesser.reset()
 
-    def tracker_constraints(self, frame: TrackerFrame) -> ConstraintSet:
+    def tracker_targets(self, frame: TrackerFrame) -> dict:
+        """site -> its joint's (position, rotation) this frame, or None (Estimator.joint_target)."""
+        return {site: self.joint_target(frame, site) for site in self.sensors.site_names}
+
+    def tracker_constraints(self, frame: TrackerFrame, targets: dict | None = None) -> ConstraintSet:
         out = ConstraintSet()
-        targets = {site: self.joint_target(frame, site) for site in self.sensors.site_names}
+        targets = self.tracker_targets(frame) if targets is None else targets
         for site, target in targets.items():
             if target is None:
                 continue
@@ -215,7 +231,7 @@ class DragPoserEstimator(Estimator):
         hang = np.asarray(head_position, float) - yaw_matrix(float(heading(head_rotation))) @ self._head_above_pelvis
         return OverPoint(J["pelvis"], self.root_prior, name="pelvis:under_head", target=tuple(hang[:2]))
 
-    def _initial_state(self, trackers: ConstraintSet):
+    def _initial_state(self, trackers: ConstraintSet, latent: np.ndarray | None = None):
         by_name = {c.name: c for c in trackers}
         yaw = 0.0
         for site in ("pelvis", "head"):
@@ -231,7 +247,7 @@ class DragPoserEstimator(Estimator):
             if not points:
                 return None
             root = np.mean(points, axis=0)
-        return np.zeros(LATENT), root, yaw
+        return (np.zeros(LATENT) if latent is None else latent), root, yaw
 
     def refine(self, pose: BodyPose, frame: TrackerFrame) -> BodyPose:
         """Another estimator's pose, moved in the latent space until the trackers' (and the
@@ -247,15 +263,31 @@ class DragPoserEstimator(Estimator):
         return self._checked(frame.stamp, self._solve(frame, (z, np.asarray(pose.root_position, float), yaw), z_prior=z))
 
     def _estimate(self, frame: TrackerFrame) -> BodyPose | None:
+        targets = self.tracker_targets(frame)
+        trackers = self.tracker_constraints(frame, targets)
+        guess = self._guess(targets)         # every frame: the GRU keeps its state
+        if self._state is None:
+            return self._solve(frame, None, trackers=trackers, observe=True, start=guess)
+        # Every pull at once: sum_k w_k |z - z_k|^2 is one quadratic with the weights' sum,
+        # centred at their weighted mean. The paper's single gradient step a frame keeps z
+        # near z_prev by itself; a Gauss-Newton step needs the term said.
+        pulls = [(self.optimizer.prior_weight, self._state[0])]
         prediction = None if self.temporal is None else self.temporal.target()
-        if prediction is None or self._state is None:
-            return self._solve(frame, self._state, observe=True)
-        # Both pulls at once: w_p |z - z_prev|^2 + w_T |z - z_T|^2 is one quadratic with the
-        # weights' sum, centred at their weighted mean. The paper's single gradient step a
-        # frame keeps z near z_prev by itself; a Gauss-Newton step needs the term said.
-        w_prev, w_t = self.optimizer.prior_weight, self.temporal_weight
-        centre = (w_prev * self._state[0] + w_t * prediction) / (w_prev + w_t)
-        return self._solve(frame, self._state, centre, w_prev + w_t, observe=True)
+        if prediction is not None:
+            pulls.append((self.temporal_weight, prediction))
+        if guess is not None:
+            pulls.append((self.tracker_weight, guess))
+        total = sum(w for w, _ in pulls)
+        centre = sum(w * z for w, z in pulls) / total
+        return self._solve(frame, self._state, centre, total, trackers=trackers, observe=True)
+
+    def _guess(self, targets: dict) -> np.ndarray | None:
+        """The tracker prior's latent for this frame, from the targets on the canonical body."""
+        if self.guesser is None:
+            return None
+        lift = np.array([0.0, 0.0, self.floor or 0.0])
+        return self.guesser.predict({site: None if t is None or t[0] is None else ((t[0] - lift) * self._scale, t[1])
+                                     for site, t in targets.items()})
 
     def _polish(self, local, root, trackers: ConstraintSet):
         """Put the tracked pelvis and end effectors exactly on their trackers (ours, not the
@@ -288,12 +320,15 @@ class DragPoserEstimator(Estimator):
             glob, _ = forward_kinematics(local, root, self.skeleton.offsets)
         return local, glob, root
 
-    def _solve(self, frame: TrackerFrame, state, z_prior=None, prior_weight=None, observe=False) -> BodyPose:
-        trackers = self.tracker_constraints(frame)
+    def _solve(self, frame: TrackerFrame, state, z_prior=None, prior_weight=None, observe=False,
+               trackers: ConstraintSet | None = None, start: np.ndarray | None = None) -> BodyPose:
+        """One frame's search from state (z, root, yaw), or from a standing start (latent
+        `start`, else the Gaussian's centre) when state is None."""
+        trackers = self.tracker_constraints(frame) if trackers is None else trackers
         if not len(trackers):
             return None
         first = state is None
-        state = state or self._initial_state(trackers)
+        state = state or self._initial_state(trackers, start)
         if state is None:
             return None
         constraints = ConstraintSet()

@@ -22,7 +22,7 @@ class RefinedEstimator(Estimator):
         self.base = create_estimator(base, sensors, skeleton, fps, **base_options)
         self.base.use_filter(NO_FILTER)          # this estimator's filter has done it
         self.refiner = DragPoserEstimator(sensors, skeleton, fps, model_dir=model_dir, iterations=iterations,
-                                          temporal_weight=0.0)   # the base pose is the prior
+                                          temporal_weight=0.0, tracker_prior=0.0)   # the base pose is the prior
 
     def _reset(self) -> None:
         self.base.reset()

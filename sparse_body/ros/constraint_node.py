@@ -40,7 +40,7 @@ class InputRefiner(Estimator):
         from ..estimators.dragposer import DragPoserEstimator
         super().__init__(sensors, skeleton, fps)
         self.refiner = DragPoserEstimator(sensors, skeleton, fps, model_path=model_path or None, iterations=iterations,
-                                          temporal_weight=0.0)   # the input pose is the prior
+                                          temporal_weight=0.0, tracker_prior=0.0)   # the input pose is the prior
         self.timeout = timeout
         self.latest: BodyPose | None = None
         self.reset()

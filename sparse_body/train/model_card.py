@@ -425,8 +425,8 @@ weight 0.0002, feet above the floor; then the closed-form IK (core/body_ik.py) p
 pelvis and end effectors on their trackers. `dragposer:temporal_weight=0` is the paper's "no temporal
 predictor" ablation (only the previous latent's pull).
 
-The next three tables were measured before the tracker prior existed (their `dragposer` is
-today's `dragposer:tracker_prior=0`). Runtime choices, measured on the validation people
+The next two tables were measured before the tracker prior existed (their `dragposer` is
+today's `dragposer:tracker_prior=0`); the root prior's table after them is measured with it. Runtime choices, measured on the validation people
 (field protocol, four-point; the default is `dragposer`; `prior_weight=0` drops the previous latent's pull, `temporal_ramp=false` holds
 each prediction for the 4 frames instead of ramping to it):
 
@@ -441,9 +441,11 @@ its decoded direction; measured on the validation people:
 Without a pelvis tracker (three-point) the search may slide the root under a leaning spine;
 `root_prior` (0.3, the default) pulls it over the point below the headset where a standing
 body's pelvis hangs, as the IK places it. Chosen on the validation people, where most of the
-gain is on takes whose root the search alone had put 30-40 cm off. On the test people it
-costs a little; over both sets of unseen people together it is a clear gain (figures in the
-README's DragPoser section):
+gain is on takes whose root the search alone had put 30-40 cm off (before the tracker prior:
+16.03 -> 12.94 cm MPJPE, root 17.09 -> 9.83; on the test people it cost a little, 9.29 ->
+10.00, and over both sets of unseen people together it was a clear gain; the README has the
+figures). Measured again with the tracker prior (the table) it is still the best weight, its
+gain smaller:
 
 {root_prior_table}
 

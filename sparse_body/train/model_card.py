@@ -425,9 +425,7 @@ weight 0.0002, feet above the floor; then the closed-form IK (core/body_ik.py) p
 pelvis and end effectors on their trackers. `dragposer:temporal_weight=0` is the paper's "no temporal
 predictor" ablation (only the previous latent's pull).
 
-The next two tables were measured before the tracker prior existed (their `dragposer` is
-today's `dragposer:tracker_prior=0`); the root prior's table after them is measured with it. Runtime choices, measured on the validation people
-(field protocol, four-point; the default is `dragposer`; `prior_weight=0` drops the previous latent's pull, `temporal_ramp=false` holds
+Runtime choices, measured on the validation people (field protocol, four-point; the default is `dragposer`; `prior_weight=0` drops the previous latent's pull, `temporal_ramp=false` holds
 each prediction for the 4 frames instead of ramping to it):
 
 {runtime_table}

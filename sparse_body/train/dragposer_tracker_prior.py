@@ -178,7 +178,7 @@ def validate(net: TrackerPriorNet, clips, decoder: Decoder, offsets: torch.Tenso
     the joint and lower-body position errors (cm, relative to the root, without heading) of
     the decoded guess. zero_mse: the latents' mean square, for scale."""
     out = {}
-    for (name, sites), mask in zip(SENSOR_SETS.items(), MASKS):
+    for name, mask in zip(SENSOR_SETS, MASKS):
         err, pe, lower, n = 0.0, 0.0, 0.0, 0
         for x, z, body in clips:
             pred, _ = net(torch.from_numpy(x[:1] * mask))

@@ -84,7 +84,7 @@ def cmd_train(args) -> int:
 
     import torch
 
-    from .train.harness import beside
+    from .train.harness import beside, with_earlier_runs
     parts = _trainers(args)
     if args.ablate_augment:
         torch.set_num_threads(args.threads)
@@ -95,10 +95,13 @@ def cmd_train(args) -> int:
         configs = [_config(config_class, args) for config_class, *_ in parts]   # errors before training
         for config, (_, train, out, report_path) in zip(configs, parts):
             checkpoint = beside(report_path, ".checkpoint.npz")
+            earlier = json.loads(report_path.read_text()) if args.resume and report_path.is_file() else None
             report = train(config, _mocap(args), out, seed=args.seed, limit=args.limit, checkpoint=checkpoint,
                            resume=args.resume)
-            checkpoint.unlink(missing_ok=True)       # the model is exported: nothing left to resume
+            if not args.keep_checkpoint:
+                checkpoint.unlink(missing_ok=True)       # the model is exported: nothing left to resume
             report["command"] = "sparse-body " + " ".join(sys.argv[1:])
+            report = with_earlier_runs(report, earlier)
             report_path.parent.mkdir(parents=True, exist_ok=True)
             report_path.write_text(json.dumps(report, indent=1))
             print(f"written {out} and {report_path}")
@@ -419,6 +422,9 @@ def build_parser() -> argparse.ArgumentParser:
                    help="continue an interrupted training from its checkpoint (<model>.checkpoint.npz, written "
                         "at every validation; weights only, the optimiser and its schedule start afresh); "
                         "--steps counts from the first run")
+    p.add_argument("--keep-checkpoint", action="store_true",
+                   help="keep <model>.checkpoint.npz after the export, so that --resume can train a finished "
+                        "model further (a warm restart: the learning rate starts over)")
     p.add_argument("--set", action="append", default=[], metavar="FIELD=VALUE",
                    help="override a field of the configuration (repeatable), e.g. --set dropout=0.2")
     p.add_argument("--augment", metavar="KINDS",

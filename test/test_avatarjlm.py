@@ -153,6 +153,25 @@ def test_train_avatarjlm_is_one_command(tmp_path, mocap_root):
     assert json.loads(meta["config"]) == report["config"] and json.loads(meta["method"]) == "avatarjlm"
 
 
+def test_a_finished_training_trains_further_from_its_kept_checkpoint(tmp_path, mocap_root):
+    """--keep-checkpoint then --resume: the second run starts where the first stopped and its
+    report keeps the first run, which the model card shows."""
+    from sparse_body.train.avatarjlm_card import _curve, _training
+    out = tmp_path / "avatarjlm.onnx"
+    run = [sys.executable, "-m", "sparse_body.cli", "train", "avatarjlm", "--config", "tiny", "--limit", "1",
+           "--out", str(out), "--no-card"]
+    subprocess.run(run + ["--steps", "2", "--keep-checkpoint"], check=True, capture_output=True)
+    assert (tmp_path / "avatarjlm.checkpoint.npz").is_file()
+    subprocess.run(run + ["--steps", "4", "--resume"], check=True, capture_output=True)
+    report = json.loads(out.with_suffix(".train.json").read_text())
+    assert report["steps"] == 4 and [r["steps"] for r in report["earlier_runs"]] == [2]
+    assert "--keep-checkpoint" in report["earlier_runs"][0]["command"] and "--resume" in report["command"]
+    assert not (tmp_path / "avatarjlm.checkpoint.npz").exists()
+    assert "then `sparse-body" in _training(report, out.name)
+    minutes = [float(row.split("|")[2]) for row in _curve(report).splitlines()]
+    assert minutes == sorted(minutes)           # the resumed run's clock goes on from the first's
+
+
 @pytest.mark.skipif(not (models_dir() / "avatarjlm.onnx").is_file(), reason="no shipped AvatarJLM model")
 def test_shipped_three_point_model_beats_ik_on_a_held_out_walk(clip_index):
     """A test person's walk, field protocol, headset and controllers only: the body is
@@ -206,3 +225,20 @@ def test_estimator_node_runs_avatarjlm_over_dds(tiny_models, tmp_path, clip, ros
     valid = sum(s.valid for s in statuses)
     assert valid >= 0.9 * len(statuses) and valid >= 30, (tmp_path / "sparse_body_estimator.log").read_text()
     assert all(np.all(np.isfinite(m.position)) for m in listener.received["joint_states"])
+
+
+def test_leg_term_judges_the_legs_own_swing_not_the_root(clip):
+    from sparse_body.core.rotations import matrix_to_6d
+    from sparse_body.train.avatarjlm_model import AvatarJlmConfig, AvatarJlmNet, leg_positions
+    from sparse_body.train.avatarjlm_train import train
+    net = AvatarJlmNet(AvatarJlmConfig.named("tiny"))
+    local = clip.local_rotations[:10].copy()
+    turned = local.copy()
+    turned[:, 0] = yaw_matrix(np.array(1.3)) @ turned[:, 0]
+    bent = local.copy()
+    bent[:, J["left_knee"]] = bent[:, J["left_knee"]] @ quat_to_matrix(np.array([np.sin(0.4), 0, 0, np.cos(0.4)]))
+    legs = [leg_positions(torch.tensor(matrix_to_6d(r), dtype=torch.float32), net.offsets) for r in (local, turned, bent)]
+    assert torch.allclose(legs[0], legs[1], atol=1e-5)             # the root's turn is not the legs'
+    assert (legs[0] - legs[2]).norm(dim=-1).max() > 0.05           # a bent knee moves the foot
+    with pytest.raises(ValueError, match="train_noise must be one of"):
+        train(replace(AvatarJlmConfig.named("tiny"), train_noise="loud"), None, None)

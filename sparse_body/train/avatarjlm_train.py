@@ -1,8 +1,8 @@
 """`sparse-body train avatarjlm`: CMU train split -> AvatarJLM ONNX model, one command.
 
-Every clip (and its augmented variants) gives its frames twice: clean, and with LoBSTr's
-tracker noise (the features, the heading frames and the head that places the body all come
-from the noisy trackers; the targets stay true). Sequences of `sequence` frames are drawn from
+Every clip (and its augmented variants) gives its frames twice: clean, and with tracker noise
+(`train_noise`: LoBSTr's by default; the features, the heading frames and the head that
+places the body all come from the noisy trackers; the targets stay true). Sequences of `sequence` frames are drawn from
 within clips; every frame of a sequence is a target (the temporal attention is causal). The
 exported model is one streaming step (train/avatarjlm_model.py: StreamingStep).
 """
@@ -20,7 +20,7 @@ from ..core.contacts import contact_labels, estimate_floor
 from ..core.rotations import matrix_to_6d
 from ..core.skeleton import Skeleton
 from ..data.catalog import load_clip, split_clips
-from ..data.virtual_trackers import LOBSTR_NOISE, _random_rotations
+from ..data.virtual_trackers import LOBSTR_NOISE, NOISE_MODELS, TrackerNoise, _random_rotations
 from ..estimators.avatarjlm_features import input_joints, reference, sequence_features
 from ..estimators.lobstr_features import body_scale
 from .augment import NO_AUGMENTATION, Augmentation, variants
@@ -42,15 +42,16 @@ class Frames:
     starts: np.ndarray      # first frames of the windows that stay within one clip
 
 
-def clip_frames(motion, joints: tuple[int, ...], copies: int, fps: float, rng: np.random.Generator):
+def clip_frames(motion, joints: tuple[int, ...], copies: int, fps: float, rng: np.random.Generator,
+                noise: TrackerNoise = LOBSTR_NOISE):
     floor = estimate_floor(motion.positions)
     pos = (motion.positions[:, joints] - [0.0, 0.0, floor]) * body_scale(motion.skeleton)
     rot = motion.global_rotations[:, joints]
     T, n = len(motion), len(joints)
     streams = [(pos, rot)]
     for _ in range(copies):
-        noisy = pos + rng.normal(0.0, LOBSTR_NOISE.position_std, size=pos.shape)
-        turned = _random_rotations(rng, T * n, LOBSTR_NOISE.rotation_max_deg).as_matrix().reshape(T, n, 3, 3) @ rot
+        noisy = pos + rng.normal(0.0, noise.position_std, size=pos.shape)
+        turned = _random_rotations(rng, T * n, noise.rotation_max_deg).as_matrix().reshape(T, n, 3, 3) @ rot
         streams.append((noisy, turned))
     x = np.stack([sequence_features(p, r) for p, r in streams])
     yaw = np.stack([reference(p[:, 0], r[:, 0])[1] for p, r in streams])
@@ -65,7 +66,8 @@ def load_frames(mocap_root: Path, split: str, config: AvatarJlmConfig, rng, limi
     parts, starts, offset = [], [], 0
     for clip in split_clips(mocap_root, split, limit):
         for motion in variants(load_clip(clip, config.fps), augmentation, rng):
-            parts.append(clip_frames(motion, joints, 1 if split == "train" else 0, config.fps, rng))
+            parts.append(clip_frames(motion, joints, 1 if split == "train" else 0, config.fps, rng,
+                                     NOISE_MODELS[config.train_noise]))
             T = len(motion)
             if T >= config.sequence:
                 starts.append(offset + np.arange(T - config.sequence + 1))
@@ -128,6 +130,8 @@ def export_onnx(net: AvatarJlmNet, path: Path, metadata: dict) -> None:
 def train(config: AvatarJlmConfig, mocap_root: Path, out: Path, seed: int = 0, limit: int | None = None,
           log=print, checkpoint: Path | None = None, resume: bool = False) -> dict:
     """Train, export out (an .onnx path) and return what the model card reports."""
+    if config.train_noise not in NOISE_MODELS:
+        raise ValueError(f"train_noise must be one of {', '.join(NOISE_MODELS)}, got {config.train_noise!r}")
     torch.manual_seed(seed)
     rng = np.random.default_rng(seed)
     t0 = time.perf_counter()

@@ -107,6 +107,15 @@ def beside(report_path: Path, suffix: str) -> Path:
     return Path(report_path).with_name(Path(report_path).name.removesuffix(".train.json") + suffix)
 
 
+def with_earlier_runs(report: dict, earlier: dict | None) -> dict:
+    """A resumed run's report (train.json) keeps the runs before it, their command, steps and
+    minutes, so that a model card can say how the model was trained from the start."""
+    if earlier is not None:
+        report["earlier_runs"] = earlier.get("earlier_runs", []) + [
+            {k: earlier[k] for k in ("command", "steps", "minutes") if k in earlier}]
+    return report
+
+
 def export_onnx(module: torch.nn.Module, example: tuple, path: Path, inputs: list[str], outputs: list[str],
                 metadata: dict, dynamic_axes: dict | None = None) -> None:
     """module (in eval mode) traced on the example inputs into an ONNX file (opset 17) with the

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from sparse_body.core.kinematics import forward_kinematics
-from sparse_body.core.rotations import quat_to_matrix, yaw_matrix
+from sparse_body.core.rotations import angle_between, quat_to_matrix, yaw_matrix
 from sparse_body.core.sensors import load_sensor_config
 from sparse_body.core.skeleton import JOINT_INDEX as J
 from sparse_body.data.catalog import load_clip
@@ -195,22 +195,51 @@ def _knee_twist_deg(local, offsets) -> float:
     return float(np.rad2deg(np.max(turns)))
 
 
-def test_shipped_three_point_knees_are_hinges_and_the_ankles_stay(clip_index):
-    """The three-point network turns a shin about its own length by up to 175 degrees
-    (validation person 05's walk, 05_02): hinge_knees takes that turn out of the knees and
-    moves no ankle; without it the knees keep it."""
+def test_shipped_three_point_legs_are_rebuilt_from_their_positions(clip_index):
+    """The shipped three-point network turns whole legs (a hip about its thigh, the knee
+    turning back; validation person 05's walk, 05_02): legs_from_positions rebuilds hips and
+    knees from where the network puts the joints, which moves no knee or ankle and leaves the
+    knees hinges."""
     motion = load_clip(clip_index["05_02"]).slice(0, 120)
     stream = list(synthesize_trackers(motion, THREE))
-    ankles, twists = {}, {}
-    for hinge in (True, False):
-        est = create_estimator("avatarjlm", THREE, motion.skeleton, hinge_knees=hinge, filter=False)
-        poses = [est.step(f) for f in stream]
-        local = quat_to_matrix(np.stack([p.local_quats for p in poses]))
-        _, pos = forward_kinematics(local, np.stack([p.root_position for p in poses]), motion.skeleton.offsets)
-        ankles[hinge] = pos[:, [J["left_ankle"], J["right_ankle"]]]
-        twists[hinge] = _knee_twist_deg(local, motion.skeleton.offsets)
-    assert twists[True] < 0.01 and twists[False] > 90
-    np.testing.assert_allclose(ankles[True], ankles[False], atol=1e-9)
+    poses = {}
+    for rebuild in (True, False):
+        est = create_estimator("avatarjlm", THREE, motion.skeleton, legs_from_positions=rebuild, hinge_knees=False,
+                               filter=False)
+        poses[rebuild] = [est.step(f) for f in stream]
+    local = {k: quat_to_matrix(np.stack([p.local_quats for p in v])) for k, v in poses.items()}
+    pos = {k: forward_kinematics(local[k], np.stack([p.root_position for p in poses[k]]), motion.skeleton.offsets)[1]
+           for k in poses}
+    legs = [J["left_knee"], J["right_knee"], J["left_ankle"], J["right_ankle"]]
+    np.testing.assert_allclose(pos[True][:, legs], pos[False][:, legs], atol=1e-9)
+    assert _knee_twist_deg(local[True], motion.skeleton.offsets) < 0.01
+    hips = [J["left_hip"], J["right_hip"]]
+    turned = np.rad2deg(angle_between(local[True][:, hips], local[False][:, hips]))
+    assert turned.max() > 90          # the network's own hips were turned
+
+
+def test_legs_rebuilt_from_positions_undo_a_leg_turned_about_its_thigh(clip_index):
+    """A true walk's legs come back unchanged; turned half a turn about the thigh (the knee
+    turning back, positions the same) they come back to the truth wherever the knee is bent."""
+    from sparse_body.core.rotations import axis_angle_to_matrix
+    from sparse_body.estimators.avatarjlm import legs_from_positions
+    motion = load_clip(clip_index["08_01"])
+    offsets, true = motion.skeleton.offsets, motion.local_rotations[::4]
+    half = axis_angle_to_matrix(np.pi * offsets[J["left_knee"]] / np.linalg.norm(offsets[J["left_knee"]]))
+    turned = true.copy()
+    turned[:, J["left_hip"]] = true[:, J["left_hip"]] @ half
+    turned[:, J["left_knee"]] = half.T @ true[:, J["left_knee"]]
+    joints = [J["left_hip"], J["left_knee"]]
+    bent = np.rad2deg(angle_between(true[:, J["left_knee"]], np.eye(3))) > 10
+    for t in range(len(true)):
+        np.testing.assert_allclose(legs_from_positions(true[t], offsets), true[t], atol=1e-6)
+        rebuilt = legs_from_positions(turned[t], offsets)
+        knee_ankle = [J["left_knee"], J["left_ankle"]]
+        np.testing.assert_allclose(forward_kinematics(rebuilt, np.zeros(3), offsets)[1][knee_ankle],
+                                   forward_kinematics(turned[t], np.zeros(3), offsets)[1][knee_ankle], atol=1e-9)
+        error = np.rad2deg(angle_between(rebuilt[joints], true[t][joints])).max()
+        assert error < 0.1 if bent[t] else True
+    assert bent.sum() > 10
 
 
 def test_estimator_node_runs_avatarjlm_over_dds(tiny_models, tmp_path, clip, ros_env):

@@ -11,7 +11,11 @@ rotation turned from the head's heading frame into the world; the body placed by
 alignment (the paper's), or on the pelvis tracker with the four-point model. The knees are
 hinges (hinge_knees, ours): the three-point network turns a shin about its own length by up
 to 175 degrees, the ankle partly turning back, which leaves positions near right and the
-joint angles a user drives a robot or an avatar with broken. Then
+joint angles a user drives a robot or an avatar with broken. A retrained network (the leg
+term) turned whole legs instead, a hip half a turn about its thigh with the knee turning back:
+the hips and knees are rebuilt from the joint positions the network gives
+(legs_from_positions, ours, the default; it makes the knees hinges too), which keeps its
+positions and gives the legs' rotations a body would have. Then
 (polish=true, ours: the paper relies on its hand-alignment loss alone) the closed-form IK
 brings the head and hands onto their trackers, keeping the network's spine curve and
 elbows, and they take their trackers' orientation.
@@ -45,6 +49,35 @@ from .onnx_model import load_model, shipped_model_path
 
 HEAD = JOINT_INDEX["head"]
 KNEES = {JOINT_INDEX["left_knee"]: JOINT_INDEX["left_ankle"], JOINT_INDEX["right_knee"]: JOINT_INDEX["right_ankle"]}
+LEGS = tuple((JOINT_INDEX[f"{side}_hip"], JOINT_INDEX[f"{side}_knee"], JOINT_INDEX[f"{side}_ankle"])
+             for side in ("left", "right"))
+KNEE_AXIS = np.array([0.0, 1.0, 0.0])       # a knee bends about the body's left axis (x forward, z up)
+
+
+def _frame(along: np.ndarray, across: np.ndarray) -> np.ndarray:
+    """Columns: along, across made perpendicular to it, and their cross product (unit)."""
+    u = along / np.linalg.norm(along)
+    v = across - (across @ u) * u
+    v = v / np.linalg.norm(v)
+    return np.stack([u, v, np.cross(u, v)], axis=1)
+
+
+def legs_from_positions(local: np.ndarray, offsets: np.ndarray) -> np.ndarray:
+    """(22, 3, 3) local rotations with each hip and knee rebuilt from the joint positions they
+    give: the thigh and shin point where they did, the knee is a hinge whose axis is normal to
+    the hip-knee-ankle plane (the hip's own across a nearly straight leg, where that plane is
+    not defined), the ankle keeps its local rotation. Hips, knees and ankles stay in place."""
+    out = local.copy()
+    glob, pos = forward_kinematics(local, np.zeros(3), offsets)
+    for hip, knee, ankle in LEGS:
+        thigh = glob[0].T @ (pos[knee] - pos[hip])
+        shin = glob[0].T @ (pos[ankle] - pos[knee])
+        axis = np.cross(thigh, shin)
+        if np.linalg.norm(axis) < 0.1 * np.linalg.norm(thigh) * np.linalg.norm(shin):   # bent under 6 degrees
+            axis = local[hip] @ KNEE_AXIS
+        out[hip] = _frame(thigh, axis) @ _frame(offsets[knee], KNEE_AXIS).T
+        out[knee] = rotation_between(offsets[ankle], out[hip].T @ shin)
+    return out
 MODELS = {"three_point": "avatarjlm.onnx", "four_point": "avatarjlm_four_point.onnx"}
 
 
@@ -93,7 +126,7 @@ class AvatarJlmEstimator(Estimator):
 
     def __init__(self, sensors, skeleton, fps: float = 60.0, model: str = "auto", model_path: str | None = None,
                  polish: bool = True, end_orientations: bool = True, hinge_knees: bool = True,
-                 floor_height: float = 0.0, max_gap: float = 0.5, threads: int = 1) -> None:
+                 legs_from_positions: bool = True, floor_height: float = 0.0, max_gap: float = 0.5, threads: int = 1) -> None:
         super().__init__(sensors, skeleton, fps)
         if model == "auto":
             model = "four_point" if "pelvis" in sensors.site_names else "three_point"
@@ -104,6 +137,7 @@ class AvatarJlmEstimator(Estimator):
                              f"{sensors.name!r} has {', '.join(sensors.site_names)} (use model:=three_point)")
         self.scale = body_scale(skeleton)
         self.polish, self.end_orientations, self.hinge_knees = polish, end_orientations, hinge_knees
+        self.legs_from_positions = legs_from_positions
         self.floor, self.max_gap = floor_height, max_gap
         self._joints = [sensors.site(s).joint_index for s in self.model.sites]
         self.reset()
@@ -134,7 +168,9 @@ class AvatarJlmEstimator(Estimator):
     def _pose(self, stamp: float, out: np.ndarray, world: np.ndarray, rot: np.ndarray) -> BodyPose:
         local = out.copy()
         offsets = self.skeleton.offsets
-        if self.hinge_knees:    # a knee is a hinge: no turn of the shin about its own length
+        if self.legs_from_positions:
+            local = legs_from_positions(local, offsets)
+        elif self.hinge_knees:  # a knee is a hinge: no turn of the shin about its own length
             for knee, ankle in KNEES.items():
                 local[knee] = rotation_between(offsets[ankle], local[knee] @ offsets[ankle])
         four = "pelvis" in self.model.sites

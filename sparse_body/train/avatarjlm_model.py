@@ -74,9 +74,8 @@ class AvatarJlmConfig:
     zeta: float = 50.0
     # ours: the lower body's positions relative to the root (its rotation and place taken out),
     # L1. Head-aligned positions (L_pos) charge a leg for every error of the spine and root
-    # above it; this term judges the legs' own swing. Off in the shipped models: with it the
-    # three-point network's legs reach further but its local rotations settle into a turned
-    # artefact (the model card: "Tried for the lower body")
+    # above it; this term judges the legs' own swing (the three-point model; its legs' local
+    # rotations come out turned, which the runtime's legs_from_positions takes out)
     leg_weight: float = 0.0
     # tracker noise on the noisy copy of each clip: lobstr (1 cm, 1.5 degrees, LoBSTr's
     # training noise) or vr (the field protocol's: 1 mm, 1 degree)
@@ -101,10 +100,11 @@ class AvatarJlmConfig:
             return cls()
         if name == "small":        # under an hour on one CPU core (beside four_point on the other)
             return cls(d_embed=256, d_model=64, heads=4, loops=3, feedforward=128, dropout=0.0, batch=6, lr=5e-4,
-                       minutes=52.0, steps=1_000_000)
+                       leg_weight=5.0, minutes=52.0, steps=1_000_000)
         if name == "four_point":   # the same size with the pelvis; the root's own rotation weighs as much as the rest
             config = cls.named("small")
             config.sensors, config.minutes, config.beta, config.identity_start = "four_point", 42.0, 1.0, True
+            config.leg_weight = 0.0     # trained before the leg term
             return config
         if name == "tiny":    # tests
             return cls(d_embed=16, d_model=8, heads=2, loops=1, feedforward=16, window=6, sequence=8, batch=3, steps=3,

@@ -14,7 +14,8 @@ to 175 degrees, the ankle partly turning back, which leaves positions near right
 joint angles a user drives a robot or an avatar with broken. A retrained network (the leg
 term) turned whole legs instead, a hip half a turn about its thigh with the knee turning back:
 the hips and knees are rebuilt from the joint positions the network gives
-(legs_from_positions, ours, the default; it makes the knees hinges too), which keeps its
+(legs_from_positions, ours; by default with the three-point model, whose legs turn; it
+makes the knees hinges too), which keeps its
 positions and gives the legs' rotations a body would have. Then
 (polish=true, ours: the paper relies on its hand-alignment loss alone) the closed-form IK
 brings the head and hands onto their trackers, keeping the network's spine curve and
@@ -126,7 +127,8 @@ class AvatarJlmEstimator(Estimator):
 
     def __init__(self, sensors, skeleton, fps: float = 60.0, model: str = "auto", model_path: str | None = None,
                  polish: bool = True, end_orientations: bool = True, hinge_knees: bool = True,
-                 legs_from_positions: bool = True, floor_height: float = 0.0, max_gap: float = 0.5, threads: int = 1) -> None:
+                 legs_from_positions: bool | None = None, floor_height: float = 0.0, max_gap: float = 0.5,
+                 threads: int = 1) -> None:
         super().__init__(sensors, skeleton, fps)
         if model == "auto":
             model = "four_point" if "pelvis" in sensors.site_names else "three_point"
@@ -137,7 +139,9 @@ class AvatarJlmEstimator(Estimator):
                              f"{sensors.name!r} has {', '.join(sensors.site_names)} (use model:=three_point)")
         self.scale = body_scale(skeleton)
         self.polish, self.end_orientations, self.hinge_knees = polish, end_orientations, hinge_knees
-        self.legs_from_positions = legs_from_positions
+        # None: the three-point model's turned legs are rebuilt; the four-point model's are not turned
+        four = "pelvis" in self.model.sites
+        self.legs_from_positions = not four if legs_from_positions is None else bool(legs_from_positions)
         self.floor, self.max_gap = floor_height, max_gap
         self._joints = [sensors.site(s).joint_index for s in self.model.sites]
         self.reset()

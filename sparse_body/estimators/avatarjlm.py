@@ -15,8 +15,8 @@ joint angles a user drives a robot or an avatar with broken. A retrained network
 term) turned whole legs instead, a hip half a turn about its thigh with the knee turning back:
 the hips and knees are rebuilt from the joint positions the network gives
 (legs_from_positions, ours; by default with the three-point model, whose legs turn; it
-makes the knees hinges too), which keeps its
-positions and gives the legs' rotations a body would have. Then
+makes the knees hinges too), which keeps its positions and gives the legs' rotations a body
+would have. Then
 (polish=true, ours: the paper relies on its hand-alignment loss alone) the closed-form IK
 brings the head and hands onto their trackers, keeping the network's spine curve and
 elbows, and they take their trackers' orientation.
@@ -69,10 +69,9 @@ def legs_from_positions(local: np.ndarray, offsets: np.ndarray) -> np.ndarray:
     the hip-knee-ankle plane (the hip's own across a nearly straight leg, where that plane is
     not defined), the ankle keeps its local rotation. Hips, knees and ankles stay in place."""
     out = local.copy()
-    glob, pos = forward_kinematics(local, np.zeros(3), offsets)
-    for hip, knee, ankle in LEGS:
-        thigh = glob[0].T @ (pos[knee] - pos[hip])
-        shin = glob[0].T @ (pos[ankle] - pos[knee])
+    for hip, knee, ankle in LEGS:      # in the pelvis's frame: no forward kinematics of the body
+        thigh = local[hip] @ offsets[knee]
+        shin = local[hip] @ local[knee] @ offsets[ankle]
         axis = np.cross(thigh, shin)
         if np.linalg.norm(axis) < 0.1 * np.linalg.norm(thigh) * np.linalg.norm(shin):   # bent under 6 degrees
             axis = local[hip] @ KNEE_AXIS
@@ -140,8 +139,8 @@ class AvatarJlmEstimator(Estimator):
         self.scale = body_scale(skeleton)
         self.polish, self.end_orientations, self.hinge_knees = polish, end_orientations, hinge_knees
         # None: the three-point model's turned legs are rebuilt; the four-point model's are not turned
-        four = "pelvis" in self.model.sites
-        self.legs_from_positions = not four if legs_from_positions is None else bool(legs_from_positions)
+        self.four = "pelvis" in self.model.sites
+        self.legs_from_positions = not self.four if legs_from_positions is None else bool(legs_from_positions)
         self.floor, self.max_gap = floor_height, max_gap
         self._joints = [sensors.site(s).joint_index for s in self.model.sites]
         self.reset()
@@ -177,11 +176,10 @@ class AvatarJlmEstimator(Estimator):
         elif self.hinge_knees:  # a knee is a hinge: no turn of the shin about its own length
             for knee, ankle in KNEES.items():
                 local[knee] = rotation_between(offsets[ankle], local[knee] @ offsets[ankle])
-        four = "pelvis" in self.model.sites
-        local[0] = rot[self.model.sites.index("pelvis")] if four else reference(world[0], rot[0])[1] @ out[0]
+        local[0] = rot[self.model.sites.index("pelvis")] if self.four else reference(world[0], rot[0])[1] @ out[0]
         glob, pos = forward_kinematics(local, np.zeros(3), offsets)
         # the root on its tracker, or where the head lands on the tracked head (head alignment)
-        root = world[self.model.sites.index("pelvis")] if four else world[0] - pos[HEAD]
+        root = world[self.model.sites.index("pelvis")] if self.four else world[0] - pos[HEAD]
         pos = pos + root
         if self.polish:
             goals = dict(zip(self._joints, world))

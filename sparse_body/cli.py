@@ -402,7 +402,7 @@ def build_parser() -> argparse.ArgumentParser:
                    help="lobstr: paper, small (under an hour on 2 CPU cores) or tiny; dragposer: small (30 "
                         "minutes a part) or tiny, and paper for its temporal predictor; dtp: small (pre-training "
                         "and occlusion fine-tuning in under an hour on 2 CPU cores), lookahead (small with 5 "
-                        "future frames: models/dtp_lookahead.onnx), paper or tiny; avatarjlm: small (three-point, 52 "
+                        "future frames: models/dtp_lookahead.onnx), paper or tiny; avatarjlm: small (three-point, 88 "
                         "minutes on one core), four_point (the same with the pelvis: models/avatarjlm_four_point.onnx), "
                         "paper (d1 1024, d2 512, 6 loops: for a GPU) or tiny")
     p.add_argument("--part", choices=["all", "vae", "temporal", "tracker_prior"], default="all",

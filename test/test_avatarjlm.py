@@ -142,6 +142,17 @@ def test_four_point_model_stands_on_the_pelvis_tracker_and_needs_it(tiny_models,
         create_estimator("avatarjlm", THREE, clip.skeleton, model_path=str(models_dir() / "lobstr.onnx"))
 
 
+def test_legs_are_rebuilt_by_default_only_where_the_network_turns_them(tiny_models, clip):
+    """Three-point networks trained from random rotations turn their legs (the runtime rebuilds
+    them unless told not to); the four-point model and networks started from the identity
+    (the shipped three-point one, tested below) do not."""
+    three, four = (str(tiny_models / f"{s}.onnx") for s in ("three_point", "four_point"))
+    assert create_estimator("avatarjlm", THREE, clip.skeleton, model_path=three).legs_from_positions
+    assert not create_estimator("avatarjlm", THREE, clip.skeleton, model_path=three,
+                                legs_from_positions=False).legs_from_positions
+    assert not create_estimator("avatarjlm", FOUR, clip.skeleton, model_path=four).legs_from_positions
+
+
 def test_train_avatarjlm_is_one_command(tmp_path, mocap_root):
     import onnxruntime as ort
     out = tmp_path / "avatarjlm.onnx"
@@ -195,27 +206,30 @@ def _knee_twist_deg(local, offsets) -> float:
     return float(np.rad2deg(np.max(turns)))
 
 
-def test_shipped_three_point_legs_are_rebuilt_from_their_positions(clip_index):
-    """The shipped three-point network turns whole legs (a hip about its thigh, the knee
-    turning back; validation person 05's walk, 05_02): legs_from_positions rebuilds hips and
-    knees from where the network puts the joints, which moves no knee or ankle and leaves the
-    knees hinges."""
+def test_shipped_three_point_legs_are_not_turned_and_rebuilding_them_moves_no_joint(clip_index):
+    """The shipped three-point network started from the identity (validation person 05's walk,
+    05_02): its legs are not turned, so by default they are not rebuilt, only the knees made
+    hinges; legs_from_positions=true on it moves no knee or ankle, keeps the knees hinges and
+    turns no hip by as much as a quarter turn."""
+    from sparse_body.estimators.avatarjlm import AvatarJlmModel
+    assert not AvatarJlmModel(models_dir() / "avatarjlm.onnx").turned_legs
     motion = load_clip(clip_index["05_02"]).slice(0, 120)
     stream = list(synthesize_trackers(motion, THREE))
     poses = {}
-    for rebuild in (True, False):
-        est = create_estimator("avatarjlm", THREE, motion.skeleton, legs_from_positions=rebuild, hinge_knees=False,
-                               filter=False)
-        poses[rebuild] = [est.step(f) for f in stream]
+    for name, options in {"default": {}, "hinged": {"legs_from_positions": False},
+                          "rebuilt": {"legs_from_positions": True}, "raw": {"legs_from_positions": False,
+                                                                           "hinge_knees": False}}.items():
+        est = create_estimator("avatarjlm", THREE, motion.skeleton, filter=False, **options)
+        poses[name] = [est.step(f) for f in stream]
     local = {k: quat_to_matrix(np.stack([p.local_quats for p in v])) for k, v in poses.items()}
     pos = {k: forward_kinematics(local[k], np.stack([p.root_position for p in poses[k]]), motion.skeleton.offsets)[1]
            for k in poses}
+    np.testing.assert_allclose(local["default"], local["hinged"], atol=1e-12)
     legs = [J["left_knee"], J["right_knee"], J["left_ankle"], J["right_ankle"]]
-    np.testing.assert_allclose(pos[True][:, legs], pos[False][:, legs], atol=1e-9)
-    assert _knee_twist_deg(local[True], motion.skeleton.offsets) < 0.01
+    np.testing.assert_allclose(pos["rebuilt"][:, legs], pos["raw"][:, legs], atol=1e-9)
+    assert _knee_twist_deg(local["rebuilt"], motion.skeleton.offsets) < 0.01
     hips = [J["left_hip"], J["right_hip"]]
-    turned = np.rad2deg(angle_between(local[True][:, hips], local[False][:, hips]))
-    assert turned.max() > 90          # the network's own hips were turned
+    assert np.rad2deg(angle_between(local["rebuilt"][:, hips], local["raw"][:, hips])).max() < 90
 
 
 def test_legs_rebuilt_from_positions_undo_a_leg_turned_about_its_thigh(clip_index):

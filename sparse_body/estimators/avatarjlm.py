@@ -9,14 +9,14 @@ fewer frames, as in training.
 The pose: the network's local rotations on the person's (calibrated) skeleton, its root
 rotation turned from the head's heading frame into the world; the body placed by head
 alignment (the paper's), or on the pelvis tracker with the four-point model. The knees are
-hinges (hinge_knees, ours): the three-point network turns a shin about its own length by up
-to 175 degrees, the ankle partly turning back, which leaves positions near right and the
-joint angles a user drives a robot or an avatar with broken. A retrained network (the leg
-term) turned whole legs instead, a hip half a turn about its thigh with the knee turning back:
-the hips and knees are rebuilt from the joint positions the network gives
-(legs_from_positions, ours; by default with the three-point model, whose legs turn; it
-makes the knees hinges too), which keeps its positions and gives the legs' rotations a body
-would have. Then
+hinges (hinge_knees, ours): a three-point network trained from random rotations turned a shin
+about its own length by up to 175 degrees, the ankle partly turning back, which leaves
+positions near right and the joint angles a user drives a robot or an avatar with broken.
+One trained so with the leg term turned whole legs instead, a hip half a turn about its thigh
+with the knee turning back: for such networks (by default those whose config does not start
+from the identity; the shipped ones do) the hips and knees are rebuilt from the joint
+positions the network gives (legs_from_positions, ours; it makes the knees hinges too), which
+keeps its positions and gives the legs' rotations a body would have. Then
 (polish=true, ours: the paper relies on its hand-alignment loss alone) the closed-form IK
 brings the head and hands onto their trackers, keeping the network's spine curve and
 elbows, and they take their trackers' orientation.
@@ -93,6 +93,9 @@ class AvatarJlmModel:
             self.sites = SITES[c["sensors"]]
             self.past, self.fps = int(c["window"]) - 1, float(c["fps"])
             self.cache_shape = (int(c["loops"]), 44, int(c["heads"]), self.past, int(c["d_model"]) // int(c["heads"]))
+            # trained from random rotations, three-point networks settled with turned legs (the
+            # four-point model started from the identity before its config recorded it)
+            self.turned_legs = c["sensors"] == "three_point" and not c.get("identity_start", False)
         except (KeyError, ValueError, TypeError):
             raise ValueError(f"{self.path}: not an AvatarJLM model (its metadata lacks a usable config)") from None
         self.start()
@@ -138,9 +141,10 @@ class AvatarJlmEstimator(Estimator):
                              f"{sensors.name!r} has {', '.join(sensors.site_names)} (use model:=three_point)")
         self.scale = body_scale(skeleton)
         self.polish, self.end_orientations, self.hinge_knees = polish, end_orientations, hinge_knees
-        # None: the three-point model's turned legs are rebuilt; the four-point model's are not turned
+        # None: rebuilt where the network's legs come out turned (AvatarJlmModel.turned_legs)
         self.four = "pelvis" in self.model.sites
-        self.legs_from_positions = not self.four if legs_from_positions is None else bool(legs_from_positions)
+        self.legs_from_positions = (self.model.turned_legs if legs_from_positions is None
+                                    else bool(legs_from_positions))
         self.floor, self.max_gap = floor_height, max_gap
         self._joints = [sensors.site(s).joint_index for s in self.model.sites]
         self.reset()

@@ -74,8 +74,7 @@ class AvatarJlmConfig:
     zeta: float = 50.0
     # ours: the lower body's positions relative to the root (its rotation and place taken out),
     # L1. Head-aligned positions (L_pos) charge a leg for every error of the spine and root
-    # above it; this term judges the legs' own swing (the three-point model; its legs' local
-    # rotations come out turned, which the runtime's legs_from_positions takes out)
+    # above it; this term judges the legs' own swing (the three-point model)
     leg_weight: float = 0.0
     # tracker noise on the noisy copy of each clip: lobstr (1 cm, 1.5 degrees, LoBSTr's
     # training noise) or vr (the field protocol's: 1 mm, 1 degree)
@@ -98,12 +97,13 @@ class AvatarJlmConfig:
     def named(cls, name: str) -> "AvatarJlmConfig":
         if name == "paper":
             return cls()
-        if name == "small":        # under an hour on one CPU core (beside four_point on the other)
+        if name == "small":        # 88 minutes on one CPU core (beside four_point on the other); from the
+            # identity with the root's own rotation weighed in, as four_point: its legs do not turn
             return cls(d_embed=256, d_model=64, heads=4, loops=3, feedforward=128, dropout=0.0, batch=6, lr=5e-4,
-                       leg_weight=5.0, minutes=52.0, steps=1_000_000)
-        if name == "four_point":   # the same size with the pelvis; the root's own rotation weighs as much as the rest
+                       identity_start=True, beta=1.0, leg_weight=5.0, minutes=88.0, steps=1_000_000)
+        if name == "four_point":   # the same size with the pelvis
             config = cls.named("small")
-            config.sensors, config.minutes, config.beta, config.identity_start = "four_point", 42.0, 1.0, True
+            config.sensors, config.minutes = "four_point", 42.0
             config.leg_weight = 0.0     # trained before the leg term
             return config
         if name == "tiny":    # tests

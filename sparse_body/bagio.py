@@ -8,13 +8,16 @@ from __future__ import annotations
 
 import os
 import shutil
+import tempfile
 from contextlib import contextmanager
 from pathlib import Path
 
 import numpy as np
+import yaml
 from rosbags.rosbag2 import Reader, StoragePlugin, Writer
 from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 
+from . import __version__
 from .core.sensors import SensorConfig
 from .core.skeleton import Skeleton
 from .core.types import BodyPose, TrackerStream
@@ -28,7 +31,11 @@ TF_TYPE = "tf2_msgs/msg/TFMessage"
 
 
 class BagError(ValueError):
-    pass
+    """A bag that cannot be read or written; the message names it and the problem."""
+
+
+class OutputError(BagError):
+    """An output path refused: it would replace an input, a user's file, folder or device."""
 
 
 def typestore():
@@ -68,34 +75,93 @@ def _log_times(stamps) -> list[int]:
     return out
 
 
-@contextmanager
-def bag_writer(path: Path, overwrite: bool = False):
-    """A rosbag2 (MCAP) Writer on a temporary name beside `path`, moved into place only when
-    the block ends without an error: an interrupted or failed write leaves nothing behind.
-    An existing `path` is an error unless overwrite."""
+# The key this package writes into every bag's metadata.yaml (custom_data): an existing path
+# is replaced only when it carries it, so --overwrite can never remove what a user owns.
+WRITER_KEY = "sparse_body.writer"
+METADATA_LIMIT = 1 << 20      # bytes: a bag's metadata.yaml is a few kB
+
+
+def written_by_us(path: Path) -> bool:
+    """Whether `path` is a bag directory this package wrote: a real directory (not a link)
+    holding metadata.yaml with our custom_data key, and nothing but the files it lists."""
     path = Path(path)
-    if path.exists() and not overwrite:
-        raise BagError(f"{path}: already exists (choose another name, or --overwrite)")
+    meta = path / "metadata.yaml"
+    if path.is_symlink() or not path.is_dir() or meta.is_symlink() or not meta.is_file():
+        return False
+    try:
+        if meta.stat().st_size > METADATA_LIMIT:
+            return False
+        info = yaml.safe_load(meta.read_text())["rosbag2_bagfile_information"]
+        ours = WRITER_KEY in (info.get("custom_data") or {})
+        listed = {"metadata.yaml", *(str(f) for f in info.get("relative_file_paths") or [])}
+    except (OSError, UnicodeDecodeError, yaml.YAMLError, KeyError, TypeError, AttributeError, RecursionError):
+        return False
+    present = {entry.name for entry in path.iterdir()}
+    return ours and present <= listed and all((path / f).is_file() and not (path / f).is_symlink()
+                                               for f in present)
+
+
+def _same_or_inside(a: Path, b: Path) -> bool:
+    a, b = a.resolve(), b.resolve()
+    return a == b or b in a.parents or a in b.parents
+
+
+def check_output(path: Path, overwrite: bool = False, inputs: tuple[Path, ...] = ()) -> Path:
+    """Refuse, before any work, an output path that would destroy something: an input of the
+    same command (or a folder holding one), anything existing unless --overwrite, and even
+    with it anything but a bag this package wrote (a device, a plain file, another folder).
+    The parent folder must exist."""
+    path = Path(path)
+    for given in inputs:
+        if Path(given).exists() and _same_or_inside(Path(given), path):
+            raise OutputError(f"{path}: is (or holds) the input {given}; choose another output")
+    if path.exists() or path.is_symlink():
+        if not written_by_us(path):
+            kind = ("a link" if path.is_symlink() else "a folder that is not a bag written by sparse_body"
+                    if path.is_dir() else "a file" if path.is_file() else "a device or special file")
+            raise OutputError(f"{path}: exists and is {kind}; it is never replaced, choose another output")
+        if not overwrite:
+            raise OutputError(f"{path}: already exists (choose another name, or --overwrite to replace this bag)")
+    parent = path.absolute().parent
+    if not parent.is_dir():
+        raise OutputError(f"{path}: {parent} is not an existing folder")
+    # a folder we may not write in (read-only, another's, full) fails now, not after the work
+    shutil.rmtree(tempfile.mkdtemp(prefix=f".{path.name}.probe-", dir=parent))
+    return path
+
+
+@contextmanager
+def bag_writer(path: Path, overwrite: bool = False, inputs: tuple[Path, ...] = ()):
+    """A rosbag2 (MCAP) Writer on a temporary name beside `path`, moved into place only when
+    the block ends without an error (SIGINT and SIGTERM included: the command line turns both
+    into exceptions): an interrupted or failed write leaves nothing behind. `path` is checked
+    by check_output before and again just before it is replaced."""
+    path = check_output(path, overwrite, inputs)
     tmp = path.with_name(f".{path.name}.partial-{os.getpid()}")
+    old = path.with_name(f".{path.name}.replaced-{os.getpid()}")
     shutil.rmtree(tmp, ignore_errors=True)
     try:
         with Writer(tmp, version=8, storage_plugin=StoragePlugin.MCAP) as writer:
+            writer.set_custom_data(WRITER_KEY, f"sparse_body {__version__}")
             yield writer
+        check_output(path, overwrite, inputs)      # nothing else may have appeared meanwhile
         if path.exists():
-            shutil.rmtree(path) if path.is_dir() else path.unlink()
+            os.replace(path, old)                    # a bag of ours: moved aside, removed once replaced
         os.replace(tmp, path)
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
+        if old.is_dir() and written_by_us(old):
+            shutil.rmtree(old, ignore_errors=True)
 
 
 def write_tracker_bag(path: Path, stream: TrackerStream, config: SensorConfig, start: float = 1_700_000_000.0,
-                      overwrite: bool = False) -> None:
+                      overwrite: bool = False, inputs: tuple[Path, ...] = ()) -> None:
     """One /tf message per frame with every valid tracker; dropped samples are left out."""
     if len(stream) == 0:
         raise BagError(f"{path}: no frames to write (an empty motion)")
     store = typestore()
     TFMessage = store.types[TF_TYPE]
-    with bag_writer(path, overwrite) as writer:
+    with bag_writer(path, overwrite, inputs) as writer:
         conn = writer.add_connection(TF_TOPIC, TF_TYPE, typestore=store)
         log_ns = _log_times(start + np.asarray(stream.times, dtype=float))
         for i in range(len(stream)):
@@ -168,12 +234,12 @@ def read_tracker_stream(path: Path, config: SensorConfig, stale_after: float = 0
 
 
 def write_estimate_bag(path: Path, poses: list[BodyPose], skeleton: Skeleton, fixed_frame: str = "world",
-                       prefix: str = "", overwrite: bool = False) -> None:
+                       prefix: str = "", overwrite: bool = False, inputs: tuple[Path, ...] = ()) -> None:
     """Per pose: one JointState, one FootContacts, one EstimateStatus and one /tf message."""
     store = typestore()
     T = store.types
     names = joint_state_names()
-    with bag_writer(path, overwrite) as writer:
+    with bag_writer(path, overwrite, inputs) as writer:
         c_js = writer.add_connection(JOINT_STATES_TOPIC, "sensor_msgs/msg/JointState", typestore=store)
         c_fc = writer.add_connection(CONTACTS_TOPIC, "sparse_body/msg/FootContacts", typestore=store)
         c_st = writer.add_connection(STATUS_TOPIC, "sparse_body/msg/EstimateStatus", typestore=store)

@@ -19,7 +19,7 @@ def _mocap(args) -> Path:
 def cmd_eval(args) -> int:
     from .core.sensors import load_sensor_config
     from .data.field_protocol import Protocol
-    from .evaluation import COMPARE_WITH, evaluate, format_table, paper_figures, write_json
+    from .evaluation import COMPARE_WITH, check_results_path, evaluate, format_table, paper_figures, write_json
     sensors = load_sensor_config(args.sensors)
     specs, reference = list(args.estimator), {}
     if not args.no_compare:
@@ -27,6 +27,8 @@ def cmd_eval(args) -> int:
             specs += [s for s in COMPARE_WITH.get(name, []) if s not in specs]
             reference.update(paper_figures(name, sensors.name, args.faulty, args.occlusion))
     protocol = Protocol.named(args.skeleton, args.noise, args.faulty, args.mounting_error, args.occlusion)
+    stem = re.sub(r"[^\w.+-]", "_", "+".join(args.estimator))
+    out = check_results_path(Path(args.output or f"sparse_body_eval_{stem}_{sensors.name}.json"))   # before the work
     if args.motion:
         from .data.catalog import motion_files
         files = motion_files(args.motion)
@@ -36,8 +38,6 @@ def cmd_eval(args) -> int:
         results = [evaluate(spec, sensors, _mocap(args), args.split, args.fps, protocol, args.limit,
                             progress=not args.quiet, per_joint=args.per_joint) for spec in specs]
     print(format_table(results, reference))
-    stem = re.sub(r"[^\w.+-]", "_", "+".join(args.estimator))
-    out = Path(args.output or f"sparse_body_eval_{stem}_{sensors.name}.json")
     write_json(results, out)
     print(f"written {out}")
     return 0
@@ -205,6 +205,24 @@ def cmd_split(args) -> int:
     return 0
 
 
+def cmd_import_mocap(args) -> int:
+    from .data.user_mocap import import_motion
+    progress = None
+    if not args.quiet:
+        from tqdm import tqdm
+        progress = lambda files: tqdm(files, desc="reading motion files", unit="file")  # noqa: E731
+    clips, skipped = import_motion(args.sources, Path(args.out), progress)
+    for path, why in skipped:
+        print(f"left out {path}: {why}", file=sys.stderr)
+    subjects = len({c.subject for c in clips})
+    minutes = sum(c.seconds for c in clips) / 60
+    print(f"written {args.out}/clips.tsv and split.yaml: {len(clips)} clips of {subjects} subjects, "
+          f"{minutes:.1f} minutes ({len(skipped)} files left out)\n"
+          f"use it with --mocap {args.out} (or SPARSE_BODY_MOCAP={args.out}): "
+          f"sparse-body eval --mocap {args.out} --estimator ik --sensors six_point")
+    return 0
+
+
 def _motion(args):
     """The motion named by --clip, --motion or --synthetic (in that order of preference)."""
     from .data.catalog import load_clip, load_motion_file, read_index
@@ -229,7 +247,7 @@ def cmd_make_bag(args) -> int:
     if args.seconds and (args.clip or args.motion):
         motion = motion.slice(0, int(args.seconds * motion.fps))
     n = make_bag(motion, load_sensor_config(args.sensors), Path(args.out), LOBSTR_NOISE if args.noise else NO_NOISE,
-                 overwrite=args.overwrite)
+                 overwrite=args.overwrite, inputs=tuple(Path(p) for p in [args.motion, args.sensors] if p))
     print(f"written {args.out}: {n} frames of {motion.name} at {motion.fps:g} Hz")
     return 0
 
@@ -279,17 +297,48 @@ def cmd_bench(args) -> int:
 
 
 def _positive_int(text: str) -> int:
-    value = int(text)
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected an integer, got {text!r}") from None
     if value < 1:
         raise argparse.ArgumentTypeError(f"must be at least 1, got {value}")
     return value
 
 
-def _percent(text: str) -> float:
-    value = float(text)
-    if not 0.0 <= value <= 100.0:
-        raise argparse.ArgumentTypeError(f"a percentage from 0 to 100, got {text}")
-    return value
+def _between(low: float, high: float, unit: str = ""):
+    """An argparse type: a finite number from low to high (both included)."""
+    def parse(text: str) -> float:
+        try:
+            value = float(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
+        if not low <= value <= high:       # NaN fails too
+            raise argparse.ArgumentTypeError(f"must be from {low:g} to {high:g}{' ' + unit if unit else ''}, "
+                                             f"got {text}")
+        return value
+    parse.__name__ = "number"
+    return parse
+
+
+def _between_int(low: int, high: int):
+    def parse(text: str) -> int:
+        try:
+            value = int(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"expected an integer, got {text!r}") from None
+        if not low <= value <= high:
+            raise argparse.ArgumentTypeError(f"must be from {low} to {high}, got {value}")
+        return value
+    parse.__name__ = "integer"
+    return parse
+
+
+_percent = _between(0.0, 100.0, "%")
+_fps = _between(1.0, 1000.0, "Hz")
+_height = _between(0.5, 2.5, "metres")
+# an hour of synthetic motion is 216,000 frames at 60 Hz; longer runs belong in a recording
+_seconds = _between(0.0, 3600.0, "seconds")
 
 
 def _choices_text() -> str:
@@ -300,8 +349,15 @@ def _choices_text() -> str:
             f"sensor configurations: {', '.join(sensors)} (or a YAML path)")
 
 
+class _Parser(argparse.ArgumentParser):
+    """argparse, but a usage error is one line (the usage is one --help away)."""
+
+    def error(self, message: str):
+        self.exit(EXIT_USAGE, f"{self.prog}: {message} (see {self.prog} --help)\n")
+
+
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(prog="sparse-body", description=__doc__, epilog=_choices_text())
+    parser = _Parser(prog="sparse-body", description=__doc__, epilog=_choices_text())
     sub = parser.add_subparsers(dest="command", required=True)
     _add = sub.add_parser
     # every subcommand's --help shows the defaults and what can be chosen
@@ -314,7 +370,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--estimator", default="ik")
     p.add_argument("--motion", help="a motion file to use instead of the CMU demo clip")
     p.add_argument("--mocap", help="the CMU folder")
-    p.add_argument("--seconds", type=float, default=6.0)
+    p.add_argument("--seconds", type=_seconds, default=6.0, help="the length of the synthetic walk")
     p.add_argument("--no-gif", action="store_true", help="skip the animation")
     p.set_defaults(func=cmd_demo)
 
@@ -323,14 +379,14 @@ def build_parser() -> argparse.ArgumentParser:
                    help="estimator name, optionally with options: lobstr:contact_ik=false (repeat to compare several)")
     p.add_argument("--sensors", default="three_point", help="sensor configuration name or YAML path")
     p.add_argument("--split", default="test", choices=["train", "validation", "test"])
-    p.add_argument("--fps", type=float, default=60.0, help="frame rate the clips are resampled to")
+    p.add_argument("--fps", type=_fps, default=60.0, help="frame rate the clips are resampled to")
     p.add_argument("--skeleton", default="calibrated", choices=["calibrated", "height", "oracle"],
                    help="the body the estimator gets: fitted by a T-pose calibration (trackers mounted as a user "
                         "wears them), the canonical body at the calibrated height, or the subject's true skeleton "
                         "with exact mounting (the lab protocol, with --noise none)")
     p.add_argument("--noise", default="vr", choices=["vr", "lobstr", "none"],
                    help="tracker noise: a VR system's (1 mm, 0.5 deg on average), LoBSTr's (1 cm, 1.5 deg) or none")
-    p.add_argument("--mounting-error", type=float, default=0.0, metavar="METRES",
+    p.add_argument("--mounting-error", type=_between(0.0, 0.5, "metres"), default=0.0, metavar="METRES",
                    help="an error no calibration finds in each tracker's mounting translation (std per axis, per "
                         "clip; not with --skeleton oracle)")
     p.add_argument("--faulty", type=_percent, default=0.0, metavar="PERCENT",
@@ -359,9 +415,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--sensors", default="six_point", help="sensor configuration name or YAML path")
     p.add_argument("--clip", help="a CMU clip id (e.g. 02_01)")
     p.add_argument("--motion", help="a motion file (.bvh, .amc, .npz)")
-    p.add_argument("--seconds", type=float, default=0.0,
+    p.add_argument("--seconds", type=_seconds, default=0.0,
                    help="length of the synthetic walk, or cut a clip to this length")
-    p.add_argument("--fps", type=float, default=60.0)
+    p.add_argument("--fps", type=_fps, default=60.0)
     p.add_argument("--noise", action="store_true", help="add LoBSTr's tracker noise")
     p.add_argument("--mocap", help="the CMU folder")
     p.add_argument("--overwrite", action="store_true", help="replace OUT if it exists")
@@ -373,10 +429,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--estimator", default="ik",
                    help="estimator, with options: lobstr, refined:base=lobstr (DragPoser refinement after it)")
     p.add_argument("--sensors", default="six_point")
-    p.add_argument("--height", type=float, default=1.75, help="the tracked person's height in metres")
+    p.add_argument("--height", type=_height, default=1.75, help="the tracked person's height in metres")
     p.add_argument("--calibration", help="a T-pose calibration file (the bridge's ~/calibrate): its fitted body "
                                          "instead of the canonical one at --height")
-    p.add_argument("--fps", type=float, default=60.0, help="the trackers' nominal rate")
+    p.add_argument("--fps", type=_fps, default=60.0, help="the trackers' nominal rate")
     p.add_argument("--smooth", action="store_true",
                    help="smooth the tracker input over the whole recording, forwards and backwards (the "
                         "estimator option smooth=true): far less shaking under noise than the live filter")
@@ -410,9 +466,9 @@ def build_parser() -> argparse.ArgumentParser:
                         "latents (all), or one")
     p.add_argument("--out", help="lobstr, dtp, avatarjlm: the .onnx file to write; dragposer: the folder for its encoder, decoder and "
                                  "temporal predictor (default: the package's models/)")
-    p.add_argument("--minutes", type=float, help="stop training after this long")
-    p.add_argument("--steps", type=int, help="stop training after this many steps")
-    p.add_argument("--threads", type=int, default=2, help="torch CPU threads")
+    p.add_argument("--minutes", type=_between(0.0, 7 * 24 * 60, "minutes"), help="stop training after this long")
+    p.add_argument("--steps", type=_positive_int, help="stop training after this many steps")
+    p.add_argument("--threads", type=_between_int(1, 256), default=2, help="torch CPU threads")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--limit", type=_positive_int, help="only the first N clips of each split (smoke runs)")
     p.add_argument("--mocap", help="the CMU folder")
@@ -436,6 +492,13 @@ def build_parser() -> argparse.ArgumentParser:
                         "write the validation figures to <model>.augment.json for the model card")
     p.set_defaults(func=cmd_train)
 
+    p = sub.add_parser("import-mocap", help="index a CMU download or any folder of BVH / ASF+AMC files for eval, "
+                                             "train and make-bag --clip (nothing is copied or changed)")
+    p.add_argument("sources", nargs="+", help="folders (searched recursively) or motion files")
+    p.add_argument("--out", required=True, help="a new folder for clips.tsv and split.yaml")
+    p.add_argument("--quiet", action="store_true", help="no progress bar")
+    p.set_defaults(func=cmd_import_mocap)
+
     p = sub.add_parser("split", help="compute the CMU train/validation/test split (by subject)")
     p.add_argument("--write", action="store_true", help="write config/splits/cmu.yaml")
     p.add_argument("--mocap", help="the CMU folder")
@@ -443,15 +506,66 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+class Terminated(KeyboardInterrupt):
+    """SIGTERM, raised where the command is, so that partial output is removed on the way out
+    as for Ctrl-C."""
+
+
+# Exit codes: one per kind of error a user can cause (README "Exit codes").
+EXIT_INPUT, EXIT_USAGE, EXIT_OUTPUT, EXIT_OS, EXIT_TOO_LARGE = 1, 2, 3, 4, 5
+EXIT_INTERRUPTED, EXIT_TERMINATED = 130, 143
+
+
+def _exit_code(err: BaseException) -> int:
+    """The exit code of an error the command ends with (see the constants above)."""
+    from .bagio import OutputError
+    from .core.textfile import FileTooLarge
+    if isinstance(err, OutputError):
+        return EXIT_OUTPUT
+    if isinstance(err, (FileTooLarge, MemoryError, RecursionError)):
+        return EXIT_TOO_LARGE
+    if isinstance(err, OSError):
+        return EXIT_OS
+    return EXIT_INPUT
+
+
+def _one_line(err: BaseException) -> str:
+    if isinstance(err, MemoryError):
+        return "out of memory (a smaller input, or a shorter --seconds / --limit)"
+    if isinstance(err, RecursionError):
+        return "input nested too deeply"
+    if isinstance(err, OSError) and err.strerror:
+        where = f"{err.filename}: " if err.filename else ""
+        return f"{where}{err.strerror}"
+    return " ".join(str(err).split()) or type(err).__name__
+
+
+def _terminate(signum, frame):
+    raise Terminated
+
+
 def main(argv: list[str] | None = None) -> None:
-    args = build_parser().parse_args(argv)
+    """Run a subcommand; every error a user can cause ends in one line on stderr and its own
+    exit code, never a traceback."""
+    import signal
+
+    import yaml
+    signal.signal(signal.SIGTERM, _terminate)
+    command = "sparse-body"
     try:
+        args = build_parser().parse_args(argv)
+        command = f"sparse-body {args.command}"
         sys.exit(args.func(args))
-    except (ValueError, FileNotFoundError) as err:   # includes MotionFileError, BagError, SensorConfigError
-        sys.exit(f"sparse-body: {err}")
+    except Terminated:
+        print(f"{command}: terminated; nothing written", file=sys.stderr)
+        sys.exit(EXIT_TERMINATED)
     except KeyboardInterrupt:                         # partial output was removed on the way out
-        print(f"sparse-body {args.command}: interrupted; nothing written", file=sys.stderr)
-        sys.exit(130)
+        print(f"{command}: interrupted; nothing written", file=sys.stderr)
+        sys.exit(EXIT_INTERRUPTED)
+    except (ValueError, OSError, EOFError, yaml.YAMLError, MemoryError, RecursionError) as err:
+        # ValueError includes MotionFileError, BagError, OutputError, SensorConfigError, CalibrationError
+        print(f"{command}: {_one_line(err)}", file=sys.stderr)
+        sys.exit(_exit_code(err))
 
 
 if __name__ == "__main__":

@@ -39,47 +39,78 @@ def head_tops(positions: np.ndarray, global_rot: np.ndarray, skull: float) -> np
     return positions[:, HEAD] + global_rot[:, HEAD] @ np.array([0.0, 0.0, skull])
 
 
+def gif_step(fps: float, most: float = 25.0) -> int:
+    """Every how many motion frames a GIF frame is drawn: the fewest that keep the GIF at most
+    `most` frames a second with a delay a whole number of centiseconds (all GIF delays are),
+    so the animation plays at the motion's real speed; the nearest when none is exact."""
+    steps = range(max(1, int(np.ceil(fps / most))), max(2, int(np.ceil(fps / most))) + int(fps) + 1)
+    exact = [k for k in steps if abs(100 * k / fps - round(100 * k / fps)) < 1e-9]
+    return exact[0] if exact else steps[0]
+
+
 def animate(path: Path, truth: np.ndarray, estimate: np.ndarray, trackers: np.ndarray, fps: float,
-            title: str, out_fps: float = 15.0, tops: tuple[np.ndarray, np.ndarray] | None = None) -> None:
-    """A GIF following the body: ground truth in grey, the estimate in blue, trackers as red
-    dots where they are mounted (a mounting offset away from their joints)."""
+            title: str, tops: tuple[np.ndarray, np.ndarray] | None = None, size_px: int = 560) -> None:
+    """A GIF at the motion's real speed: ground truth in grey, the estimate in blue, trackers
+    as red dots where they are mounted (a mounting offset away from their joints), over a
+    floor grid, seen by a fixed camera the body moves through, with equal axes."""
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
-    from matplotlib.animation import FuncAnimation, PillowWriter
+    from matplotlib.lines import Line2D
+    from PIL import Image
 
-    step = max(1, int(round(fps / out_fps)))
+    step = gif_step(fps)
     idx = np.arange(0, len(truth), step)
-    fig = plt.figure(figsize=(5, 5))
-    ax = fig.add_subplot(projection="3d")
-    # the view follows the pelvis and is just larger than the body, which then fills it
-    half = 0.55 * (truth[..., 2].max() - truth[..., 2].min()) + 0.1
-    floor = truth[..., 2].min()
-
-    def draw(k):
-        i = idx[k]
+    both = np.concatenate([truth.reshape(-1, 3), estimate.reshape(-1, 3)])
+    both = both[np.all(np.isfinite(both), axis=1)]
+    floor = float(truth[..., 2].min())
+    low, high = both.min(axis=0) - 0.15, both.max(axis=0) + 0.15
+    low[2], high[2] = floor, max(high[2], floor + 1.0)
+    extent = high - low                                        # metres along x, y, z: the box's shape
+    fig = plt.figure(figsize=(size_px / 100, size_px / 100), dpi=100)
+    ax = fig.add_axes((0.0, 0.0, 1.0, 0.9), projection="3d")
+    grid = np.arange(np.floor(low[0] * 2) / 2, high[0] + 0.5, 0.5), np.arange(np.floor(low[1] * 2) / 2, high[1] + 0.5, 0.5)
+    legend = [Line2D([], [], color="0.6", lw=2, label="truth"), Line2D([], [], color="tab:blue", lw=2, label="estimate"),
+              Line2D([], [], color="tab:red", marker="o", lw=0, label="trackers (as mounted)")]
+    frames = []
+    for i in idx:
         ax.cla()
-        centre = truth[i, 0]
-        ax.set_xlim(centre[0] - half, centre[0] + half)
-        ax.set_ylim(centre[1] - half, centre[1] + half)
-        ax.set_zlim(floor, floor + 2 * half)
-        ax.set_xlabel("x [m]")
-        ax.set_ylabel("y [m]")
-        ax.set_zlabel("z [m]")
-        ax.set_title(f"{title}\nframe {i}: grey truth, blue estimate,\nred trackers as mounted (offset from their joints)",
-                     fontsize=8)
+        ax.set_xlim(low[0], high[0])
+        ax.set_ylim(low[1], high[1])
+        ax.set_zlim(low[2], high[2])
+        ax.set_box_aspect(tuple(extent))                         # equal axes: a metre is a metre
+        ax.set_xlabel("x [m]", fontsize=7)
+        ax.set_ylabel("y [m]", fontsize=7)
+        ax.tick_params(labelsize=6)
+        ax.set_zticks([])
+        for x in grid[0]:                                         # the floor, 0.5 m squares
+            ax.plot([x, x], [grid[1][0], grid[1][-1]], [floor, floor], color="0.85", lw=0.6)
+        for y in grid[1]:
+            ax.plot([grid[0][0], grid[0][-1]], [y, y], [floor, floor], color="0.85", lw=0.6)
         for n, (pos, colour) in enumerate(((truth[i], "0.6"), (estimate[i], "tab:blue"))):
             for j in range(1, len(PARENTS)):
-                p = PARENTS[j]
-                ax.plot(*zip(pos[p], pos[j]), color=colour, lw=2)
+                ax.plot(*zip(pos[PARENTS[j]], pos[j]), color=colour, lw=2)
             if tops is not None:
                 ax.plot(*zip(pos[HEAD], tops[n][i]), color=colour, lw=5)
         tr = trackers[i][np.all(np.isfinite(trackers[i]), axis=1)]
         ax.scatter(tr[:, 0], tr[:, 1], tr[:, 2], color="tab:red", s=20)
-
-    anim = FuncAnimation(fig, draw, frames=len(idx))
-    anim.save(path, writer=PillowWriter(fps=out_fps))
+        ax.legend(handles=legend, loc="upper left", fontsize=7, frameon=False)
+        fig.suptitle(f"{title}   t = {i / fps:5.2f} s", fontsize=9, y=0.97)
+        fig.canvas.draw()
+        frames.append(Image.fromarray(np.asarray(fig.canvas.buffer_rgba())[..., :3]).quantize(colors=64))
     plt.close(fig)
+    delay_ms = round(1000 * step / fps)                 # whole centiseconds (gif_step)
+    frames[0].save(path, save_all=True, append_images=frames[1:], duration=delay_ms, loop=0)
+
+
+# Why a metric has no value, when the motion gives it none.
+NO_VALUE = {
+    "Skate [cm/s]": "no frame of the motion has a foot in contact with the floor",
+    "Contact acc [%]": "the estimator reports no contacts",
+    "End-effector PE [cm]": "no tracked joint",
+    "Jitter [100m/s3]": "the motion is too short",
+    "MPJVE [cm/s]": "the motion is too short",
+}
 
 
 def run_demo(out_dir: Path, sensors: SensorConfig, estimator: str, mocap_root: Path | None,
@@ -89,13 +120,11 @@ def run_demo(out_dir: Path, sensors: SensorConfig, estimator: str, mocap_root: P
     motion, source = pick_motion(mocap_root, motion_file, seconds, fps)
     print(f"motion: {source}, {len(motion)} frames at {motion.fps:g} Hz")
     trackers, estimates = out_dir / "trackers", out_dir / "estimates"
-    for bag in (trackers, estimates):
-        if bag.exists():
-            import shutil
-            shutil.rmtree(bag)
-    make_bag(motion, sensors, trackers)
+    # an earlier demo's bags are replaced; anything else there is refused (bagio.check_output)
+    make_bag(motion, sensors, trackers, overwrite=True)
     print(f"tracker bag ({sensors.name}): {trackers}")
-    poses = process_bag(trackers, estimates, estimator, sensors, motion.skeleton, motion.fps, progress=False)
+    poses = process_bag(trackers, estimates, estimator, sensors, motion.skeleton, motion.fps, progress=False,
+                        overwrite=True)
     print(f"estimate bag ({estimator}): {estimates}, {len(poses)} estimates")
     local = quat_to_matrix(np.stack([p.local_quats for p in poses]))
     glob, pos = forward_kinematics(local, np.stack([p.root_position for p in poses]), motion.skeleton.offsets)
@@ -104,7 +133,7 @@ def run_demo(out_dir: Path, sensors: SensorConfig, estimator: str, mocap_root: P
                                motion.fps, floor, contact_labels(motion.positions, motion.fps, floor),
                                np.stack([p.contact for p in poses]), sorted({s.joint_index for s in sensors.sites}))
     for key, value in metrics.items():
-        print(f"  {key:<24}{value:8.2f}")
+        print(f"  {key:<24}{value:8.2f}" if np.isfinite(value) else f"  {key:<24}     n/a  ({NO_VALUE.get(key, 'undefined')})")
     if gif:
         stream = read_tracker_stream(trackers, sensors)
         animation = out_dir / "demo.gif"

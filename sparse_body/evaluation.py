@@ -188,6 +188,44 @@ def format_table(results: list[EvalResult], reference: dict[str, dict[str, float
     return "\n".join(lines + legend)
 
 
+RESULT_KEYS = {"estimator", "sensors", "split", "clips"}
+RESULTS_LIMIT = 256 << 20      # bytes: a results file of every CMU clip is a few MB
+
+
+def is_results_file(path: Path) -> bool:
+    """Whether path is a results file `write_json` wrote (a JSON list of results): the only
+    existing file an evaluation replaces."""
+    path = Path(path)
+    try:
+        if path.is_symlink() or not path.is_file() or path.stat().st_size > RESULTS_LIMIT:
+            return False
+        data = json.loads(path.read_text())
+    except (OSError, ValueError, RecursionError):
+        return False
+    return isinstance(data, list) and bool(data) and all(isinstance(r, dict) and RESULT_KEYS <= r.keys() for r in data)
+
+
+def check_results_path(path: Path) -> Path:
+    """Refuse, before any evaluation, a results path that is not ours to write: an existing
+    file other than an earlier results file, a folder, a device; its folder must exist."""
+    from .bagio import OutputError
+    path = Path(path)
+    if (path.exists() or path.is_symlink()) and not is_results_file(path):
+        raise OutputError(f"{path}: exists and is not a results file of `sparse-body eval`; it is never "
+                          f"replaced, choose another --output")
+    if not path.absolute().parent.is_dir():
+        raise OutputError(f"{path}: {path.absolute().parent} is not an existing folder")
+    return path
+
+
 def write_json(results: list[EvalResult], path: Path) -> None:
-    Path(path).parent.mkdir(parents=True, exist_ok=True)
-    Path(path).write_text(json.dumps([r.to_json() for r in results], indent=1, allow_nan=True))
+    """The results as JSON, written under a temporary name and moved into place."""
+    import os
+    path = check_results_path(path)
+    tmp = path.with_name(f".{path.name}.partial-{os.getpid()}")
+    try:
+        tmp.write_text(json.dumps([r.to_json() for r in results], indent=1, allow_nan=True))
+        check_results_path(path)
+        os.replace(tmp, path)
+    finally:
+        tmp.unlink(missing_ok=True)

@@ -3,7 +3,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from .bagio import BagError, read_tracker_stream, write_estimate_bag, write_tracker_bag
+from .bagio import check_output, read_tracker_stream, write_estimate_bag, write_tracker_bag
 from .core.sensors import SensorConfig
 from .core.skeleton import Skeleton
 from .core.types import BodyPose
@@ -13,10 +13,12 @@ from .estimators import create_estimator
 
 
 def make_bag(motion: Motion, sensors: SensorConfig, out: Path, noise: TrackerNoise = NO_NOISE, seed: int = 0,
-             start: float = 1_700_000_000.0, overwrite: bool = False) -> int:
-    """Write the virtual trackers of a motion as a rosbag2 (MCAP) of /tf; returns the frame count."""
+             start: float = 1_700_000_000.0, overwrite: bool = False, inputs: tuple[Path, ...] = ()) -> int:
+    """Write the virtual trackers of a motion as a rosbag2 (MCAP) of /tf; returns the frame count.
+    `inputs`: the files the motion came from, which the output may not replace."""
+    check_output(out, overwrite, inputs)      # before the work, not after it
     stream = synthesize_trackers(motion, sensors, noise, seed)
-    write_tracker_bag(out, stream, sensors, start, overwrite)
+    write_tracker_bag(out, stream, sensors, start, overwrite, inputs)
     return len(stream)
 
 
@@ -25,8 +27,7 @@ def process_bag(bag_in: Path, bag_out: Path, estimator: str, sensors: SensorConf
                 refused: dict | None = None, **options) -> list[BodyPose]:
     """Run an estimator over a tracker bag and write one estimate per input frame (refused
     tracker samples are counted in `refused`, reason -> count, when a dict is given)."""
-    if Path(bag_out).exists() and not overwrite:    # before the estimation, not after it
-        raise BagError(f"{bag_out}: already exists (choose another name, or --overwrite)")
+    check_output(bag_out, overwrite, (Path(bag_in),))    # before the estimation, not after it
     stream = read_tracker_stream(bag_in, sensors, stale_after, refused)
     never = [site for s, site in enumerate(sensors.site_names) if not stream.valid[:, s].any()]
     if never:
@@ -39,5 +40,5 @@ def process_bag(bag_in: Path, bag_out: Path, estimator: str, sensors: SensorConf
         from tqdm import tqdm
         frames = tqdm(frames, total=len(stream), desc=f"{estimator} {Path(bag_in).name}", unit="frame")
     poses = est.process(frames)      # offline: an estimator that can look ahead does here
-    write_estimate_bag(bag_out, poses, skeleton, sensors.fixed_frame, overwrite=overwrite)
+    write_estimate_bag(bag_out, poses, skeleton, sensors.fixed_frame, overwrite=overwrite, inputs=(Path(bag_in),))
     return poses

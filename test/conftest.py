@@ -42,3 +42,15 @@ def ros_env(monkeypatch):
     rclpy.init()
     yield dict(os.environ)
     rclpy.shutdown()
+
+
+def pytest_collection_modifyitems(config, items):
+    """Tests marked `mocap` skip, saying why, when the motion capture is absent (the marker
+    alone skips nothing)."""
+    if find_mocap_root() is not None:
+        return
+    skip = pytest.mark.skip(reason="no motion capture: ../shared/mocap is absent and SPARSE_BODY_MOCAP unset "
+                                   "(`sparse-body import-mocap` makes one from a CMU download)")
+    for item in items:
+        if "mocap" in item.keywords:
+            item.add_marker(skip)

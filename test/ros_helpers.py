@@ -91,6 +91,13 @@ class CpuBurners:
             p.wait(timeout=10)
 
 
+# seconds a node may take to start, or a reply to come, on a starved machine (spin_until
+# returns as soon as its condition holds, so a quiet machine waits no longer)
+STARTUP_LIMIT = 300.0
+# seconds a replay may take on a starved machine before the test gives up on it
+PLAYBACK_LIMIT = 600.0
+
+
 def replay_bag(rclpy, ros_env, tmp_path: Path, motion, config, estimator_params: dict):
     """A tracker bag of `motion` played by the real tracker bridge into the real estimator
     node (default parameters but those given); returns the Listener after the whole bag has
@@ -110,20 +117,24 @@ def replay_bag(rclpy, ros_env, tmp_path: Path, motion, config, estimator_params:
     listener = Listener(rclpy, {"joint_states": JointState, "foot_contacts": FootContacts, "/tf": TFMessage,
                                 "estimate_status": EstimateStatus, "robot_description": String,
                                 "/diagnostics": DiagnosticArray},
-                        qos={"robot_description": latched, "/tf": 500, "joint_states": 500, "estimate_status": 500})
+                        qos={"robot_description": latched, **{t: max(500, 2 * len(motion)) for t in ("/tf", "joint_states",
+                                                                                         "estimate_status")}})
     frames = {s.frame_id for s in config.sites}
     listener.tracker_stamps = []
     bridge = None
     try:
-        assert listener.spin_until(lambda: listener.received["robot_description"], 60.0), "estimator did not start"
+        assert listener.spin_until(lambda: listener.received["robot_description"], STARTUP_LIMIT), "estimator did not start"
         bridge = start_node("sparse_body.ros.tracker_bridge_node", {"bag": str(tmp_path / "trackers"), "min_subscribers": 2,
                                                                     "start_delay": 0.5},
                             "sparse_body_tracker_bridge", tmp_path, ros_env)
 
         def tracker_messages():
             return sum(any(tf.child_frame_id in frames for tf in m.transforms) for m in listener.received["/tf"])
-        # Until the whole bag has played (with slack for a loaded machine), then a little more.
-        listener.spin_until(lambda: tracker_messages() >= len(motion), 60.0 + 2 * len(motion) / motion.fps)
+        # Until the whole bag has played and arrived, however long a loaded machine takes to start
+        # the bridge and play it (within a generous limit: a bag is seconds long), then a little more.
+        bridge_log = tmp_path / "sparse_body_tracker_bridge.log"
+        listener.spin_until(lambda: tracker_messages() >= len(motion) and "finished playing" in bridge_log.read_text(),
+                            PLAYBACK_LIMIT)
         listener.spin_for(1.0)
     finally:
         listener.destroy()

@@ -98,12 +98,12 @@ def test_serial_reader_reads_a_pseudo_terminal_and_reconnects(tmp_path):
     def keep(samples):
         with lock:
             got.extend((time.time(), s) for s in samples)
-    deadline = time.monotonic() + 10
+    deadline = time.monotonic() + 120                    # a starved machine starts the sender slowly
     while not link.exists() and time.monotonic() < deadline:
         time.sleep(0.02)
     reader = SerialTrackerReader(str(link), keep, reconnect_interval=0.1)
     try:
-        out, _ = sender.communicate(timeout=20)
+        out, _ = sender.communicate(timeout=300)
         time.sleep(0.2)
     finally:
         reader.close()
@@ -120,7 +120,9 @@ def test_serial_reader_reads_a_pseudo_terminal_and_reconnects(tmp_path):
     after = {s.device for t, s in got if t > arrival[-1] - 1.0}
     assert before == after == devices and arrival[-1] - arrival[0] > 1.5
     lag = np.array([t - s.stamp for t, s in got])
-    assert np.all(lag > -0.005) and np.median(lag) < 0.05         # device time mapped onto host time
+    # device time mapped onto host time (unmapped it would be off by the device's epoch); a
+    # starved reader takes samples late, which only the bench measures
+    assert np.all(lag > -0.005) and np.median(lag) < 0.5
     assert all(s.position is not None for _, s in got)
 
 

@@ -178,7 +178,7 @@ def test_constraint_node_refines_an_estimator_over_dds_and_takes_new_constraints
     """estimator (ik) -> constraint node (refined/...), with constraints changed by service."""
     import rclpy
     pytest.importorskip("tf2_msgs.msg")
-    from ros_helpers import Listener, start_node, stop
+    from ros_helpers import STARTUP_LIMIT, Listener, start_node, stop
     from sensor_msgs.msg import JointState
     from sparse_body.msg import EstimateStatus
     from sparse_body.offline import make_bag
@@ -197,16 +197,16 @@ def test_constraint_node_refines_an_estimator_over_dds_and_takes_new_constraints
 
     def call(**fields):
         future = client.call_async(SetConstraint.Request(**fields))
-        listener.spin_until(future.done, 10.0)
+        listener.spin_until(future.done, STARTUP_LIMIT)
         return future.result()
     try:
-        assert listener.spin_until(lambda: listener.received["refined/joint_states"], 30.0), \
+        assert listener.spin_until(lambda: listener.received["refined/joint_states"], STARTUP_LIMIT), \
             (tmp_path / "sparse_body_constraint.log").read_text()
         bridge = start_node("sparse_body.ros.tracker_bridge_node", {"bag": str(tmp_path / "trackers"),
                                                                     "min_subscribers": 2, "start_delay": 0.5},
                             "sparse_body_tracker_bridge", tmp_path, ros_env)
-        listener.spin_until(lambda: sum(s.valid for s in listener.received["refined/estimate_status"]) >= 20, 60.0)
-        assert client.wait_for_service(timeout_sec=10.0)
+        listener.spin_until(lambda: sum(s.valid for s in listener.received["refined/estimate_status"]) >= 20, STARTUP_LIMIT)
+        assert client.wait_for_service(timeout_sec=STARTUP_LIMIT)
         added = call(name="lift", type="above_floor", joint="left_foot", weight=2.0, values=[0.3])
         bad = call(name="x", type="teleport", joint="head", values=[1.0])
         removed = call(name="lift", remove=True)

@@ -35,7 +35,7 @@ def generate_test_description():
 
 class TestEstimatorStarts(unittest.TestCase):
     def test_configured_and_publishing(self, proc_output):
-        proc_output.assertWaitFor("configured: reference on three_point", timeout=30, stream="stderr")
+        proc_output.assertWaitFor("configured: reference on three_point", timeout=300, stream="stderr")
 
 
 @launch_testing.post_shutdown_test()

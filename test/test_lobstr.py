@@ -266,7 +266,7 @@ def test_estimator_node_runs_lobstr_over_dds(tiny_model, tmp_path, clip, ros_env
     """estimator:=lobstr with the four-point configuration, fed by the tracker bridge."""
     import rclpy
     pytest.importorskip("tf2_msgs.msg")
-    from ros_helpers import Listener, start_node, stop
+    from ros_helpers import STARTUP_LIMIT, Listener, start_node, stop
     from sensor_msgs.msg import JointState
     from sparse_body.msg import EstimateStatus, FootContacts
     from sparse_body.offline import make_bag
@@ -281,13 +281,13 @@ def test_estimator_node_runs_lobstr_over_dds(tiny_model, tmp_path, clip, ros_env
                                 "estimate_status": EstimateStatus})
     bridge = None
     try:
-        assert listener.spin_until(lambda: listener.received["joint_states"], 20.0), \
+        assert listener.spin_until(lambda: listener.received["joint_states"], STARTUP_LIMIT), \
             (tmp_path / "sparse_body_estimator.log").read_text()
         bridge = start_node("sparse_body.ros.tracker_bridge_node",
                             {"bag": str(tmp_path / "trackers"), "min_subscribers": 1, "start_delay": 0.5},
                             "sparse_body_tracker_bridge", tmp_path, env)
         # deadlines, not rates: a starved CPU is slower, not wrong
-        listener.spin_until(lambda: sum(s.valid for s in listener.received["estimate_status"]) >= 30, 60.0)
+        listener.spin_until(lambda: sum(s.valid for s in listener.received["estimate_status"]) >= 30, STARTUP_LIMIT)
     finally:
         listener.destroy()
         stop(est, *([bridge] if bridge else []))

@@ -114,5 +114,6 @@ def test_eval_takes_a_users_own_motion_files(tmp_path, mocap_root, capsys):
     assert "(2 clips of the motion files given" in capsys.readouterr().out
     result = json.loads((tmp_path / "out.json").read_text())[0]
     assert result["split"] == "files" and [c["clip"] for c in result["clips"]] == ["02_01.amc.gz", "02_02.amc.gz"]
-    with pytest.raises(SystemExit, match="no such file or folder"):
+    with pytest.raises(SystemExit) as ended:
         main(["eval", "--estimator", "ik", "--motion", str(tmp_path / "absent.bvh"), "--quiet"])
+    assert ended.value.code == 1 and "no such file or folder" in capsys.readouterr().err

@@ -16,7 +16,7 @@ from diagnostic_msgs.msg import DiagnosticArray  # noqa: E402
 from sensor_msgs.msg import JointState  # noqa: E402
 from tf2_msgs.msg import TFMessage  # noqa: E402
 
-from ros_helpers import Listener, diagnostic_values, stamp_key, start_node, stop  # noqa: E402
+from ros_helpers import STARTUP_LIMIT, Listener, diagnostic_values, stamp_key, start_node, stop  # noqa: E402
 from sparse_body.core.sensors import load_sensor_config  # noqa: E402
 from sparse_body.data.synthetic import synthetic_walk  # noqa: E402
 from sparse_body.data.virtual_trackers import synthesize_trackers  # noqa: E402
@@ -59,7 +59,7 @@ def test_vmc_over_loopback_reaches_joint_states(ros_env, tmp_path):
                                 "/diagnostics": DiagnosticArray}, qos={"/tf": 500})
     client = SimpleUDPClient("127.0.0.1", port)
     try:
-        assert listener.spin_until(lambda: listener.received["joint_states"], 20.0), "estimator did not start"
+        assert listener.spin_until(lambda: listener.received["joint_states"], STARTUP_LIMIT), "estimator did not start"
         start = time.monotonic()
         for i in range(len(stream)):
             for s, site in enumerate(config.site_names):
@@ -98,13 +98,13 @@ def test_serial_trackers_through_a_pty_reach_joint_states_across_a_reconnect(ros
                                 "/diagnostics": DiagnosticArray})
     sender = None
     try:
-        assert listener.spin_until(lambda: listener.received["joint_states"], 20.0), "estimator did not start"
+        assert listener.spin_until(lambda: listener.received["joint_states"], STARTUP_LIMIT), "estimator did not start"
         listener.spin_for(1.0)
         sender = subprocess.Popen([sys.executable, "-m", "sparse_body.adapters.serial_sender", "--pty", str(link),
                                    "--sensors", "four_point", "--rate", "200", "--seconds", "6", "--garbage", "0.05",
                                    "--bad-crc", "0.02", "--split", "--disconnect-at", "2.5", "--offline", "1.0"],
                                   stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
-        listener.spin_until(lambda: sender.poll() is not None, 30.0)
+        listener.spin_until(lambda: sender.poll() is not None, STARTUP_LIMIT)
         listener.spin_for(1.5)
     finally:
         listener.destroy()
@@ -160,7 +160,7 @@ def test_calibration_service_measures_offsets_and_height_and_applies_them(ros_en
             p, q = to_unity(mounted, rot.as_quat())
             client.send_message(VMC_NAMES[site][0], [VMC_NAMES[site][1], *p, *q])
     try:
-        assert calibrate.wait_for_service(timeout_sec=20.0), "no calibration service"
+        assert calibrate.wait_for_service(timeout_sec=STARTUP_LIMIT), "no calibration service"
         future = calibrate.call_async(Calibrate.Request(seconds=0.5))
         end = time.monotonic() + 15
         while not future.done() and time.monotonic() < end:
@@ -198,10 +198,10 @@ def test_calibration_requests_are_bounded_and_write_only_under_the_calibration_d
 
     def call(**fields):
         future = calibrate.call_async(Calibrate.Request(**fields))
-        assert listener.spin_until(future.done, 30.0), f"no answer to {fields}"
+        assert listener.spin_until(future.done, STARTUP_LIMIT), f"no answer to {fields}"
         return future.result()
     try:
-        assert calibrate.wait_for_service(timeout_sec=30.0), "no calibration service"
+        assert calibrate.wait_for_service(timeout_sec=STARTUP_LIMIT), "no calibration service"
         endless = call(seconds=float("inf"))                        # killed the bridge (OverflowError)
         forever = call(seconds=2e9)                                  # blocked its executor for ever
         outside = call(seconds=0.1, save_path=str(tmp_path / "elsewhere" / "x.yaml"))

@@ -16,7 +16,7 @@ from sensor_msgs.msg import JointState  # noqa: E402
 from std_msgs.msg import String  # noqa: E402
 from tf2_msgs.msg import TFMessage  # noqa: E402
 
-from ros_helpers import Listener, diagnostic_values, during_playback, replay_bag, stamp_key, start_node, stop  # noqa: E402
+from ros_helpers import STARTUP_LIMIT, Listener, diagnostic_values, during_playback, replay_bag, stamp_key, start_node, stop  # noqa: E402
 from sparse_body.core.kinematics import forward_kinematics  # noqa: E402
 from sparse_body.core.rotations import euler_to_matrix, quat_to_matrix  # noqa: E402
 from sparse_body.core.sensors import load_sensor_config  # noqa: E402
@@ -33,7 +33,7 @@ BRIDGE = "sparse_body.ros.tracker_bridge_node"
 
 
 
-def _call(node, client, request, timeout=10.0):
+def _call(node, client, request, timeout=STARTUP_LIMIT):
     assert client.wait_for_service(timeout_sec=timeout), f"no service {client.srv_name}"
     future = client.call_async(request)
     rclpy.spin_until_future_complete(node, future, timeout_sec=timeout)
@@ -61,7 +61,7 @@ def test_lifecycle_transitions_gate_the_outputs(ros_env, tmp_path):
         listener.spin_for(1.0)
         assert listener.received["joint_states"] == []          # inactive: nothing published
         assert transition(Transition.TRANSITION_ACTIVATE) and state() == State.PRIMARY_STATE_ACTIVE
-        assert listener.spin_until(lambda: len(listener.received["joint_states"]) >= 10, 10.0)
+        assert listener.spin_until(lambda: len(listener.received["joint_states"]) >= 10, STARTUP_LIMIT)
         # With no trackers at all the node still publishes: finite, held poses.
         assert all(np.all(np.isfinite(m.position)) for m in listener.received["joint_states"])
         assert transition(Transition.TRANSITION_DEACTIVATE)
@@ -178,8 +178,13 @@ def test_a_calibration_file_gives_the_body_the_node_estimates_and_publishes(ros_
     and feet on their trackers with that body."""
     from sparse_body.adapters.calibration import Calibration
     from sparse_body.data.field_protocol import FIELD, calibrate_from_tpose, tpose_motion
+    from sparse_body.core.skeleton import JOINT_INDEX as J
+    from sparse_body.data.motion import Motion
     from sparse_body.data.virtual_trackers import NO_NOISE, synthesize_trackers
     motion = _motion(request)
+    offsets = motion.skeleton.offsets.copy()      # longer forearms and shins than any canonical body has
+    offsets[[J["left_wrist"], J["right_wrist"], J["left_ankle"], J["right_ankle"]]] *= 1.15
+    motion = Motion(motion.name, motion.fps, Skeleton(offsets), motion.local_quats, motion.root_positions)
     config = load_sensor_config("six_point")
     rng = np.random.default_rng(0)
     calibration = calibrate_from_tpose(synthesize_trackers(tpose_motion(motion, FIELD, rng), config, NO_NOISE), config)
@@ -213,7 +218,7 @@ def test_bad_tracker_input_is_reported_and_never_gives_non_finite_output(ros_env
                                 "/diagnostics": DiagnosticArray})
     pub = listener.node.create_publisher(TFMessage, "/tf", 100)
     try:
-        assert listener.spin_until(lambda: listener.received["joint_states"], 15.0), "estimator did not start"
+        assert listener.spin_until(lambda: listener.received["joint_states"], STARTUP_LIMIT), "estimator did not start"
         start = time.monotonic()
         for i in range(len(motion)):
             t = time.monotonic() - start
@@ -277,7 +282,7 @@ def test_plain_process_takes_the_shipped_parameter_file(ros_env, tmp_path):
                              "-p", "estimator:=reference"], stdout=log, stderr=subprocess.STDOUT, env=ros_env)
     listener = Listener(rclpy, {"joint_states": JointState})
     try:
-        assert listener.spin_until(lambda: len(listener.received["joint_states"]) >= 5, 15.0)
+        assert listener.spin_until(lambda: len(listener.received["joint_states"]) >= 5, STARTUP_LIMIT)
     finally:
         listener.destroy()
         stop(proc)
@@ -296,7 +301,7 @@ def test_a_qos_override_changes_only_the_publisher_it_names(ros_env, tmp_path):
         def reliability(topic):
             infos = node.get_publishers_info_by_topic(topic)
             return infos[0].qos_profile.reliability if infos else None
-        assert listener.spin_until(lambda: reliability("/estimate_status") is not None, 20.0), \
+        assert listener.spin_until(lambda: reliability("/estimate_status") is not None, STARTUP_LIMIT), \
             (tmp_path / "sparse_body_estimator.log").read_text()
         assert reliability("/joint_states") == ReliabilityPolicy.BEST_EFFORT
         assert reliability("/foot_contacts") == ReliabilityPolicy.RELIABLE
@@ -378,7 +383,7 @@ def test_a_bad_height_refuses_configure_with_the_reason_and_the_node_stays_up(ro
         change = node.create_client(ChangeState, "/sparse_body_estimator/change_state")
         get = node.create_client(GetState, "/sparse_body_estimator/get_state")
         assert not _call(node, change, ChangeState.Request(transition=Transition(id=Transition.TRANSITION_CONFIGURE)),
-                         timeout=30.0).success
+                         timeout=STARTUP_LIMIT).success
         assert _call(node, get, GetState.Request()).current_state.id == State.PRIMARY_STATE_UNCONFIGURED
         assert proc.poll() is None
     finally:
@@ -396,7 +401,7 @@ def test_parameters_set_while_configured_apply_live_or_are_refused_with_the_reas
     listener = Listener(rclpy, {"joint_states": JointState})
     try:
         node = listener.node
-        assert listener.spin_until(lambda: listener.received["joint_states"], 30.0)
+        assert listener.spin_until(lambda: listener.received["joint_states"], STARTUP_LIMIT)
         setp = node.create_client(SetParameters, "/sparse_body_estimator/set_parameters")
 
         def set_one(name, **value):
@@ -439,7 +444,7 @@ def test_trackers_on_a_static_chain_count_as_current(ros_env, tmp_path):
         msg.transforms.append(tf)
     pub.publish(msg)
     try:
-        assert listener.spin_until(lambda: sum(s.valid for s in listener.received["estimate_status"]) >= 10, 30.0), \
+        assert listener.spin_until(lambda: sum(s.valid for s in listener.received["estimate_status"]) >= 10, STARTUP_LIMIT), \
             {s.message for s in listener.received["estimate_status"]}
     finally:
         listener.destroy()

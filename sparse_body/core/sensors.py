@@ -157,12 +157,18 @@ def load_sensor_config(name_or_path: str | Path) -> SensorConfig:
 
 
 def read_yaml(path: Path, error: type[Exception] = ValueError):
-    """A YAML file's content, or error naming the file and what is wrong with it."""
+    """A YAML file's content, or error naming the file and what is wrong with it (unreadable,
+    over the size limit of core/textfile.py, not UTF-8, not YAML, nested too deeply)."""
+    from .textfile import FileTooLarge, read_limited
     try:
-        return yaml.safe_load(Path(path).read_text())
+        return yaml.safe_load(read_limited(path, "yaml"))
     except OSError as err:
-        raise error(f"{path}: cannot be read ({err.strerror})") from None
+        raise error(f"{path}: cannot be read ({err.strerror or err})") from None
+    except FileTooLarge as err:
+        raise error(str(err)) from None
     except UnicodeDecodeError as err:
         raise error(f"{path}: not UTF-8 text ({err.reason} at byte {err.start})") from None
     except yaml.YAMLError as err:
-        raise error(f"{path}: not valid YAML ({err})") from None
+        raise error(f"{path}: not valid YAML ({' '.join(str(err).split())})") from None
+    except RecursionError:
+        raise error(f"{path}: nested too deeply to be a configuration") from None

@@ -15,7 +15,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from . import MotionFileError
-from .source import SourceMotion, read_text, stem
+from .source import MAX_JOINTS, SourceMotion, read_text, stem
 
 INCH = 0.0254
 
@@ -109,6 +109,8 @@ def load_asf(path: Path) -> AsfSkeleton:
                     root_position = _three(path, lineno, "root position", tok[1:])
             elif section == ":bonedata":
                 if tok[0] == "begin":
+                    if len(bones) >= MAX_JOINTS:
+                        raise MotionFileError(path, f"line {lineno}: more than {MAX_JOINTS} bones (a body has under 100)")
                     current = {"dof": []}
                 elif tok[0] == "end":
                     if current is None or not {"name", "direction", "length", "axis"} <= current.keys():

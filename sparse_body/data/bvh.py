@@ -12,7 +12,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from . import MotionFileError
-from .source import SourceMotion, read_text, stem
+from .source import MAX_JOINTS, SourceMotion, read_text, stem
 
 # Length units of the CMU BVH conversions (see ../shared/mocap/README.md): MotionBuilder and
 # 3ds Max releases keep the ASF units (1/0.45 inch), Daz releases use centimetres.
@@ -46,6 +46,7 @@ def _check_channels(path: Path, joint: str, channels: list[str]) -> None:
         raise MotionFileError(path, f"joint {joint!r} has {rotations} rotation channels (0 or 3 allowed)")
 
 
+
 def default_unit(layout: str) -> float:
     return 0.01 if layout == "cmu_bvh_daz" else CMU_ASF_UNIT
 
@@ -66,6 +67,8 @@ def load_bvh(path: Path, length_unit: float | None = None) -> SourceMotion:
     try:
         while i < len(tokens):
             tok = tokens[i]
+            if tok in ("ROOT", "JOINT", "End") and len(names) >= MAX_JOINTS:
+                raise MotionFileError(path, f"more than {MAX_JOINTS} joints in HIERARCHY (a body has under 100)")
             if tok in ("ROOT", "JOINT"):
                 names.append(tokens[i + 1])
                 parents.append(stack[-1] if stack else -1)

@@ -79,7 +79,11 @@ def read_index(root: Path) -> list[Clip]:
     return clips
 
 
-def split_path() -> Path:
+def split_path(mocap_root: Path | None = None) -> Path:
+    """The split of a motion folder: its own split.yaml (`sparse-body import-mocap` writes
+    one), else the package's split of the CMU collection."""
+    if mocap_root is not None and (Path(mocap_root) / "split.yaml").is_file():
+        return Path(mocap_root) / "split.yaml"
     return config_dir() / "splits" / "cmu.yaml"
 
 
@@ -125,7 +129,7 @@ def load_split(path: Path | None = None) -> dict[str, list[str]]:
 def split_clips(mocap_root: Path, split: str, limit: int | None = None) -> list[Clip]:
     """The clips of one part of the committed split, in its order (only the first `limit`)."""
     index = {c.clip_id: c for c in read_index(mocap_root)}
-    wanted = load_split()[split]
+    wanted = load_split(split_path(mocap_root))[split]
     missing = [c for c in wanted if c not in index]
     if missing:
         raise FileNotFoundError(f"{mocap_root}: clips of the {split} split are missing: {', '.join(missing[:5])}")
@@ -151,13 +155,16 @@ def load_clip(clip: Clip, fps: float = DEFAULT_FPS, use_cache: bool = True) -> M
             return Motion.load(cached)
         except MotionFileError:
             cached.unlink(missing_ok=True)   # a half-written entry: parse again
-    if clip.format == "asf/amc":
+    if clip.format == "file":          # a user's file (import-mocap): its skeleton found beside it
+        motion = load_motion_file(clip.path, fps)
+        source = None
+    elif clip.format == "asf/amc":
         source = load_amc(clip.path, load_asf(clip.skeleton_path), fps=clip.fps)
     elif clip.format.startswith("bvh"):
         source = load_bvh(clip.path)
     else:
         raise MotionFileError(clip.path, f"unknown format {clip.format!r}")
-    motion = retarget(source, fps)
+    motion = retarget(source, fps) if source is not None else motion
     # Exactly what the cache holds (float32 quaternions), so a clip gives bit-identical results
     # parsed or cached: the latent optimiser's accept/refuse decisions grow 1e-7 differences
     # into metric changes of a few hundredths (seen as two evaluations of one configuration).

@@ -1,13 +1,16 @@
 """A motion on its source skeleton, as a loader reads it, before retargeting."""
 from __future__ import annotations
 
-import gzip
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
 from . import MotionFileError
+
+# A skeleton of more joints is no body (CMU's have 31 to 38, with hands and toes about 70):
+# the loaders refuse it while reading the hierarchy, before a frame is parsed.
+MAX_JOINTS = 1000
 
 
 @dataclass
@@ -33,17 +36,21 @@ class SourceMotion:
 
 
 def read_text(path: Path) -> str:
-    """The text of a motion file, gzip-compressed (.gz) or plain."""
+    """The text of a motion file, gzip-compressed (.gz) or plain, within the motion size limit
+    (core/textfile.py); bytes that are not UTF-8 are replaced (comments in other encodings)."""
+    from ..core.textfile import FileTooLarge, read_limited
     path = Path(path)
     if not path.is_file():
         raise MotionFileError(path, "no such file")
     try:
-        if path.suffix == ".gz":
-            with gzip.open(path, "rt", encoding="utf-8", errors="replace") as f:
-                return f.read()
-        return path.read_text(encoding="utf-8", errors="replace")
+        with_replacement = read_limited(path, "motion")
+    except UnicodeDecodeError as err:
+        with_replacement = err.object.decode("utf-8", errors="replace")
+    except FileTooLarge as err:
+        raise MotionFileError(path, str(err).removeprefix(f"{path}: ")) from None
     except (OSError, EOFError) as err:  # a truncated .gz raises EOFError
         raise MotionFileError(path, f"cannot be read ({err})") from None
+    return with_replacement
 
 
 def stem(path: Path) -> str:

@@ -45,6 +45,7 @@ from ..core.skeleton import JOINT_INDEX, PARENTS
 from ..core.types import BodyPose, TrackerFrame
 from .avatarjlm_features import SITES, features, reference
 from .base import Estimator
+from .options import FLOOR, MAX_GAP, THREADS
 from .lobstr_features import body_scale
 from .onnx_model import load_model, shipped_model_path
 
@@ -120,6 +121,7 @@ class AvatarJlmModel:
 class AvatarJlmEstimator(Estimator):
     name = "avatarjlm"
     required_sites = frozenset(SITES["three_point"])
+    option_ranges = {"floor_height": FLOOR, "max_gap": MAX_GAP, "threads": THREADS}
 
     def __init__(self, sensors, skeleton, fps: float = 60.0, model: str = "auto", model_path: str | None = None,
                  polish: bool = True, end_orientations: bool = True, hinge_knees: bool = True,

@@ -15,6 +15,7 @@ from ..core.skeleton import Skeleton
 from ..core.tracker_filter import FilterConfig, TrackerFilter, filter_config
 from ..core.tracker_smoother import smooth_frames
 from ..core.types import BodyPose, TrackerFrame, TrackerStream
+from .options import Option, Range, check_value, options_of
 
 # name -> "module:Class"; modules are imported on first use so that an estimator's
 # dependencies (onnxruntime, a model file) are needed only when it is chosen.
@@ -40,6 +41,13 @@ class Estimator(ABC):
     name: ClassVar[str]
     # Sites the method cannot work without (checked against the sensor configuration).
     required_sites: ClassVar[frozenset[str]] = frozenset()
+    # The closed interval each numeric option must lie in (options.py; every one has one).
+    option_ranges: ClassVar[dict[str, Range]] = {}
+
+    @classmethod
+    def options(cls) -> dict[str, Option]:
+        """The options a user can give (the constructor's keywords), by name."""
+        return options_of(cls.__init__)
 
     def __init__(self, sensors: SensorConfig, skeleton: Skeleton, fps: float = 60.0) -> None:
         missing = self.required_sites - set(sensors.site_names)
@@ -159,7 +167,10 @@ def parse_estimator_spec(spec: str) -> tuple[str, dict]:
         key, eq, value = item.partition("=")
         if not eq or not key:
             raise ValueError(f"estimator option {item!r} in {spec!r} is not key=value")
-        options[key.strip()] = yaml.safe_load(value)
+        try:
+            options[key.strip()] = yaml.safe_load(value)
+        except (yaml.YAMLError, RecursionError):
+            raise ValueError(f"estimator option {item!r} in {spec!r}: the value is not a plain YAML scalar") from None
     return name.strip(), options
 
 
@@ -178,14 +189,16 @@ def create_estimator(name: str, sensors: SensorConfig, skeleton: Skeleton, fps: 
         raise ValueError(f"smooth must be true or false, got {smooth!r}")
     module, cls = target.split(":")
     cls = getattr(importlib.import_module(module), cls)
-    parameters = inspect.signature(cls.__init__).parameters.values()
-    known = [p.name for p in parameters if p.kind is inspect.Parameter.POSITIONAL_OR_KEYWORD
-             and p.name not in ("self", "sensors", "skeleton", "fps")]
-    takes_more = any(p.kind is inspect.Parameter.VAR_KEYWORD for p in parameters)   # DragPoser's optimiser options
+    known = cls.options()
+    takes_more = any(p.kind is inspect.Parameter.VAR_KEYWORD             # refined: its base's options
+                     for p in inspect.signature(cls.__init__).parameters.values())
     unknown = [k for k in options if k not in known]
     if unknown and not takes_more:
         raise ValueError(f"estimator {name!r} has no option {', '.join(map(repr, unknown))}; "
                          f"its options are {', '.join(known) or 'none'} and the filter's (filter_...)")
+    for key, value in options.items():       # before any model is loaded
+        if key in known:
+            check_value(name, known[key], value, cls.option_ranges)
     try:
         estimator = cls(sensors, skeleton, fps=fps, **options)
     except TypeError as err:

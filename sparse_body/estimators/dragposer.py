@@ -29,6 +29,7 @@ from ..core.sensors import SITE_JOINTS
 from ..core.skeleton import JOINT_INDEX as J
 from ..core.types import BodyPose, TrackerFrame
 from .base import Estimator
+from .options import FLOOR, THREADS, Option, Range, options_of
 from .constraints import AboveFloor, ConstraintSet, Orientation, OverPoint, Position
 from ..core.skeleton import Skeleton
 from .dragposer_pose import HEIGHT_JOINTS, LATENT, dual_quaternions, split_heading
@@ -147,6 +148,21 @@ class LatentOptimizer:
 
 class DragPoserEstimator(Estimator):
     name = "dragposer"
+    option_ranges = {
+        "iterations": Range(1, 100, "search steps a frame"),
+        "position_weight": Range(0.0, 1e3), "orientation_weight": Range(0.0, 1e3),
+        "floor_height": FLOOR, "threads": THREADS,
+        "tolerance": Range(0.0, 1.0, "metres"), "rotation_tolerance": Range(0.0, 3.1416, "radians"),
+        "temporal_weight": Range(0.0, 10.0), "ahead": Range(1, 16, "frames"),
+        "root_prior": Range(0.0, 100.0), "tracker_prior": Range(0.0, 100.0),
+        # the optimiser's (LatentOptimizer)
+        "damping": Range(1e-9, 1e6), "prior_weight": Range(0.0, 10.0), "latent_weight": Range(0.0, 10.0),
+        "eps": Range(1e-9, 1.0, "the finite-difference step"),
+    }
+
+    @classmethod
+    def options(cls) -> dict[str, Option]:
+        return options_of(cls.__init__, LatentOptimizer.__init__)     # **optimizer goes there
 
     def __init__(self, sensors, skeleton, fps: float = 60.0, model_dir: str | None = None,
                  model_path: str | None = None, iterations: int = 3,

@@ -40,6 +40,7 @@ from ..core.sensors import SITE_JOINTS
 from ..core.skeleton import JOINT_INDEX, PARENTS
 from ..core.types import BodyPose, TrackerFrame, TrackerStream
 from .base import Estimator
+from .options import FLOOR, MAX_GAP, THREADS, Range
 from .dtp_features import FEATURES, FOOT_LEAVES, INPUT_SITES, LEAF_SITES, leaf_features, window_features
 from .lobstr_features import body_scale
 from .onnx_model import load_model, shipped_model_path
@@ -87,6 +88,11 @@ class Sample:
 class DtpEstimator(Estimator):
     name = "dtp"
     required_sites = frozenset(INPUT_SITES)
+    option_ranges = {
+        "foot_trust": Range(0.0, 5.0, "metres between tracker and network foot fully trusted"),
+        "foot_speed": Range(0.0, 100.0, "m/s: a foot tracker jumping faster is not followed"),
+        "floor_height": FLOOR, "max_gap": MAX_GAP, "threads": THREADS,
+    }
 
     def __init__(self, sensors, skeleton, fps: float = 60.0, model: str = "online", model_path: str | None = None,
                  polish: bool = True, foot_trust: float = 0.4, foot_speed: float = 8.0, end_orientations: bool = True,

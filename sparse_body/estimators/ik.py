@@ -19,6 +19,7 @@ from ..core.skeleton import JOINT_INDEX as J
 from ..core.skeleton import PARENTS
 from ..core.types import BodyPose, TrackerFrame
 from .base import Estimator
+from .options import FLOOR
 from .reference import standing_pose
 
 END_SITES = ("head", "left_hand", "right_hand", "left_foot", "right_foot")
@@ -27,6 +28,7 @@ _ANKLES = (J["left_ankle"], J["right_ankle"])
 
 class IKEstimator(Estimator):
     name = "ik"
+    option_ranges = {"floor_height": FLOOR}
 
     def __init__(self, sensors, skeleton, fps: float = 60.0, floor_height: float = 0.0) -> None:
         super().__init__(sensors, skeleton, fps)

@@ -22,6 +22,7 @@ from ..core.sensors import SITE_JOINTS
 from ..core.skeleton import JOINT_INDEX as J
 from ..core.types import BodyPose, TrackerFrame
 from .base import Estimator
+from .options import FLOOR, MAX_GAP, THREADS, Range
 from .contact_ik import ContactHold
 from .ik import IKEstimator
 from .lobstr_features import INPUT_SITES, OUTPUTS, apply_legs, apply_upper, body_scale, feature_count, features
@@ -85,6 +86,12 @@ def _retime(x: np.ndarray, ratio: float) -> np.ndarray:
 class LobstrEstimator(Estimator):
     name = "lobstr"
     required_sites = frozenset(INPUT_SITES)
+    option_ranges = {
+        "contact_threshold": Range(0.0, 1.0, "a contact probability"),
+        "release_frames": Range(0, 600, "frames to let a contact go over"),
+        "floor_height": FLOOR, "max_gap": MAX_GAP, "threads": THREADS,
+        "spine_tolerance": Range(0.0, 0.0199, "metres the predicted spine may leave the head off"),
+    }
 
     def __init__(self, sensors, skeleton, fps: float = 60.0, model_path: str | None = None,
                  contact_ik: bool = True, contact_threshold: float = 0.5, release_frames: int = 10,

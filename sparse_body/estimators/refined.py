@@ -8,11 +8,13 @@ from __future__ import annotations
 
 from ..core.tracker_filter import NO_FILTER
 from .base import Estimator, create_estimator
+from .options import Range
 from .dragposer import DragPoserEstimator
 
 
 class RefinedEstimator(Estimator):
     name = "refined"
+    option_ranges = {"iterations": Range(1, 100, "search steps a frame")}
 
     def __init__(self, sensors, skeleton, fps: float = 60.0, base: str = "ik", model_dir: str | None = None,
                  iterations: int = 3, **base_options) -> None:

@@ -243,8 +243,11 @@ class TrackerBridge(Node):
         folder = self.params["calibration_dir"]
         if not folder:
             raise CalibrationError("save_path refused: the bridge has no calibration_dir to write requests under")
-        path = Path(requested).expanduser()
-        path = (Path(folder) / path if not path.is_absolute() else path).resolve()
+        # no expanduser: '~' is a peer's text, and expanding it raises for an unknown user
+        try:
+            path = (Path(folder) / requested).resolve()     # an absolute request stays absolute
+        except (ValueError, OSError, RuntimeError) as err:    # a NUL byte, a symlink loop
+            raise CalibrationError(f"save_path refused: {requested!r} ({err})") from None
         if not path.is_relative_to(Path(folder).resolve()) or path.suffix not in (".yaml", ".yml"):
             raise CalibrationError(f"save_path refused: {requested!r} is not a .yaml file under {folder}")
         if not path.parent.is_dir():
@@ -274,7 +277,12 @@ class TrackerBridge(Node):
             self.get_logger().warn(f"calibration failed: {err}")
             return response
         if path:
-            calibration.save(path)
+            try:
+                calibration.save(path)
+            except OSError as err:
+                response.success, response.message = False, f"calibration not saved to {path}: {err.strerror or err}"
+                self.get_logger().warn(response.message)
+                return response
         with self._lock:
             self.calibration = calibration
         response.success, response.height, response.sites = True, float(calibration.height), sorted(calibration.offsets)

@@ -1,0 +1,157 @@
+"""A user's files survive every command: outputs replace only bags this package wrote, never
+an input, a plain file, a folder of other files or a device; interrupted and terminated runs
+leave nothing behind; every error a user can cause ends in one line and its own exit code."""
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+from sparse_body.bagio import OutputError, check_output, written_by_us
+from sparse_body.cli import EXIT_INPUT, EXIT_OS, EXIT_OUTPUT, EXIT_TERMINATED, EXIT_USAGE, main
+from sparse_body.core.sensors import load_sensor_config
+from sparse_body.data.synthetic import synthetic_walk
+from sparse_body.offline import make_bag
+
+
+@pytest.fixture(scope="module")
+def bag(tmp_path_factory) -> Path:
+    path = tmp_path_factory.mktemp("bags") / "walk"
+    make_bag(synthetic_walk(1.0), load_sensor_config("six_point"), path)
+    return path
+
+
+def run_cli(capsys, *argv) -> tuple[int, str]:
+    with pytest.raises(SystemExit) as ended:
+        main([str(a) for a in argv])
+    return ended.value.code, capsys.readouterr().err
+
+
+def tree(path: Path) -> dict:
+    """Every file under path with its size and modification time."""
+    return {str(p): (p.stat().st_size, p.stat().st_mtime_ns) for p in sorted(Path(path).rglob("*")) if p.is_file()}
+
+
+def test_the_input_is_never_the_output(bag, capsys):
+    before = tree(bag)
+    code, err = run_cli(capsys, "process", bag, bag, "--overwrite", "--quiet")
+    assert code == EXIT_OUTPUT and "is (or holds) the input" in err and len(err.strip().splitlines()) == 1
+    code, err = run_cli(capsys, "process", bag, bag.parent, "--overwrite", "--quiet")    # a folder holding it
+    assert code == EXIT_OUTPUT
+    assert tree(bag) == before
+
+
+@pytest.mark.parametrize("kind", ["file", "folder", "fifo", "link"])
+def test_overwrite_never_replaces_what_is_not_our_bag(bag, tmp_path, capsys, kind):
+    target = tmp_path / "target"
+    if kind == "file":
+        target.write_text("a user's notes")
+    elif kind == "folder":
+        target.mkdir()
+        (target / "thesis.tex").write_text("years of work")
+    elif kind == "fifo":
+        os.mkfifo(target)
+    else:
+        make_bag(synthetic_walk(0.5), load_sensor_config("six_point"), tmp_path / "ours")
+        target.symlink_to(tmp_path / "ours")          # even a link to our own bag: the link is the user's
+    before = os.lstat(target)
+    code, err = run_cli(capsys, "process", bag, target, "--overwrite", "--quiet")
+    assert code == EXIT_OUTPUT and "never replaced" in err and len(err.strip().splitlines()) == 1
+    after = os.lstat(target)
+    assert (after.st_ino, after.st_mode, after.st_mtime_ns) == (before.st_ino, before.st_mode, before.st_mtime_ns)
+    assert not [p for p in tmp_path.iterdir() if p.name.startswith(".")]
+
+
+def test_devices_are_refused_without_being_touched():
+    for device in ("/dev/null", "/dev/zero"):
+        before = os.stat(device)
+        with pytest.raises(OutputError, match="a device or special file"):
+            check_output(Path(device), overwrite=True)
+        assert os.stat(device).st_ino == before.st_ino
+
+
+def test_overwrite_replaces_a_bag_this_package_wrote(bag, tmp_path, capsys):
+    out = tmp_path / "out"
+    assert run_cli(capsys, "process", bag, out, "--quiet")[0] == 0
+    assert written_by_us(out)
+    code, err = run_cli(capsys, "process", bag, out, "--quiet")
+    assert code == EXIT_OUTPUT and "--overwrite" in err
+    assert run_cli(capsys, "process", bag, out, "--quiet", "--overwrite", "--estimator", "reference")[0] == 0
+    assert written_by_us(out) and sorted(p.name for p in tmp_path.iterdir()) == ["out"]
+    # a file slipped into our bag makes it the user's: no longer replaced
+    (out / "notes.txt").write_text("mine now")
+    assert not written_by_us(out)
+    assert run_cli(capsys, "process", bag, out, "--quiet", "--overwrite")[0] == EXIT_OUTPUT
+    assert (out / "notes.txt").read_text() == "mine now"
+
+
+def test_sigterm_during_process_leaves_nothing_behind(tmp_path):
+    bag = tmp_path / "long"
+    make_bag(synthetic_walk(60.0), load_sensor_config("six_point"), bag)
+    before = sorted(p.name for p in tmp_path.iterdir())
+    proc = subprocess.Popen([sys.executable, "-m", "sparse_body.cli", "process", str(bag), str(tmp_path / "out"),
+                             "--estimator", "dragposer"], stderr=subprocess.PIPE, text=True)
+    try:
+        deadline = time.monotonic() + 300                # a busy machine loads the model slowly
+        started = ""
+        while "frame" not in started and time.monotonic() < deadline and proc.poll() is None:
+            started += os.read(proc.stderr.fileno(), 256).decode(errors="replace")   # the progress bar
+        assert proc.poll() is None, f"ended before it could be terminated: {started}"
+        proc.send_signal(signal.SIGTERM)
+        _, err = proc.communicate(timeout=120)
+    finally:
+        proc.kill()
+    assert proc.returncode == EXIT_TERMINATED, err
+    assert "terminated; nothing written" in err and "Traceback" not in err
+    assert sorted(p.name for p in tmp_path.iterdir()) == before
+
+
+def _nested_yaml(path: Path) -> Path:
+    path.write_text("[" * 100_000 + "]" * 100_000)
+    return path
+
+
+@pytest.mark.parametrize("case", ["parent not a folder", "read-only folder", "parent is a file", "nested sensors", "nested calibration",
+                                  "yaml option", "python tag", "huge seconds", "fps zero", "fps nan",
+                                  "negative option", "option type", "huge yaml", "calibration device",
+                                  "bvh joints"])
+def test_every_user_error_is_one_line_and_its_exit_code(bag, tmp_path, capsys, case):
+    out = tmp_path / "out"
+    argv, code, said = {
+        "parent not a folder": (["process", bag, "/proc/version/out"], EXIT_OUTPUT, "is not an existing folder"),
+        "read-only folder": (["process", bag, "/proc/sparse_body_out"], EXIT_OS, "/proc/"),
+        "parent is a file": (["process", bag, bag / "metadata.yaml" / "out"], EXIT_OUTPUT, "input"),
+        "nested sensors": (["process", bag, out, "--sensors", _nested_yaml(tmp_path / "s.yaml")], EXIT_INPUT,
+                           "nested too deeply"),
+        "nested calibration": (["process", bag, out, "--calibration", _nested_yaml(tmp_path / "c.yaml")],
+                               EXIT_INPUT, "nested too deeply"),
+        "yaml option": (["process", bag, out, "--estimator", "ik:filter=[[[["], EXIT_INPUT, "not a plain YAML"),
+        "python tag": (["process", bag, out, "--estimator", "ik:floor_height=!!python/object/apply:os.system [ls]"],
+                       EXIT_INPUT, "not a plain YAML"),
+        "huge seconds": (["make-bag", out, "--seconds", "1e9"], EXIT_USAGE, "from 0 to 3600"),
+        "fps zero": (["process", bag, out, "--fps", "0"], EXIT_USAGE, "from 1 to 1000"),
+        "fps nan": (["eval", "--estimator", "ik", "--fps", "nan"], EXIT_USAGE, "from 1 to 1000"),
+        "negative option": (["process", bag, out, "--estimator", "dtp:foot_trust=-5"], EXIT_INPUT,
+                            "foot_trust must be from 0 to 5"),
+        "option type": (["process", bag, out, "--estimator", "dragposer:iterations=2.5"], EXIT_INPUT,
+                        "iterations takes an integer"),
+        "huge yaml": (["process", bag, out, "--sensors", tmp_path / "big.yaml"], EXIT_INPUT, "MiB allowed"),
+        "calibration device": (["process", bag, out, "--calibration", "/dev/zero"], EXIT_INPUT, "MiB allowed"),
+        "bvh joints": (["make-bag", out, "--motion", tmp_path / "many.bvh"], EXIT_INPUT, "more than 1000 joints"),
+    }[case]
+    if case == "huge yaml":
+        (tmp_path / "big.yaml").write_text("# padding\n" * 200_000)
+    if case == "bvh joints":
+        joints = "".join(f"JOINT j{i}\n{{\nOFFSET 0 0 1\nCHANNELS 3 Zrotation Xrotation Yrotation\n"
+                         for i in range(100_000))
+        (tmp_path / "many.bvh").write_text("HIERARCHY\nROOT r\n{\nOFFSET 0 0 0\nCHANNELS 0\n" + joints
+                                           + "}\n" * 100_001 + "MOTION\nFrames: 0\nFrame Time: 0.01\n")
+    started = time.monotonic()
+    got, err = run_cli(capsys, *argv, *(["--quiet"] if argv[0] in ("process", "eval") else []))
+    assert (got, len(err.strip().splitlines())) == (code, 1), err
+    assert said in err and "Traceback" not in err
+    assert time.monotonic() - started < 60
+    assert not out.exists() and not [p for p in tmp_path.iterdir() if p.name.startswith('.')]

@@ -123,6 +123,10 @@ fi
 pkg_hash=$(inputs_hash "$ROOT/pyproject.toml" "$STAMPS/deps")
 if ! up_to_date package "$pkg_hash"; then
   say "installing sparse_body (editable) and the sparse-body command"
+  # setuptools 77 or later reads pyproject's SPDX licence string; the editable install below
+  # builds without isolation, with the venv's own setuptools (a new venv's is older)
+  "$VPY" -c 'import setuptools, sys; sys.exit(int(setuptools.__version__.split(".")[0]) < 77)' 2>/dev/null \
+    || "$VPY" -m pip install --quiet "setuptools>=77" || die "upgrading setuptools failed"
   # compat mode puts the checkout on sys.path, so sparse_body/ here and the generated
   # sparse_body/msg in the venv merge into one package (see sparse_body/__init__.py).
   "$VPY" -m pip install --quiet --no-deps --no-build-isolation -e "$ROOT" --config-settings editable_mode=compat

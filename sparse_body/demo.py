@@ -78,7 +78,8 @@ def animate(path: Path, truth: np.ndarray, estimate: np.ndarray, trackers: np.nd
         ax.set_xlim(low[0], high[0])
         ax.set_ylim(low[1], high[1])
         ax.set_zlim(low[2], high[2])
-        ax.set_box_aspect(tuple(extent))                         # equal axes: a metre is a metre
+        ax.set_box_aspect(tuple(extent), zoom=1.1)               # equal axes: a metre is a metre
+        ax.grid(False)                                            # the floor grid below is the scale
         ax.set_xlabel("x [m]", fontsize=7)
         ax.set_ylabel("y [m]", fontsize=7)
         ax.tick_params(labelsize=6)

@@ -373,7 +373,7 @@ def test_missing_temporal_predictor_names_the_file_and_the_way_out(tiny_vae, tmp
     est = create_estimator("dragposer", load_sensor_config("six_point"), Skeleton.canonical(), model_dir=str(tmp_path),
                            temporal_weight=0, tracker_prior=0)
     assert est.temporal is None and est.guesser is None
-    with pytest.raises(ValueError, match="tracker_prior must be a finite weight"):
+    with pytest.raises(ValueError, match="tracker_prior must be from 0 to 100"):
         create_estimator("dragposer", load_sensor_config("six_point"), Skeleton.canonical(), model_dir=str(tmp_path),
                          temporal_weight=0, tracker_prior=-1)
 

@@ -175,7 +175,7 @@ def test_cli_refuses_bad_arguments_and_lists_what_is_there(tmp_path, capsys):
     from sparse_body.cli import main
     for argv, said in [(["eval", "--estimator", "ik", "--limit", "0"], "must be at least 1"),
                        (["eval", "--estimator", "ik", "--limit", "-1"], "must be at least 1"),
-                       (["eval", "--estimator", "ik", "--faulty", "150"], "a percentage from 0 to 100")]:
+                       (["eval", "--estimator", "ik", "--faulty", "150"], "must be from 0 to 100 %")]:
         with pytest.raises(SystemExit):
             main(argv)
         assert said in capsys.readouterr().err
@@ -220,7 +220,7 @@ def test_the_demo_draws_the_skull_above_the_head_joint_and_its_output_is_not_com
     np.testing.assert_allclose(top[0] - pos[0, HEAD], [0.0, 0.0, 0.1], atol=1e-12)
     root = Path(__file__).resolve().parents[1]
     assert "/sparse_body_demo/" in (root / ".gitignore").read_text().split()
-    recipe = (root / "Makefile").read_text().split("\ntest: setup\n")[1].splitlines()[0]
+    recipe = (root / "Makefile").read_text().split("\ntest: setup-dev\n")[1].splitlines()[0]
     assert "pytest" in recipe and "-rs" in recipe            # make test says what it skipped and why
 
 

@@ -334,6 +334,25 @@ def test_the_tf_reader_ignores_the_frames_its_node_publishes(ros_env):
         node.destroy_node()
 
 
+@pytest.mark.parametrize("spec,parameters,expected", [
+    ("ik:filter_position_noise=0.02", {}, 0.02),                       # ran with 0.001: configure set it again
+    ("ik", {"filter_position_noise": 0.03}, 0.03),
+    ("ik:filter_position_noise=0.02", {"filter_position_noise": 0.03}, 0.03),   # a parameter set wins
+])
+def test_the_filter_takes_the_spec_string_then_the_parameters_set(ros_env, spec, parameters, expected):
+    from rclpy.parameter import Parameter
+    from sparse_body.ros.estimator_node import EstimatorNode
+    node = EstimatorNode(parameter_overrides=[Parameter("estimator", value=spec),
+                                              *(Parameter(k, value=v) for k, v in parameters.items())])
+    try:
+        node.trigger_configure()
+        assert node.estimator is not None
+        assert node.estimator.input_filter.config.position_noise == expected
+        assert node.estimator.input_filter.config.rotation_noise == 0.33      # the others keep their defaults
+    finally:
+        node.destroy_node()
+
+
 @pytest.mark.parametrize("signal_name", ["SIGINT", "SIGTERM"])
 def test_every_node_ends_cleanly_on_a_signal_while_data_flows(ros_env, tmp_path, signal_name):
     import signal

@@ -36,7 +36,7 @@ from ..core.rotations import matrix_to_quat
 from ..core.sensors import SensorConfigError, load_sensor_config
 from ..core.skeleton import JOINT_NAMES, Skeleton
 from ..core.tracker_filter import PREFIX as FILTER
-from ..core.tracker_filter import FilterConfig, filter_config
+from ..core.tracker_filter import FilterConfig
 from ..core.types import BodyPose
 from ..estimators import create_estimator
 from ..estimators.base import parse_estimator_spec
@@ -151,7 +151,6 @@ class EstimatorNode(LifecycleNode):
             if p["calibration"]:
                 self.get_logger().info(f"the body of {p['calibration']}: {self.skeleton.height():.2f} m tall")
             self.estimator = self._make_estimator(p, sensors)
-            self.estimator.use_filter(filter_config({k: v for k, v in p.items() if k.startswith(FILTER)}))
         except (SensorConfigError, CalibrationError, ValueError, FileNotFoundError) as err:
             self.get_logger().error(f"configure failed: {err}")
             self._release()
@@ -163,7 +162,7 @@ class EstimatorNode(LifecycleNode):
         self.sensors, self.params = sensors, p
         self._frames = [s.frame_id for s in sensors.sites]
         own = {p["frame_prefix"] + name for name in JOINT_NAMES}     # the body's links, as messages.transforms names them
-        self.tf_in = TfReader(self, set(self._frames), ignore_frames=own, on_tracker=self._on_tracker)
+        self.tf_in = TfReader(self, set(self._frames), ignore_frames=own, on_tracker=self._tracker_arrived)
         self._configure_inputs()
         overrides = QoSOverridingOptions.with_default_policies()
         from tf2_msgs.msg import TFMessage   # here, not at import: the stand-in exists only after setup
@@ -186,9 +185,14 @@ class EstimatorNode(LifecycleNode):
         return TransitionCallbackReturn.SUCCESS
 
     def _make_estimator(self, p: dict, sensors):
+        """One merge order for the filter: its defaults, then the spec string's filter_*
+        options, then the filter_* parameters a user set (those not at their defaults); the
+        estimator applies them (create_estimator), so nothing sets its filter a second time."""
         name, options = parse_estimator_spec(p["estimator"])
         if p["model_path"]:
             options["model_path"] = p["model_path"]
+        options.update({k: p[k] for k, (default, _) in self.PARAMETERS.items()
+                        if k.startswith(FILTER) and p[k] != default})
         return create_estimator(name, sensors, self.skeleton, fps=p["output_rate"], **options)
 
     def _configure_inputs(self) -> None:
@@ -201,6 +205,7 @@ class EstimatorNode(LifecycleNode):
         self._last_now = None
         self._last_input = -np.inf      # the newest tracker stamp the last estimate used
         self._last_step = -np.inf       # when it was made (monotonic)
+        self._last_arrival = -np.inf    # when a new tracker sample last arrived (monotonic)
         self.timer = self.create_timer(1.0 / self.params["output_rate"], self._tick)
         self.diag_timer = self.create_timer(1.0, self._publish_diagnostics)
         return super().on_activate(state)
@@ -240,6 +245,11 @@ class EstimatorNode(LifecycleNode):
         self._ages = self._site_valid = None
 
     # -- work --------------------------------------------------------------------------------
+    def _tracker_arrived(self) -> None:
+        """The TF reader took a new tracker sample: the trackers are alive (tracker_timeout)."""
+        self._last_arrival = time.monotonic()
+        self._on_tracker()
+
     def _on_tracker(self) -> None:
         """A tracker sample came: estimate now if every live tracker has moved since the last
         estimate. Bursts are coalesced: at most one estimate per half output period, the
@@ -273,7 +283,10 @@ class EstimatorNode(LifecycleNode):
         # a tracker whose whole chain is static is current
         stamps = np.array([now if s == np.inf else s for s in self.tf_in.stamps(self._frames)])
         newest = stamps.max() if len(stamps) else -np.inf
-        no_input = not now - newest <= self.params["tracker_timeout"]
+        # the trackers stopped, not the node being late: judged by when samples last arrived, so
+        # a starved node's estimates from fresh samples stay valid (it only gets slower)
+        silent = time.monotonic() - self._last_arrival
+        no_input = not silent <= self.params["tracker_timeout"] or not np.isfinite(newest)
         if fallback and not no_input and newest <= self._last_input:
             return                                       # nothing new yet: wait for the trackers
         frame, stamps = self.tf_in.sample(self.sensors, now if no_input else newest, self.params["stale_timeout"])
@@ -300,8 +313,8 @@ class EstimatorNode(LifecycleNode):
         if not pose.valid:
             self._stats["invalid"] += 1
             if not reason and no_input:
-                reason = ("held: no tracker input yet" if not np.isfinite(newest)
-                          else f"held: no tracker input for {now - newest:.1f} s")
+                reason = ("held: no tracker input yet" if not (np.isfinite(newest) and np.isfinite(silent))
+                          else f"held: no tracker input for {silent:.1f} s")
             elif not reason:
                 missing = [s for s, ok in zip(self.sensors.site_names, frame.valid) if not ok]
                 reason = f"held: no usable pose from {', '.join(missing)}" if missing else "held"

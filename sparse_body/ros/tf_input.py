@@ -14,8 +14,16 @@ from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPo
 from ..tf_cache import Accepted, TfCache, sample_trackers
 from .messages import to_seconds
 
-TF_QOS = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.VOLATILE,
-                    history=HistoryPolicy.KEEP_LAST)
+# /tf's history is kept short: a node that falls behind then skips to the newest messages
+# instead of working through a backlog (100 messages were 1.3 s of lag at 60 Hz plus the
+# node's own link TF); a few per tracker still holds trackers published one per message.
+TF_QUEUE_PER_TRACKER, TF_QUEUE_MIN = 1, 4
+
+
+def tf_qos(tracker_count: int) -> QoSProfile:
+    return QoSProfile(depth=TF_QUEUE_MIN + TF_QUEUE_PER_TRACKER * tracker_count,
+                      reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.VOLATILE,
+                      history=HistoryPolicy.KEEP_LAST)
 TF_STATIC_QOS = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE,
                            durability=DurabilityPolicy.TRANSIENT_LOCAL, history=HistoryPolicy.KEEP_LAST)
 
@@ -35,7 +43,8 @@ class TfReader:
         self.rejected = {a: 0 for a in Accepted if a is not Accepted.OK}
         self.jumped_back = False
         self._node = node
-        self._subs = [node.create_subscription(TFMessage, "/tf", lambda m: self._on_tf(m, False), TF_QOS),
+        self._subs = [node.create_subscription(TFMessage, "/tf", lambda m: self._on_tf(m, False),
+                                               tf_qos(len(self.tracker_frames))),
                       node.create_subscription(TFMessage, "/tf_static", lambda m: self._on_tf(m, True), TF_STATIC_QOS)]
 
     def _on_tf(self, msg, static: bool) -> None:

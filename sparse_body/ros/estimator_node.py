@@ -67,8 +67,8 @@ PARAMETERS = {
                           "absent); estimates driven by tracker input are limited to twice this"),
     "stale_timeout": (0.1, "a tracker's newest sample no longer counts when it is this many seconds (or three of "
                            "the tracker's own sample intervals, if longer) behind the newest tracker sample"),
-    "tracker_timeout": (1.0, "seconds without a new tracker sample (by the node's clock) after which the estimate "
-                             "is held, invalid"),
+    "tracker_timeout": (1.0, "seconds in which no new tracker sample arrived after which the estimate is held, "
+                             "invalid: the trackers stopped (a node running late on a busy CPU stays valid)"),
     "frame_prefix": ("", "prefix of the body's TF frames"),
     "publish_link_tf": (True, "publish every body link on /tf (off when robot_state_publisher does)"),
     "autostart": (False, "configure and activate on start-up (without a lifecycle manager)"),

@@ -65,11 +65,14 @@ install_requirements() {   # stamp name, then the requirement files
   fi
   say "installing Python dependencies ($stamp: $(cd "$ROOT" && basename -a "$@" | tr '\n' ' '))"
   local args=(); for f in "$@"; do args+=(-r "$f"); done
-  # pip's own lines (Collecting, Downloading with sizes) are the progress; the
-  # already-satisfied noise of a second run is left out
-  "$VPY" -m pip install --progress-bar off --upgrade pip > >(grep -v '^Requirement already satisfied') \
-    || die "upgrading pip failed"
-  "$VPY" -m pip install --progress-bar off "${args[@]}" > >(grep -v '^Requirement already satisfied') \
+  # uv (from PyPI, into the venv) downloads and installs in parallel: the runtime in seconds
+  # where pip took minutes; its lines (each package added, the time taken) are the progress.
+  # --native-tls: the system's certificate store, as pip uses it.
+  if [ ! -x "$VENV/bin/uv" ]; then
+    "$VPY" -m pip install --progress-bar off "uv>=0.4" > >(grep -v '^Requirement already satisfied') \
+      || die "installing uv (the installer) failed"
+  fi
+  "$VENV/bin/uv" pip install --python "$VPY" --native-tls "${args[@]}" \
     || die "installing $(basename -a "$@" | tr '\n' ' ')failed"
   mark_done "$stamp" "$hash"
 }

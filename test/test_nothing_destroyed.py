@@ -109,6 +109,26 @@ def test_sigterm_during_process_leaves_nothing_behind(tmp_path):
     assert sorted(p.name for p in tmp_path.iterdir()) == before
 
 
+@pytest.mark.parametrize("delay", [1.5, 4.0])
+def test_ctrl_c_at_any_moment_ends_in_one_line(tmp_path, delay):
+    """SIGINT while the command starts, loads its model or works: exit 130, one line, no
+    traceback, nothing written (the first seconds printed a KeyboardInterrupt traceback)."""
+    bag = tmp_path / "long"
+    make_bag(synthetic_walk(30.0), load_sensor_config("six_point"), bag)
+    before = sorted(p.name for p in tmp_path.iterdir())
+    proc = subprocess.Popen([sys.executable, "-m", "sparse_body.cli", "process", str(bag), str(tmp_path / "out"),
+                             "--estimator", "dragposer", "--quiet"], stderr=subprocess.PIPE, text=True)
+    try:
+        time.sleep(delay)
+        proc.send_signal(signal.SIGINT)
+        _, err = proc.communicate(timeout=120)
+    finally:
+        proc.kill()
+    assert proc.returncode == 130, err
+    assert "Traceback" not in err and len(err.strip().splitlines()) == 1, err
+    assert sorted(p.name for p in tmp_path.iterdir()) == before
+
+
 def _nested_yaml(path: Path) -> Path:
     path.write_text("[" * 100_000 + "]" * 100_000)
     return path

@@ -206,6 +206,7 @@ def test_calibration_requests_are_bounded_and_write_only_under_the_calibration_d
         forever = call(seconds=2e9)                                  # blocked its executor for ever
         outside = call(seconds=0.1, save_path=str(tmp_path / "elsewhere" / "x.yaml"))
         sneaky = call(seconds=0.1, save_path="../escape.yaml")
+        tilde = call(seconds=0.1, save_path="~nosuchuser/a.yaml")             # expanduser() raised: the bridge died
         # while a calibration waits for samples the bridge's other work goes on
         listener.received["/diagnostics"].clear()
         waiting = call(seconds=2.5, save_path="mine.yaml")            # no trackers: fails, but only after 2.5 s
@@ -219,4 +220,5 @@ def test_calibration_requests_are_bounded_and_write_only_under_the_calibration_d
     assert not forever.success and "seconds must be between" in forever.message
     assert not outside.success and "not a .yaml file under" in outside.message
     assert not sneaky.success and not (tmp_path / "escape.yaml").exists() and not (tmp_path / "elsewhere").exists()
+    assert not tilde.success and "save_path refused" in tilde.message
     assert not waiting.success and heard >= 1

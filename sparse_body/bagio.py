@@ -137,9 +137,12 @@ def bag_writer(path: Path, overwrite: bool = False, inputs: tuple[Path, ...] = (
     into exceptions): an interrupted or failed write leaves nothing behind. `path` is checked
     by check_output before and again just before it is replaced."""
     path = check_output(path, overwrite, inputs)
-    tmp = path.with_name(f".{path.name}.partial-{os.getpid()}")
+    # the bag is made under its own name inside a hidden folder, so that its file is NAME.mcap
+    partial = path.with_name(f".{path.name}.partial-{os.getpid()}")
+    tmp = partial / path.name
     old = path.with_name(f".{path.name}.replaced-{os.getpid()}")
-    shutil.rmtree(tmp, ignore_errors=True)
+    shutil.rmtree(partial, ignore_errors=True)
+    partial.mkdir()
     try:
         with Writer(tmp, version=8, storage_plugin=StoragePlugin.MCAP) as writer:
             writer.set_custom_data(WRITER_KEY, f"sparse_body {__version__}")
@@ -149,7 +152,7 @@ def bag_writer(path: Path, overwrite: bool = False, inputs: tuple[Path, ...] = (
             os.replace(path, old)                    # a bag of ours: moved aside, removed once replaced
         os.replace(tmp, path)
     finally:
-        shutil.rmtree(tmp, ignore_errors=True)
+        shutil.rmtree(partial, ignore_errors=True)
         if old.is_dir() and written_by_us(old):
             shutil.rmtree(old, ignore_errors=True)
 

@@ -44,7 +44,7 @@ def tracker_bag(tmp_path_factory) -> Path:
     return path
 
 
-@settings(max_examples=40, deadline=None, derandomize=True, suppress_health_check=list(HealthCheck))
+@settings(max_examples=40, deadline=None, derandomize=True, database=None, suppress_health_check=list(HealthCheck))
 @given(command=st.sampled_from(["process", "make-bag", "eval"]), estimator=ESTIMATOR,
        flags=st.lists(st.tuples(st.sampled_from(["--fps", "--height", "--seconds", "--sensors", "--calibration",
                                                  "--limit", "--mounting-error", "--faulty", "--clip", "--skeleton"]),

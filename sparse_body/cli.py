@@ -548,11 +548,10 @@ def main(argv: list[str] | None = None) -> None:
     """Run a subcommand; every error a user can cause ends in one line on stderr and its own
     exit code, never a traceback."""
     import signal
-
-    import yaml
-    signal.signal(signal.SIGTERM, _terminate)
-    command = "sparse-body"
-    try:
+    command, YAMLError = "sparse-body", ValueError     # (yaml's own until it is imported)
+    try:                        # from the first statement: Ctrl-C while starting is one line too
+        signal.signal(signal.SIGTERM, _terminate)
+        from yaml import YAMLError
         args = build_parser().parse_args(argv)
         command = f"sparse-body {args.command}"
         sys.exit(args.func(args))
@@ -562,7 +561,7 @@ def main(argv: list[str] | None = None) -> None:
     except KeyboardInterrupt:                         # partial output was removed on the way out
         print(f"{command}: interrupted; nothing written", file=sys.stderr)
         sys.exit(EXIT_INTERRUPTED)
-    except (ValueError, OSError, EOFError, yaml.YAMLError, MemoryError, RecursionError) as err:
+    except (ValueError, OSError, EOFError, YAMLError, MemoryError, RecursionError) as err:
         # ValueError includes MotionFileError, BagError, OutputError, SensorConfigError, CalibrationError
         print(f"{command}: {_one_line(err)}", file=sys.stderr)
         sys.exit(_exit_code(err))

@@ -126,8 +126,11 @@ def test_ctrl_c_at_any_moment_ends_in_one_line(tmp_path, delay):
         _, err = proc.communicate(timeout=120)
     finally:
         proc.kill()
-    assert proc.returncode == 130, err
+    # 130; or ended by SIGINT itself (-2, which a shell also reports as 130) when the interrupt
+    # hit inside an import that CPython ran as nested code: the line is printed either way
+    assert proc.returncode in (130, -signal.SIGINT), err
     assert "Traceback" not in err and len(err.strip().splitlines()) == 1, err
+    assert "interrupted; nothing written" in err
     assert sorted(p.name for p in tmp_path.iterdir()) == before
 
 

@@ -19,6 +19,7 @@ from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 
 from . import __version__
 from .core.sensors import SensorConfig
+from .core.textfile import read_limited
 from .core.skeleton import Skeleton
 from .core.types import BodyPose, TrackerStream
 from .output import FOOT_NAMES, body_transforms, contact_points, joint_state_names, joint_state_positions, stamp_parts
@@ -78,7 +79,6 @@ def _log_times(stamps) -> list[int]:
 # The key this package writes into every bag's metadata.yaml (custom_data): an existing path
 # is replaced only when it carries it, so --overwrite can never remove what a user owns.
 WRITER_KEY = "sparse_body.writer"
-METADATA_LIMIT = 1 << 20      # bytes: a bag's metadata.yaml is a few kB
 
 
 def written_by_us(path: Path) -> bool:
@@ -89,12 +89,10 @@ def written_by_us(path: Path) -> bool:
     if path.is_symlink() or not path.is_dir() or meta.is_symlink() or not meta.is_file():
         return False
     try:
-        if meta.stat().st_size > METADATA_LIMIT:
-            return False
-        info = yaml.safe_load(meta.read_text())["rosbag2_bagfile_information"]
+        info = yaml.safe_load(read_limited(meta, "yaml"))["rosbag2_bagfile_information"]
         ours = WRITER_KEY in (info.get("custom_data") or {})
         listed = {"metadata.yaml", *(str(f) for f in info.get("relative_file_paths") or [])}
-    except (OSError, UnicodeDecodeError, yaml.YAMLError, KeyError, TypeError, AttributeError, RecursionError):
+    except (OSError, ValueError, yaml.YAMLError, KeyError, TypeError, AttributeError, RecursionError):
         return False
     present = {entry.name for entry in path.iterdir()}
     return ours and present <= listed and all((path / f).is_file() and not (path / f).is_symlink()

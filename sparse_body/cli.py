@@ -184,17 +184,15 @@ def _ablate_augmentation(args, parts) -> None:
 
 
 def cmd_split(args) -> int:
-    from .data.catalog import compute_split, read_index, split_path
+    from .data.catalog import compute_split, read_index, split_path, split_yaml
     clips = read_index(_mocap(args))
     parts = compute_split(clips)
     subjects = {part: sorted({cid.split("_")[0] for cid in ids}, key=int) for part, ids in parts.items()}
-    text = ("# Train / validation / test split of the CMU clips in ../shared/mocap, by subject: no\n"
-            "# test or validation subject has a take in training, so the test figures are those of\n"
-            "# people the models never saw. Written by `sparse-body split --write` (the rule is in\n"
-            "# sparse_body/data/catalog.py: compute_split). Every estimator trains and evaluates on it.\n"
-            + "".join(f"# {part} subjects: {', '.join(s)}\n" for part, s in subjects.items()))
-    for part, ids in parts.items():   # quoted: YAML 1.1 would read 08_01 as a number
-        text += f"{part}:\n" + "".join(f'  - "{c}"\n' for c in ids)
+    text = split_yaml(parts, "Train / validation / test split of the CMU clips in ../shared/mocap, by subject: no\n"
+                             "test or validation subject has a take in training, so the test figures are those of\n"
+                             "people the models never saw. Written by `sparse-body split --write` (the rule is in\n"
+                             "sparse_body/data/catalog.py: compute_split). Every estimator trains and evaluates on it.\n"
+                      + "".join(f"{part} subjects: {', '.join(s)}\n" for part, s in subjects.items()))
     if args.write:
         split_path().write_text(text)
         print(f"written {split_path()}")

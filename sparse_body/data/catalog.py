@@ -117,6 +117,14 @@ def compute_split(clips: list[Clip]) -> dict[str, list[str]]:
     return parts
 
 
+def split_yaml(parts: dict[str, list[str]], header: str) -> str:
+    """A split as the YAML load_split reads, after a comment header (one '# ' line each)."""
+    text = "".join(f"# {line}\n" for line in header.splitlines())
+    for part in SPLITS:   # quoted: YAML 1.1 would read 08_01 as a number
+        text += f"{part}:\n" + "".join(f'  - "{c}"\n' for c in parts[part])
+    return text
+
+
 def load_split(path: Path | None = None) -> dict[str, list[str]]:
     path = Path(path or split_path())
     with open(path) as f:

@@ -12,7 +12,7 @@ import re
 from pathlib import Path
 
 from . import MotionFileError
-from .catalog import DEFAULT_FPS, MOTION_SUFFIXES, SPLITS, Clip, compute_split, load_motion_file
+from .catalog import DEFAULT_FPS, MOTION_SUFFIXES, Clip, compute_split, load_motion_file, split_yaml
 
 INDEX_COLUMNS = ("file", "clip", "format", "fps", "frames", "seconds", "category", "description")
 CMU_NAME = re.compile(r"^(\d+)_(\d+)$")
@@ -79,9 +79,7 @@ def import_motion(sources, out: Path, progress=None) -> tuple[list[Clip], list[t
             writer.writerow([str(c.path), c.clip_id, c.format, f"{c.fps:g}", round(c.seconds * c.fps), f"{c.seconds:g}",
                              c.category, c.description])
     parts = compute_split(clips)
-    text = ("# Train / validation / test split by subject of the clips in clips.tsv (written by\n"
-            "# `sparse-body import-mocap`; the rule is sparse_body/data/catalog.py: compute_split)\n")
-    for part in SPLITS:
-        text += f"{part}:\n" + "".join(f'  - "{c}"\n' for c in parts[part])
+    text = split_yaml(parts, "Train / validation / test split by subject of the clips in clips.tsv (written by\n"
+                             "`sparse-body import-mocap`; the rule is sparse_body/data/catalog.py: compute_split)")
     (out / "split.yaml").write_text(text)
     return clips, skipped

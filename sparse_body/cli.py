@@ -4,6 +4,7 @@ from __future__ import annotations
 import argparse
 import re
 import sys
+from dataclasses import replace
 from pathlib import Path
 
 
@@ -16,10 +17,14 @@ def _mocap(args) -> Path:
     return root
 
 
+RESULTS_DIR = "sparse_body_results"     # where eval writes when --output is not given
+
+
 def cmd_eval(args) -> int:
     from .core.sensors import load_sensor_config
     from .data.field_protocol import Protocol
-    from .evaluation import COMPARE_WITH, check_results_path, evaluate, format_table, paper_figures, write_json
+    from .evaluation import (COMPARE_WITH, check_results_path, file_items, format_groups, format_table,
+                             paper_figures, run_evaluation, split_items)
     sensors = load_sensor_config(args.sensors)
     specs, reference = list(args.estimator), {}
     if not args.no_compare:
@@ -27,19 +32,50 @@ def cmd_eval(args) -> int:
             specs += [s for s in COMPARE_WITH.get(name, []) if s not in specs]
             reference.update(paper_figures(name, sensors.name, args.faulty, args.occlusion))
     protocol = Protocol.named(args.skeleton, args.noise, args.faulty, args.mounting_error, args.occlusion)
-    stem = re.sub(r"[^\w.+-]", "_", "+".join(args.estimator))
-    out = check_results_path(Path(args.output or f"sparse_body_eval_{stem}_{sensors.name}.json"))   # before the work
-    if args.motion:
-        from .data.catalog import motion_files
-        files = motion_files(args.motion)
-        results = [evaluate(spec, sensors, None, args.split, args.fps, protocol, args.limit, progress=not args.quiet,
-                            motions=files, per_joint=args.per_joint) for spec in specs]
+    if args.motion:        # the files are found and every AMC paired with its ASF before any work
+        from .data.motion_inputs import balanced, find_inputs
+        group_by = args.group_by or "folder"
+        inputs = balanced(find_inputs(args.motion, args.skeleton_file, group_by), args.limit)
+        items, split = file_items(inputs, args.fps, args.amc_fps), "files"
+        if any(i.is_amc for i in inputs):
+            hows = {}
+            for i in inputs:
+                if i.is_amc:
+                    hows[i.how] = hows.get(i.how, 0) + 1
+            print(f"AMC files taken as captured at {args.amc_fps:g} Hz (--amc-fps); skeletons: "
+                  + ", ".join(f"{n} {how}" for how, n in hows.items()), file=sys.stderr)
     else:
-        results = [evaluate(spec, sensors, _mocap(args), args.split, args.fps, protocol, args.limit,
-                            progress=not args.quiet, per_joint=args.per_joint) for spec in specs]
+        if args.skeleton_file or args.group_by == "folder":
+            raise ValueError("--skeleton-file and --group-by folder are for --motion files")
+        items, split = split_items(_mocap(args), args.split, args.fps, args.limit), args.split
+        if args.group_by != "prefix":          # the split's clips: by subject with --group-by prefix
+            items = [replace(i, group="") for i in items]
+    stem = re.sub(r"[^\w.+-]", "_", "+".join(args.estimator))
+    if args.output:
+        out = Path(args.output)
+    else:
+        folder = Path(RESULTS_DIR)
+        if not folder.is_dir() and not folder.is_symlink() and not folder.exists():
+            folder.mkdir()
+        out = folder / f"eval_{stem}_{sensors.name}.json"
+    out = check_results_path(out)         # before the work
+    print(f"results: {out} (written after each clip; the same command resumes)", file=sys.stderr)
+    results = run_evaluation(specs, sensors, items, split, args.fps, protocol, args.per_joint, out=out,
+                             progress=not args.quiet, warn=lambda text: print(f"warning: {text}", file=sys.stderr))
+    if not results[0].clips:
+        raise ValueError(f"no clip could be evaluated: {results[0].skipped[0]['clip']}: {results[0].skipped[0]['reason']}"
+                         if results[0].skipped else "no clips to evaluate")
     print(format_table(results, reference))
-    write_json(results, out)
+    groups = format_groups(results, label=args.group_by or ("folder" if args.motion else "group"))
+    if groups:
+        print(groups)
     print(f"written {out}")
+    skipped = {s["clip"]: s["reason"] for r in results for s in r.skipped}
+    if skipped:
+        first, why = next(iter(skipped.items()))
+        print(f"sparse-body: {len(skipped)} of {len(items)} clips skipped (each in {out} under 'skipped'); "
+              f"{first}: {why}", file=sys.stderr)
+        return EXIT_INPUT
     return 0
 
 
@@ -394,15 +430,24 @@ def build_parser() -> argparse.ArgumentParser:
                    help="DTP's foot occlusion: in about this share (%%) of the frames one or both foot trackers "
                         "lose sight for half a second and report the origin with the identity rotation or noise "
                         "within a leg's length")
-    p.add_argument("--limit", type=_positive_int, help="only the first N clips of the split")
+    p.add_argument("--limit", type=_positive_int,
+                   help="only N clips: the first of the split, or of the --motion files taken in turn from each group")
     p.add_argument("--per-joint", action="store_true",
                    help="also each joint's position and rotation error (rows 'PE <joint> [cm]', 'RE <joint> [deg]'): "
                         "where an estimator's error sits")
     p.add_argument("--motion", action="append", metavar="PATH",
-                   help="evaluate on these motion files instead of the CMU split (repeat; a folder stands for its "
-                        ".bvh / .amc / .npz files, an .amc needs its .asf beside it)")
+                   help="evaluate on these motion files instead of the CMU split (repeat): a file, a folder (searched "
+                        "recursively for .bvh / .amc / .npz) or AMC=ASF; an AMC file gets the ASF beside it whose "
+                        "name starts its own, else the only ASF in its folder")
+    p.add_argument("--skeleton-file", metavar="ASF", help="the ASF skeleton of every AMC file given")
+    p.add_argument("--amc-fps", type=_fps, default=120.0, metavar="HZ",
+                   help="the rate AMC files were captured at (the files do not say)")
+    p.add_argument("--group-by", choices=["folder", "prefix", "none"],
+                   help="figures by group as well: the file's folder under the --motion folder, or its name up to "
+                        "the first _ or - (an actor; CMU's subject); default: folder for --motion")
     p.add_argument("--mocap", help="the CMU folder (default: ../shared/mocap/cmu or $SPARSE_BODY_MOCAP)")
-    p.add_argument("--output", help="where to write the JSON results")
+    p.add_argument("--output", help=f"where to write the JSON results (default: {RESULTS_DIR}/eval_ESTIMATOR_SENSORS.json); "
+                                    "written after each clip, and an earlier run's file under the same settings is resumed")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.add_argument("--no-compare", action="store_true",
                    help="only the named estimators: no baseline, ablation or paper figures beside them")

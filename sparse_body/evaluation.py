@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import json
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -18,12 +19,28 @@ from .core.kinematics import forward_kinematics
 from .core.metrics import per_joint_metrics, sequence_metrics, weighted_mean
 from .core.rotations import quat_to_matrix
 from .core.sensors import SensorConfig
-from .data.catalog import DEFAULT_FPS, load_clip, load_motion_file, split_clips
+from .data import MotionFileError
+from .data.catalog import DEFAULT_FPS, load_clip, split_clips
 from .data.motion import Motion
+from .data.motion_inputs import (AMC_FPS, MotionInput, balanced, content_digest, find_inputs, identity_seed,
+                                 implausible, load_input)
 from .data.field_protocol import FIELD, Protocol, user_view
 from .data.virtual_trackers import TrackerNoise
 from .estimators import create_estimator
-from .estimators.base import parse_estimator_spec  # noqa: F401 - the CLI's import
+from .estimators.base import parse_estimator_spec
+
+
+@dataclass
+class EvalItem:
+    """One clip to evaluate: its name, its identity (what a resumed run matches), the field
+    protocol's seed, how to load it, its group in the tables and what was read."""
+    name: str
+    key: str
+    seed: int
+    load: Callable[[], Motion]
+    group: str = ""
+    source: str = ""
+    check_plausible: bool = False     # a user's file: say when its skeleton does not fit the motion
 
 
 @dataclass
@@ -36,15 +53,77 @@ class EvalResult:
     per_clip: list[dict[str, float]] = field(default_factory=list)
     seconds: float = 0.0
     protocol: str = "field"
+    keys: list[str] = field(default_factory=list)
+    groups: list[str] = field(default_factory=list)
+    sources: list[str] = field(default_factory=list)
+    skipped: list[dict[str, str]] = field(default_factory=list)
+    settings: dict = field(default_factory=dict)    # what a resumed run must share
 
     @property
     def summary(self) -> dict[str, float]:
         return weighted_mean(self.per_clip, self.frames) if self.per_clip else {}
 
+    def add(self, item: EvalItem, frames: int, metrics: dict[str, float]) -> None:
+        self.clips.append(item.name)
+        self.frames.append(frames)
+        self.per_clip.append(metrics)
+        self.keys.append(item.key)
+        self.groups.append(item.group)
+        self.sources.append(item.source)
+
+    def by_group(self) -> dict[str, "EvalResult"]:
+        out: dict[str, EvalResult] = {}
+        for k, group in enumerate(self.groups if len(self.groups) == len(self.clips) else []):
+            if group:
+                part = out.setdefault(group, EvalResult(self.estimator, self.sensors, self.split, protocol=self.protocol))
+                part.clips.append(self.clips[k])
+                part.frames.append(self.frames[k])
+                part.per_clip.append(self.per_clip[k])
+        return dict(sorted(out.items()))
+
     def to_json(self) -> dict:
+        clips = [{"clip": c, "frames": n, **m} for c, n, m in zip(self.clips, self.frames, self.per_clip)]
+        for extra, values in (("key", self.keys), ("group", self.groups), ("source", self.sources)):
+            if len(values) == len(clips):
+                for row, v in zip(clips, values):
+                    row[extra] = v
+        groups = {g: {"clips": len(r.clips), "frames": int(sum(r.frames)), "summary": r.summary,
+                      "interval_95": clip_interval(r.per_clip, r.frames)} for g, r in self.by_group().items()}
         return {"estimator": self.estimator, "sensors": self.sensors, "split": self.split, "protocol": self.protocol,
-                "frames": int(sum(self.frames)), "seconds": self.seconds, "summary": self.summary,
-                "clips": [{"clip": c, "frames": n, **m} for c, n, m in zip(self.clips, self.frames, self.per_clip)]}
+                "settings": self.settings, "frames": int(sum(self.frames)), "seconds": self.seconds,
+                "summary": self.summary, "interval_95": clip_interval(self.per_clip, self.frames),
+                "groups": groups, "skipped": self.skipped, "clips": clips}
+
+    @classmethod
+    def from_json(cls, data: dict) -> "EvalResult":
+        info = ("clip", "frames", "key", "group", "source")
+        rows = data.get("clips", [])
+        return cls(data["estimator"], data["sensors"], data["split"], [r["clip"] for r in rows],
+                   [int(r["frames"]) for r in rows], [{k: v for k, v in r.items() if k not in info} for r in rows],
+                   float(data.get("seconds", 0.0)), data.get("protocol", "field"),
+                   [r.get("key", r["clip"]) for r in rows], [r.get("group", "") for r in rows],
+                   [r.get("source", "") for r in rows], list(data.get("skipped", [])), dict(data.get("settings", {})))
+
+
+def clip_interval(per_clip: list[dict[str, float]], frames: list[int], draws: int = 1000,
+                  seed: int = 0) -> dict[str, list[float]]:
+    """A 95 % bootstrap interval of each frame-weighted mean, clips drawn with replacement
+    (how far the figure could move with other clips of the same kind); none under 2 clips."""
+    if len(per_clip) < 2:
+        return {}
+    keys = list(per_clip[0])
+    values = np.array([[row.get(k, np.nan) for k in keys] for row in per_clip], dtype=float)
+    weights = np.asarray(frames, dtype=float)[:, None] * np.isfinite(values)
+    values = np.nan_to_num(values)
+    picks = np.random.default_rng(seed).integers(0, len(per_clip), (draws, len(per_clip)))
+    with np.errstate(invalid="ignore", divide="ignore"):
+        means = (values * weights)[picks].sum(1) / weights[picks].sum(1)
+    out = {}
+    for j, key in enumerate(keys):
+        ok = np.isfinite(means[:, j])
+        if ok.any():
+            out[key] = [float(np.percentile(means[ok, j], 2.5)), float(np.percentile(means[ok, j], 97.5))]
+    return out
 
 
 def evaluate_motion(motion: Motion, estimator_name: str, sensors: SensorConfig,
@@ -128,6 +207,32 @@ COMPARE_WITH = {
 }
 
 
+def split_items(mocap_root: Path, split: str, fps: float = DEFAULT_FPS, limit: int | None = None) -> list[EvalItem]:
+    """The clips of a part of the CMU split (or of an imported folder's), seeded by their place
+    in the split (the split's order is fixed, so the draws are too)."""
+    return [EvalItem(c.clip_id, c.clip_id, k, lambda c=c: load_clip(c, fps), c.subject, str(c.path))
+            for k, c in enumerate(split_clips(mocap_root, split, limit))]
+
+
+def file_items(inputs: list[MotionInput], fps: float = DEFAULT_FPS, amc_fps: float = AMC_FPS) -> list[EvalItem]:
+    """A user's motion files, each identified and seeded by its name and content, so the field
+    protocol's draws for a clip do not move when files are added, removed or reordered."""
+    items = []
+    for inp in inputs:
+        source = str(inp.path) + (f" with {inp.skeleton} ({inp.how})" if inp.skeleton else "")
+        try:
+            digest = content_digest(inp)
+        except OSError as err:
+            def fail(err=err):
+                raise err
+            items.append(EvalItem(inp.path.name, str(inp.path), 0, fail, inp.group, source))
+            continue
+        load = lambda inp=inp, digest=digest: load_input(inp, fps, amc_fps, digest)  # noqa: E731
+        items.append(EvalItem(inp.path.name, f"{inp.path.name}:{digest[:16]}", identity_seed(inp.path.name, digest),
+                              load, inp.group, source, check_plausible=True))
+    return items
+
+
 def evaluate(estimator_spec: str, sensors: SensorConfig, mocap_root: Path | None, split: str = "test",
              fps: float = DEFAULT_FPS, protocol: Protocol = FIELD, limit: int | None = None,
              progress: bool = True, motions: list[Path] | None = None, per_joint: bool = False,
@@ -135,27 +240,70 @@ def evaluate(estimator_spec: str, sensors: SensorConfig, mocap_root: Path | None
     """estimator_spec: a name, optionally with options ("lobstr:contact_ik=false"). The clips
     of a split of the CMU catalogue, or the motion files given (a user's own: BVH or ASF/AMC
     of a known layout, sparse_body .npz)."""
-    estimator_name, spec_options = parse_estimator_spec(estimator_spec)
-    options = {**spec_options, **options}
     if motions is not None:
-        items = [(Path(p).name, lambda p=p: load_motion_file(Path(p), fps)) for p in motions[:limit]]
-        split = "files"
+        items, split = file_items(balanced(find_inputs(motions), limit), fps), "files"
     else:
-        items = [(c.clip_id, lambda c=c: load_clip(c, fps)) for c in split_clips(mocap_root, split, limit)]
-    result = EvalResult(estimator_spec, sensors.name, split, protocol=protocol.label)
-    start = time.perf_counter()
+        items = split_items(mocap_root, split, fps, limit)
+    return run_evaluation([estimator_spec], sensors, items, split, fps, protocol, per_joint,
+                          progress=progress, **options)[0]
+
+
+def run_evaluation(specs: list[str], sensors: SensorConfig, items: list[EvalItem], split: str,
+                   fps: float = DEFAULT_FPS, protocol: Protocol = FIELD, per_joint: bool = False,
+                   out: Path | None = None, progress: bool = True, warn=None, **options) -> list[EvalResult]:
+    """Every estimator on every clip, a clip at a time: each clip is read once for all
+    estimators, and the results are written to `out` after each (so a stopped run keeps what
+    it did, and the same command resumes: clips already in `out` under the same settings are
+    not evaluated again). A file that cannot be read or evaluated is recorded in the results'
+    `skipped` with the reason and the run goes on; warn(text) hears of motions that do not fit
+    their skeleton."""
+    results = []
+    for spec in specs:
+        settings = {"fps": fps, "per_joint": per_joint, **{k: str(v) for k, v in options.items()}}
+        results.append(EvalResult(spec, sensors.name, split, protocol=protocol.label, settings=settings))
+    if out is not None:
+        results = _resumed(results, out)
     iterator = items
     if progress:
         from tqdm import tqdm
-        iterator = tqdm(items, desc=f"eval {estimator_spec}/{sensors.name}", unit="clip")
-    for k, (name, load) in enumerate(iterator):
-        motion = load()
-        result.clips.append(name)
-        result.frames.append(len(motion))
-        result.per_clip.append(evaluate_motion(motion, estimator_name, sensors, protocol, seed=k,
-                                               per_joint=per_joint, **options))
-    result.seconds = time.perf_counter() - start
-    return result
+        iterator = tqdm(items, desc=f"eval {'+'.join(specs)}/{sensors.name}", unit="clip")
+    for item in iterator:
+        todo = [r for r in results if item.key not in r.keys and item.key not in {s["key"] for s in r.skipped}]
+        if not todo:
+            continue
+        try:
+            motion = item.load()
+        except (MotionFileError, ValueError, OSError) as err:
+            for r in todo:
+                r.skipped.append({"clip": item.name, "key": item.key, "reason": " ".join(str(err).split())})
+            todo = []
+        if todo and item.check_plausible and warn is not None and (why := implausible(motion)):
+            warn(f"{item.source}: {why}: does the skeleton fit the motion (the actor's ASF, its length unit)?")
+        for r in todo:
+            start = time.perf_counter()
+            name, spec_options = parse_estimator_spec(r.estimator)
+            try:
+                metrics = evaluate_motion(motion, name, sensors, protocol, seed=item.seed, per_joint=per_joint,
+                                          **{**spec_options, **options})
+            except (MotionFileError, ValueError) as err:
+                r.skipped.append({"clip": item.name, "key": item.key, "reason": " ".join(str(err).split())})
+                continue
+            r.add(item, len(motion), metrics)
+            r.seconds += time.perf_counter() - start
+        if out is not None and any(r.clips for r in results):   # nothing but failures: nothing written
+            write_json(results, out)
+    return results
+
+
+def _resumed(results: list[EvalResult], out: Path) -> list[EvalResult]:
+    """The results already in `out` for the same estimator, sensors, split, protocol and
+    settings (a run stopped or extended); fresh results for the others."""
+    if not is_results_file(out):
+        return results
+    earlier = [EvalResult.from_json(d) for d in json.loads(Path(out).read_text())]
+    same = lambda a, b: (a.estimator, a.sensors, a.split, a.protocol, a.settings) == \
+        (b.estimator, b.sensors, b.split, b.protocol, b.settings)  # noqa: E731
+    return [next((e for e in earlier if same(e, r)), r) for r in results]
 
 
 def format_table(results: list[EvalResult], reference: dict[str, dict[str, float]] | None = None,
@@ -186,6 +334,33 @@ def format_table(results: list[EvalResult], reference: dict[str, dict[str, float
     protocol = "protocols as named" if mixed else f"{results[0].protocol} protocol"
     lines.append(f"({len(results[0].clips)} clips of {where}, {frames} frames; {protocol})")
     return "\n".join(lines + legend)
+
+
+def format_groups(results: list[EvalResult], metric: str = "MPJPE [cm]", label: str = "group") -> str:
+    """One metric by group (folder, actor prefix or subject): the frame-weighted mean of each
+    result with its 95 % clip-bootstrap interval, and the group's clip count."""
+    parts = [r.by_group() for r in results]
+    names = sorted({g for p in parts for g in p})
+    if not names:
+        return ""
+    columns = [f"{r.estimator}/{r.sensors}" for r in results]
+    width = max(len(label) + len(metric) + 4, *(len(g) + 12 for g in names))
+    colw = max(22, *(len(c) + 2 for c in columns))
+    lines = [f"{metric} by {label}".ljust(width) + "".join(c.rjust(colw) for c in columns)]
+    for g in names:
+        clips = max(len(p[g].clips) for p in parts if g in p)
+        cells = []
+        for p in parts:
+            r = p.get(g)
+            mean = r.summary.get(metric, float("nan")) if r else float("nan")
+            interval = clip_interval(r.per_clip, r.frames).get(metric) if r else None
+            text = "-" if not np.isfinite(mean) else f"{mean:.2f}"
+            if interval and np.isfinite(mean):
+                text += f" [{interval[0]:.2f}, {interval[1]:.2f}]"
+            cells.append(text.rjust(colw))
+        lines.append(f"{g} ({clips} clips)".ljust(width) + "".join(cells))
+    lines.append("(frame-weighted mean [95 % interval, clips drawn with replacement])")
+    return "\n".join(lines)
 
 
 RESULT_KEYS = {"estimator", "sensors", "split", "clips"}

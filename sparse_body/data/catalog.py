@@ -157,28 +157,31 @@ def _cache_file(clip: Clip, fps: float) -> Path:
 
 def load_clip(clip: Clip, fps: float = DEFAULT_FPS, use_cache: bool = True) -> Motion:
     """A clip retargeted onto the 22-joint body at fps, from the cache when it is there."""
-    cached = _cache_file(clip, fps)
-    if use_cache and cached.is_file():
+    def parse() -> Motion:
+        if clip.format == "file":          # a user's file (import-mocap): its skeleton found beside it
+            return load_motion_file(clip.path, fps)
+        if clip.format == "asf/amc":
+            return retarget(load_amc(clip.path, load_asf(clip.skeleton_path), fps=clip.fps), fps)
+        if clip.format.startswith("bvh"):
+            return retarget(load_bvh(clip.path), fps)
+        raise MotionFileError(clip.path, f"unknown format {clip.format!r}")
+    return cached_motion(_cache_file(clip, fps) if use_cache else None, parse, clip.clip_id)
+
+
+def cached_motion(cached: Path | None, parse, name: str) -> Motion:
+    """The motion in the cache file `cached`, else parse() stored there (None: no cache)."""
+    if cached is not None and cached.is_file():
         try:
             return Motion.load(cached)
         except MotionFileError:
             cached.unlink(missing_ok=True)   # a half-written entry: parse again
-    if clip.format == "file":          # a user's file (import-mocap): its skeleton found beside it
-        motion = load_motion_file(clip.path, fps)
-        source = None
-    elif clip.format == "asf/amc":
-        source = load_amc(clip.path, load_asf(clip.skeleton_path), fps=clip.fps)
-    elif clip.format.startswith("bvh"):
-        source = load_bvh(clip.path)
-    else:
-        raise MotionFileError(clip.path, f"unknown format {clip.format!r}")
-    motion = retarget(source, fps) if source is not None else motion
+    motion = parse()
     # Exactly what the cache holds (float32 quaternions), so a clip gives bit-identical results
     # parsed or cached: the latent optimiser's accept/refuse decisions grow 1e-7 differences
     # into metric changes of a few hundredths (seen as two evaluations of one configuration).
-    motion = Motion(clip.clip_id, motion.fps, motion.skeleton,
+    motion = Motion(name, motion.fps, motion.skeleton,
                     motion.local_quats.astype(np.float32).astype(np.float64), motion.root_positions)
-    if use_cache:
+    if cached is not None:
         cached.parent.mkdir(parents=True, exist_ok=True)
         # a name of this process's own: two trainers filling the cache at once must not
         # move each other's half-written files
@@ -216,20 +219,20 @@ def _retargeted(path: Path, source, fps: float) -> Motion:
         raise MotionFileError(path, str(err)) from None
 
 
-def load_motion_file(path: Path, fps: float = DEFAULT_FPS, skeleton: Path | None = None) -> Motion:
-    """Any supported motion file: .bvh, .amc (with its .asf, found beside it if not given),
-    AMASS .npz (needs an SMPL model, see amass.py) or a sparse_body motion .npz."""
+def load_motion_file(path: Path, fps: float = DEFAULT_FPS, skeleton: Path | None = None,
+                     amc_fps: float = 120.0) -> Motion:
+    """Any supported motion file: .bvh, .amc (captured at amc_fps, with its .asf: given, or
+    found beside it by the rule of motion_inputs.skeleton_for), AMASS .npz (needs an SMPL
+    model, see amass.py) or a sparse_body motion .npz."""
     path = Path(path)
     name = path.name.lower().removesuffix(".gz")       # .AMC, .BVH: the same formats
     if name.endswith(".bvh"):
         return _retargeted(path, load_bvh(path), fps)
     if name.endswith(".amc"):
         if skeleton is None:
-            found = sorted(p for p in path.parent.iterdir() if p.name.lower().removesuffix(".gz").endswith(".asf"))
-            if len(found) != 1:
-                raise MotionFileError(path, "an AMC file needs its ASF skeleton: pass it explicitly")
-            skeleton = found[0]
-        return _retargeted(path, load_amc(path, load_asf(skeleton)), fps)
+            from .motion_inputs import skeleton_for
+            skeleton, _ = skeleton_for(path)
+        return _retargeted(path, load_amc(path, load_asf(skeleton), fps=amc_fps), fps)
     if name.endswith(".npz"):
         import numpy as np
         with np.load(path, allow_pickle=False) as z:

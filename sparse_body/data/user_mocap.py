@@ -13,10 +13,10 @@ from pathlib import Path
 
 from . import MotionFileError
 from .catalog import DEFAULT_FPS, MOTION_SUFFIXES, Clip, compute_split, load_motion_file, split_yaml
+from .motion_inputs import AMC_FPS
 
 INDEX_COLUMNS = ("file", "clip", "format", "fps", "frames", "seconds", "category", "description")
 CMU_NAME = re.compile(r"^(\d+)_(\d+)$")
-AMC_FPS = 120.0      # an AMC file names no rate; CMU captured at 120 Hz
 
 
 def _clip_id(path: Path, stem: str) -> str:

@@ -4,7 +4,7 @@
 
 Arguments: sensors, estimator, model_path, refine, height, calibration (a T-pose calibration file: its fitted body
 replaces the height-scaled one), bag (the tracker source; empty: trackers come from
-elsewhere on /tf), rviz, robot_state_publisher. The estimator is a lifecycle node; it is configured and activated
+elsewhere on /tf), loop (replay the bag again and again), rviz, robot_state_publisher. The estimator is a lifecycle node; it is configured and activated
 here through its autostart parameter.
 """
 import os
@@ -61,7 +61,7 @@ def _nodes(context):
     if arg("bag"):
         nodes.append(Node(package="sparse_body", executable="tracker_bridge", name="sparse_body_tracker_bridge",
                           output="screen", parameters=[os.path.join(share, "config", "tracker_bridge.yaml"),
-                                                       {"bag": arg("bag")}]))
+                                                       {"bag": arg("bag"), "loop": arg("loop").lower() in ("true", "1")}]))
     return nodes
 
 
@@ -76,6 +76,7 @@ def generate_launch_description():
         DeclareLaunchArgument("calibration", default_value="",
                               description="T-pose calibration file (tracker bridge ~/calibrate): its body is used"),
         DeclareLaunchArgument("bag", default_value="", description="rosbag2 of tracker TF to replay"),
+        DeclareLaunchArgument("loop", default_value="false", description="replay the bag again and again"),
         DeclareLaunchArgument("rviz", default_value="false", description="start RViz"),
         DeclareLaunchArgument("refine", default_value="false",
                               description="also start the constraint node (DragPoser refinement, refined/ topics)"),

@@ -56,6 +56,16 @@ VPY="$VENV/bin/python"
 # itself needs no ROS libraries, so skip that here.
 export _ROS_WHEELS_BOOTSTRAP_COMPLETE=1
 
+# uv (from PyPI, into the venv) downloads and installs in parallel: the runtime in seconds
+# where pip took minutes; its lines (each package added, the time taken) are the progress.
+# --native-tls: the system's certificate store, as pip uses it.
+ensure_uv() {
+  if [ ! -x "$VENV/bin/uv" ]; then
+    "$VPY" -m pip install --progress-bar off "uv>=0.4" > >(grep -v '^Requirement already satisfied') \
+      || die "installing uv (the installer) failed"
+  fi
+}
+
 install_requirements() {   # stamp name, then the requirement files
   local stamp="$1"; shift
   local hash; hash=$(inputs_hash "$@")
@@ -65,13 +75,7 @@ install_requirements() {   # stamp name, then the requirement files
   fi
   say "installing Python dependencies ($stamp: $(cd "$ROOT" && basename -a "$@" | tr '\n' ' '))"
   local args=(); for f in "$@"; do args+=(-r "$f"); done
-  # uv (from PyPI, into the venv) downloads and installs in parallel: the runtime in seconds
-  # where pip took minutes; its lines (each package added, the time taken) are the progress.
-  # --native-tls: the system's certificate store, as pip uses it.
-  if [ ! -x "$VENV/bin/uv" ]; then
-    "$VPY" -m pip install --progress-bar off "uv>=0.4" > >(grep -v '^Requirement already satisfied') \
-      || die "installing uv (the installer) failed"
-  fi
+  ensure_uv
   "$VENV/bin/uv" pip install --python "$VPY" --native-tls "${args[@]}" \
     || die "installing $(basename -a "$@" | tr '\n' ' ')failed"
   mark_done "$stamp" "$hash"
@@ -121,6 +125,58 @@ elif ! up_to_date tf2_msgs "$tf_hash"; then
   say "generating tf2_msgs/TFMessage for the test environment"
   build_interfaces "$ROOT/test/ros_env/tf2_msgs" "$ROOT/build/tf2_msgs"
   mark_done tf2_msgs "$tf_hash"
+fi
+
+# The launch stack (launch, launch_ros, launch_testing) and the `ros2` command are not on
+# PyPI; ../shared/ros (or $SPARSE_BODY_ROS_TOOLS) carries them as wheels built unchanged from
+# upstream. With them the venv is a ROS prefix like /opt/ros/DISTRO: `ros2 launch sparse_body
+# ...`, `ros2 run sparse_body estimator_node` and the launch tests work. Without them those
+# tests skip, saying why; on a ROS install `apt install ros-$ROS_DISTRO-launch-testing-ros
+# ros-$ROS_DISTRO-ros2cli` gives the same.
+ROS_TOOLS="${SPARSE_BODY_ROS_TOOLS:-$ROOT/../shared/ros}"
+if [ -d "$ROS_TOOLS/wheels" ] && ls "$ROS_TOOLS"/wheels/*.whl >/dev/null 2>&1; then
+  ros_hash=$(inputs_hash "$ROOT/requirements-ros-tools.txt" "$STAMPS/deps" "$ROS_TOOLS"/README.md \
+             <(ls -l "$ROS_TOOLS"/wheels "$ROOT"/launch) "$ROS_TOOLS"/composition_interfaces/srv/*.srv "$ROOT/scripts/setup.sh")
+  if ! up_to_date ros_tools "$ros_hash"; then
+    say "installing the ROS 2 launch tools and the ros2 command from $ROS_TOOLS"
+    ensure_uv
+    # --no-deps: launch_ros names ament_index_python, which the ROS wheels ship under
+    # another distribution name (ros-ament-index-python); what they import is listed in
+    # requirements-ros-tools.txt
+    "$VENV/bin/uv" pip install --python "$VPY" --no-index --no-deps "$ROS_TOOLS"/wheels/*.whl \
+      || die "installing the wheels of $ROS_TOOLS failed"
+    "$VENV/bin/uv" pip install --python "$VPY" --native-tls -r "$ROOT/requirements-ros-tools.txt" \
+      || die "installing requirements-ros-tools.txt failed"
+    # launch_ros imports composition_interfaces.srv; it comes as source, generated here
+    say "generating composition_interfaces"
+    build_interfaces "$ROS_TOOLS/composition_interfaces" "$ROOT/build/composition_interfaces"
+    # This package in the venv's ROS prefix as colcon would install it: launch files,
+    # configuration and models under share/, the node executables under lib/ (with this
+    # interpreter, so they run without activating the venv).
+    SHARE="$VENV/share/sparse_body"
+    mkdir -p "$SHARE" "$VENV/lib/sparse_body"
+    for d in config models; do ln -sfn "$ROOT/$d" "$SHARE/$d"; done
+    # ros2 launch walks share/sparse_body for the file and does not follow a linked folder
+    rm -rf "$SHARE/launch"; mkdir -p "$SHARE/launch"
+    for f in "$ROOT"/launch/*.py; do ln -sfn "$f" "$SHARE/launch/$(basename "$f")"; done
+    ln -sfn "$ROOT/package.xml" "$SHARE/package.xml"
+    for exe in sparse-body estimator_node tracker_bridge constraint_node; do
+      { echo "#!$VPY"; tail -n +2 "$ROOT/scripts/$exe"; } > "$VENV/lib/sparse_body/$exe"
+      chmod +x "$VENV/lib/sparse_body/$exe"
+    done
+    mkdir -p "$VENV/share/ament_index/resource_index/packages"
+    touch "$VENV/share/ament_index/resource_index/packages/sparse_body"
+    # Every interpreter of the venv (the ros2 command, launch, the tests) finds the prefix
+    # without a sourced setup file: AMENT_PREFIX_PATH gets the venv in front.
+    SITE=$("$VPY" -c 'import sysconfig; print(sysconfig.get_paths()["purelib"])')
+    echo 'import os, sys; os.environ["AMENT_PREFIX_PATH"] = os.pathsep.join(dict.fromkeys([sys.prefix] + [p for p in os.environ.get("AMENT_PREFIX_PATH", "").split(os.pathsep) if p]))' \
+      > "$SITE/sparse_body_ament_prefix.pth"
+    mark_done ros_tools "$ros_hash"
+  else
+    say "ROS 2 launch tools up to date"
+  fi
+else
+  say "no ROS 2 launch tools at $ROS_TOOLS: the launch tests will skip (see README, Install)"
 fi
 
 pkg_hash=$(inputs_hash "$ROOT/pyproject.toml" "$STAMPS/deps")

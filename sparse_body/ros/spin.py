@@ -55,3 +55,10 @@ def spin_until_shutdown(node, threads: int = 1) -> None:
         except Exception:  # noqa: BLE001 - destroying after the context went away
             pass
         rclpy.try_shutdown()
+        # The node is stopping: a second signal has nothing left to ask. A terminal's Ctrl-C
+        # reaches every process of a launch and launch then sends its own SIGINT; Python's
+        # finalisation puts the default handlers back, so that second SIGINT killed the
+        # exiting node (exit code -2, "process has died"). Ignored signals stay ignored.
+        if threading.current_thread() is threading.main_thread():
+            for sig in (signal.SIGINT, signal.SIGTERM):
+                signal.signal(sig, signal.SIG_IGN)

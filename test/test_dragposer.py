@@ -149,7 +149,9 @@ def test_user_constraints_are_added_and_removed_at_runtime(tiny_vae):
     for frame in list(stream)[:10]:
         est.step(frame)
     assert sorted(est.constraints.names()) == ["floor:10", "floor:11"]
+    assert est.constraints.user_names() == []                     # the floor is built in, not the user's
     est.constraints.add(AboveFloor("left_foot", 5.0, name="lift", height=0.4))
+    assert est.constraints.user_names() == ["lift"]
     pose = est.step(stream.frame(10))
     from sparse_body.core.rotations import quat_to_matrix
     local = quat_to_matrix(pose.local_quats)
@@ -218,7 +220,7 @@ def test_constraint_node_refines_an_estimator_over_dds_and_takes_new_constraints
     valid = sum(s.valid for s in statuses)
     assert valid >= 20, (len(statuses), {s.message for s in statuses})
     assert all(np.all(np.isfinite(m.position)) for m in listener.received["refined/joint_states"])
-    assert added.success and "lift" in added.active
+    assert added.success and added.active == ["lift"]          # the user's only: not the built-in floor ones
     assert not bad.success and "unknown constraint type 'teleport'" in bad.message
     assert removed.success and "lift" not in removed.active
     assert not missing.success

@@ -482,3 +482,36 @@ def test_the_estimator_parameter_names_every_estimator():
     from sparse_body.ros.estimator_node import PARAMETERS
     text = PARAMETERS["estimator"][1]
     assert all(name in text for name in ESTIMATORS), text
+
+
+def test_a_node_stopped_longer_than_tracker_timeout_is_late_not_invalid_when_it_resumes(ros_env, tmp_path):
+    """A starved CPU, taken to the extreme: the estimator process is stopped (SIGSTOP) for
+    twice tracker_timeout while the trackers go on. On resuming it must not take the trackers
+    for stopped (tracker_timeout is judged by when samples arrive, not by the node's lateness):
+    every estimate after the pause is valid."""
+    import os
+    import signal
+    config = load_sensor_config("six_point")
+    make_bag(synthetic_walk(4.0), config, tmp_path / "trackers")
+    est = start_node(ESTIMATOR, {"sensors": "six_point", "estimator": "ik", "autostart": True, "tracker_timeout": 1.0},
+                     "sparse_body_estimator", tmp_path, ros_env)
+    bridge = start_node(BRIDGE, {"bag": str(tmp_path / "trackers"), "loop": True}, "sparse_body_tracker_bridge",
+                        tmp_path, ros_env)
+    listener = Listener(rclpy, {"estimate_status": EstimateStatus}, qos={"estimate_status": 1000})
+    statuses = listener.received["estimate_status"]
+    try:
+        assert listener.spin_until(lambda: sum(s.valid for s in statuses) >= 30, STARTUP_LIMIT), \
+            (tmp_path / "sparse_body_estimator.log").read_text()
+        os.kill(est.pid, signal.SIGSTOP)
+        try:
+            listener.spin_for(2.0)
+        finally:
+            os.kill(est.pid, signal.SIGCONT)
+        before = len(statuses)
+        listener.spin_until(lambda: len(statuses) >= before + 30, STARTUP_LIMIT)
+    finally:
+        listener.destroy()
+        stop(est, bridge)
+    after = statuses[before:]
+    assert len(after) >= 30
+    assert [s.message for s in after if not s.valid] == [], [s.message for s in statuses if not s.valid]

@@ -122,19 +122,28 @@ class AngleLimit(Constraint):
 
 
 class ConstraintSet:
-    """Named constraints, added and removed while the optimiser runs."""
+    """Named constraints, added and removed while the optimiser runs. Built-in ones (the
+    estimator's own, e.g. the feet above the floor) are told apart from the user's."""
 
     def __init__(self) -> None:
         self._items: dict[str, Constraint] = {}
+        self._builtin: set[str] = set()
 
-    def add(self, constraint: Constraint) -> None:
+    def add(self, constraint: Constraint, builtin: bool = False) -> None:
         self._items[constraint.name] = constraint
+        (self._builtin.add if builtin else self._builtin.discard)(constraint.name)
 
     def remove(self, name: str) -> bool:
+        self._builtin.discard(name)
         return self._items.pop(name, None) is not None
+
+    def user_names(self) -> list[str]:
+        """The constraints a user added (set_constraint), not the built-in ones."""
+        return [n for n in self._items if n not in self._builtin]
 
     def clear(self) -> None:
         self._items.clear()
+        self._builtin.clear()
 
     def __iter__(self):
         return iter(list(self._items.values()))

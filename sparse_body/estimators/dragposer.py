@@ -201,7 +201,7 @@ class DragPoserEstimator(Estimator):
         self.constraints = ConstraintSet()      # the user's, kept across frames
         if floor_height is not None:
             for foot in FOOT_JOINTS:
-                self.constraints.add(AboveFloor(foot, 1.0, name=f"floor:{foot}", height=floor_height))
+                self.constraints.add(AboveFloor(foot, 1.0, name=f"floor:{foot}", height=floor_height), builtin=True)
         self._head_above_pelvis = skeleton.rest_positions()[J["head"]]
         self._scale = body_scale(skeleton)
         self._canonical_offsets = Skeleton.canonical().offsets

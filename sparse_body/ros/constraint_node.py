@@ -128,7 +128,7 @@ class ConstraintNode(EstimatorNode):
                 response.success, response.message = True, f"set {constraint.name}"
         except ValueError as err:
             response.success, response.message = False, str(err)
-        response.active = constraints.names()
+        response.active = constraints.user_names()     # as the service says: the user's, not the floor's
         return response
 
     def _release(self) -> None:

@@ -1,13 +1,14 @@
 """What the launch file starts, without starting it: needs the launch and launch_ros Python
-packages (a ROS install; no PyPI wheels, so it skips here) but no running nodes."""
+packages (not on PyPI: make setup installs them from ../shared/ros, or a ROS install) but no
+running nodes."""
 import importlib.util
 from pathlib import Path
 
 import pytest
 
-pytest.importorskip("launch_ros", reason="launch_ros is not installed (ROS install only)")
-pytest.importorskip("launch.actions", reason="launch is not installed (ROS install only)")
-pytest.importorskip("ament_index_python.packages", reason="ament_index_python is not installed (ROS install only)")
+pytest.importorskip("launch_ros", reason="launch_ros is not installed (make setup installs it from ../shared/ros; or a ROS install)")
+pytest.importorskip("launch.actions", reason="launch is not installed (make setup installs it from ../shared/ros; or a ROS install)")
+pytest.importorskip("ament_index_python.packages", reason="ament_index_python is not installed (make setup)")
 
 
 def _launch_module():

@@ -206,6 +206,7 @@ class EstimatorNode(LifecycleNode):
         self._last_input = -np.inf      # the newest tracker stamp the last estimate used
         self._last_step = -np.inf       # when it was made (monotonic)
         self._last_arrival = -np.inf    # when a new tracker sample last arrived (monotonic)
+        self._silence_seen = False      # the last call found the trackers silent (see _estimate)
         self.timer = self.create_timer(1.0 / self.params["output_rate"], self._tick)
         self.diag_timer = self.create_timer(1.0, self._publish_diagnostics)
         return super().on_activate(state)
@@ -287,6 +288,14 @@ class EstimatorNode(LifecycleNode):
         # a starved node's estimates from fresh samples stay valid (it only gets slower)
         silent = time.monotonic() - self._last_arrival
         no_input = not silent <= self.params["tracker_timeout"] or not np.isfinite(newest)
+        if no_input and np.isfinite(newest) and not self._silence_seen:
+            # Silence is believed at its second sighting. After this node was stopped, starved
+            # or busy, the executor runs the timer before the /tf messages that came meanwhile
+            # (rclpy takes timers first); those are taken before the next call, so trackers
+            # that are alive are seen alive by then.
+            self._silence_seen = True
+            return
+        self._silence_seen = no_input
         if fallback and not no_input and newest <= self._last_input:
             return                                       # nothing new yet: wait for the trackers
         frame, stamps = self.tf_in.sample(self.sensors, now if no_input else newest, self.params["stale_timeout"])

@@ -4,6 +4,7 @@ from __future__ import annotations
 import argparse
 import re
 import sys
+from collections import Counter
 from dataclasses import replace
 from pathlib import Path
 
@@ -37,11 +38,8 @@ def cmd_eval(args) -> int:
         group_by = args.group_by or "folder"
         inputs = balanced(find_inputs(args.motion, args.skeleton_file, group_by), args.limit)
         items, split = file_items(inputs, args.fps, args.amc_fps), "files"
-        if any(i.is_amc for i in inputs):
-            hows = {}
-            for i in inputs:
-                if i.is_amc:
-                    hows[i.how] = hows.get(i.how, 0) + 1
+        hows = Counter(i.how for i in inputs if i.is_amc)
+        if hows:
             print(f"AMC files taken as captured at {args.amc_fps:g} Hz (--amc-fps); skeletons: "
                   + ", ".join(f"{n} {how}" for how, n in hows.items()), file=sys.stderr)
     else:
@@ -55,7 +53,7 @@ def cmd_eval(args) -> int:
         out = Path(args.output)
     else:
         folder = Path(RESULTS_DIR)
-        if not folder.is_dir() and not folder.is_symlink() and not folder.exists():
+        if not (folder.exists() or folder.is_symlink()):    # ours to make; anything else there is checked below
             folder.mkdir()
         out = folder / f"eval_{stem}_{sensors.name}.json"
     out = check_results_path(out)         # before the work

@@ -81,17 +81,20 @@ class EvalResult:
                 part.per_clip.append(self.per_clip[k])
         return dict(sorted(out.items()))
 
-    def to_json(self) -> dict:
+    def to_json(self, intervals: bool = True) -> dict:
+        """intervals=False: without the bootstrap intervals (a run's in-between writes, which
+        would otherwise redo 1000 draws per group after every clip)."""
+        interval = clip_interval if intervals else (lambda *_: {})
         clips = [{"clip": c, "frames": n, **m} for c, n, m in zip(self.clips, self.frames, self.per_clip)]
         for extra, values in (("key", self.keys), ("group", self.groups), ("source", self.sources)):
             if len(values) == len(clips):
                 for row, v in zip(clips, values):
                     row[extra] = v
         groups = {g: {"clips": len(r.clips), "frames": int(sum(r.frames)), "summary": r.summary,
-                      "interval_95": clip_interval(r.per_clip, r.frames)} for g, r in self.by_group().items()}
+                      "interval_95": interval(r.per_clip, r.frames)} for g, r in self.by_group().items()}
         return {"estimator": self.estimator, "sensors": self.sensors, "split": self.split, "protocol": self.protocol,
                 "settings": self.settings, "frames": int(sum(self.frames)), "seconds": self.seconds,
-                "summary": self.summary, "interval_95": clip_interval(self.per_clip, self.frames),
+                "summary": self.summary, "interval_95": interval(self.per_clip, self.frames),
                 "groups": groups, "skipped": self.skipped, "clips": clips}
 
     @classmethod
@@ -267,8 +270,9 @@ def run_evaluation(specs: list[str], sensors: SensorConfig, items: list[EvalItem
     if progress:
         from tqdm import tqdm
         iterator = tqdm(items, desc=f"eval {'+'.join(specs)}/{sensors.name}", unit="clip")
+    done = [set(r.keys) | {s["key"] for s in r.skipped} for r in results]   # what a resumed run has
     for item in iterator:
-        todo = [r for r in results if item.key not in r.keys and item.key not in {s["key"] for s in r.skipped}]
+        todo = [r for r, keys in zip(results, done) if item.key not in keys]
         if not todo:
             continue
         try:
@@ -291,7 +295,9 @@ def run_evaluation(specs: list[str], sensors: SensorConfig, items: list[EvalItem
             r.add(item, len(motion), metrics)
             r.seconds += time.perf_counter() - start
         if out is not None and any(r.clips for r in results):   # nothing but failures: nothing written
-            write_json(results, out)
+            write_json(results, out, intervals=False)
+    if out is not None and any(r.clips for r in results):
+        write_json(results, out)
     return results
 
 
@@ -393,13 +399,13 @@ def check_results_path(path: Path) -> Path:
     return path
 
 
-def write_json(results: list[EvalResult], path: Path) -> None:
+def write_json(results: list[EvalResult], path: Path, intervals: bool = True) -> None:
     """The results as JSON, written under a temporary name and moved into place."""
     import os
     path = check_results_path(path)
     tmp = path.with_name(f".{path.name}.partial-{os.getpid()}")
     try:
-        tmp.write_text(json.dumps([r.to_json() for r in results], indent=1, allow_nan=True))
+        tmp.write_text(json.dumps([r.to_json(intervals) for r in results], indent=1, allow_nan=True))
         check_results_path(path)
         os.replace(tmp, path)
     finally:

@@ -156,13 +156,14 @@ def test_angle_units_are_read_from_the_asf_and_the_amc(tmp_path):
 def test_user_motion_files_upper_case_and_unknown_layouts(tmp_path, mocap_root):
     import gzip
     import shutil
-    from sparse_body.data.catalog import load_motion_file, motion_files
+    from sparse_body.data.catalog import load_motion_file
+    from sparse_body.data.motion_inputs import find_inputs
     subject = mocap_root / "asfamc" / "subjects" / "02"
     if not subject.is_dir():
         pytest.skip("the CMU ASF/AMC subject 02 is not in ../shared/mocap")
     shutil.copy(subject / "02.asf", tmp_path / "02.ASF")
     (tmp_path / "02_05.AMC").write_bytes(gzip.decompress((subject / "02_05.amc.gz").read_bytes()))
-    assert motion_files([tmp_path]) == [tmp_path / "02_05.AMC"]
+    assert [i.path for i in find_inputs([tmp_path])] == [tmp_path / "02_05.AMC"]
     motion = load_motion_file(tmp_path / "02_05.AMC", 60.0)
     assert len(motion) > 100 and np.all(np.isfinite(motion.positions))
     (tmp_path / "other.bvh").write_text(BVH)                       # a layout we have no joint map for

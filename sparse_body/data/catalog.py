@@ -197,21 +197,6 @@ def cached_motion(cached: Path | None, parse, name: str) -> Motion:
 MOTION_SUFFIXES = (".bvh", ".amc", ".npz")
 
 
-def motion_files(paths) -> list[Path]:
-    """The motion files named, a folder standing for the motion files in it (sorted)."""
-    out = []
-    for path in map(Path, paths):
-        if path.is_dir():
-            out += sorted(p for p in path.iterdir() if p.name.lower().removesuffix(".gz").endswith(MOTION_SUFFIXES))
-        elif path.exists():
-            out.append(path)
-        else:
-            raise MotionFileError(path, "no such file or folder")
-    if not out:
-        raise MotionFileError(Path(", ".join(map(str, paths))), "no motion files (.bvh, .amc, .npz) there")
-    return out
-
-
 def _retargeted(path: Path, source, fps: float) -> Motion:
     try:
         return retarget(source, fps)

@@ -2,19 +2,22 @@
 
     ros2 launch sparse_body sparse_body.launch.py sensors:=four_point estimator:=lobstr bag:=/path/to/trackers
 
-Arguments: sensors, estimator, model_path, refine, height, calibration (a T-pose calibration file: its fitted body
-replaces the height-scaled one), bag (the tracker source; empty: trackers come from
-elsewhere on /tf), loop (replay the bag again and again), rviz, robot_state_publisher. The estimator is a lifecycle node; it is configured and activated
+Arguments: sensors, estimator, model_path, refine, height, calibration (a T-pose calibration
+file: its fitted body replaces the height-scaled one), bag (the tracker source; empty:
+trackers come from elsewhere on /tf), loop (replay the bag again and again), rviz,
+robot_state_publisher. The estimator is a lifecycle node; it is configured and activated
 here through its autostart parameter.
 """
+
 import os
 
 from ament_index_python.packages import PackageNotFoundError, get_package_share_directory
-from launch import LaunchDescription
 from launch.actions import DeclareLaunchArgument, LogInfo, OpaqueFunction
 from launch.conditions import IfCondition
 from launch.substitutions import LaunchConfiguration
 from launch_ros.actions import LifecycleNode, Node
+
+from launch import LaunchDescription
 
 
 def _installed(package: str) -> bool:
@@ -33,57 +36,122 @@ def _nodes(context):
     arg = lambda name: LaunchConfiguration(name).perform(context)  # noqa: E731
     height = float(arg("height"))
     body = person_body(arg("calibration"), height)
-    estimator_params = [os.path.join(share, "config", "estimator.yaml"),
-                        {"sensors": arg("sensors"), "estimator": arg("estimator"), "height": height,
-                         "calibration": arg("calibration"),
-                         "model_path": arg("model_path"),
-                         "publish_link_tf": False, "autostart": True}]
+    estimator_params = [
+        os.path.join(share, "config", "estimator.yaml"),
+        {
+            "sensors": arg("sensors"),
+            "estimator": arg("estimator"),
+            "height": height,
+            "calibration": arg("calibration"),
+            "model_path": arg("model_path"),
+            "publish_link_tf": False,
+            "autostart": True,
+        },
+    ]
     with_rsp = arg("robot_state_publisher").lower() in ("true", "1")
     notes = []
     if with_rsp and not _installed("robot_state_publisher"):
         # checked before anything starts: a failing node must not leave the estimator orphaned
-        notes.append(LogInfo(msg="robot_state_publisher is not installed: the estimator publishes the body's "
-                                 "link TF itself (install ros-$ROS_DISTRO-robot-state-publisher, or pass "
-                                 "robot_state_publisher:=false to silence this)"))
+        notes.append(
+            LogInfo(
+                msg="robot_state_publisher is not installed: the estimator publishes the body's "
+                "link TF itself (install ros-$ROS_DISTRO-robot-state-publisher, or pass "
+                "robot_state_publisher:=false to silence this)"
+            )
+        )
         with_rsp = False
     estimator_params[1]["publish_link_tf"] = not with_rsp
-    nodes = notes + [LifecycleNode(package="sparse_body", executable="estimator_node", name="sparse_body_estimator",
-                           namespace="", output="screen", parameters=estimator_params)]
+    nodes = notes + [
+        LifecycleNode(
+            package="sparse_body",
+            executable="estimator_node",
+            name="sparse_body_estimator",
+            namespace="",
+            output="screen",
+            parameters=estimator_params,
+        )
+    ]
     if with_rsp:
-        nodes.append(Node(package="robot_state_publisher", executable="robot_state_publisher", output="screen",
-                          parameters=[{"robot_description": body_urdf(body)}]))
+        nodes.append(
+            Node(
+                package="robot_state_publisher",
+                executable="robot_state_publisher",
+                output="screen",
+                parameters=[{"robot_description": body_urdf(body)}],
+            )
+        )
     if arg("refine").lower() in ("true", "1"):
-        nodes.append(LifecycleNode(package="sparse_body", executable="constraint_node", name="sparse_body_constraint",
-                                   namespace="", output="screen",
-                                   parameters=[{"sensors": arg("sensors"), "height": height,
-                                                "calibration": arg("calibration"), "autostart": True}],
-                                   remappings=[("input/joint_states", "joint_states")]))
+        nodes.append(
+            LifecycleNode(
+                package="sparse_body",
+                executable="constraint_node",
+                name="sparse_body_constraint",
+                namespace="",
+                output="screen",
+                parameters=[
+                    {"sensors": arg("sensors"), "height": height, "calibration": arg("calibration"), "autostart": True}
+                ],
+                remappings=[("input/joint_states", "joint_states")],
+            )
+        )
     if arg("bag"):
-        nodes.append(Node(package="sparse_body", executable="tracker_bridge", name="sparse_body_tracker_bridge",
-                          output="screen", parameters=[os.path.join(share, "config", "tracker_bridge.yaml"),
-                                                       {"bag": arg("bag"), "loop": arg("loop").lower() in ("true", "1")}]))
+        nodes.append(
+            Node(
+                package="sparse_body",
+                executable="tracker_bridge",
+                name="sparse_body_tracker_bridge",
+                output="screen",
+                parameters=[
+                    os.path.join(share, "config", "tracker_bridge.yaml"),
+                    {"bag": arg("bag"), "loop": arg("loop").lower() in ("true", "1")},
+                ],
+            )
+        )
     return nodes
 
 
 def generate_launch_description():
-    return LaunchDescription([
-        DeclareLaunchArgument("sensors", default_value="six_point", description="sensor configuration"),
-        DeclareLaunchArgument("estimator", default_value="ik",
-                              description="estimation method: ik, lobstr, dragposer, dtp, avatarjlm (options as NAME:key=value)"),
-        DeclareLaunchArgument("model_path", default_value="",
-                              description="model file of a learned estimator (empty: the shipped one)"),
-        DeclareLaunchArgument("height", default_value="1.75", description="the person's height in metres"),
-        DeclareLaunchArgument("calibration", default_value="",
-                              description="T-pose calibration file (tracker bridge ~/calibrate): its body is used"),
-        DeclareLaunchArgument("bag", default_value="", description="rosbag2 of tracker TF to replay"),
-        DeclareLaunchArgument("loop", default_value="false", description="replay the bag again and again"),
-        DeclareLaunchArgument("rviz", default_value="false", description="start RViz"),
-        DeclareLaunchArgument("refine", default_value="false",
-                              description="also start the constraint node (DragPoser refinement, refined/ topics)"),
-        DeclareLaunchArgument("robot_state_publisher", default_value="true",
-                              description="start robot_state_publisher (else, or when it is not installed, the "
-                                          "estimator publishes link TF)"),
-        OpaqueFunction(function=_nodes),
-        Node(package="rviz2", executable="rviz2", output="screen", condition=IfCondition(LaunchConfiguration("rviz")),
-             arguments=["-d", os.path.join(get_package_share_directory("sparse_body"), "config", "sparse_body.rviz")]),
-    ])
+    return LaunchDescription(
+        [
+            DeclareLaunchArgument("sensors", default_value="six_point", description="sensor configuration"),
+            DeclareLaunchArgument(
+                "estimator",
+                default_value="ik",
+                description="estimation method: ik, lobstr, dragposer, dtp, avatarjlm (options as NAME:key=value)",
+            ),
+            DeclareLaunchArgument(
+                "model_path", default_value="", description="model file of a learned estimator (empty: the shipped one)"
+            ),
+            DeclareLaunchArgument("height", default_value="1.75", description="the person's height in metres"),
+            DeclareLaunchArgument(
+                "calibration",
+                default_value="",
+                description="T-pose calibration file (tracker bridge ~/calibrate): its body is used",
+            ),
+            DeclareLaunchArgument("bag", default_value="", description="rosbag2 of tracker TF to replay"),
+            DeclareLaunchArgument("loop", default_value="false", description="replay the bag again and again"),
+            DeclareLaunchArgument("rviz", default_value="false", description="start RViz"),
+            DeclareLaunchArgument(
+                "refine",
+                default_value="false",
+                description="also start the constraint node (DragPoser refinement, refined/ topics)",
+            ),
+            DeclareLaunchArgument(
+                "robot_state_publisher",
+                default_value="true",
+                description="start robot_state_publisher (else, or when it is not installed, the "
+                "estimator publishes link TF)",
+            ),
+            OpaqueFunction(function=_nodes),
+            Node(
+                package="rviz2",
+                executable="rviz2",
+                output="screen",
+                condition=IfCondition(LaunchConfiguration("rviz")),
+                arguments=[
+                    "-d",
+                    os.path.join(get_package_share_directory("sparse_body"), "config", "sparse_body.rviz"),
+                ],
+            ),
+        ]
+    )

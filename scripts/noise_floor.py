@@ -8,6 +8,7 @@ A joint an estimator puts on a tracker inherits at least the best of these.
 
 Usage: .venv/bin/python scripts/noise_floor.py [--split test] [--sensors six_point]
 """
+
 import argparse
 
 import numpy as np
@@ -43,21 +44,26 @@ def main() -> None:
         return float(np.average(v, weights=n)), float(np.average(j, weights=n)), np.average(per_site, axis=0, weights=n)
 
     print(f"{args.sensors} tracker positions, {args.split} split ({len(clips)} clips), LoBSTr noise")
-    print("clean trackers: jitter %.1f" % np.average([jitter(t, f) for t, _, f in clips],
-                                                     weights=[len(t) for t, _, _ in clips]))
-    print("raw noisy: velocity error %.1f cm/s, jitter %.1f" % figures(lambda frames: frames)[:2])
+    clean = np.average([jitter(t, f) for t, _, f in clips], weights=[len(t) for t, _, _ in clips])
+    print(f"clean trackers: jitter {clean:.1f}")
+    velocity, shake, _ = figures(lambda frames: frames)
+    print(f"raw noisy: velocity error {velocity:.1f} cm/s, jitter {shake:.1f}")
     for a in (0.1, 0.2, 0.35, 0.5, 1.0):
         config = FilterConfig(position_noise=0.01, rotation_noise=0.0, acceleration=a)
+
         def live(frames, config=config):
             each = TrackerFilter(config, sensors.site_names)
             return [each(f) for f in frames]
+
         velocity, shake, per_site = figures(live)
-        print("live filter, acceleration %.2f: velocity error %.1f cm/s, jitter %.1f" % (a, velocity, shake))
-        print("  per site: " + ", ".join(f"{name} {v:.1f}" for name, v in zip(sensors.site_names, per_site)))
+        print(f"live filter, acceleration {a:.2f}: velocity error {velocity:.1f} cm/s, jitter {shake:.1f}")
+        print(
+            "  per site: " + ", ".join(f"{name} {v:.1f}" for name, v in zip(sensors.site_names, per_site, strict=True))
+        )
     for a in (0.3, 0.5, 0.7, 1.0, 1.5, 3.0):
         config = FilterConfig(position_noise=0.01, rotation_noise=0.0, smooth_acceleration=a)
-        print("offline smoother, acceleration %.2f: velocity error %.1f cm/s, jitter %.1f"
-              % (a, *figures(lambda frames: smooth_frames(frames, config))[:2]))
+        velocity, shake, _ = figures(lambda frames, config=config: smooth_frames(frames, config))
+        print(f"offline smoother, acceleration {a:.2f}: velocity error {velocity:.1f} cm/s, jitter {shake:.1f}")
 
 
 if __name__ == "__main__":

@@ -2,6 +2,7 @@
 
 The ROS-free core lives in core/, data/ and estimators/; ROS nodes live in ros/.
 """
+
 from pkgutil import extend_path
 
 # The interfaces generated from msg/ (sparse_body.msg) are installed by CMake into the

@@ -4,6 +4,7 @@ Bags use the message definitions of Humble and later (sensor_msgs/JointState,
 tf2_msgs/TFMessage) plus this package's msg/ files, registered from their text, so
 `ros2 bag play` on a ROS machine plays them to the nodes.
 """
+
 from __future__ import annotations
 
 import os
@@ -19,8 +20,8 @@ from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 
 from . import __version__
 from .core.sensors import SensorConfig
-from .core.textfile import read_limited
 from .core.skeleton import Skeleton
+from .core.textfile import read_limited
 from .core.types import BodyPose, TrackerStream
 from .output import FOOT_NAMES, body_transforms, contact_points, joint_state_names, joint_state_positions, stamp_parts
 from .resources import share_dir
@@ -60,10 +61,13 @@ def _header(store, seconds: float, frame_id: str):
 def _transform_msg(store, seconds, parent, child, translation, rotation):
     T = store.types
     return T["geometry_msgs/msg/TransformStamped"](
-        header=_header(store, seconds, parent), child_frame_id=child,
+        header=_header(store, seconds, parent),
+        child_frame_id=child,
         transform=T["geometry_msgs/msg/Transform"](
             translation=T["geometry_msgs/msg/Vector3"](*map(float, translation)),
-            rotation=T["geometry_msgs/msg/Quaternion"](*map(float, rotation))))
+            rotation=T["geometry_msgs/msg/Quaternion"](*map(float, rotation)),
+        ),
+    )
 
 
 def _log_times(stamps) -> list[int]:
@@ -95,8 +99,7 @@ def written_by_us(path: Path) -> bool:
     except (OSError, ValueError, yaml.YAMLError, KeyError, TypeError, AttributeError, RecursionError):
         return False
     present = {entry.name for entry in path.iterdir()}
-    return ours and present <= listed and all((path / f).is_file() and not (path / f).is_symlink()
-                                               for f in present)
+    return ours and present <= listed and all((path / f).is_file() and not (path / f).is_symlink() for f in present)
 
 
 def _same_or_inside(a: Path, b: Path) -> bool:
@@ -115,8 +118,15 @@ def check_output(path: Path, overwrite: bool = False, inputs: tuple[Path, ...] =
             raise OutputError(f"{path}: is (or holds) the input {given}; choose another output")
     if path.exists() or path.is_symlink():
         if not written_by_us(path):
-            kind = ("a link" if path.is_symlink() else "a folder that is not a bag written by sparse_body"
-                    if path.is_dir() else "a file" if path.is_file() else "a device or special file")
+            kind = (
+                "a link"
+                if path.is_symlink()
+                else "a folder that is not a bag written by sparse_body"
+                if path.is_dir()
+                else "a file"
+                if path.is_file()
+                else "a device or special file"
+            )
             raise OutputError(f"{path}: exists and is {kind}; it is never replaced, choose another output")
         if not overwrite:
             raise OutputError(f"{path}: already exists (choose another name, or --overwrite to replace this bag)")
@@ -145,9 +155,9 @@ def bag_writer(path: Path, overwrite: bool = False, inputs: tuple[Path, ...] = (
         with Writer(tmp, version=8, storage_plugin=StoragePlugin.MCAP) as writer:
             writer.set_custom_data(WRITER_KEY, f"sparse_body {__version__}")
             yield writer
-        check_output(path, overwrite, inputs)      # nothing else may have appeared meanwhile
+        check_output(path, overwrite, inputs)  # nothing else may have appeared meanwhile
         if path.exists():
-            os.replace(path, old)                    # a bag of ours: moved aside, removed once replaced
+            os.replace(path, old)  # a bag of ours: moved aside, removed once replaced
         os.replace(tmp, path)
     finally:
         shutil.rmtree(partial, ignore_errors=True)
@@ -155,8 +165,14 @@ def bag_writer(path: Path, overwrite: bool = False, inputs: tuple[Path, ...] = (
             shutil.rmtree(old, ignore_errors=True)
 
 
-def write_tracker_bag(path: Path, stream: TrackerStream, config: SensorConfig, start: float = 1_700_000_000.0,
-                      overwrite: bool = False, inputs: tuple[Path, ...] = ()) -> None:
+def write_tracker_bag(
+    path: Path,
+    stream: TrackerStream,
+    config: SensorConfig,
+    start: float = 1_700_000_000.0,
+    overwrite: bool = False,
+    inputs: tuple[Path, ...] = (),
+) -> None:
     """One /tf message per frame with every valid tracker; dropped samples are left out."""
     if len(stream) == 0:
         raise BagError(f"{path}: no frames to write (an empty motion)")
@@ -178,8 +194,9 @@ def write_tracker_bag(path: Path, stream: TrackerStream, config: SensorConfig, s
             writer.write(conn, log_ns[i], data)
 
 
-def read_tracker_stream(path: Path, config: SensorConfig, stale_after: float = 0.1,
-                        refused: dict | None = None) -> TrackerStream:
+def read_tracker_stream(
+    path: Path, config: SensorConfig, stale_after: float = 0.1, refused: dict | None = None
+) -> TrackerStream:
     """The trackers at each input frame of a bag: every /tf message that moves a tracker
     frame is one frame, sampled at the newest stamp it carries. A tracker whose sample in
     that message was refused (non-finite, degenerate quaternion, out of order) is invalid in
@@ -195,7 +212,9 @@ def read_tracker_stream(path: Path, config: SensorConfig, stale_after: float = 0
         with Reader(path) as reader:
             conns = [c for c in reader.connections if c.topic in (TF_TOPIC, TF_STATIC_TOPIC)]
             if not any(c.topic == TF_TOPIC for c in conns):
-                raise BagError(f"{path}: no {TF_TOPIC} topic (topics: {', '.join(sorted({c.topic for c in reader.connections}))})")
+                raise BagError(
+                    f"{path}: no {TF_TOPIC} topic (topics: {', '.join(sorted({c.topic for c in reader.connections}))})"
+                )
             for conn, _, raw in reader.messages(connections=conns):
                 msg = store.deserialize_cdr(raw, conn.msgtype)
                 static = conn.topic == TF_STATIC_TOPIC
@@ -203,10 +222,11 @@ def read_tracker_stream(path: Path, config: SensorConfig, stale_after: float = 0
                 for tf in msg.transforms:
                     stamp = tf.header.stamp.sec + tf.header.stamp.nanosec * 1e-9
                     tr, q = tf.transform.translation, tf.transform.rotation
-                    result = cache.set(tf.header.frame_id, tf.child_frame_id, stamp, (tr.x, tr.y, tr.z),
-                                       (q.x, q.y, q.z, q.w), static)
+                    result = cache.set(
+                        tf.header.frame_id, tf.child_frame_id, stamp, (tr.x, tr.y, tr.z), (q.x, q.y, q.z, q.w), static
+                    )
                     if tf.child_frame_id in tracker_frames and not static:
-                        moved = True   # even a refused sample is an input frame: it gets an output
+                        moved = True  # even a refused sample is an input frame: it gets an output
                         if result in (Accepted.OK, Accepted.JUMPED_BACK):
                             newest = max(newest, stamp)
                         else:
@@ -215,7 +235,7 @@ def read_tracker_stream(path: Path, config: SensorConfig, stale_after: float = 0
                             if refused is not None:
                                 refused[result.value] = refused.get(result.value, 0) + 1
                 if moved:
-                    if not np.isfinite(newest):   # every sample refused: the frame keeps its own stamp if it has one
+                    if not np.isfinite(newest):  # every sample refused: the frame keeps its own stamp if it has one
                         newest = refused_stamp if np.isfinite(refused_stamp) else (times[-1] if times else 0.0)
                     stamp = newest
                     frame, _ = sample_trackers(cache.lookup, config, stamp, stale_after)
@@ -230,12 +250,24 @@ def read_tracker_stream(path: Path, config: SensorConfig, stale_after: float = 0
         raise BagError(f"{path}: cannot be read as a rosbag2 ({err})") from None
     if not frames:
         raise BagError(f"{path}: no transforms of the tracker frames {', '.join(sorted(tracker_frames))}")
-    return TrackerStream(config.site_names, np.array(times), np.stack([f.positions for f in frames]),
-                         np.stack([f.orientations for f in frames]), np.stack([f.valid for f in frames]))
+    return TrackerStream(
+        config.site_names,
+        np.array(times),
+        np.stack([f.positions for f in frames]),
+        np.stack([f.orientations for f in frames]),
+        np.stack([f.valid for f in frames]),
+    )
 
 
-def write_estimate_bag(path: Path, poses: list[BodyPose], skeleton: Skeleton, fixed_frame: str = "world",
-                       prefix: str = "", overwrite: bool = False, inputs: tuple[Path, ...] = ()) -> None:
+def write_estimate_bag(
+    path: Path,
+    poses: list[BodyPose],
+    skeleton: Skeleton,
+    fixed_frame: str = "world",
+    prefix: str = "",
+    overwrite: bool = False,
+    inputs: tuple[Path, ...] = (),
+) -> None:
     """Per pose: one JointState, one FootContacts, one EstimateStatus and one /tf message."""
     store = typestore()
     T = store.types
@@ -245,24 +277,41 @@ def write_estimate_bag(path: Path, poses: list[BodyPose], skeleton: Skeleton, fi
         c_fc = writer.add_connection(CONTACTS_TOPIC, "sparse_body/msg/FootContacts", typestore=store)
         c_st = writer.add_connection(STATUS_TOPIC, "sparse_body/msg/EstimateStatus", typestore=store)
         c_tf = writer.add_connection(TF_TOPIC, TF_TYPE, typestore=store)
-        for pose, ns in zip(poses, _log_times([p.stamp for p in poses])):
+        for pose, ns in zip(poses, _log_times([p.stamp for p in poses]), strict=True):
             header = _header(store, pose.stamp, fixed_frame)
-            js = T["sensor_msgs/msg/JointState"](header=_header(store, pose.stamp, ""), name=names,
-                                                 position=joint_state_positions(pose), velocity=np.zeros(0),
-                                                 effort=np.zeros(0))
+            js = T["sensor_msgs/msg/JointState"](
+                header=_header(store, pose.stamp, ""),
+                name=names,
+                position=joint_state_positions(pose),
+                velocity=np.zeros(0),
+                effort=np.zeros(0),
+            )
             writer.write(c_js, ns, store.serialize_cdr(js, "sensor_msgs/msg/JointState"))
             points = contact_points(pose, skeleton)
-            contacts = [T["sparse_body/msg/FootContact"](
-                name=n, in_contact=bool(pose.contact[k]), probability=float(pose.contact_probability[k]),
-                contact_point=T["geometry_msgs/msg/Point"](*map(float, points[k])))
-                for k, n in enumerate(FOOT_NAMES)]
-            writer.write(c_fc, ns, store.serialize_cdr(T["sparse_body/msg/FootContacts"](header=header, contacts=contacts),
-                                                       "sparse_body/msg/FootContacts"))
-            status = T["sparse_body/msg/EstimateStatus"](header=header, valid=bool(pose.valid),
-                                                          message="" if pose.valid else "held: too little tracker input")
+            contacts = [
+                T["sparse_body/msg/FootContact"](
+                    name=n,
+                    in_contact=bool(pose.contact[k]),
+                    probability=float(pose.contact_probability[k]),
+                    contact_point=T["geometry_msgs/msg/Point"](*map(float, points[k])),
+                )
+                for k, n in enumerate(FOOT_NAMES)
+            ]
+            writer.write(
+                c_fc,
+                ns,
+                store.serialize_cdr(
+                    T["sparse_body/msg/FootContacts"](header=header, contacts=contacts), "sparse_body/msg/FootContacts"
+                ),
+            )
+            status = T["sparse_body/msg/EstimateStatus"](
+                header=header, valid=bool(pose.valid), message="" if pose.valid else "held: too little tracker input"
+            )
             writer.write(c_st, ns, store.serialize_cdr(status, "sparse_body/msg/EstimateStatus"))
-            tfs = [_transform_msg(store, pose.stamp, t.parent, t.child, t.translation, t.rotation)
-                   for t in body_transforms(pose, skeleton, fixed_frame, prefix)]
+            tfs = [
+                _transform_msg(store, pose.stamp, t.parent, t.child, t.translation, t.rotation)
+                for t in body_transforms(pose, skeleton, fixed_frame, prefix)
+            ]
             writer.write(c_tf, ns, store.serialize_cdr(T[TF_TYPE](transforms=tfs), TF_TYPE))
 
 

@@ -7,6 +7,7 @@ from it arriving at a subscriber (header stamps are the tracker stamps), with th
 node as a separate process; estimates are driven by tracker input, so no timer wait is in
 it. Speed and latency are measured here, never asserted in tests: a busy machine is slower,
 not wrong."""
+
 from __future__ import annotations
 
 import os
@@ -24,12 +25,14 @@ from .data.virtual_trackers import synthesize_trackers
 from .estimators import create_estimator
 from .estimators.base import parse_estimator_spec
 
-
 # (figure, estimator, goal for its p99 in ms); the latency goal is 3 ms plus the step's p99
-STEP_GOALS = (("ik step", "ik", 0.3), ("lobstr step (network, upper-body IK, contact IK)", "lobstr", 0.5),
-              ("dragposer step (search, predictor, polish)", "dragposer", 3.0),
-              ("dtp step (21-frame window, transformer, polish)", "dtp", 2.0),
-              ("avatarjlm step (streaming joint tokens, polish)", "avatarjlm", 5.0))
+STEP_GOALS = (
+    ("ik step", "ik", 0.3),
+    ("lobstr step (network, upper-body IK, contact IK)", "lobstr", 0.5),
+    ("dragposer step (search, predictor, polish)", "dragposer", 3.0),
+    ("dtp step (21-frame window, transformer, polish)", "dtp", 2.0),
+    ("avatarjlm step (streaming joint tokens, polish)", "avatarjlm", 5.0),
+)
 LATENCY_GOAL_MS = 3.0
 
 
@@ -41,7 +44,7 @@ def bench_offline(estimators, sensors_name: str, seconds: float = 20.0) -> dict[
     print(f"offline: {len(stream)} frames of a synthetic walk, {sensors_name}")
     out = {}
     for name in estimators:
-        method, options = parse_estimator_spec(name)     # a spec: "avatarjlm:model_path=FILE"
+        method, options = parse_estimator_spec(name)  # a spec: "avatarjlm:model_path=FILE"
         est = create_estimator(method, config, motion.skeleton, **options)
         est.reset()
         times = []
@@ -49,10 +52,12 @@ def bench_offline(estimators, sensors_name: str, seconds: float = 20.0) -> dict[
             t0 = time.perf_counter()
             est.step(frame)
             times.append(time.perf_counter() - t0)
-        ms = np.array(times[10:]) * 1000     # the first frames warm caches (and DragPoser's first search is long)
+        ms = np.array(times[10:]) * 1000  # the first frames warm caches (and DragPoser's first search is long)
         out[name] = (float(np.percentile(ms, 50)), float(np.percentile(ms, 99)))
-        print(f"  {name:<10} {len(ms) / (ms.sum() / 1000):8.0f} frames/s   step p50 {out[name][0]:6.2f} ms"
-              f"   p99 {out[name][1]:6.2f} ms")
+        print(
+            f"  {name:<10} {len(ms) / (ms.sum() / 1000):8.0f} frames/s   step p50 {out[name][0]:6.2f} ms"
+            f"   p99 {out[name][1]:6.2f} ms"
+        )
     return out
 
 
@@ -64,16 +69,33 @@ def bench_latency(estimator: str, sensors_name: str, seconds: float = 10.0, rate
     from tf2_msgs.msg import TFMessage
 
     from .ros.messages import to_seconds, to_time
+
     config = load_sensor_config(sensors_name)
     motion = synthetic_walk(seconds + 5)
     stream = synthesize_trackers(motion, config)
     env = {**os.environ, "ROS_DOMAIN_ID": str(150 + os.getpid() % 50), "OMP_NUM_THREADS": "1"}
     os.environ["ROS_DOMAIN_ID"] = env["ROS_DOMAIN_ID"]
     with tempfile.TemporaryDirectory() as tmp:
-        log = open(Path(tmp) / "node.log", "w")
-        proc = subprocess.Popen([sys.executable, "-m", "sparse_body.ros.estimator_node", "--ros-args",
-                                 "-p", "autostart:=true", "-p", f"sensors:={sensors_name}", "-p", f"estimator:={estimator}",
-                                 "-p", f"output_rate:={rate}"], stdout=log, stderr=subprocess.STDOUT, env=env)
+        with open(Path(tmp) / "node.log", "w") as log:  # the child holds its own copy
+            proc = subprocess.Popen(
+                [
+                    sys.executable,
+                    "-m",
+                    "sparse_body.ros.estimator_node",
+                    "--ros-args",
+                    "-p",
+                    "autostart:=true",
+                    "-p",
+                    f"sensors:={sensors_name}",
+                    "-p",
+                    f"estimator:={estimator}",
+                    "-p",
+                    f"output_rate:={rate}",
+                ],
+                stdout=log,
+                stderr=subprocess.STDOUT,
+                env=env,
+            )
         rclpy.init()
         node = rclpy.create_node("sparse_body_bench")
         latencies, sent = [], set()
@@ -83,7 +105,7 @@ def bench_latency(estimator: str, sensors_name: str, seconds: float = 10.0, rate
             key = round(stamp * 1e6)
             if key in sent:
                 latencies.append(node.get_clock().now().nanoseconds * 1e-9 - stamp)
-                sent.discard(key)   # count each tracker sample once: the first estimate using it
+                sent.discard(key)  # count each tracker sample once: the first estimate using it
 
         node.create_subscription(JointState, "joint_states", on_joints, 100)
         pub = node.create_publisher(TFMessage, "/tf", 100)
@@ -98,10 +120,17 @@ def bench_latency(estimator: str, sensors_name: str, seconds: float = 10.0, rate
                 msgs = []
                 for s, site in enumerate(config.sites):
                     m = TransformStamped()
-                    m.header.frame_id, m.child_frame_id, m.header.stamp = config.fixed_frame, site.frame_id, to_time(now)
-                    m.transform.translation.x, m.transform.translation.y, m.transform.translation.z = map(float, stream.positions[i, s])
-                    (m.transform.rotation.x, m.transform.rotation.y, m.transform.rotation.z,
-                     m.transform.rotation.w) = map(float, stream.orientations[i, s])
+                    m.header.frame_id, m.child_frame_id, m.header.stamp = (
+                        config.fixed_frame,
+                        site.frame_id,
+                        to_time(now),
+                    )
+                    m.transform.translation.x, m.transform.translation.y, m.transform.translation.z = map(
+                        float, stream.positions[i, s]
+                    )
+                    (m.transform.rotation.x, m.transform.rotation.y, m.transform.rotation.z, m.transform.rotation.w) = (
+                        map(float, stream.orientations[i, s])
+                    )
                     msgs.append(m)
                 sent.add(round(to_seconds(to_time(now)) * 1e6))
                 pub.publish(TFMessage(transforms=msgs))
@@ -118,8 +147,10 @@ def bench_latency(estimator: str, sensors_name: str, seconds: float = 10.0, rate
     if not len(ms):
         print("latency: no JointState arrived (see the node's log)")
         return None
-    print(f"latency TF in -> JointState out ({estimator}, {sensors_name}, trackers at {rate:g} Hz, "
-          f"{len(ms)} samples): p50 {np.percentile(ms, 50):.2f} ms, p99 {np.percentile(ms, 99):.2f} ms")
+    print(
+        f"latency TF in -> JointState out ({estimator}, {sensors_name}, trackers at {rate:g} Hz, "
+        f"{len(ms)} samples): p50 {np.percentile(ms, 50):.2f} ms, p99 {np.percentile(ms, 99):.2f} ms"
+    )
     return float(np.percentile(ms, 50)), float(np.percentile(ms, 99))
 
 
@@ -140,14 +171,15 @@ def bench_network(frames: int = 3000) -> None:
     from .estimators.lobstr_features import feature_count
     from .train.lobstr_model import LobstrConfig, LobstrNet, LobstrStep
     from .train.lobstr_train import export_onnx
+
     torch.set_num_threads(1)
     rng = np.random.default_rng(0)
-    x = rng.normal(size=(frames, feature_count(True))).astype(np.float32)   # a model reads its first columns
+    x = rng.normal(size=(frames, feature_count(True))).astype(np.float32)  # a model reads its first columns
     print(f"LoBSTr network step, {frames} frames, 1 thread (torch {torch.__version__})")
 
     def time_ort(model: LobstrModel):
         state, times = model.initial_state(), []
-        for row in x[:, :model.features]:
+        for row in x[:, : model.features]:
             t0 = time.perf_counter()
             _, _, state = model.step(row, state)
             times.append(time.perf_counter() - t0)
@@ -159,7 +191,7 @@ def bench_network(frames: int = 3000) -> None:
         step = LobstrStep(net)
         state, times = torch.zeros(1, 1, config.hidden), []
         with torch.inference_mode():
-            for row in torch.from_numpy(x[:, :feature_count(config.learned_upper)]):
+            for row in torch.from_numpy(x[:, : feature_count(config.learned_upper)]):
                 t0 = time.perf_counter()
                 _, _, state = step(row[None], state)
                 times.append(time.perf_counter() - t0)
@@ -170,11 +202,17 @@ def bench_network(frames: int = 3000) -> None:
             print(f"  {name:<6} hidden {config.hidden:<5} onnxruntime  {_percentiles(time_ort(LobstrModel(path)))}")
     if default_model_path().is_file():
         model = LobstrModel()
-        print(f"  shipped {default_model_path().name} (hidden {model.hidden}) onnxruntime  {_percentiles(time_ort(model))}")
+        shipped = f"shipped {default_model_path().name} (hidden {model.hidden})"
+        print(f"  {shipped} onnxruntime  {_percentiles(time_ort(model))}")
 
 
-def bench_dragposer(frames: int = 600, max_iterations: int = 20, tolerance: float = 0.01,
-                    rotation_tolerance: float = 0.087, torch_frames: int = 10) -> None:
+def bench_dragposer(
+    frames: int = 600,
+    max_iterations: int = 20,
+    tolerance: float = 0.01,
+    rotation_tolerance: float = 0.087,
+    torch_frames: int = 10,
+) -> None:
     """DragPoser's pose optimiser, six-point, on the demo's CMU test clip (the synthetic walk without
     ../shared/mocap): milliseconds per frame and iterations until the trackers are met (1 cm,
     5 degrees), for the ONNX Runtime Gauss-Newton runtime and the torch autograd reference
@@ -182,10 +220,11 @@ def bench_dragposer(frames: int = 600, max_iterations: int = 20, tolerance: floa
     solution."""
     import torch
 
-    from .estimators.dragposer import END_JOINTS, DragPoserEstimator
-    from .train.dragposer_reference import load_vae, optimise
     from .data.catalog import find_mocap_root, load_clip, read_index
     from .demo import DEMO_CLIP
+    from .estimators.dragposer import END_JOINTS, DragPoserEstimator
+    from .train.dragposer_reference import load_vae, optimise
+
     torch.set_num_threads(1)
     root = find_mocap_root()
     if root is not None:
@@ -195,8 +234,15 @@ def bench_dragposer(frames: int = 600, max_iterations: int = 20, tolerance: floa
     config = load_sensor_config("six_point")
     stream = synthesize_trackers(motion, config)
     # the search alone, as the reference does it: no temporal prior, no IK polish
-    est = DragPoserEstimator(config, motion.skeleton, iterations=max_iterations, tolerance=tolerance,
-                             rotation_tolerance=rotation_tolerance, temporal_weight=0.0, polish=False)
+    est = DragPoserEstimator(
+        config,
+        motion.skeleton,
+        iterations=max_iterations,
+        tolerance=tolerance,
+        rotation_tolerance=rotation_tolerance,
+        temporal_weight=0.0,
+        polish=False,
+    )
     times, states = [], []
     for frame in stream:
         states.append(est._state)
@@ -204,11 +250,15 @@ def bench_dragposer(frames: int = 600, max_iterations: int = 20, tolerance: floa
         est.step(frame)
         times.append(time.perf_counter() - t0)
     its = np.array(est.iterations_used[1:])
-    print(f"DragPoser optimiser, six-point, {where}, {len(stream)} frames, trackers met within "
-          f"{tolerance * 100:g} cm / {np.degrees(rotation_tolerance):.0f} deg, 1 thread")
-    print(f"  onnxruntime Gauss-Newton: {_percentiles(times[1:])} per frame; iterations to converge: mean "
-          f"{its.mean():.2f}, p99 {np.percentile(its, 99):.0f} (cap {max_iterations}); "
-          f"{1000 * np.mean(times[1:]) / its.mean():.2f} ms per iteration")
+    print(
+        f"DragPoser optimiser, six-point, {where}, {len(stream)} frames, trackers met within "
+        f"{tolerance * 100:g} cm / {np.degrees(rotation_tolerance):.0f} deg, 1 thread"
+    )
+    print(
+        f"  onnxruntime Gauss-Newton: {_percentiles(times[1:])} per frame; iterations to converge: mean "
+        f"{its.mean():.2f}, p99 {np.percentile(its, 99):.0f} (cap {max_iterations}); "
+        f"{1000 * np.mean(times[1:]) / its.mean():.2f} ms per iteration"
+    )
     vae = load_vae(est.vae.dir)
     picks = np.linspace(10, len(stream) - 1, torch_frames).astype(int)
     t_iters, t_ms = [], []
@@ -220,14 +270,32 @@ def bench_dragposer(frames: int = 600, max_iterations: int = 20, tolerance: floa
             constraints.add(c)
         stats = {}
         t0 = time.perf_counter()
-        optimise(vae, constraints, motion.skeleton.offsets, z, root, yaw, z, iterations=2000, lr=0.01,
-                 tolerance=tolerance, rotation_tolerance=rotation_tolerance, stats=stats, skip_orientation=END_JOINTS)
+        optimise(
+            vae,
+            constraints,
+            motion.skeleton.offsets,
+            z,
+            root,
+            yaw,
+            z,
+            iterations=2000,
+            lr=0.01,
+            tolerance=tolerance,
+            rotation_tolerance=rotation_tolerance,
+            stats=stats,
+            skip_orientation=END_JOINTS,
+        )
         t_ms.append((time.perf_counter() - t0) * 1000)
         t_iters.append(stats["iterations"])
-    print(f"  torch autograd (Adam):    {np.mean(t_ms):8.1f} ms per frame over {torch_frames} frames; iterations to "
-          f"converge: mean {np.mean(t_iters):.1f} (cap 2000); {np.sum(t_ms) / np.sum(t_iters):.2f} ms per iteration")
-    for label, options in [("live defaults", {}), ("without the temporal predictor", {"temporal_weight": 0.0}),
-                           ("without the IK polish", {"polish": False})]:
+    print(
+        f"  torch autograd (Adam):    {np.mean(t_ms):8.1f} ms per frame over {torch_frames} frames; iterations to "
+        f"converge: mean {np.mean(t_iters):.1f} (cap 2000); {np.sum(t_ms) / np.sum(t_iters):.2f} ms per iteration"
+    )
+    for label, options in [
+        ("live defaults", {}),
+        ("without the temporal predictor", {"temporal_weight": 0.0}),
+        ("without the IK polish", {"polish": False}),
+    ]:
         live = DragPoserEstimator(config, motion.skeleton, **options)
         times = []
         for frame in stream:
@@ -251,8 +319,14 @@ def run_goals(latency: bool = True) -> None:
     if latency:
         measured = bench_latency("ik", "six_point")
         goal = LATENCY_GOAL_MS + steps["ik"][1]
-        rows.append(("TF in -> JointState out, ik over DDS", f"p99 <= {LATENCY_GOAL_MS:g} ms + ik step = {goal:.2f} ms",
-                     measured, measured is not None and measured[1] <= goal))
+        rows.append(
+            (
+                "TF in -> JointState out, ik over DDS",
+                f"p99 <= {LATENCY_GOAL_MS:g} ms + ik step = {goal:.2f} ms",
+                measured,
+                measured is not None and measured[1] <= goal,
+            )
+        )
     load = os.getloadavg()[0]
     print(f"\ngoals (load average {load:.1f} on {os.cpu_count()} cores while measured)")
     print(f"  {'figure':<50} {'goal':<34} {'p50 / p99 [ms]':<18} met")

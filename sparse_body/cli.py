@@ -1,4 +1,5 @@
 """The `sparse-body` command."""
+
 from __future__ import annotations
 
 import argparse
@@ -11,58 +12,87 @@ from pathlib import Path
 
 def _mocap(args) -> Path:
     from .data.catalog import find_mocap_root
+
     root = find_mocap_root(args.mocap)
     if root is None:
-        sys.exit("sparse-body: no motion capture found; pass --mocap DIR or set SPARSE_BODY_MOCAP "
-                 "(the CMU folder of ../shared/mocap)")
+        sys.exit(
+            "sparse-body: no motion capture found; pass --mocap DIR or set SPARSE_BODY_MOCAP "
+            "(the CMU folder of ../shared/mocap)"
+        )
     return root
 
 
-RESULTS_DIR = "sparse_body_results"     # where eval writes when --output is not given
+RESULTS_DIR = "sparse_body_results"  # where eval writes when --output is not given
 
 
 def cmd_eval(args) -> int:
     from .core.sensors import load_sensor_config
     from .data.field_protocol import Protocol
-    from .evaluation import (COMPARE_WITH, check_results_path, file_items, format_groups, format_table,
-                             paper_figures, run_evaluation, split_items)
+    from .evaluation import (
+        check_results_path,
+        file_items,
+        format_groups,
+        format_table,
+        run_evaluation,
+        split_items,
+    )
+    from .methods import METHODS, paper_figures
+
     sensors = load_sensor_config(args.sensors)
     specs, reference = list(args.estimator), {}
     if not args.no_compare:
         for name in args.estimator:
-            specs += [s for s in COMPARE_WITH.get(name, []) if s not in specs]
+            compare = METHODS[name].compare_with if name in METHODS else ()
+            specs += [s for s in compare if s not in specs]
             reference.update(paper_figures(name, sensors.name, args.faulty, args.occlusion))
     protocol = Protocol.named(args.skeleton, args.noise, args.faulty, args.mounting_error, args.occlusion)
-    if args.motion:        # the files are found and every AMC paired with its ASF before any work
+    if args.motion:  # the files are found and every AMC paired with its ASF before any work
         from .data.motion_inputs import balanced, find_inputs
+
         group_by = args.group_by or "folder"
         inputs = balanced(find_inputs(args.motion, args.skeleton_file, group_by), args.limit)
         items, split = file_items(inputs, args.fps, args.amc_fps), "files"
         hows = Counter(i.how for i in inputs if i.is_amc)
         if hows:
-            print(f"AMC files taken as captured at {args.amc_fps:g} Hz (--amc-fps); skeletons: "
-                  + ", ".join(f"{n} {how}" for how, n in hows.items()), file=sys.stderr)
+            print(
+                f"AMC files taken as captured at {args.amc_fps:g} Hz (--amc-fps); skeletons: "
+                + ", ".join(f"{n} {how}" for how, n in hows.items()),
+                file=sys.stderr,
+            )
     else:
         if args.skeleton_file or args.group_by == "folder":
             raise ValueError("--skeleton-file and --group-by folder are for --motion files")
         items, split = split_items(_mocap(args), args.split, args.fps, args.limit), args.split
-        if args.group_by != "prefix":          # the split's clips: by subject with --group-by prefix
+        if args.group_by != "prefix":  # the split's clips: by subject with --group-by prefix
             items = [replace(i, group="") for i in items]
     stem = re.sub(r"[^\w.+-]", "_", "+".join(args.estimator))
     if args.output:
         out = Path(args.output)
     else:
         folder = Path(RESULTS_DIR)
-        if not (folder.exists() or folder.is_symlink()):    # ours to make; anything else there is checked below
+        if not (folder.exists() or folder.is_symlink()):  # ours to make; anything else there is checked below
             folder.mkdir()
         out = folder / f"eval_{stem}_{sensors.name}.json"
-    out = check_results_path(out)         # before the work
+    out = check_results_path(out)  # before the work
     print(f"results: {out} (written after each clip; the same command resumes)", file=sys.stderr)
-    results = run_evaluation(specs, sensors, items, split, args.fps, protocol, args.per_joint, out=out,
-                             progress=not args.quiet, warn=lambda text: print(f"warning: {text}", file=sys.stderr))
+    results = run_evaluation(
+        specs,
+        sensors,
+        items,
+        split,
+        args.fps,
+        protocol,
+        args.per_joint,
+        out=out,
+        progress=not args.quiet,
+        warn=lambda text: print(f"warning: {text}", file=sys.stderr),
+    )
     if not results[0].clips:
-        raise ValueError(f"no clip could be evaluated: {results[0].skipped[0]['clip']}: {results[0].skipped[0]['reason']}"
-                         if results[0].skipped else "no clips to evaluate")
+        raise ValueError(
+            f"no clip could be evaluated: {results[0].skipped[0]['clip']}: {results[0].skipped[0]['reason']}"
+            if results[0].skipped
+            else "no clips to evaluate"
+        )
     print(format_table(results, reference))
     groups = format_groups(results, label=args.group_by or ("folder" if args.motion else "group"))
     if groups:
@@ -71,46 +101,31 @@ def cmd_eval(args) -> int:
     skipped = {s["clip"]: s["reason"] for r in results for s in r.skipped}
     if skipped:
         first, why = next(iter(skipped.items()))
-        print(f"sparse-body: {len(skipped)} of {len(items)} clips skipped (each in {out} under 'skipped'); "
-              f"{first}: {why}", file=sys.stderr)
+        print(
+            f"sparse-body: {len(skipped)} of {len(items)} clips skipped (each in {out} under 'skipped'); "
+            f"{first}: {why}",
+            file=sys.stderr,
+        )
         return EXIT_INPUT
     return 0
 
 
 def _trainers(args) -> list[tuple]:
     """(config class, train function, output, report file) for each part the command trains."""
+    from .methods import METHODS, load
     from .resources import models_dir
-    if args.method == "lobstr":      # one file: models/lobstr.onnx
-        from .train.lobstr_model import LobstrConfig
-        from .train.lobstr_train import train
-        out = Path(args.out or models_dir() / "lobstr.onnx")
-        return [(LobstrConfig, train, out, out.with_suffix(".train.json"))]
-    if args.method == "dtp":         # models/dtp.onnx (online) or dtp_lookahead.onnx (future frames)
-        from .train.dtp_model import DtpConfig
-        from .train.dtp_train import train
-        name = "dtp_lookahead.onnx" if _config(DtpConfig, args).future else "dtp.onnx"
-        out = Path(args.out or models_dir() / name)
-        return [(DtpConfig, train, out, out.with_suffix(".train.json"))]
-    if args.method == "avatarjlm":   # models/avatarjlm.onnx (three-point) or avatarjlm_four_point.onnx
-        from .train.avatarjlm_model import AvatarJlmConfig
-        from .train.avatarjlm_train import train
-        sensors = _config(AvatarJlmConfig, args).sensors
-        out = Path(args.out or models_dir() / ("avatarjlm.onnx" if sensors == "three_point" else f"avatarjlm_{sensors}.onnx"))
-        return [(AvatarJlmConfig, train, out, out.with_suffix(".train.json"))]
-    out = Path(args.out or models_dir())   # a folder: dragposer_{encoder,decoder,temporal,tracker_prior}.onnx
-    parts = []
-    if args.part in ("all", "vae"):
-        from .train.dragposer_train import train_vae
-        from .train.dragposer_vae import VaeConfig
-        parts.append((VaeConfig, train_vae, out, out / "dragposer.train.json"))
-    if args.part in ("all", "temporal"):     # after the VAE: it learns in the VAE's latent space
-        from .train.dragposer_temporal import TemporalConfig
-        from .train.dragposer_temporal_train import train_temporal
-        parts.append((TemporalConfig, train_temporal, out, out / "dragposer_temporal.train.json"))
-    if args.part in ("all", "tracker_prior"):   # also in the VAE's latent space
-        from .train.dragposer_tracker_prior import TrackerPriorConfig, train_tracker_prior
-        parts.append((TrackerPriorConfig, train_tracker_prior, out, out / "dragposer_tracker_prior.train.json"))
-    return parts
+
+    training = METHODS[args.method].training
+    names = [part.name for part in training.parts]
+    if args.part != "all" and args.part not in names:
+        raise ValueError(f"{args.method} has no part {args.part!r}; its parts: all, {', '.join(names)}")
+    parts = [part for part in training.parts if args.part in ("all", part.name)]
+    config_classes = [load(part.config) for part in parts]
+    out = Path(args.out or models_dir() / training.output(lambda: _config(config_classes[0], args)))
+    return [
+        (config_class, load(part.train), out, part.report(out))
+        for part, config_class in zip(parts, config_classes, strict=True)
+    ]
 
 
 def cmd_train(args) -> int:
@@ -119,6 +134,7 @@ def cmd_train(args) -> int:
     import torch
 
     from .train.harness import beside, with_earlier_runs
+
     parts = _trainers(args)
     if args.ablate_augment:
         torch.set_num_threads(args.threads)
@@ -126,33 +142,24 @@ def cmd_train(args) -> int:
         return 0
     if not args.card_only:
         torch.set_num_threads(args.threads)
-        configs = [_config(config_class, args) for config_class, *_ in parts]   # errors before training
-        for config, (_, train, out, report_path) in zip(configs, parts):
+        configs = [_config(config_class, args) for config_class, *_ in parts]  # errors before training
+        for config, (_, train, out, report_path) in zip(configs, parts, strict=True):
             checkpoint = beside(report_path, ".checkpoint.npz")
             earlier = json.loads(report_path.read_text()) if args.resume and report_path.is_file() else None
-            report = train(config, _mocap(args), out, seed=args.seed, limit=args.limit, checkpoint=checkpoint,
-                           resume=args.resume)
+            report = train(
+                config, _mocap(args), out, seed=args.seed, limit=args.limit, checkpoint=checkpoint, resume=args.resume
+            )
             if not args.keep_checkpoint:
-                checkpoint.unlink(missing_ok=True)       # the model is exported: nothing left to resume
+                checkpoint.unlink(missing_ok=True)  # the model is exported: nothing left to resume
             report["command"] = "sparse-body " + " ".join(sys.argv[1:])
             report = with_earlier_runs(report, earlier)
             report_path.parent.mkdir(parents=True, exist_ok=True)
             report_path.write_text(json.dumps(report, indent=1))
             print(f"written {out} and {report_path}")
     if not args.no_card:
-        from .train import model_card
-        out = parts[0][2]
-        if args.method == "lobstr":
-            card = model_card.write_lobstr_card(out, json.loads(parts[0][3].read_text()), _mocap(args),
-                                                limit=args.limit)
-        elif args.method == "dtp":      # one card for the online, lookahead and pre-trained models
-            from .train.dtp_card import write_dtp_card
-            card = write_dtp_card(out.with_name("dtp.onnx"), _mocap(args), limit=args.limit)
-        elif args.method == "avatarjlm":   # one card for the three- and four-point models
-            from .train.avatarjlm_card import write_avatarjlm_card
-            card = write_avatarjlm_card(out.with_name("avatarjlm.onnx"), _mocap(args), limit=args.limit)
-        else:
-            card = model_card.write_dragposer_card(out, _mocap(args), limit=args.limit)
+        from .methods import METHODS
+
+        card = METHODS[args.method].training.card(parts[0][2], _mocap(args), args.limit)
         print(f"written {card}")
     return 0
 
@@ -163,13 +170,14 @@ def _config(config_class, args):
     from dataclasses import fields
 
     from .train.augment import Augmentation
+
     config = config_class.named(args.config)
     if args.minutes is not None:
         config.minutes = args.minutes
     if args.steps is not None:
         config.steps = args.steps
     if args.augment is not None:
-        config.augment = Augmentation.parse(args.augment).spec     # refused here, before any training
+        config.augment = Augmentation.parse(args.augment).spec  # refused here, before any training
     types = {f.name: type(getattr(config, f.name)) for f in fields(config)}
     for item in args.set:
         name, _, value = item.partition("=")
@@ -193,6 +201,7 @@ def _ablate_augmentation(args, parts) -> None:
 
     from .train.augment import Augmentation
     from .train.harness import beside
+
     for config_class, train, out, report_path in parts:
         kinds = Augmentation.parse(args.augment or config_class.named(args.config).augment).kinds
         specs = ["none", ",".join(kinds) or "none"]
@@ -203,30 +212,41 @@ def _ablate_augmentation(args, parts) -> None:
             config = _config(config_class, args)
             config.augment = spec
             with tempfile.TemporaryDirectory() as tmp:
-                if out.is_dir():   # what an earlier part left there (the predictor trains in the VAE's space)
+                if out.is_dir():  # what an earlier part left there (the predictor trains in the VAE's space)
                     shutil.copytree(out, tmp, dirs_exist_ok=True)
                 target = Path(tmp) / out.name if out.suffix == ".onnx" else Path(tmp)
                 report = train(config, _mocap(args), target, seed=args.seed, limit=args.limit)
-            runs.append({"augment": spec, "steps": report["steps"], "minutes": report["minutes"],
-                         "validation": report["validation"]})
+            runs.append(
+                {
+                    "augment": spec,
+                    "steps": report["steps"],
+                    "minutes": report["minutes"],
+                    "validation": report["validation"],
+                }
+            )
             print(f"augment {spec}: {report['validation']}")
         path = beside(report_path, ".augment.json")
         path.parent.mkdir(parents=True, exist_ok=True)
-        path.write_text(json.dumps({"command": "sparse-body " + " ".join(sys.argv[1:]), "seed": args.seed,
-                                    "runs": runs}, indent=1))
+        path.write_text(
+            json.dumps({"command": "sparse-body " + " ".join(sys.argv[1:]), "seed": args.seed, "runs": runs}, indent=1)
+        )
         print(f"written {path}")
 
 
 def cmd_split(args) -> int:
     from .data.catalog import compute_split, read_index, split_path, split_yaml
+
     clips = read_index(_mocap(args))
     parts = compute_split(clips)
     subjects = {part: sorted({cid.split("_")[0] for cid in ids}, key=int) for part, ids in parts.items()}
-    text = split_yaml(parts, "Train / validation / test split of the CMU clips in ../shared/mocap, by subject: no\n"
-                             "test or validation subject has a take in training, so the test figures are those of\n"
-                             "people the models never saw. Written by `sparse-body split --write` (the rule is in\n"
-                             "sparse_body/data/catalog.py: compute_split). Every estimator trains and evaluates on it.\n"
-                      + "".join(f"{part} subjects: {', '.join(s)}\n" for part, s in subjects.items()))
+    text = split_yaml(
+        parts,
+        "Train / validation / test split of the CMU clips in ../shared/mocap, by subject: no\n"
+        "test or validation subject has a take in training, so the test figures are those of\n"
+        "people the models never saw. Written by `sparse-body split --write` (the rule is in\n"
+        "sparse_body/data/catalog.py: compute_split). Every estimator trains and evaluates on it.\n"
+        + "".join(f"{part} subjects: {', '.join(s)}\n" for part, s in subjects.items()),
+    )
     if args.write:
         split_path().write_text(text)
         print(f"written {split_path()}")
@@ -239,19 +259,23 @@ def cmd_split(args) -> int:
 
 def cmd_import_mocap(args) -> int:
     from .data.user_mocap import import_motion
+
     progress = None
     if not args.quiet:
         from tqdm import tqdm
+
         progress = lambda files: tqdm(files, desc="reading motion files", unit="file")  # noqa: E731
     clips, skipped = import_motion(args.sources, Path(args.out), progress)
     for path, why in skipped:
         print(f"left out {path}: {why}", file=sys.stderr)
     subjects = len({c.subject for c in clips})
     minutes = sum(c.seconds for c in clips) / 60
-    print(f"written {args.out}/clips.tsv and split.yaml: {len(clips)} clips of {subjects} subjects, "
-          f"{minutes:.1f} minutes ({len(skipped)} files left out)\n"
-          f"use it with --mocap {args.out} (or SPARSE_BODY_MOCAP={args.out}): "
-          f"sparse-body eval --mocap {args.out} --estimator ik --sensors six_point")
+    print(
+        f"written {args.out}/clips.tsv and split.yaml: {len(clips)} clips of {subjects} subjects, "
+        f"{minutes:.1f} minutes ({len(skipped)} files left out)\n"
+        f"use it with --mocap {args.out} (or SPARSE_BODY_MOCAP={args.out}): "
+        f"sparse-body eval --mocap {args.out} --estimator ik --sensors six_point"
+    )
     return 0
 
 
@@ -259,6 +283,7 @@ def _motion(args):
     """The motion named by --clip, --motion or --synthetic (in that order of preference)."""
     from .data.catalog import load_clip, load_motion_file, read_index
     from .data.synthetic import synthetic_walk
+
     if args.motion:
         return load_motion_file(Path(args.motion), args.fps)
     if args.clip:
@@ -273,13 +298,20 @@ def cmd_make_bag(args) -> int:
     from .core.sensors import load_sensor_config
     from .data.virtual_trackers import LOBSTR_NOISE, NO_NOISE
     from .offline import make_bag
+
     if not (args.clip or args.motion or args.seconds > 0):
         raise ValueError("make-bag needs a motion: --clip ID, --motion FILE, or --seconds S of the synthetic walk")
     motion = _motion(args)
     if args.seconds and (args.clip or args.motion):
         motion = motion.slice(0, int(args.seconds * motion.fps))
-    n = make_bag(motion, load_sensor_config(args.sensors), Path(args.out), LOBSTR_NOISE if args.noise else NO_NOISE,
-                 overwrite=args.overwrite, inputs=tuple(Path(p) for p in [args.motion, args.sensors] if p))
+    n = make_bag(
+        motion,
+        load_sensor_config(args.sensors),
+        Path(args.out),
+        LOBSTR_NOISE if args.noise else NO_NOISE,
+        overwrite=args.overwrite,
+        inputs=tuple(Path(p) for p in [args.motion, args.sensors] if p),
+    )
     print(f"written {args.out}: {n} frames of {motion.name} at {motion.fps:g} Hz")
     return 0
 
@@ -289,18 +321,30 @@ def cmd_process(args) -> int:
     from .core.sensors import load_sensor_config
     from .evaluation import parse_estimator_spec
     from .offline import process_bag
+
     name, options = parse_estimator_spec(args.estimator)
     if args.smooth:
         options["smooth"] = True
     refused: dict[str, int] = {}
     body = person_body(args.calibration, args.height)
-    poses = process_bag(Path(args.bag_in), Path(args.bag_out), name, load_sensor_config(args.sensors),
-                        body, args.fps, progress=not args.quiet, overwrite=args.overwrite,
-                        refused=refused, **options)
+    poses = process_bag(
+        Path(args.bag_in),
+        Path(args.bag_out),
+        name,
+        load_sensor_config(args.sensors),
+        body,
+        args.fps,
+        progress=not args.quiet,
+        overwrite=args.overwrite,
+        refused=refused,
+        **options,
+    )
     invalid = sum(not p.valid for p in poses)
     rejected = ", ".join(f"{n} {reason}" for reason, n in sorted(refused.items())) or "none"
-    print(f"written {args.bag_out}: {len(poses)} estimates ({invalid} marked invalid); "
-          f"tracker samples refused: {rejected}")
+    print(
+        f"written {args.bag_out}: {len(poses)} estimates ({invalid} marked invalid); "
+        f"tracker samples refused: {rejected}"
+    )
     return 0
 
 
@@ -308,13 +352,22 @@ def cmd_demo(args) -> int:
     from .core.sensors import load_sensor_config
     from .data.catalog import find_mocap_root
     from .demo import run_demo
-    run_demo(Path(args.out), load_sensor_config(args.sensors), args.estimator,
-             find_mocap_root(args.mocap), args.motion, args.seconds, gif=not args.no_gif)
+
+    run_demo(
+        Path(args.out),
+        load_sensor_config(args.sensors),
+        args.estimator,
+        find_mocap_root(args.mocap),
+        args.motion,
+        args.seconds,
+        gif=not args.no_gif,
+    )
     return 0
 
 
 def cmd_bench(args) -> int:
     from .bench import bench_dragposer, bench_network, run, run_goals
+
     if args.network:
         bench_network()
         return 0
@@ -340,15 +393,18 @@ def _positive_int(text: str) -> int:
 
 def _between(low: float, high: float, unit: str = ""):
     """An argparse type: a finite number from low to high (both included)."""
+
     def parse(text: str) -> float:
         try:
             value = float(text)
         except ValueError:
             raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
-        if not low <= value <= high:       # NaN fails too
-            raise argparse.ArgumentTypeError(f"must be from {low:g} to {high:g}{' ' + unit if unit else ''}, "
-                                             f"got {text}")
+        if not low <= value <= high:  # NaN fails too
+            raise argparse.ArgumentTypeError(
+                f"must be from {low:g} to {high:g}{' ' + unit if unit else ''}, got {text}"
+            )
         return value
+
     parse.__name__ = "number"
     return parse
 
@@ -362,6 +418,7 @@ def _between_int(low: int, high: int):
         if not low <= value <= high:
             raise argparse.ArgumentTypeError(f"must be from {low} to {high}, got {value}")
         return value
+
     parse.__name__ = "integer"
     return parse
 
@@ -374,11 +431,14 @@ _seconds = _between(0.0, 3600.0, "seconds")
 
 
 def _choices_text() -> str:
-    from .estimators.base import ESTIMATORS
+    from .methods import METHODS
     from .resources import config_dir
+
     sensors = sorted(p.stem for p in (config_dir() / "sensors").glob("*.yaml"))
-    return (f"estimators: {', '.join(sorted(ESTIMATORS))} (options as NAME:key=value,...); "
-            f"sensor configurations: {', '.join(sensors)} (or a YAML path)")
+    return (
+        f"estimators: {', '.join(sorted(METHODS))} (options as NAME:key=value,...); "
+        f"sensor configurations: {', '.join(sensors)} (or a YAML path)"
+    )
 
 
 class _Parser(argparse.ArgumentParser):
@@ -389,12 +449,15 @@ class _Parser(argparse.ArgumentParser):
 
 
 def build_parser() -> argparse.ArgumentParser:
+    from .methods import METHODS, TRAINABLE
+
     parser = _Parser(prog="sparse-body", description=__doc__, epilog=_choices_text())
     sub = parser.add_subparsers(dest="command", required=True)
     _add = sub.add_parser
     # every subcommand's --help shows the defaults and what can be chosen
-    sub.add_parser = lambda *a, **k: _add(*a, formatter_class=argparse.ArgumentDefaultsHelpFormatter,
-                                          epilog=_choices_text(), **k)
+    sub.add_parser = lambda *a, **k: _add(
+        *a, formatter_class=argparse.ArgumentDefaultsHelpFormatter, epilog=_choices_text(), **k
+    )
 
     p = sub.add_parser("demo", help="motion -> tracker bag -> estimator -> metrics and an animation")
     p.add_argument("--out", default="sparse_body_demo", help="folder for the bags and demo.gif")
@@ -407,48 +470,99 @@ def build_parser() -> argparse.ArgumentParser:
     p.set_defaults(func=cmd_demo)
 
     p = sub.add_parser("eval", help="run estimators over a split of the CMU clips and print the metrics")
-    p.add_argument("--estimator", action="append", required=True,
-                   help="estimator name, optionally with options: lobstr:contact_ik=false (repeat to compare several)")
+    p.add_argument(
+        "--estimator",
+        action="append",
+        required=True,
+        help="estimator name, optionally with options: lobstr:contact_ik=false (repeat to compare several)",
+    )
     p.add_argument("--sensors", default="three_point", help="sensor configuration name or YAML path")
     p.add_argument("--split", default="test", choices=["train", "validation", "test"])
     p.add_argument("--fps", type=_fps, default=60.0, help="frame rate the clips are resampled to")
-    p.add_argument("--skeleton", default="calibrated", choices=["calibrated", "height", "oracle"],
-                   help="the body the estimator gets: fitted by a T-pose calibration (trackers mounted as a user "
-                        "wears them), the canonical body at the calibrated height, or the subject's true skeleton "
-                        "with exact mounting (the lab protocol, with --noise none)")
-    p.add_argument("--noise", default="vr", choices=["vr", "lobstr", "none"],
-                   help="tracker noise: a VR system's (1 mm, 0.5 deg on average), LoBSTr's (1 cm, 1.5 deg) or none")
-    p.add_argument("--mounting-error", type=_between(0.0, 0.5, "metres"), default=0.0, metavar="METRES",
-                   help="an error no calibration finds in each tracker's mounting translation (std per axis, per "
-                        "clip; not with --skeleton oracle)")
-    p.add_argument("--faulty", type=_percent, default=0.0, metavar="PERCENT",
-                   help="DragPoser's faulty sensors: each frame, with this probability (%%), one tracker "
-                        "disconnects for 100 frames")
-    p.add_argument("--occlusion", type=_percent, default=0.0, metavar="PERCENT",
-                   help="DTP's foot occlusion: in about this share (%%) of the frames one or both foot trackers "
-                        "lose sight for half a second and report the origin with the identity rotation or noise "
-                        "within a leg's length")
-    p.add_argument("--limit", type=_positive_int,
-                   help="only N clips: the first of the split, or of the --motion files taken in turn from each group")
-    p.add_argument("--per-joint", action="store_true",
-                   help="also each joint's position and rotation error (rows 'PE <joint> [cm]', 'RE <joint> [deg]'): "
-                        "where an estimator's error sits")
-    p.add_argument("--motion", action="append", metavar="PATH",
-                   help="evaluate on these motion files instead of the CMU split (repeat): a file, a folder (searched "
-                        "recursively for .bvh / .amc / .npz) or AMC=ASF; an AMC file gets the ASF beside it whose "
-                        "name starts its own, else the only ASF in its folder")
+    p.add_argument(
+        "--skeleton",
+        default="calibrated",
+        choices=["calibrated", "height", "oracle"],
+        help="the body the estimator gets: fitted by a T-pose calibration (trackers mounted as a user "
+        "wears them), the canonical body at the calibrated height, or the subject's true skeleton "
+        "with exact mounting (the lab protocol, with --noise none)",
+    )
+    p.add_argument(
+        "--noise",
+        default="vr",
+        choices=["vr", "lobstr", "none"],
+        help="tracker noise: a VR system's (1 mm, 0.5 deg on average), LoBSTr's (1 cm, 1.5 deg) or none",
+    )
+    p.add_argument(
+        "--mounting-error",
+        type=_between(0.0, 0.5, "metres"),
+        default=0.0,
+        metavar="METRES",
+        help="an error no calibration finds in each tracker's mounting translation (std per axis, per "
+        "clip; not with --skeleton oracle)",
+    )
+    p.add_argument(
+        "--faulty",
+        type=_percent,
+        default=0.0,
+        metavar="PERCENT",
+        help="DragPoser's faulty sensors: each frame, with this probability (%%), one tracker "
+        "disconnects for 100 frames",
+    )
+    p.add_argument(
+        "--occlusion",
+        type=_percent,
+        default=0.0,
+        metavar="PERCENT",
+        help="DTP's foot occlusion: in about this share (%%) of the frames one or both foot trackers "
+        "lose sight for half a second and report the origin with the identity rotation or noise "
+        "within a leg's length",
+    )
+    p.add_argument(
+        "--limit",
+        type=_positive_int,
+        help="only N clips: the first of the split, or of the --motion files taken in turn from each group",
+    )
+    p.add_argument(
+        "--per-joint",
+        action="store_true",
+        help="also each joint's position and rotation error (rows 'PE <joint> [cm]', 'RE <joint> [deg]'): "
+        "where an estimator's error sits",
+    )
+    p.add_argument(
+        "--motion",
+        action="append",
+        metavar="PATH",
+        help="evaluate on these motion files instead of the CMU split (repeat): a file, a folder (searched "
+        "recursively for .bvh / .amc / .npz) or AMC=ASF; an AMC file gets the ASF beside it whose "
+        "name starts its own, else the only ASF in its folder",
+    )
     p.add_argument("--skeleton-file", metavar="ASF", help="the ASF skeleton of every AMC file given")
-    p.add_argument("--amc-fps", type=_fps, default=120.0, metavar="HZ",
-                   help="the rate AMC files were captured at (the files do not say)")
-    p.add_argument("--group-by", choices=["folder", "prefix", "none"],
-                   help="figures by group as well: the file's folder under the --motion folder, or its name up to "
-                        "the first _ or - (an actor; CMU's subject); default: folder for --motion")
+    p.add_argument(
+        "--amc-fps",
+        type=_fps,
+        default=120.0,
+        metavar="HZ",
+        help="the rate AMC files were captured at (the files do not say)",
+    )
+    p.add_argument(
+        "--group-by",
+        choices=["folder", "prefix", "none"],
+        help="figures by group as well: the file's folder under the --motion folder, or its name up to "
+        "the first _ or - (an actor; CMU's subject); default: folder for --motion",
+    )
     p.add_argument("--mocap", help="the CMU folder (default: ../shared/mocap/cmu or $SPARSE_BODY_MOCAP)")
-    p.add_argument("--output", help=f"where to write the JSON results (default: {RESULTS_DIR}/eval_ESTIMATOR_SENSORS.json); "
-                                    "written after each clip, and an earlier run's file under the same settings is resumed")
+    p.add_argument(
+        "--output",
+        help=f"where to write the JSON results (default: {RESULTS_DIR}/eval_ESTIMATOR_SENSORS.json); "
+        "written after each clip, and an earlier run's file under the same settings is resumed",
+    )
     p.add_argument("--quiet", action="store_true", help="no progress bar")
-    p.add_argument("--no-compare", action="store_true",
-                   help="only the named estimators: no baseline, ablation or paper figures beside them")
+    p.add_argument(
+        "--no-compare",
+        action="store_true",
+        help="only the named estimators: no baseline, ablation or paper figures beside them",
+    )
     p.set_defaults(func=cmd_eval)
 
     p = sub.add_parser("make-bag", help="write a rosbag2 (MCAP) of tracker TF from a motion")
@@ -456,8 +570,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--sensors", default="six_point", help="sensor configuration name or YAML path")
     p.add_argument("--clip", help="a CMU clip id (e.g. 02_01)")
     p.add_argument("--motion", help="a motion file (.bvh, .amc, .npz)")
-    p.add_argument("--seconds", type=_seconds, default=0.0,
-                   help="length of the synthetic walk, or cut a clip to this length")
+    p.add_argument(
+        "--seconds", type=_seconds, default=0.0, help="length of the synthetic walk, or cut a clip to this length"
+    )
     p.add_argument("--fps", type=_fps, default=60.0)
     p.add_argument("--noise", action="store_true", help="add LoBSTr's tracker noise")
     p.add_argument("--mocap", help="the CMU folder")
@@ -467,46 +582,65 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("process", help="run an estimator over a tracker bag and write an estimate bag")
     p.add_argument("bag_in")
     p.add_argument("bag_out")
-    p.add_argument("--estimator", default="ik",
-                   help="estimator, with options: lobstr, refined:base=lobstr (DragPoser refinement after it)")
+    p.add_argument(
+        "--estimator",
+        default="ik",
+        help="estimator, with options: lobstr, refined:base=lobstr (DragPoser refinement after it)",
+    )
     p.add_argument("--sensors", default="six_point")
     p.add_argument("--height", type=_height, default=1.75, help="the tracked person's height in metres")
-    p.add_argument("--calibration", help="a T-pose calibration file (the bridge's ~/calibrate): its fitted body "
-                                         "instead of the canonical one at --height")
+    p.add_argument(
+        "--calibration",
+        help="a T-pose calibration file (the bridge's ~/calibrate): its fitted body "
+        "instead of the canonical one at --height",
+    )
     p.add_argument("--fps", type=_fps, default=60.0, help="the trackers' nominal rate")
-    p.add_argument("--smooth", action="store_true",
-                   help="smooth the tracker input over the whole recording, forwards and backwards (the "
-                        "estimator option smooth=true): far less shaking under noise than the live filter")
+    p.add_argument(
+        "--smooth",
+        action="store_true",
+        help="smooth the tracker input over the whole recording, forwards and backwards (the "
+        "estimator option smooth=true): far less shaking under noise than the live filter",
+    )
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.add_argument("--overwrite", action="store_true", help="replace BAG_OUT if it exists")
     p.set_defaults(func=cmd_process)
 
     p = sub.add_parser("bench", help="step times and end-to-end latency over DDS, beside their goals")
-    p.add_argument("--estimator", action="append",
-                   help="estimator(s) to measure on --sensors (default: the goal table: ik, lobstr, dragposer, dtp, avatarjlm "
-                        "step times and ik's TF -> JointState latency)")
+    p.add_argument(
+        "--estimator",
+        action="append",
+        help="estimator(s) to measure on --sensors (default: the goal table: ik, lobstr, dragposer, dtp, avatarjlm "
+        "step times and ik's TF -> JointState latency)",
+    )
     p.add_argument("--sensors", default="six_point")
     p.add_argument("--no-latency", action="store_true", help="only the offline speed (no ROS needed)")
-    p.add_argument("--network", action="store_true",
-                   help="only LoBSTr's network step: torch against ONNX Runtime on one core")
-    p.add_argument("--dragposer", action="store_true",
-                   help="only DragPoser's optimiser: ONNX Runtime Gauss-Newton against the torch reference")
+    p.add_argument(
+        "--network", action="store_true", help="only LoBSTr's network step: torch against ONNX Runtime on one core"
+    )
+    p.add_argument(
+        "--dragposer",
+        action="store_true",
+        help="only DragPoser's optimiser: ONNX Runtime Gauss-Newton against the torch reference",
+    )
     p.set_defaults(func=cmd_bench)
 
     p = sub.add_parser("train", help="train a learned estimator on the CMU train split (ONNX + model card)")
-    p.add_argument("method", choices=["lobstr", "dragposer", "dtp", "avatarjlm"])
-    p.add_argument("--config", default="small",
-                   help="lobstr: paper, small (under an hour on 2 CPU cores) or tiny; dragposer: small (30 "
-                        "minutes a part) or tiny, and paper for its temporal predictor; dtp: small (pre-training "
-                        "and occlusion fine-tuning in under an hour on 2 CPU cores), lookahead (small with 5 "
-                        "future frames: models/dtp_lookahead.onnx), paper or tiny; avatarjlm: small (three-point, 88 "
-                        "minutes on one core), four_point (the same with the pelvis: models/avatarjlm_four_point.onnx), "
-                        "paper (d1 1024, d2 512, 6 loops: for a GPU) or tiny")
-    p.add_argument("--part", choices=["all", "vae", "temporal", "tracker_prior"], default="all",
-                   help="dragposer: train the pose VAE, then the temporal predictor and the tracker prior on its "
-                        "latents (all), or one")
-    p.add_argument("--out", help="lobstr, dtp, avatarjlm: the .onnx file to write; dragposer: the folder for its encoder, decoder and "
-                                 "temporal predictor (default: the package's models/)")
+    trainable = {name: METHODS[name].training for name in TRAINABLE}
+    p.add_argument("method", choices=list(trainable))
+    p.add_argument(
+        "--config", default="small", help="; ".join(f"{name}: {t.config_help}" for name, t in trainable.items())
+    )
+    several = {name: [part.name for part in t.parts] for name, t in trainable.items() if len(t.parts) > 1}
+    p.add_argument(
+        "--part",
+        default="all",
+        help="of a method with several networks, train all (in order: later ones learn from earlier ones) "
+        "or one: " + "; ".join(f"{name}: {', '.join(parts)}" for name, parts in several.items()),
+    )
+    p.add_argument(
+        "--out",
+        help="; ".join(f"{name}: {t.out_help}" for name, t in trainable.items()) + " (default: the package's models/)",
+    )
     p.add_argument("--minutes", type=_between(0.0, 7 * 24 * 60, "minutes"), help="stop training after this long")
     p.add_argument("--steps", type=_positive_int, help="stop training after this many steps")
     p.add_argument("--threads", type=_between_int(1, 256), default=2, help="torch CPU threads")
@@ -515,26 +649,46 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--mocap", help="the CMU folder")
     p.add_argument("--no-card", action="store_true", help="skip the test-split evaluation and model card")
     p.add_argument("--card-only", action="store_true", help="only rewrite the model card of an existing model")
-    p.add_argument("--resume", action="store_true",
-                   help="continue an interrupted training from its checkpoint (<model>.checkpoint.npz, written "
-                        "at every validation; weights only, the optimiser and its schedule start afresh); "
-                        "--steps counts from the first run")
-    p.add_argument("--keep-checkpoint", action="store_true",
-                   help="keep <model>.checkpoint.npz after the export, so that --resume can train a finished "
-                        "model further (a warm restart: the learning rate starts over)")
-    p.add_argument("--set", action="append", default=[], metavar="FIELD=VALUE",
-                   help="override a field of the configuration (repeatable), e.g. --set dropout=0.2")
-    p.add_argument("--augment", metavar="KINDS",
-                   help="augmentations of the train clips: mirror,speed,proportions (any of them), all or none "
-                        "(default: the configuration's)")
-    p.add_argument("--ablate-augment", action="store_true",
-                   help="instead of training the model: train without augmentation, with the configuration's "
-                        "(or --augment's) and with each of its kinds left out (same seed, --minutes each), and "
-                        "write the validation figures to <model>.augment.json for the model card")
+    p.add_argument(
+        "--resume",
+        action="store_true",
+        help="continue an interrupted training from its checkpoint (<model>.checkpoint.npz, written "
+        "at every validation; weights only, the optimiser and its schedule start afresh); "
+        "--steps counts from the first run",
+    )
+    p.add_argument(
+        "--keep-checkpoint",
+        action="store_true",
+        help="keep <model>.checkpoint.npz after the export, so that --resume can train a finished "
+        "model further (a warm restart: the learning rate starts over)",
+    )
+    p.add_argument(
+        "--set",
+        action="append",
+        default=[],
+        metavar="FIELD=VALUE",
+        help="override a field of the configuration (repeatable), e.g. --set dropout=0.2",
+    )
+    p.add_argument(
+        "--augment",
+        metavar="KINDS",
+        help="augmentations of the train clips: mirror,speed,proportions (any of them), all or none "
+        "(default: the configuration's)",
+    )
+    p.add_argument(
+        "--ablate-augment",
+        action="store_true",
+        help="instead of training the model: train without augmentation, with the configuration's "
+        "(or --augment's) and with each of its kinds left out (same seed, --minutes each), and "
+        "write the validation figures to <model>.augment.json for the model card",
+    )
     p.set_defaults(func=cmd_train)
 
-    p = sub.add_parser("import-mocap", help="index a CMU download or any folder of BVH / ASF+AMC files for eval, "
-                                             "train and make-bag --clip (nothing is copied or changed)")
+    p = sub.add_parser(
+        "import-mocap",
+        help="index a CMU download or any folder of BVH / ASF+AMC files for eval, "
+        "train and make-bag --clip (nothing is copied or changed)",
+    )
     p.add_argument("sources", nargs="+", help="folders (searched recursively) or motion files")
     p.add_argument("--out", required=True, help="a new folder for clips.tsv and split.yaml")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
@@ -561,6 +715,7 @@ def _exit_code(err: BaseException) -> int:
     """The exit code of an error the command ends with (see the constants above)."""
     from .bagio import OutputError
     from .core.textfile import FileTooLarge
+
     if isinstance(err, OutputError):
         return EXIT_OUTPUT
     if isinstance(err, (FileTooLarge, MemoryError, RecursionError)):
@@ -589,17 +744,19 @@ def main(argv: list[str] | None = None) -> None:
     """Run a subcommand; every error a user can cause ends in one line on stderr and its own
     exit code, never a traceback."""
     import signal
-    command, YAMLError = "sparse-body", ValueError     # (yaml's own until it is imported)
-    try:                        # from the first statement: Ctrl-C while starting is one line too
+
+    command, YAMLError = "sparse-body", ValueError  # (yaml's own until it is imported)
+    try:  # from the first statement: Ctrl-C while starting is one line too
         signal.signal(signal.SIGTERM, _terminate)
         from yaml import YAMLError
+
         args = build_parser().parse_args(argv)
         command = f"sparse-body {args.command}"
         sys.exit(args.func(args))
     except Terminated:
         print(f"{command}: terminated; nothing written", file=sys.stderr)
         sys.exit(EXIT_TERMINATED)
-    except KeyboardInterrupt:                         # partial output was removed on the way out
+    except KeyboardInterrupt:  # partial output was removed on the way out
         print(f"{command}: interrupted; nothing written", file=sys.stderr)
         sys.exit(EXIT_INTERRUPTED)
     except (ValueError, OSError, EOFError, YAMLError, MemoryError, RecursionError) as err:

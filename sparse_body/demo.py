@@ -1,5 +1,6 @@
 """`sparse-body demo`: a motion becomes a tracker bag, goes through an estimator, and comes
 out as metrics and an animation of the estimate against the ground truth."""
+
 from __future__ import annotations
 
 from pathlib import Path
@@ -17,20 +18,23 @@ from .offline import make_bag, process_bag
 
 HEAD = JOINT_INDEX["head"]
 
-DEMO_CLIP = "17_10"   # boxing, from the test split: a person no model trained on
+DEMO_CLIP = "17_10"  # boxing, from the test split: a person no model trained on
 
 
 def pick_motion(mocap_root: Path | None, motion_file: str | None, seconds: float, fps: float) -> tuple[Motion, str]:
     from .data.catalog import load_clip, load_motion_file, read_index
     from .data.synthetic import synthetic_walk
+
     if motion_file:
         return load_motion_file(Path(motion_file), fps), f"the motion file {motion_file}"
     if mocap_root is not None:
         clip = {c.clip_id: c for c in read_index(mocap_root)}[DEMO_CLIP]
         motion = load_clip(clip, fps)
         return motion.slice(0, int(seconds * fps)), f"CMU clip {DEMO_CLIP} ({clip.description}) from {mocap_root}"
-    return (synthetic_walk(seconds, fps),
-            "a built-in SYNTHETIC walk (no motion capture found: pass --motion FILE or --mocap DIR for real motion)")
+    return (
+        synthetic_walk(seconds, fps),
+        "a built-in SYNTHETIC walk (no motion capture found: pass --motion FILE or --mocap DIR for real motion)",
+    )
 
 
 def head_tops(positions: np.ndarray, global_rot: np.ndarray, skull: float) -> np.ndarray:
@@ -48,12 +52,21 @@ def gif_step(fps: float, most: float = 25.0) -> int:
     return exact[0] if exact else steps[0]
 
 
-def animate(path: Path, truth: np.ndarray, estimate: np.ndarray, trackers: np.ndarray, fps: float,
-            title: str, tops: tuple[np.ndarray, np.ndarray] | None = None, size_px: int = 560) -> None:
+def animate(
+    path: Path,
+    truth: np.ndarray,
+    estimate: np.ndarray,
+    trackers: np.ndarray,
+    fps: float,
+    title: str,
+    tops: tuple[np.ndarray, np.ndarray] | None = None,
+    size_px: int = 560,
+) -> None:
     """A GIF at the motion's real speed: ground truth in grey, the estimate in blue, trackers
     as red dots where they are mounted (a mounting offset away from their joints), over a
     floor grid, seen by a fixed camera the body moves through, with equal axes."""
     import matplotlib
+
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
     from matplotlib.lines import Line2D
@@ -66,33 +79,39 @@ def animate(path: Path, truth: np.ndarray, estimate: np.ndarray, trackers: np.nd
     floor = float(truth[..., 2].min())
     low, high = both.min(axis=0) - 0.15, both.max(axis=0) + 0.15
     low[2], high[2] = floor, max(high[2], floor + 1.0)
-    extent = high - low                                        # metres along x, y, z: the box's shape
+    extent = high - low  # metres along x, y, z: the box's shape
     fig = plt.figure(figsize=(size_px / 100, size_px / 100), dpi=100)
     ax = fig.add_axes((0.0, 0.0, 1.0, 0.9), projection="3d")
-    grid = np.arange(np.floor(low[0] * 2) / 2, high[0] + 0.5, 0.5), np.arange(np.floor(low[1] * 2) / 2, high[1] + 0.5, 0.5)
-    legend = [Line2D([], [], color="0.6", lw=2, label="truth"), Line2D([], [], color="tab:blue", lw=2, label="estimate"),
-              Line2D([], [], color="tab:red", marker="o", lw=0, label="trackers (as mounted)")]
+    grid = (
+        np.arange(np.floor(low[0] * 2) / 2, high[0] + 0.5, 0.5),
+        np.arange(np.floor(low[1] * 2) / 2, high[1] + 0.5, 0.5),
+    )
+    legend = [
+        Line2D([], [], color="0.6", lw=2, label="truth"),
+        Line2D([], [], color="tab:blue", lw=2, label="estimate"),
+        Line2D([], [], color="tab:red", marker="o", lw=0, label="trackers (as mounted)"),
+    ]
     frames = []
     for i in idx:
         ax.cla()
         ax.set_xlim(low[0], high[0])
         ax.set_ylim(low[1], high[1])
         ax.set_zlim(low[2], high[2])
-        ax.set_box_aspect(tuple(extent), zoom=1.1)               # equal axes: a metre is a metre
-        ax.grid(False)                                            # the floor grid below is the scale
+        ax.set_box_aspect(tuple(extent), zoom=1.1)  # equal axes: a metre is a metre
+        ax.grid(False)  # the floor grid below is the scale
         ax.set_xlabel("x [m]", fontsize=7)
         ax.set_ylabel("y [m]", fontsize=7)
         ax.tick_params(labelsize=6)
         ax.set_zticks([])
-        for x in grid[0]:                                         # the floor, 0.5 m squares
+        for x in grid[0]:  # the floor, 0.5 m squares
             ax.plot([x, x], [grid[1][0], grid[1][-1]], [floor, floor], color="0.85", lw=0.6)
         for y in grid[1]:
             ax.plot([grid[0][0], grid[0][-1]], [y, y], [floor, floor], color="0.85", lw=0.6)
         for n, (pos, colour) in enumerate(((truth[i], "0.6"), (estimate[i], "tab:blue"))):
             for j in range(1, len(PARENTS)):
-                ax.plot(*zip(pos[PARENTS[j]], pos[j]), color=colour, lw=2)
+                ax.plot(*zip(pos[PARENTS[j]], pos[j], strict=True), color=colour, lw=2)
             if tops is not None:
-                ax.plot(*zip(pos[HEAD], tops[n][i]), color=colour, lw=5)
+                ax.plot(*zip(pos[HEAD], tops[n][i], strict=True), color=colour, lw=5)
         tr = trackers[i][np.all(np.isfinite(trackers[i]), axis=1)]
         ax.scatter(tr[:, 0], tr[:, 1], tr[:, 2], color="tab:red", s=20)
         ax.legend(handles=legend, loc="upper left", fontsize=7, frameon=False)
@@ -100,7 +119,7 @@ def animate(path: Path, truth: np.ndarray, estimate: np.ndarray, trackers: np.nd
         fig.canvas.draw()
         frames.append(Image.fromarray(np.asarray(fig.canvas.buffer_rgba())[..., :3]).quantize(colors=64))
     plt.close(fig)
-    delay_ms = round(1000 * step / fps)                 # whole centiseconds (gif_step)
+    delay_ms = round(1000 * step / fps)  # whole centiseconds (gif_step)
     frames[0].save(path, save_all=True, append_images=frames[1:], duration=delay_ms, loop=0)
 
 
@@ -114,9 +133,18 @@ NO_VALUE = {
 }
 
 
-def run_demo(out_dir: Path, sensors: SensorConfig, estimator: str, mocap_root: Path | None,
-             motion_file: str | None = None, seconds: float = 6.0, fps: float = 60.0, gif: bool = True) -> dict:
+def run_demo(
+    out_dir: Path,
+    sensors: SensorConfig,
+    estimator: str,
+    mocap_root: Path | None,
+    motion_file: str | None = None,
+    seconds: float = 6.0,
+    fps: float = 60.0,
+    gif: bool = True,
+) -> dict:
     from .bagio import read_tracker_stream
+
     out_dir.mkdir(parents=True, exist_ok=True)
     motion, source = pick_motion(mocap_root, motion_file, seconds, fps)
     print(f"motion: {source}, {len(motion)} frames at {motion.fps:g} Hz")
@@ -124,23 +152,39 @@ def run_demo(out_dir: Path, sensors: SensorConfig, estimator: str, mocap_root: P
     # an earlier demo's bags are replaced; anything else there is refused (bagio.check_output)
     make_bag(motion, sensors, trackers, overwrite=True)
     print(f"tracker bag ({sensors.name}): {trackers}")
-    poses = process_bag(trackers, estimates, estimator, sensors, motion.skeleton, motion.fps, progress=False,
-                        overwrite=True)
+    poses = process_bag(
+        trackers, estimates, estimator, sensors, motion.skeleton, motion.fps, progress=False, overwrite=True
+    )
     print(f"estimate bag ({estimator}): {estimates}, {len(poses)} estimates")
     local = quat_to_matrix(np.stack([p.local_quats for p in poses]))
     glob, pos = forward_kinematics(local, np.stack([p.root_position for p in poses]), motion.skeleton.offsets)
     floor = estimate_floor(motion.positions)
-    metrics = sequence_metrics(pos, glob, local, motion.positions, motion.global_rotations, motion.local_rotations,
-                               motion.fps, floor, contact_labels(motion.positions, motion.fps, floor),
-                               np.stack([p.contact for p in poses]), sorted({s.joint_index for s in sensors.sites}))
+    metrics = sequence_metrics(
+        pos,
+        glob,
+        local,
+        motion.positions,
+        motion.global_rotations,
+        motion.local_rotations,
+        motion.fps,
+        floor,
+        contact_labels(motion.positions, motion.fps, floor),
+        np.stack([p.contact for p in poses]),
+        sorted({s.joint_index for s in sensors.sites}),
+    )
     for key, value in metrics.items():
-        print(f"  {key:<24}{value:8.2f}" if np.isfinite(value) else f"  {key:<24}     n/a  ({NO_VALUE.get(key, 'undefined')})")
+        print(
+            f"  {key:<24}{value:8.2f}"
+            if np.isfinite(value)
+            else f"  {key:<24}     n/a  ({NO_VALUE.get(key, 'undefined')})"
+        )
     if gif:
         stream = read_tracker_stream(trackers, sensors)
         animation = out_dir / "demo.gif"
         skull = 0.1 * motion.skeleton.height() / 1.75
         tops = (head_tops(motion.positions, motion.global_rotations, skull), head_tops(pos, glob, skull))
-        animate(animation, motion.positions, pos, stream.positions, motion.fps, f"{estimator} / {sensors.name}",
-                tops=tops)
+        animate(
+            animation, motion.positions, pos, stream.positions, motion.fps, f"{estimator} / {sensors.name}", tops=tops
+        )
         print(f"animation: {animation}")
     return metrics

@@ -3,6 +3,7 @@
 By default under the field protocol (data/field_protocol.py): the estimator gets the body and
 the tracker samples a user would have, not the subject's true skeleton and clean trackers;
 the lab protocol (LAB) gives the papers' setting for comparison."""
+
 from __future__ import annotations
 
 import json
@@ -12,7 +13,6 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
-import yaml
 
 from .core.contacts import contact_labels, estimate_floor
 from .core.kinematics import forward_kinematics
@@ -21,10 +21,18 @@ from .core.rotations import quat_to_matrix
 from .core.sensors import SensorConfig
 from .data import MotionFileError
 from .data.catalog import DEFAULT_FPS, load_clip, split_clips
-from .data.motion import Motion
-from .data.motion_inputs import (AMC_FPS, MotionInput, balanced, content_digest, find_inputs, identity_seed,
-                                 implausible, load_input)
 from .data.field_protocol import FIELD, Protocol, user_view
+from .data.motion import Motion
+from .data.motion_inputs import (
+    AMC_FPS,
+    MotionInput,
+    balanced,
+    content_digest,
+    find_inputs,
+    identity_seed,
+    implausible,
+    load_input,
+)
 from .data.virtual_trackers import TrackerNoise
 from .estimators import create_estimator
 from .estimators.base import parse_estimator_spec
@@ -34,13 +42,14 @@ from .estimators.base import parse_estimator_spec
 class EvalItem:
     """One clip to evaluate: its name, its identity (what a resumed run matches), the field
     protocol's seed, how to load it, its group in the tables and what was read."""
+
     name: str
     key: str
     seed: int
     load: Callable[[], Motion]
     group: str = ""
     source: str = ""
-    check_plausible: bool = False     # a user's file: say when its skeleton does not fit the motion
+    check_plausible: bool = False  # a user's file: say when its skeleton does not fit the motion
 
 
 @dataclass
@@ -57,7 +66,7 @@ class EvalResult:
     groups: list[str] = field(default_factory=list)
     sources: list[str] = field(default_factory=list)
     skipped: list[dict[str, str]] = field(default_factory=list)
-    settings: dict = field(default_factory=dict)    # what a resumed run must share
+    settings: dict = field(default_factory=dict)  # what a resumed run must share
 
     @property
     def summary(self) -> dict[str, float]:
@@ -71,11 +80,13 @@ class EvalResult:
         self.groups.append(item.group)
         self.sources.append(item.source)
 
-    def by_group(self) -> dict[str, "EvalResult"]:
+    def by_group(self) -> dict[str, EvalResult]:
         out: dict[str, EvalResult] = {}
         for k, group in enumerate(self.groups if len(self.groups) == len(self.clips) else []):
             if group:
-                part = out.setdefault(group, EvalResult(self.estimator, self.sensors, self.split, protocol=self.protocol))
+                part = out.setdefault(
+                    group, EvalResult(self.estimator, self.sensors, self.split, protocol=self.protocol)
+                )
                 part.clips.append(self.clips[k])
                 part.frames.append(self.frames[k])
                 part.per_clip.append(self.per_clip[k])
@@ -85,31 +96,59 @@ class EvalResult:
         """intervals=False: without the bootstrap intervals (a run's in-between writes, which
         would otherwise redo 1000 draws per group after every clip)."""
         interval = clip_interval if intervals else (lambda *_: {})
-        clips = [{"clip": c, "frames": n, **m} for c, n, m in zip(self.clips, self.frames, self.per_clip)]
+        clips = [{"clip": c, "frames": n, **m} for c, n, m in zip(self.clips, self.frames, self.per_clip, strict=True)]
         for extra, values in (("key", self.keys), ("group", self.groups), ("source", self.sources)):
             if len(values) == len(clips):
-                for row, v in zip(clips, values):
+                for row, v in zip(clips, values, strict=True):
                     row[extra] = v
-        groups = {g: {"clips": len(r.clips), "frames": int(sum(r.frames)), "summary": r.summary,
-                      "interval_95": interval(r.per_clip, r.frames)} for g, r in self.by_group().items()}
-        return {"estimator": self.estimator, "sensors": self.sensors, "split": self.split, "protocol": self.protocol,
-                "settings": self.settings, "frames": int(sum(self.frames)), "seconds": self.seconds,
-                "summary": self.summary, "interval_95": interval(self.per_clip, self.frames),
-                "groups": groups, "skipped": self.skipped, "clips": clips}
+        groups = {
+            g: {
+                "clips": len(r.clips),
+                "frames": int(sum(r.frames)),
+                "summary": r.summary,
+                "interval_95": interval(r.per_clip, r.frames),
+            }
+            for g, r in self.by_group().items()
+        }
+        return {
+            "estimator": self.estimator,
+            "sensors": self.sensors,
+            "split": self.split,
+            "protocol": self.protocol,
+            "settings": self.settings,
+            "frames": int(sum(self.frames)),
+            "seconds": self.seconds,
+            "summary": self.summary,
+            "interval_95": interval(self.per_clip, self.frames),
+            "groups": groups,
+            "skipped": self.skipped,
+            "clips": clips,
+        }
 
     @classmethod
-    def from_json(cls, data: dict) -> "EvalResult":
+    def from_json(cls, data: dict) -> EvalResult:
         info = ("clip", "frames", "key", "group", "source")
         rows = data.get("clips", [])
-        return cls(data["estimator"], data["sensors"], data["split"], [r["clip"] for r in rows],
-                   [int(r["frames"]) for r in rows], [{k: v for k, v in r.items() if k not in info} for r in rows],
-                   float(data.get("seconds", 0.0)), data.get("protocol", "field"),
-                   [r.get("key", r["clip"]) for r in rows], [r.get("group", "") for r in rows],
-                   [r.get("source", "") for r in rows], list(data.get("skipped", [])), dict(data.get("settings", {})))
+        return cls(
+            data["estimator"],
+            data["sensors"],
+            data["split"],
+            [r["clip"] for r in rows],
+            [int(r["frames"]) for r in rows],
+            [{k: v for k, v in r.items() if k not in info} for r in rows],
+            float(data.get("seconds", 0.0)),
+            data.get("protocol", "field"),
+            [r.get("key", r["clip"]) for r in rows],
+            [r.get("group", "") for r in rows],
+            [r.get("source", "") for r in rows],
+            list(data.get("skipped", [])),
+            dict(data.get("settings", {})),
+        )
 
 
-def clip_interval(per_clip: list[dict[str, float]], frames: list[int], draws: int = 1000,
-                  seed: int = 0) -> dict[str, list[float]]:
+def clip_interval(
+    per_clip: list[dict[str, float]], frames: list[int], draws: int = 1000, seed: int = 0
+) -> dict[str, list[float]]:
     """A 95 % bootstrap interval of each frame-weighted mean, clips drawn with replacement
     (how far the figure could move with other clips of the same kind); none under 2 clips."""
     if len(per_clip) < 2:
@@ -129,9 +168,15 @@ def clip_interval(per_clip: list[dict[str, float]], frames: list[int], draws: in
     return out
 
 
-def evaluate_motion(motion: Motion, estimator_name: str, sensors: SensorConfig,
-                    protocol: Protocol = FIELD, seed: int = 0, per_joint: bool = False,
-                    **options) -> dict[str, float]:
+def evaluate_motion(
+    motion: Motion,
+    estimator_name: str,
+    sensors: SensorConfig,
+    protocol: Protocol = FIELD,
+    seed: int = 0,
+    per_joint: bool = False,
+    **options,
+) -> dict[str, float]:
     """Metrics of one estimator on one motion, from the motion's own virtual trackers as the
     protocol hands them to a user's estimator (its body, mounting, noise).
 
@@ -141,8 +186,9 @@ def evaluate_motion(motion: Motion, estimator_name: str, sensors: SensorConfig,
     avatar or robot would show them. per_joint: each joint's errors as well
     (core/metrics.py: per_joint_metrics)."""
     floor = estimate_floor(motion.positions)
-    motion = Motion(motion.name, motion.fps, motion.skeleton, motion.local_quats,
-                    motion.root_positions - [0.0, 0.0, floor])
+    motion = Motion(
+        motion.name, motion.fps, motion.skeleton, motion.local_quats, motion.root_positions - [0.0, 0.0, floor]
+    )
     view = user_view(motion, sensors, protocol, seed)
     options = {**filter_options(protocol.noise), **options}
     estimator = create_estimator(estimator_name, view.sensors, view.skeleton, fps=motion.fps, **options)
@@ -154,8 +200,19 @@ def evaluate_motion(motion: Motion, estimator_name: str, sensors: SensorConfig,
     floor = 0.0
     gt_contacts = contact_labels(motion.positions, motion.fps, floor)
     tracked = sorted({s.joint_index for s in sensors.sites})
-    metrics = sequence_metrics(pos, glob, local, motion.positions, motion.global_rotations, motion.local_rotations,
-                               motion.fps, floor, gt_contacts, pred_contacts, tracked)
+    metrics = sequence_metrics(
+        pos,
+        glob,
+        local,
+        motion.positions,
+        motion.global_rotations,
+        motion.local_rotations,
+        motion.fps,
+        floor,
+        gt_contacts,
+        pred_contacts,
+        tracked,
+    )
     if per_joint:
         metrics.update(per_joint_metrics(pos, motion.positions, local, motion.local_rotations))
     return metrics
@@ -168,53 +225,13 @@ def filter_options(noise: TrackerNoise) -> dict[str, float]:
     return {"filter_position_noise": noise.position_std, "filter_rotation_noise": noise.rotation_max_deg / 3}
 
 
-# Published figures printed beside an estimator's results, by (estimator, sensors[, faulty %])
-# (the papers' own data and protocols: a guide rather than a like-for-like comparison).
-PAPER_FIGURES = {
-    ("lobstr", "four_point"): {"LoBSTr paper": {"Contact acc [%]": 85.77, "Lower RE [deg]": 8.53, "Toe PE [cm]": 6.63}},
-    # DragPoser, Table 2: joint position, rotation, velocity error and end-effector error
-    ("dragposer", "six_point"): {"DragPoser paper": {"MPJPE [cm]": 2.18, "MPJRE [deg]": 7.66, "MPJVE [cm/s]": 10.7,
-                                                     "End-effector PE [cm]": 1.02},
-                                 # Table 3: the optimiser without the temporal predictor
-                                 "paper, no predictor": {"MPJPE [cm]": 3.05, "MPJRE [deg]": 10.5,
-                                                         "MPJVE [cm/s]": 13.1, "End-effector PE [cm]": 1.36}},
-    ("dragposer", "four_point"): {"DragPoser paper": {"MPJPE [cm]": 7.86, "MPJRE [deg]": 10.6, "MPJVE [cm/s]": 20.0,
-                                                      "End-effector PE [cm]": 1.12}},
-    ("dragposer", "three_point"): {"DragPoser paper": {"MPJPE [cm]": 15.5, "MPJRE [deg]": 22.0, "MPJVE [cm/s]": 34.0,
-                                                       "End-effector PE [cm]": 16.1}},
-    ("dragposer", "hip_hands"): {"DragPoser paper": {"MPJPE [cm]": 9.95, "MPJRE [deg]": 14.1, "MPJVE [cm/s]": 23.1,
-                                                     "End-effector PE [cm]": 1.77}},
-    # DTP, Table 2 (online, TotalCapture): mean joint position error, global rotation error, jerk
-    ("dtp", "six_point"): {"DTP paper": {"MPJPE [cm]": 1.04, "MPJRE [deg]": 4.22, "Jitter [100m/s3]": 2.31}},
-    # AvatarJLM, Table 1 (AMASS Protocol 1: 90 % of CMU, BMLrub, HDM05 for training)
-    ("avatarjlm", "three_point"): {"AvatarJLM paper": {"MPJPE [cm]": 3.35, "MPJRE [deg]": 2.90, "MPJVE [cm/s]": 20.79}},
-    ("avatarjlm", "four_point"): {"AvatarJLM paper": {"MPJPE [cm]": 2.09, "MPJRE [deg]": 2.40, "MPJVE [cm/s]": 17.82}},
-    ("dragposer", "six_point", 1.0): {"DragPoser paper": {"MPJPE [cm]": 6.55, "MPJRE [deg]": 12.0,
-                                                          "MPJVE [cm/s]": 21.1, "End-effector PE [cm]": 10.2}},
-}
-
-
-def paper_figures(estimator: str, sensors: str, faulty_percent: float = 0.0, occluded_percent: float = 0.0) -> dict:
-    if occluded_percent:          # the DTP paper's occluded test set has no stated share: no like to compare
-        return {}
-    key = (estimator, sensors, faulty_percent) if faulty_percent else (estimator, sensors)
-    return PAPER_FIGURES.get(key, {})
-
-
-# What `sparse-body eval` runs beside a learned estimator unless told not to.
-COMPARE_WITH = {
-    "lobstr": ["lobstr:contact_ik=false", "ik"],
-    "dragposer": ["dragposer:temporal_weight=0", "ik"],   # the paper's Table 3 ablation, the baseline
-    "dtp": ["dtp:model=pretrained", "dtp:model=lookahead", "dragposer", "lobstr", "ik"],
-    "avatarjlm": ["avatarjlm:polish=false", "dragposer", "ik"],
-}
-
-
 def split_items(mocap_root: Path, split: str, fps: float = DEFAULT_FPS, limit: int | None = None) -> list[EvalItem]:
     """The clips of a part of the CMU split (or of an imported folder's), seeded by their place
     in the split (the split's order is fixed, so the draws are too)."""
-    return [EvalItem(c.clip_id, c.clip_id, k, lambda c=c: load_clip(c, fps), c.subject, str(c.path))
-            for k, c in enumerate(split_clips(mocap_root, split, limit))]
+    return [
+        EvalItem(c.clip_id, c.clip_id, k, lambda c=c: load_clip(c, fps), c.subject, str(c.path))
+        for k, c in enumerate(split_clips(mocap_root, split, limit))
+    ]
 
 
 def file_items(inputs: list[MotionInput], fps: float = DEFAULT_FPS, amc_fps: float = AMC_FPS) -> list[EvalItem]:
@@ -226,20 +243,40 @@ def file_items(inputs: list[MotionInput], fps: float = DEFAULT_FPS, amc_fps: flo
         try:
             digest = content_digest(inp)
         except OSError as err:
+
             def fail(err=err):
                 raise err
+
             items.append(EvalItem(inp.path.name, str(inp.path), 0, fail, inp.group, source))
             continue
         load = lambda inp=inp, digest=digest: load_input(inp, fps, amc_fps, digest)  # noqa: E731
-        items.append(EvalItem(inp.path.name, f"{inp.path.name}:{digest[:16]}", identity_seed(inp.path.name, digest),
-                              load, inp.group, source, check_plausible=True))
+        items.append(
+            EvalItem(
+                inp.path.name,
+                f"{inp.path.name}:{digest[:16]}",
+                identity_seed(inp.path.name, digest),
+                load,
+                inp.group,
+                source,
+                check_plausible=True,
+            )
+        )
     return items
 
 
-def evaluate(estimator_spec: str, sensors: SensorConfig, mocap_root: Path | None, split: str = "test",
-             fps: float = DEFAULT_FPS, protocol: Protocol = FIELD, limit: int | None = None,
-             progress: bool = True, motions: list[Path] | None = None, per_joint: bool = False,
-             **options) -> EvalResult:
+def evaluate(
+    estimator_spec: str,
+    sensors: SensorConfig,
+    mocap_root: Path | None,
+    split: str = "test",
+    fps: float = DEFAULT_FPS,
+    protocol: Protocol = FIELD,
+    limit: int | None = None,
+    progress: bool = True,
+    motions: list[Path] | None = None,
+    per_joint: bool = False,
+    **options,
+) -> EvalResult:
     """estimator_spec: a name, optionally with options ("lobstr:contact_ik=false"). The clips
     of a split of the CMU catalogue, or the motion files given (a user's own: BVH or ASF/AMC
     of a known layout, sparse_body .npz)."""
@@ -247,13 +284,24 @@ def evaluate(estimator_spec: str, sensors: SensorConfig, mocap_root: Path | None
         items, split = file_items(balanced(find_inputs(motions), limit), fps), "files"
     else:
         items = split_items(mocap_root, split, fps, limit)
-    return run_evaluation([estimator_spec], sensors, items, split, fps, protocol, per_joint,
-                          progress=progress, **options)[0]
+    return run_evaluation(
+        [estimator_spec], sensors, items, split, fps, protocol, per_joint, progress=progress, **options
+    )[0]
 
 
-def run_evaluation(specs: list[str], sensors: SensorConfig, items: list[EvalItem], split: str,
-                   fps: float = DEFAULT_FPS, protocol: Protocol = FIELD, per_joint: bool = False,
-                   out: Path | None = None, progress: bool = True, warn=None, **options) -> list[EvalResult]:
+def run_evaluation(
+    specs: list[str],
+    sensors: SensorConfig,
+    items: list[EvalItem],
+    split: str,
+    fps: float = DEFAULT_FPS,
+    protocol: Protocol = FIELD,
+    per_joint: bool = False,
+    out: Path | None = None,
+    progress: bool = True,
+    warn=None,
+    **options,
+) -> list[EvalResult]:
     """Every estimator on every clip, a clip at a time: each clip is read once for all
     estimators, and the results are written to `out` after each (so a stopped run keeps what
     it did, and the same command resumes: clips already in `out` under the same settings are
@@ -269,10 +317,11 @@ def run_evaluation(specs: list[str], sensors: SensorConfig, items: list[EvalItem
     iterator = items
     if progress:
         from tqdm import tqdm
+
         iterator = tqdm(items, desc=f"eval {'+'.join(specs)}/{sensors.name}", unit="clip")
-    done = [set(r.keys) | {s["key"] for s in r.skipped} for r in results]   # what a resumed run has
+    done = [set(r.keys) | {s["key"] for s in r.skipped} for r in results]  # what a resumed run has
     for item in iterator:
-        todo = [r for r, keys in zip(results, done) if item.key not in keys]
+        todo = [r for r, keys in zip(results, done, strict=True) if item.key not in keys]
         if not todo:
             continue
         try:
@@ -287,14 +336,15 @@ def run_evaluation(specs: list[str], sensors: SensorConfig, items: list[EvalItem
             start = time.perf_counter()
             name, spec_options = parse_estimator_spec(r.estimator)
             try:
-                metrics = evaluate_motion(motion, name, sensors, protocol, seed=item.seed, per_joint=per_joint,
-                                          **{**spec_options, **options})
+                metrics = evaluate_motion(
+                    motion, name, sensors, protocol, seed=item.seed, per_joint=per_joint, **{**spec_options, **options}
+                )
             except (MotionFileError, ValueError) as err:
                 r.skipped.append({"clip": item.name, "key": item.key, "reason": " ".join(str(err).split())})
                 continue
             r.add(item, len(motion), metrics)
             r.seconds += time.perf_counter() - start
-        if out is not None and any(r.clips for r in results):   # nothing but failures: nothing written
+        if out is not None and any(r.clips for r in results):  # nothing but failures: nothing written
             write_json(results, out, intervals=False)
     if out is not None and any(r.clips for r in results):
         write_json(results, out)
@@ -307,18 +357,29 @@ def _resumed(results: list[EvalResult], out: Path) -> list[EvalResult]:
     if not is_results_file(out):
         return results
     earlier = [EvalResult.from_json(d) for d in json.loads(Path(out).read_text())]
-    same = lambda a, b: (a.estimator, a.sensors, a.split, a.protocol, a.settings) == \
-        (b.estimator, b.sensors, b.split, b.protocol, b.settings)  # noqa: E731
+
+    def same(a, b) -> bool:
+        return (a.estimator, a.sensors, a.split, a.protocol, a.settings) == (
+            b.estimator,
+            b.sensors,
+            b.split,
+            b.protocol,
+            b.settings,
+        )
+
     return [next((e for e in earlier if same(e, r)), r) for r in results]
 
 
-def format_table(results: list[EvalResult], reference: dict[str, dict[str, float]] | None = None,
-                 max_width: int = 100) -> str:
+def format_table(
+    results: list[EvalResult], reference: dict[str, dict[str, float]] | None = None, max_width: int = 100
+) -> str:
     """Metrics as rows, one column per result (and per paper figure given in reference).
     Columns whose names would make the table wider than max_width are numbered, and the
     numbers named below the table, so it fits a normal terminal."""
     mixed = len({r.protocol for r in results}) > 1
-    columns = [f"{r.estimator}/{r.sensors}" + (f" ({r.protocol})" if mixed else "") for r in results] + list(reference or {})
+    columns = [f"{r.estimator}/{r.sensors}" + (f" ({r.protocol})" if mixed else "") for r in results] + list(
+        reference or {}
+    )
     values = [r.summary for r in results] + list((reference or {}).values())
     keys = list(results[0].summary)
     width = max(len(k) for k in keys) + 2
@@ -370,7 +431,7 @@ def format_groups(results: list[EvalResult], metric: str = "MPJPE [cm]", label: 
 
 
 RESULT_KEYS = {"estimator", "sensors", "split", "clips"}
-RESULTS_LIMIT = 256 << 20      # bytes: a results file of every CMU clip is a few MB
+RESULTS_LIMIT = 256 << 20  # bytes: a results file of every CMU clip is a few MB
 
 
 def is_results_file(path: Path) -> bool:
@@ -383,17 +444,20 @@ def is_results_file(path: Path) -> bool:
         data = json.loads(path.read_text())
     except (OSError, ValueError, RecursionError):
         return False
-    return isinstance(data, list) and bool(data) and all(isinstance(r, dict) and RESULT_KEYS <= r.keys() for r in data)
+    return isinstance(data, list) and bool(data) and all(isinstance(r, dict) and r.keys() >= RESULT_KEYS for r in data)
 
 
 def check_results_path(path: Path) -> Path:
     """Refuse, before any evaluation, a results path that is not ours to write: an existing
     file other than an earlier results file, a folder, a device; its folder must exist."""
     from .bagio import OutputError
+
     path = Path(path)
     if (path.exists() or path.is_symlink()) and not is_results_file(path):
-        raise OutputError(f"{path}: exists and is not a results file of `sparse-body eval`; it is never "
-                          f"replaced, choose another --output")
+        raise OutputError(
+            f"{path}: exists and is not a results file of `sparse-body eval`; it is never "
+            f"replaced, choose another --output"
+        )
     if not path.absolute().parent.is_dir():
         raise OutputError(f"{path}: {path.absolute().parent} is not an existing folder")
     return path
@@ -402,6 +466,7 @@ def check_results_path(path: Path) -> Path:
 def write_json(results: list[EvalResult], path: Path, intervals: bool = True) -> None:
     """The results as JSON, written under a temporary name and moved into place."""
     import os
+
     path = check_results_path(path)
     tmp = path.with_name(f".{path.name}.partial-{os.getpid()}")
     try:

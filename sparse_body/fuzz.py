@@ -11,6 +11,7 @@ SensorConfigError, CalibrationError) naming the file. Anything else escaping, a 
 sample, or one input taking longer than the time limit (a hang) stops the run with a crash
 report and a non-zero exit status; a clean run prints how many inputs it executed.
 """
+
 from __future__ import annotations
 
 import sys
@@ -53,7 +54,7 @@ def serial_input(data: bytes) -> None:
     rest = fdp.ConsumeBytes(fdp.remaining_bytes())
     i = k = 0
     while i < len(rest):
-        for frame in _serial.feed(rest[i:i + cuts[k % len(cuts)]]):
+        for frame in _serial.feed(rest[i : i + cuts[k % len(cuts)]]):
             _check(frame.orientation, frame.position)
         i, k = i + cuts[k % len(cuts)], k + 1
 
@@ -64,7 +65,7 @@ def vmc_input(data: bytes) -> None:
 
 
 _DIR = Path(tempfile.mkdtemp(prefix="sparse_body_fuzz_files_"))
-_SPLIT = b"\n%%\n"          # asf_amc and yaml: two files in one input
+_SPLIT = b"\n%%\n"  # asf_amc and yaml: two files in one input
 
 
 def _file(name: str, data: bytes) -> Path:
@@ -110,9 +111,13 @@ TEXT_TARGETS = {"bvh", "asf_amc", "yaml"}
 
 def text_seeds() -> list[bytes]:
     from sparse_body.resources import config_dir
-    return [TINY_BVH.encode(), TINY_ASF.encode() + _SPLIT + TINY_AMC.encode(),
-            (config_dir() / "sensors" / "four_point.yaml").read_bytes() + _SPLIT + _CALIBRATION,
-            (config_dir() / "sensors" / "six_point.yaml").read_bytes() + _SPLIT + _calibration_with_body()]
+
+    return [
+        TINY_BVH.encode(),
+        TINY_ASF.encode() + _SPLIT + TINY_AMC.encode(),
+        (config_dir() / "sensors" / "four_point.yaml").read_bytes() + _SPLIT + _CALIBRATION,
+        (config_dir() / "sensors" / "six_point.yaml").read_bytes() + _SPLIT + _calibration_with_body(),
+    ]
 
 
 _CALIBRATION = b"height: 1.7\nfacing_yaw: 0.1\noffsets:\n  head: [0, 0, 0, 1]\n"
@@ -122,6 +127,7 @@ def _calibration_with_body() -> bytes:
     """A calibration file with a fitted body, as the bridge writes it (its skeleton section)."""
     from sparse_body.adapters.calibration import Calibration
     from sparse_body.core.skeleton import Skeleton
+
     with tempfile.TemporaryDirectory() as folder:
         path = Path(folder) / "calibration.yaml"
         Calibration(1.7, 0.1, {}, Skeleton.canonical(1.7)).save(path)
@@ -129,7 +135,7 @@ def _calibration_with_body() -> bytes:
 
 
 def seeds() -> list[bytes]:
-    out = [encode_frame(1, 1000, [0, 0, 0, 1]), encode_frame(2, 2 ** 32 - 5, [0.5, 0.5, 0.5, 0.5], [1, 2, 3])]
+    out = [encode_frame(1, 1000, [0, 0, 0, 1]), encode_frame(2, 2**32 - 5, [0.5, 0.5, 0.5, 0.5], [1, 2, 3])]
     out.append(b"\x02\x01" + out[0] + b"\xa5\x5a\x01" + out[1])
     for address in KINDS:
         b = OscMessageBuilder(address)
@@ -153,8 +159,9 @@ def main(argv: list[str] | None = None) -> None:
     # -timeout: an input that takes seconds is a hang (a receiver thread stuck for good, a
     # loader that never returns)
     max_len = 4096 if target in TEXT_TARGETS else 512
-    atheris.Setup([argv[0], f"-runs={runs}", f"-max_len={max_len}", "-timeout=10", *argv[3:], str(corpus)],
-                  TARGETS[target])
+    atheris.Setup(
+        [argv[0], f"-runs={runs}", f"-max_len={max_len}", "-timeout=10", *argv[3:], str(corpus)], TARGETS[target]
+    )
     atheris.Fuzz()
 
 

@@ -1,4 +1,5 @@
 """Offline processing without ROS: motion -> tracker bag, and tracker bag -> estimate bag."""
+
 from __future__ import annotations
 
 from pathlib import Path
@@ -12,33 +13,56 @@ from .data.virtual_trackers import NO_NOISE, TrackerNoise, synthesize_trackers
 from .estimators import create_estimator
 
 
-def make_bag(motion: Motion, sensors: SensorConfig, out: Path, noise: TrackerNoise = NO_NOISE, seed: int = 0,
-             start: float = 1_700_000_000.0, overwrite: bool = False, inputs: tuple[Path, ...] = ()) -> int:
+def make_bag(
+    motion: Motion,
+    sensors: SensorConfig,
+    out: Path,
+    noise: TrackerNoise = NO_NOISE,
+    seed: int = 0,
+    start: float = 1_700_000_000.0,
+    overwrite: bool = False,
+    inputs: tuple[Path, ...] = (),
+) -> int:
     """Write the virtual trackers of a motion as a rosbag2 (MCAP) of /tf; returns the frame count.
     `inputs`: the files the motion came from, which the output may not replace."""
-    check_output(out, overwrite, inputs)      # before the work, not after it
+    check_output(out, overwrite, inputs)  # before the work, not after it
     stream = synthesize_trackers(motion, sensors, noise, seed)
     write_tracker_bag(out, stream, sensors, start, overwrite, inputs)
     return len(stream)
 
 
-def process_bag(bag_in: Path, bag_out: Path, estimator: str, sensors: SensorConfig, skeleton: Skeleton,
-                fps: float = 60.0, stale_after: float = 0.1, progress: bool = True, overwrite: bool = False,
-                refused: dict | None = None, **options) -> list[BodyPose]:
+def process_bag(
+    bag_in: Path,
+    bag_out: Path,
+    estimator: str,
+    sensors: SensorConfig,
+    skeleton: Skeleton,
+    fps: float = 60.0,
+    stale_after: float = 0.1,
+    progress: bool = True,
+    overwrite: bool = False,
+    refused: dict | None = None,
+    **options,
+) -> list[BodyPose]:
     """Run an estimator over a tracker bag and write one estimate per input frame (refused
     tracker samples are counted in `refused`, reason -> count, when a dict is given)."""
-    check_output(bag_out, overwrite, (Path(bag_in),))    # before the estimation, not after it
+    check_output(bag_out, overwrite, (Path(bag_in),))  # before the estimation, not after it
     stream = read_tracker_stream(bag_in, sensors, stale_after, refused)
     never = [site for s, site in enumerate(sensors.site_names) if not stream.valid[:, s].any()]
     if never:
         import warnings
-        warnings.warn(f"{bag_in}: the configured tracker(s) {', '.join(never)} of {sensors.name!r} never appear "
-                      f"with a usable pose (wrong --sensors?)", stacklevel=2)
+
+        warnings.warn(
+            f"{bag_in}: the configured tracker(s) {', '.join(never)} of {sensors.name!r} never appear "
+            f"with a usable pose (wrong --sensors?)",
+            stacklevel=2,
+        )
     est = create_estimator(estimator, sensors, skeleton, fps=fps, **options)
     frames = iter(stream)
     if progress:
         from tqdm import tqdm
+
         frames = tqdm(frames, total=len(stream), desc=f"{estimator} {Path(bag_in).name}", unit="frame")
-    poses = est.process(frames)      # offline: an estimator that can look ahead does here
+    poses = est.process(frames)  # offline: an estimator that can look ahead does here
     write_estimate_bag(bag_out, poses, skeleton, sensors.fixed_frame, overwrite=overwrite, inputs=(Path(bag_in),))
     return poses

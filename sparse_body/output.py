@@ -1,5 +1,6 @@
 """A body pose as the ROS outputs carry it, without ROS types: JointState names and values,
 TF transforms and foot contacts. ros/ and bagio.py wrap these in rclpy or rosbags messages."""
+
 from __future__ import annotations
 
 import warnings
@@ -13,7 +14,7 @@ from .core.rotations import JOINT_EULER_ORDER, matrix_to_euler, quat_to_matrix
 from .core.skeleton import JOINT_NAMES, NUM_JOINTS, PARENTS, Skeleton
 from .core.types import BodyPose
 
-AXES = ("z", "y", "x")   # JOINT_EULER_ORDER, one revolute joint per axis, outermost first
+AXES = ("z", "y", "x")  # JOINT_EULER_ORDER, one revolute joint per axis, outermost first
 assert JOINT_EULER_ORDER == "ZYX"
 
 
@@ -25,7 +26,7 @@ def joint_state_names() -> list[str]:
 def joint_state_positions(pose: BodyPose) -> np.ndarray:
     """Angles (radians) in joint_state_names() order: local = Rz(a) @ Ry(b) @ Rx(c)."""
     local = quat_to_matrix(pose.local_quats[1:])
-    with warnings.catch_warnings():   # gimbal lock still yields a valid decomposition
+    with warnings.catch_warnings():  # gimbal lock still yields a valid decomposition
         warnings.simplefilter("ignore", UserWarning)
         return matrix_to_euler(local, JOINT_EULER_ORDER).reshape(-1)
 
@@ -34,6 +35,7 @@ def pose_from_joint_state(names, positions, root_position, root_quat, stamp: flo
     """The inverse of joint_state_positions: a pose from a JointState of our 63 joints (in
     any order) and the root's pose (from TF). Missing joints or non-finite values: ValueError."""
     from .core.rotations import euler_to_matrix, matrix_to_quat
+
     index = {n: i for i, n in enumerate(names)}
     wanted = joint_state_names()
     missing = [n for n in wanted if n not in index]
@@ -52,18 +54,22 @@ def pose_from_joint_state(names, positions, root_position, root_quat, stamp: flo
 class Transform:
     parent: str
     child: str
-    translation: np.ndarray   # (3,)
-    rotation: np.ndarray      # (4,) x y z w
+    translation: np.ndarray  # (3,)
+    rotation: np.ndarray  # (4,) x y z w
 
 
-def body_transforms(pose: BodyPose, skeleton: Skeleton, fixed_frame: str, prefix: str = "",
-                    links: bool = True) -> list[Transform]:
+def body_transforms(
+    pose: BodyPose, skeleton: Skeleton, fixed_frame: str, prefix: str = "", links: bool = True
+) -> list[Transform]:
     """fixed_frame -> pelvis, and (links=True) every parent link -> child link."""
     out = [Transform(fixed_frame, prefix + JOINT_NAMES[0], pose.root_position, pose.local_quats[0])]
     if links:
         for j in range(1, NUM_JOINTS):
-            out.append(Transform(prefix + JOINT_NAMES[PARENTS[j]], prefix + JOINT_NAMES[j],
-                                 skeleton.offsets[j], pose.local_quats[j]))
+            out.append(
+                Transform(
+                    prefix + JOINT_NAMES[PARENTS[j]], prefix + JOINT_NAMES[j], skeleton.offsets[j], pose.local_quats[j]
+                )
+            )
     return out
 
 

@@ -1,4 +1,5 @@
 """Where the package's data files (config/) are, in a checkout, a pip install or a ROS install."""
+
 from __future__ import annotations
 
 import os
@@ -16,10 +17,11 @@ def share_dir() -> Path:
         return checkout
     try:  # a colcon / apt install
         from ament_index_python.packages import get_package_share_directory
+
         return Path(get_package_share_directory("sparse_body"))
     except Exception:  # noqa: BLE001 - not installed with ament, or no ament at all
         pass
-    return Path(sys.prefix) / "share" / "sparse_body"   # pip install (data-files)
+    return Path(sys.prefix) / "share" / "sparse_body"  # pip install (data-files)
 
 
 def config_dir() -> Path:

@@ -8,6 +8,7 @@ an older stamp than the one held is refused as out of order, unless it is older 
 `jump_back` seconds, which is taken for a clock jump back (a looping bag): then everything
 is forgotten and the caller is told, so it can reset its estimator.
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -30,7 +31,7 @@ class Edge:
     parent: str
     stamp: float
     translation: np.ndarray
-    rotation: np.ndarray   # x y z w, unit
+    rotation: np.ndarray  # x y z w, unit
     static: bool
     interval: float = 0.0  # running mean of the time between samples (s); 0 until the second
 
@@ -80,7 +81,7 @@ class TfCache:
         """(stamp, translation, rotation xyzw) of source in target, or None when unknown.
         The stamp is the oldest of the dynamic transforms on the way (inf if all static)."""
         edge = self._edges.get(source)
-        if edge is not None and edge.parent == target:       # the usual tracker: one edge, nothing to compose
+        if edge is not None and edge.parent == target:  # the usual tracker: one edge, nothing to compose
             return (np.inf if edge.static else edge.stamp), edge.translation.copy(), edge.rotation.copy()
         rot, trans, stamp = Rotation.identity(), np.zeros(3), np.inf
         frame, seen = source, set()
@@ -115,6 +116,7 @@ def sample_trackers(lookup, config, stamp: float, stale_after: float, budget=Non
     when unknown, `stamp` when the chain is all static).
     Orientation-only sites get NaN positions, position-only sites NaN orientations."""
     from .core.types import TrackerFrame
+
     S = len(config.sites)
     positions = np.full((S, 3), np.nan)
     orientations = np.full((S, 4), np.nan)

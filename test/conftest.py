@@ -26,6 +26,7 @@ def rng():
 
 def random_rotations(rng, shape):
     from scipy.spatial.transform import Rotation
+
     n = int(np.prod(shape))
     return Rotation.random(n, random_state=rng).as_matrix().reshape(tuple(shape) + (3, 3))
 
@@ -37,6 +38,7 @@ def ros_env(monkeypatch):
     import os
 
     from ros_helpers import isolated_domain
+
     rclpy = pytest.importorskip("rclpy", reason="rclpy is not installed (run the setup command)")
     monkeypatch.setenv("ROS_DOMAIN_ID", isolated_domain())
     rclpy.init()
@@ -49,8 +51,10 @@ def pytest_collection_modifyitems(config, items):
     alone skips nothing)."""
     if find_mocap_root() is not None:
         return
-    skip = pytest.mark.skip(reason="no motion capture: ../shared/mocap is absent and SPARSE_BODY_MOCAP unset "
-                                   "(`sparse-body import-mocap` makes one from a CMU download)")
+    skip = pytest.mark.skip(
+        reason="no motion capture: ../shared/mocap is absent and SPARSE_BODY_MOCAP unset "
+        "(`sparse-body import-mocap` makes one from a CMU download)"
+    )
     for item in items:
         if "mocap" in item.keywords:
             item.add_marker(skip)

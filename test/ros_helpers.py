@@ -1,4 +1,5 @@
 """Running the real nodes as processes and listening to them over DDS, for the tests."""
+
 from __future__ import annotations
 
 import os
@@ -16,15 +17,20 @@ def isolated_domain() -> str:
     return str(random.Random(os.getpid() + time.time_ns()).randint(1, 200))
 
 
-def start_node(module: str, params: dict, node_name: str, tmp_path: Path, env: dict,
-               remaps: dict | None = None) -> subprocess.Popen:
+def start_node(
+    module: str, params: dict, node_name: str, tmp_path: Path, env: dict, remaps: dict | None = None
+) -> subprocess.Popen:
     """python -m MODULE --ros-args --params-file FILE [-r FROM:=TO]: what a launch file gives the node."""
     params_file = tmp_path / f"{node_name}.yaml"
     params_file.write_text(yaml.safe_dump({node_name: {"ros__parameters": params}}))
-    log = open(tmp_path / f"{node_name}.log", "w")
-    remap_args = [a for src, dst in (remaps or {}).items() for a in ("-r", f"{src}:={dst}")]
-    return subprocess.Popen([sys.executable, "-m", module, "--ros-args", "--params-file", str(params_file),
-                             *remap_args], stdout=log, stderr=subprocess.STDOUT, env=env)
+    with open(tmp_path / f"{node_name}.log", "w") as log:  # the child holds its own copy
+        remap_args = [a for src, dst in (remaps or {}).items() for a in ("-r", f"{src}:={dst}")]
+        return subprocess.Popen(
+            [sys.executable, "-m", module, "--ros-args", "--params-file", str(params_file), *remap_args],
+            stdout=log,
+            stderr=subprocess.STDOUT,
+            env=env,
+        )
 
 
 def stop(*procs: subprocess.Popen) -> None:
@@ -53,6 +59,7 @@ class Listener:
         def callback(msg):
             self.received[topic].append(msg)
             self.arrival[topic].append(time.monotonic())
+
         return callback
 
     def spin_for(self, seconds: float) -> None:
@@ -80,7 +87,7 @@ class CpuBurners:
         self.count = count or os.cpu_count() or 2
         self.procs: list[subprocess.Popen] = []
 
-    def __enter__(self) -> "CpuBurners":
+    def __enter__(self) -> CpuBurners:
         self.procs = [subprocess.Popen([sys.executable, "-c", "while True: pass"]) for _ in range(self.count)]
         return self
 
@@ -109,27 +116,51 @@ def replay_bag(rclpy, ros_env, tmp_path: Path, motion, config, estimator_params:
 
     from sparse_body.msg import EstimateStatus, FootContacts
     from sparse_body.offline import make_bag
+
     make_bag(motion, config, tmp_path / "trackers")
-    est = start_node("sparse_body.ros.estimator_node", {"sensors": config.name, "autostart": True, **estimator_params},
-                     "sparse_body_estimator", tmp_path, ros_env)
+    est = start_node(
+        "sparse_body.ros.estimator_node",
+        {"sensors": config.name, "autostart": True, **estimator_params},
+        "sparse_body_estimator",
+        tmp_path,
+        ros_env,
+    )
     latched = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL)
     from diagnostic_msgs.msg import DiagnosticArray
-    listener = Listener(rclpy, {"joint_states": JointState, "foot_contacts": FootContacts, "/tf": TFMessage,
-                                "estimate_status": EstimateStatus, "robot_description": String,
-                                "/diagnostics": DiagnosticArray},
-                        qos={"robot_description": latched, **{t: max(500, 2 * len(motion)) for t in ("/tf", "joint_states",
-                                                                                         "estimate_status")}})
+
+    listener = Listener(
+        rclpy,
+        {
+            "joint_states": JointState,
+            "foot_contacts": FootContacts,
+            "/tf": TFMessage,
+            "estimate_status": EstimateStatus,
+            "robot_description": String,
+            "/diagnostics": DiagnosticArray,
+        },
+        qos={
+            "robot_description": latched,
+            **{t: max(500, 2 * len(motion)) for t in ("/tf", "joint_states", "estimate_status")},
+        },
+    )
     frames = {s.frame_id for s in config.sites}
     listener.tracker_stamps = []
     bridge = None
     try:
-        assert listener.spin_until(lambda: listener.received["robot_description"], STARTUP_LIMIT), "estimator did not start"
-        bridge = start_node("sparse_body.ros.tracker_bridge_node", {"bag": str(tmp_path / "trackers"), "min_subscribers": 2,
-                                                                    "start_delay": 0.5},
-                            "sparse_body_tracker_bridge", tmp_path, ros_env)
+        assert listener.spin_until(lambda: listener.received["robot_description"], STARTUP_LIMIT), (
+            "estimator did not start"
+        )
+        bridge = start_node(
+            "sparse_body.ros.tracker_bridge_node",
+            {"bag": str(tmp_path / "trackers"), "min_subscribers": 2, "start_delay": 0.5},
+            "sparse_body_tracker_bridge",
+            tmp_path,
+            ros_env,
+        )
 
         def tracker_messages():
             return sum(any(tf.child_frame_id in frames for tf in m.transforms) for m in listener.received["/tf"])
+
         # Until the whole bag has played and arrived, however long a loaded machine takes to start
         # the bridge and play it (within a generous limit: a bag is seconds long), then a little more.
         bridge_log = tmp_path / "sparse_body_tracker_bridge.log"
@@ -144,8 +175,14 @@ def replay_bag(rclpy, ros_env, tmp_path: Path, motion, config, estimator_params:
         listener.destroy()
         stop(est, *([bridge] if bridge else []))
     assert played, "the bridge did not play the whole bag: " + bridge_log.read_text()[-2000:]
-    listener.tracker_stamps = sorted({stamp_key(tf.header.stamp) for m in listener.received["/tf"]
-                                      for tf in m.transforms if tf.child_frame_id in frames})
+    listener.tracker_stamps = sorted(
+        {
+            stamp_key(tf.header.stamp)
+            for m in listener.received["/tf"]
+            for tf in m.transforms
+            if tf.child_frame_id in frames
+        }
+    )
     return listener
 
 

@@ -1,5 +1,6 @@
 """Tracker adapters without ROS: the serial protocol over a real pseudo-terminal, device
 clocks, VMC over real UDP with python-osc, T-pose calibration, and a short fuzzing run."""
+
 import subprocess
 import sys
 import threading
@@ -34,20 +35,20 @@ def test_serial_frames_survive_garbage_splits_and_bad_checksums(rng):
     for k, (dev, t, q, pos) in enumerate(sent):
         frame = bytearray(encode_frame(dev, t, q, pos))
         if k % 7 == 3:
-            frame[-5] ^= 0x40                            # a corrupted payload: the checksum fails
+            frame[-5] ^= 0x40  # a corrupted payload: the checksum fails
         else:
             expected.append((dev, t))
         if k % 5 == 1:
-            stream += bytes(rng.integers(0, 256, 23, dtype=np.uint8))   # line noise
+            stream += bytes(rng.integers(0, 256, 23, dtype=np.uint8))  # line noise
         if k % 11 == 0:
-            stream += b"\xa5\x5a\x01"                    # a torn frame: sync and a bit of header
+            stream += b"\xa5\x5a\x01"  # a torn frame: sync and a bit of header
         stream += frame
     decoder = FrameDecoder()
     got = []
     i = 0
-    while i < len(stream):                               # reads of 1..17 bytes
+    while i < len(stream):  # reads of 1..17 bytes
         n = int(rng.integers(1, 18))
-        got += decoder.feed(bytes(stream[i:i + n]))
+        got += decoder.feed(bytes(stream[i : i + n]))
         i += n
     assert [(f.device_id, f.device_time_us) for f in got] == expected
     assert decoder.stats.bad_checksums == len(sent) - len(expected)
@@ -55,26 +56,30 @@ def test_serial_frames_survive_garbage_splits_and_bad_checksums(rng):
     by_time = {t: (q, pos) for _, t, q, pos in sent}
     for f in got:
         q, pos = by_time[f.device_time_us]
-        assert abs(abs(np.dot(f.orientation, q)) - 1) < 1e-6     # float32 on the wire
+        assert abs(abs(np.dot(f.orientation, q)) - 1) < 1e-6  # float32 on the wire
         assert (f.position is None) == (pos is None)
 
 
 def test_serial_frames_with_impossible_values_are_dropped_and_counted():
     decoder = FrameDecoder()
-    out = decoder.feed(encode_frame(1, 0, [0, 0, 0, 0]) + encode_frame(1, 1, [np.nan, 0, 0, 1])
-                       + encode_frame(1, 2, [0, 0, 0, 1], [np.inf, 0, 0]) + encode_frame(1, 3, [0, 0, 0, 2]))
+    out = decoder.feed(
+        encode_frame(1, 0, [0, 0, 0, 0])
+        + encode_frame(1, 1, [np.nan, 0, 0, 1])
+        + encode_frame(1, 2, [0, 0, 0, 1], [np.inf, 0, 0])
+        + encode_frame(1, 3, [0, 0, 0, 2])
+    )
     assert out == [] and decoder.stats.bad_values == 4
 
 
 def test_device_clock_follows_drift_unwraps_and_survives_a_restart(rng):
     clock = DeviceClock(window=2.0)
     errors = []
-    start_us = WRAP_US - 3_000_000                       # wraps 3 s in
-    for i in range(2000):                                # 10 s at 200 Hz
+    start_us = WRAP_US - 3_000_000  # wraps 3 s in
+    for i in range(2000):  # 10 s at 200 Hz
         true_host = 1000.0 + i / 200
-        device_s = (true_host - 1000.0) * (1 + 200e-6)   # the device clock runs 200 ppm fast
+        device_s = (true_host - 1000.0) * (1 + 200e-6)  # the device clock runs 200 ppm fast
         raw = (start_us + int(device_s * 1e6)) % WRAP_US
-        arrival = true_host + 0.002 + abs(rng.normal(0, 0.003))   # transport delay >= 2 ms
+        arrival = true_host + 0.002 + abs(rng.normal(0, 0.003))  # transport delay >= 2 ms
         errors.append(clock.to_host(raw, arrival) - true_host)
     errors = np.abs(np.array(errors[400:]))
     assert errors.max() < 0.006 and np.median(errors) < 0.004
@@ -88,17 +93,40 @@ def test_serial_reader_reads_a_pseudo_terminal_and_reconnects(tmp_path):
     """The reference sender process writes through a pty at 200 Hz, with garbage, split
     frames and bad checksums, and is unplugged for a second half way."""
     from sparse_body.adapters.serial_reader import SerialTrackerReader
+
     link = tmp_path / "ttyTRACKERS"
-    sender = subprocess.Popen([sys.executable, "-m", "sparse_body.adapters.serial_sender", "--pty", str(link),
-                               "--rate", "200", "--seconds", "4", "--garbage", "0.05", "--bad-crc", "0.02", "--split",
-                               "--disconnect-at", "1.5", "--offline", "1.0"],
-                              stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    sender = subprocess.Popen(
+        [
+            sys.executable,
+            "-m",
+            "sparse_body.adapters.serial_sender",
+            "--pty",
+            str(link),
+            "--rate",
+            "200",
+            "--seconds",
+            "4",
+            "--garbage",
+            "0.05",
+            "--bad-crc",
+            "0.02",
+            "--split",
+            "--disconnect-at",
+            "1.5",
+            "--offline",
+            "1.0",
+        ],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.STDOUT,
+        text=True,
+    )
     got, lock = [], threading.Lock()
 
     def keep(samples):
         with lock:
             got.extend((time.time(), s) for s in samples)
-    deadline = time.monotonic() + 120                    # a starved machine starts the sender slowly
+
+    deadline = time.monotonic() + 120  # a starved machine starts the sender slowly
     while not link.exists() and time.monotonic() < deadline:
         time.sleep(0.02)
     reader = SerialTrackerReader(str(link), keep, reconnect_interval=0.1)
@@ -133,8 +161,9 @@ def test_unity_to_rep103_is_the_axis_change(rng):
         p = rng.normal(size=3)
         pr, qr = unity_to_rep103(p, q)
         np.testing.assert_allclose(pr, M @ p)
-        np.testing.assert_allclose(Rotation.from_quat(qr).as_matrix(), M @ Rotation.from_quat(q).as_matrix() @ M.T,
-                                   atol=1e-12)
+        np.testing.assert_allclose(
+            Rotation.from_quat(qr).as_matrix(), M @ Rotation.from_quat(q).as_matrix() @ M.T, atol=1e-12
+        )
     # Unity's up (y) is REP-103's z, Unity's forward (z) is x
     np.testing.assert_allclose(unity_to_rep103([0, 1.7, 0], [0, 0, 0, 1])[0], [0, 0, 1.7])
     np.testing.assert_allclose(unity_to_rep103([0, 0, 2.0], [0, 0, 0, 1])[0], [2.0, 0, 0])
@@ -142,15 +171,16 @@ def test_unity_to_rep103_is_the_axis_change(rng):
 
 def test_vmc_over_udp_with_python_osc():
     from pythonosc.udp_client import SimpleUDPClient
+
     got = []
     receiver = VmcReceiver(got.extend, "127.0.0.1", 0)
     try:
         client = SimpleUDPClient(*receiver.address)
         client.send_message("/VMC/Ext/Hmd/Pos", ["HMD", 0.1, 1.6, 0.3, 0.0, 0.0, 0.0, 1.0])
         client.send_message("/VMC/Ext/Con/Pos", ["LHR-AAAA", -0.2, 1.2, 0.1, 0.0, 0.7071068, 0.0, 0.7071068])
-        client.send_message("/VMC/Ext/Tra/Pos", ["tracker", 1.0])                 # too few arguments
-        client.send_message("/VMC/Ext/Tra/Pos", ["t2", 0, 0, 0, 0, 0, 0, 0])      # zero quaternion
-        client.send_message("/VMC/Ext/Bone/Pos", ["Hips", 0, 0, 0, 0, 0, 0, 1])   # not ours
+        client.send_message("/VMC/Ext/Tra/Pos", ["tracker", 1.0])  # too few arguments
+        client.send_message("/VMC/Ext/Tra/Pos", ["t2", 0, 0, 0, 0, 0, 0, 0])  # zero quaternion
+        client.send_message("/VMC/Ext/Bone/Pos", ["Hips", 0, 0, 0, 0, 0, 0, 1])  # not ours
         client._sock.sendto(b"\x00garbage", receiver.address)
         deadline = time.monotonic() + 5
         while time.monotonic() < deadline and sum(receiver.decoder.errors.values()) < 3:
@@ -185,15 +215,23 @@ def _tpose_samples(height, yaw, mounts, rng, noise=0.0):
     samples = {}
     for site, mount in mounts.items():
         j = joints[site]
-        samples[site] = [(pos[j] + rng.normal(0, noise, 3),
-                          (Rotation.from_rotvec(rng.normal(0, noise, 3)) * Rotation.from_matrix(glob[j]) * mount).as_quat())
-                         for _ in range(60)]
+        samples[site] = [
+            (
+                pos[j] + rng.normal(0, noise, 3),
+                (Rotation.from_rotvec(rng.normal(0, noise, 3)) * Rotation.from_matrix(glob[j]) * mount).as_quat(),
+            )
+            for _ in range(60)
+        ]
     return samples
 
 
 def test_tpose_calibration_recovers_mounting_and_height(rng, tmp_path):
-    mounts = {"head": Rotation.from_euler("y", 0.3), "left_hand": Rotation.from_euler("xz", [1.2, 0.4]),
-              "right_hand": Rotation.from_euler("x", -1.0), "pelvis": Rotation.from_euler("z", 2.0)}
+    mounts = {
+        "head": Rotation.from_euler("y", 0.3),
+        "left_hand": Rotation.from_euler("xz", [1.2, 0.4]),
+        "right_hand": Rotation.from_euler("x", -1.0),
+        "pelvis": Rotation.from_euler("z", 2.0),
+    }
     samples = _tpose_samples(1.62, 2.5, mounts, rng, noise=0.005)
     cal = calibrate_tpose(samples)
     assert abs(cal.height - 1.62) < 0.02
@@ -209,8 +247,12 @@ def test_tpose_calibration_recovers_mounting_and_height(rng, tmp_path):
 
 
 def test_calibration_refuses_what_is_not_a_tpose(rng, tmp_path):
-    samples = _tpose_samples(1.75, 0.0, {"head": Rotation.identity(), "left_hand": Rotation.identity(),
-                                         "right_hand": Rotation.identity()}, rng)
+    samples = _tpose_samples(
+        1.75,
+        0.0,
+        {"head": Rotation.identity(), "left_hand": Rotation.identity(), "right_hand": Rotation.identity()},
+        rng,
+    )
     samples["left_hand"] = [(samples["right_hand"][0][0] + [0, 0.1, 0], q) for _, q in samples["left_hand"]]
     with pytest.raises(CalibrationError, match="not a T-pose"):
         calibrate_tpose(samples)
@@ -224,13 +266,15 @@ def test_calibration_refuses_what_is_not_a_tpose(rng, tmp_path):
         Calibration.load(tmp_path / "worse.yaml")
 
 
-@pytest.mark.parametrize("target,runs", [("serial", 20000), ("vmc", 20000), ("bvh", 3000), ("asf_amc", 3000),
-                                         ("yaml", 3000)])
+@pytest.mark.parametrize(
+    "target,runs", [("serial", 20000), ("vmc", 20000), ("bvh", 3000), ("asf_amc", 3000), ("yaml", 3000)]
+)
 def test_a_short_fuzzing_run_finds_nothing(target, runs):
     """The full run (a million inputs each) is `make fuzz`; this keeps the harness working."""
     pytest.importorskip("atheris")
-    out = subprocess.run([sys.executable, "-m", "sparse_body.fuzz", target, str(runs)],
-                         capture_output=True, text=True, timeout=600)
+    out = subprocess.run(
+        [sys.executable, "-m", "sparse_body.fuzz", target, str(runs)], capture_output=True, text=True, timeout=600
+    )
     assert out.returncode == 0, out.stderr[-3000:]
     assert f"Done {runs} runs" in out.stderr
 
@@ -252,12 +296,13 @@ def test_orientation_only_foot_imus_turn_the_ankles_and_invent_no_position():
     from sparse_body.data.synthetic import synthetic_walk
     from sparse_body.data.virtual_trackers import synthesize_trackers
     from sparse_body.estimators import create_estimator
+
     config = load_sensor_config("four_point_foot_imus")
     motion = synthetic_walk(2.0)
     stream = synthesize_trackers(motion, config)
     feet = [config.site_names.index(s) for s in ("left_foot", "right_foot")]
     assert np.isnan(stream.positions[:, feet]).all() and np.isfinite(stream.orientations[:, feet]).all()
-    est = create_estimator("ik", config, motion.skeleton, filter=False)      # exact input, exact ankles
+    est = create_estimator("ik", config, motion.skeleton, filter=False)  # exact input, exact ankles
     assert est.joint_target(stream.frame(0), "left_foot")[0] is None
     poses = est.process(stream)
     assert all(p.valid and p.is_finite() for p in poses)

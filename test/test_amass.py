@@ -1,8 +1,10 @@
 """AMASS loading against a small SMPL-like model made here (no licensed file is needed)."""
+
 import numpy as np
 import pytest
 
-from sparse_body.core.skeleton import JOINT_INDEX as J, PARENTS
+from sparse_body.core.skeleton import JOINT_INDEX as J
+from sparse_body.core.skeleton import PARENTS
 from sparse_body.data import MotionFileError
 from sparse_body.data.amass import load_amass
 
@@ -10,18 +12,24 @@ from sparse_body.data.amass import load_amass
 def _model(tmp_path, rng):
     # 22 "vertices", one per joint, placed like a T-pose in SMPL axes (x left, y up, z forward).
     from sparse_body.core.skeleton import Skeleton
+
     ours = Skeleton.canonical().rest_positions()
-    smpl = ours[:, [1, 2, 0]]   # inverse of SMPL_TO_BODY
+    smpl = ours[:, [1, 2, 0]]  # inverse of SMPL_TO_BODY
     path = tmp_path / "model.npz"
-    np.savez(path, v_template=smpl, shapedirs=np.zeros((22, 3, 10)), J_regressor=np.eye(22),
-             kintree_table=np.array([PARENTS, list(range(22))]))
+    np.savez(
+        path,
+        v_template=smpl,
+        shapedirs=np.zeros((22, 3, 10)),
+        J_regressor=np.eye(22),
+        kintree_table=np.array([PARENTS, list(range(22))]),
+    )
     return path, ours
 
 
 def test_amass_rest_and_elbow_bend(tmp_path, rng):
     model, ours = _model(tmp_path, rng)
     poses = np.zeros((3, 156))
-    poses[1, 3 * J["left_elbow"] + 1] = np.pi / 2          # 90 degrees about SMPL y = our z (up)
+    poses[1, 3 * J["left_elbow"] + 1] = np.pi / 2  # 90 degrees about SMPL y = our z (up)
     trans = np.array([[0, 0, 0.0], [0.1, 0, 0], [0, 0, 0]])
     np.savez(tmp_path / "walk_poses.npz", poses=poses, trans=trans, betas=np.zeros(16), mocap_framerate=np.array(30.0))
     m = load_amass(tmp_path / "walk_poses.npz", model, fps=None)

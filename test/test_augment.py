@@ -1,4 +1,5 @@
 """Training augmentation (train/augment.py) on a real clip: what each kind does to the body."""
+
 import json
 
 import numpy as np
@@ -7,8 +8,17 @@ import pytest
 from sparse_body.core.contacts import estimate_floor
 from sparse_body.core.skeleton import JOINT_INDEX as J
 from sparse_body.data.catalog import load_clip
-from sparse_body.train.augment import (KINDS, MIRROR, SEGMENTS, Augmentation, mirrored, played_at,
-                                       random_variant, variants, with_proportions)
+from sparse_body.train.augment import (
+    KINDS,
+    MIRROR,
+    SEGMENTS,
+    Augmentation,
+    mirrored,
+    played_at,
+    random_variant,
+    variants,
+    with_proportions,
+)
 
 
 @pytest.fixture(scope="module")
@@ -20,10 +30,11 @@ def test_the_mirror_image_is_the_reflected_motion_with_sides_swapped(walk):
     mirror = mirrored(walk)
     np.testing.assert_allclose(mirror.positions, walk.positions[:, MIRROR] * [1, -1, 1], atol=1e-9)
     # the person's left hand now does (reflected) what the right hand did
-    np.testing.assert_allclose(mirror.positions[:, J["left_wrist"], 1], -walk.positions[:, J["right_wrist"], 1],
-                               atol=1e-9)
+    np.testing.assert_allclose(
+        mirror.positions[:, J["left_wrist"], 1], -walk.positions[:, J["right_wrist"], 1], atol=1e-9
+    )
     np.testing.assert_allclose(mirrored(mirror).positions, walk.positions, atol=1e-9)
-    assert not np.allclose(mirror.positions, walk.positions, atol=0.01)     # a walk is not symmetric
+    assert not np.allclose(mirror.positions, walk.positions, atol=0.01)  # a walk is not symmetric
 
 
 def test_speed_shortens_the_motion_and_keeps_its_path(walk):
@@ -31,8 +42,9 @@ def test_speed_shortens_the_motion_and_keeps_its_path(walk):
     assert fast.fps == walk.fps
     assert abs(fast.duration - walk.duration / 1.25) < 1.5 / walk.fps
     np.testing.assert_allclose(fast.positions[0], walk.positions[0], atol=1e-9)
-    np.testing.assert_allclose(fast.positions[-1], walk.positions[min(round((len(fast) - 1) * 1.25), len(walk) - 1)],
-                               atol=0.02)
+    np.testing.assert_allclose(
+        fast.positions[-1], walk.positions[min(round((len(fast) - 1) * 1.25), len(walk) - 1)], atol=0.02
+    )
     speed = np.linalg.norm(np.diff(walk.root_positions[:, :2], axis=0), axis=1).mean()
     fast_speed = np.linalg.norm(np.diff(fast.root_positions[:, :2], axis=0), axis=1).mean()
     assert fast_speed == pytest.approx(1.25 * speed, rel=0.02)
@@ -40,8 +52,9 @@ def test_speed_shortens_the_motion_and_keeps_its_path(walk):
 
 def test_proportions_change_segment_lengths_and_keep_the_feet_on_the_floor(walk):
     body = with_proportions(walk, {"thigh": 1.08, "forearm": 0.92})
-    lengths = np.linalg.norm(body.skeleton.offsets, axis=1) / np.maximum(np.linalg.norm(walk.skeleton.offsets, axis=1),
-                                                                          1e-12)
+    lengths = np.linalg.norm(body.skeleton.offsets, axis=1) / np.maximum(
+        np.linalg.norm(walk.skeleton.offsets, axis=1), 1e-12
+    )
     assert lengths[J["left_knee"]] == pytest.approx(1.08) and lengths[J["right_knee"]] == pytest.approx(1.08)
     assert lengths[J["left_wrist"]] == pytest.approx(0.92)
     assert lengths[J["left_elbow"]] == pytest.approx(1.0)
@@ -78,17 +91,34 @@ def test_augmentation_names_parse_and_unknown_ones_are_refused():
 
 def test_ablation_command_writes_each_runs_validation(tmp_path, mocap_root):
     from sparse_body.cli import main
+
     out = tmp_path / "lobstr.onnx"
     with pytest.raises(SystemExit) as done:
-        main(["train", "lobstr", "--config", "tiny", "--limit", "2", "--ablate-augment", "--augment", "mirror,speed",
-              "--out", str(out), "--mocap", str(mocap_root)])
+        main(
+            [
+                "train",
+                "lobstr",
+                "--config",
+                "tiny",
+                "--limit",
+                "2",
+                "--ablate-augment",
+                "--augment",
+                "mirror,speed",
+                "--out",
+                str(out),
+                "--mocap",
+                str(mocap_root),
+            ]
+        )
     assert done.value.code == 0
     report = json.loads((tmp_path / "lobstr.augment.json").read_text())
     assert [r["augment"] for r in report["runs"]] == ["none", "mirror,speed", "speed", "mirror"]
     for run in report["runs"]:
         assert run["steps"] == 3 and np.isfinite(run["validation"]["lower_rot_error_deg"])
-    assert not out.exists()       # ablation runs train throwaway models
+    assert not out.exists()  # ablation runs train throwaway models
     from sparse_body.train.model_card import LOBSTR_VALIDATION, augmentation_table
+
     table = augmentation_table(tmp_path / "lobstr.train.json", LOBSTR_VALIDATION)
     for spec in ("none", "mirror", "mirror,speed", "speed"):
         assert table.count(f"\n| {spec} |") == 1

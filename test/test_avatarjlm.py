@@ -1,6 +1,7 @@
 """AvatarJLM: features, the streaming ONNX step against the torch model over a whole window,
 the estimator on real clips (hands on their trackers, missing trackers, gaps, four-point),
 training in one command, and the node over DDS."""
+
 import json
 import subprocess
 import sys
@@ -34,10 +35,16 @@ def tiny_models(tmp_path_factory, mocap_root):
     """Tiny three- and four-point models trained for a few steps by the real training code."""
     from sparse_body.train.avatarjlm_model import AvatarJlmConfig
     from sparse_body.train.avatarjlm_train import train
+
     folder = tmp_path_factory.mktemp("avatarjlm")
     for sensors in ("three_point", "four_point"):
-        train(replace(AvatarJlmConfig.named("tiny"), sensors=sensors), mocap_root, folder / f"{sensors}.onnx",
-              limit=2, log=lambda *_: None)
+        train(
+            replace(AvatarJlmConfig.named("tiny"), sensors=sensors),
+            mocap_root,
+            folder / f"{sensors}.onnx",
+            limit=2,
+            log=lambda *_: None,
+        )
     return folder
 
 
@@ -52,13 +59,14 @@ def _joints(pose, skeleton):
 
 def test_features_do_not_depend_on_where_the_person_stands_or_faces(clip):
     from scipy.spatial.transform import Rotation
+
     turn = yaw_matrix(np.array(-2.1))
     quats = clip.local_quats.copy()
     quats[:, 0] = (Rotation.from_matrix(turn) * Rotation.from_quat(quats[:, 0])).as_quat()
     moved = replace(clip, root_positions=clip.root_positions @ turn.T + [3.0, -2.0, 0.0], local_quats=quats)
     np.testing.assert_allclose(_features(moved), _features(clip), atol=1e-9)
     x = _features(clip)
-    assert x.shape == (len(clip), 54) and np.abs(x[1:, 9:12]).max() > 1e-3   # it sees the head move
+    assert x.shape == (len(clip), 54) and np.abs(x[1:, 9:12]).max() > 1e-3  # it sees the head move
 
 
 def test_streaming_onnx_step_gives_the_torch_models_output_over_the_window(tmp_path, clip):
@@ -68,12 +76,13 @@ def test_streaming_onnx_step_gives_the_torch_models_output_over_the_window(tmp_p
     from sparse_body.estimators.avatarjlm import AvatarJlmModel
     from sparse_body.train.avatarjlm_model import AvatarJlmConfig, AvatarJlmNet
     from sparse_body.train.avatarjlm_train import export_onnx
+
     config = AvatarJlmConfig(d_embed=32, d_model=16, heads=4, loops=2, feedforward=32, window=9, dropout=0.0)
     torch.manual_seed(0)
     net = AvatarJlmNet(config).eval()
     with torch.no_grad():
         for block in net.temporal:
-            block.attention.age_bias.normal_(0.0, 1.0)      # ages must line up, not just be ignored
+            block.attention.age_bias.normal_(0.0, 1.0)  # ages must line up, not just be ignored
     x = _features(clip.slice(0, 30)).astype(np.float32)
     net.mean.copy_(torch.from_numpy(x.mean(0)))
     net.std.copy_(torch.from_numpy(x.std(0) + 1e-3))
@@ -83,16 +92,17 @@ def test_streaming_onnx_step_gives_the_torch_models_output_over_the_window(tmp_p
     stamps = np.arange(len(x)) / config.fps
     streamed = [model.step(x[t], stamps[t]) for t in range(len(x))]
     from sparse_body.core.rotations import sixd_to_matrix
+
     for t in (0, 3, config.window - 1, 20, len(x) - 1):
         with torch.no_grad():
-            full = net(torch.from_numpy(x[None, :t + 1]))[0][0, -1].numpy()
+            full = net(torch.from_numpy(x[None, : t + 1]))[0][0, -1].numpy()
         np.testing.assert_allclose(streamed[t], sixd_to_matrix(full.astype(np.float64)), atol=1e-4)
 
 
 def test_hands_reach_their_trackers_and_missing_ones_hold_the_pose(tiny_models, clip):
     stream = synthesize_trackers(clip, THREE, VR_NOISE, seed=3)
     head = stream.sites.index("head")
-    stream.positions[160:165, head] = np.nan            # the headset gone: no pose
+    stream.positions[160:165, head] = np.nan  # the headset gone: no pose
     stream.valid[100:103, stream.sites.index("left_hand")] = False
     path = str(tiny_models / "three_point.onnx")
     est = create_estimator("avatarjlm", THREE, clip.skeleton, model_path=path, filter=False)
@@ -101,7 +111,9 @@ def test_hands_reach_their_trackers_and_missing_ones_hold_the_pose(tiny_models, 
     valid = np.array([p.valid for p in poses])
     assert not valid[160:165].any() and not valid[100:103].any()
     assert valid[:100].all() and valid[103:160].all() and valid[165:].all()
-    raw = create_estimator("avatarjlm", THREE, clip.skeleton, model_path=path, filter=False, polish=False).process(stream)
+    raw = create_estimator("avatarjlm", THREE, clip.skeleton, model_path=path, filter=False, polish=False).process(
+        stream
+    )
     for t in (30, 120, 200):
         polished = np.linalg.norm(_joints(poses[t], clip.skeleton)[WRISTS] - clip.positions[t, WRISTS], axis=-1)
         network = np.linalg.norm(_joints(raw[t], clip.skeleton)[WRISTS] - clip.positions[t, WRISTS], axis=-1)
@@ -126,8 +138,9 @@ def test_a_gap_starts_the_past_over(tiny_models, clip):
     est.reset()
     for t in range(100):
         est.step(stream.frame(t))
-    assert not np.allclose(est.step(stream.frame(100)).local_quats, fresh.step(stream.frame(100)).local_quats,
-                           atol=1e-6)
+    assert not np.allclose(
+        est.step(stream.frame(100)).local_quats, fresh.step(stream.frame(100)).local_quats, atol=1e-6
+    )
 
 
 def test_four_point_model_stands_on_the_pelvis_tracker_and_needs_it(tiny_models, clip):
@@ -148,16 +161,36 @@ def test_legs_are_rebuilt_by_default_only_where_the_network_turns_them(tiny_mode
     (the shipped three-point one, tested below) do not."""
     three, four = (str(tiny_models / f"{s}.onnx") for s in ("three_point", "four_point"))
     assert create_estimator("avatarjlm", THREE, clip.skeleton, model_path=three).legs_from_positions
-    assert not create_estimator("avatarjlm", THREE, clip.skeleton, model_path=three,
-                                legs_from_positions=False).legs_from_positions
+    assert not create_estimator(
+        "avatarjlm", THREE, clip.skeleton, model_path=three, legs_from_positions=False
+    ).legs_from_positions
     assert not create_estimator("avatarjlm", FOUR, clip.skeleton, model_path=four).legs_from_positions
 
 
 def test_train_avatarjlm_is_one_command(tmp_path, mocap_root):
     import onnxruntime as ort
+
     out = tmp_path / "avatarjlm.onnx"
-    subprocess.run([sys.executable, "-m", "sparse_body.cli", "train", "avatarjlm", "--config", "tiny", "--steps", "2",
-                    "--limit", "1", "--out", str(out), "--no-card"], check=True, capture_output=True)
+    subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "sparse_body.cli",
+            "train",
+            "avatarjlm",
+            "--config",
+            "tiny",
+            "--steps",
+            "2",
+            "--limit",
+            "1",
+            "--out",
+            str(out),
+            "--no-card",
+        ],
+        check=True,
+        capture_output=True,
+    )
     report = json.loads(out.with_suffix(".train.json").read_text())
     assert report["steps"] == 2 and report["train_clips"] == 1 and "mpjpe_cm" in report["validation"]
     meta = ort.InferenceSession(str(out), providers=["CPUExecutionProvider"]).get_modelmeta().custom_metadata_map
@@ -168,9 +201,22 @@ def test_a_finished_training_trains_further_from_its_kept_checkpoint(tmp_path, m
     """--keep-checkpoint then --resume: the second run starts where the first stopped and its
     report keeps the first run, which the model card shows."""
     from sparse_body.train.avatarjlm_card import _curve, _training
+
     out = tmp_path / "avatarjlm.onnx"
-    run = [sys.executable, "-m", "sparse_body.cli", "train", "avatarjlm", "--config", "tiny", "--limit", "1",
-           "--out", str(out), "--no-card"]
+    run = [
+        sys.executable,
+        "-m",
+        "sparse_body.cli",
+        "train",
+        "avatarjlm",
+        "--config",
+        "tiny",
+        "--limit",
+        "1",
+        "--out",
+        str(out),
+        "--no-card",
+    ]
     subprocess.run(run + ["--steps", "2", "--keep-checkpoint"], check=True, capture_output=True)
     assert (tmp_path / "avatarjlm.checkpoint.npz").is_file()
     subprocess.run(run + ["--steps", "4", "--resume"], check=True, capture_output=True)
@@ -180,7 +226,7 @@ def test_a_finished_training_trains_further_from_its_kept_checkpoint(tmp_path, m
     assert not (tmp_path / "avatarjlm.checkpoint.npz").exists()
     assert "then `sparse-body" in _training(report, out.name)
     minutes = [float(row.split("|")[2]) for row in _curve(report).splitlines()]
-    assert minutes == sorted(minutes)           # the resumed run's clock goes on from the first's
+    assert minutes == sorted(minutes)  # the resumed run's clock goes on from the first's
 
 
 @pytest.mark.skipif(not (models_dir() / "avatarjlm.onnx").is_file(), reason="no shipped AvatarJLM model")
@@ -190,6 +236,7 @@ def test_shipped_three_point_model_beats_ik_on_a_held_out_walk(clip_index):
     from sparse_body.data.catalog import load_split
     from sparse_body.data.field_protocol import FIELD
     from sparse_body.evaluation import evaluate_motion
+
     assert "16_17" in load_split()["test"]
     motion = load_clip(clip_index["16_17"])
     learned = evaluate_motion(motion, "avatarjlm", THREE, FIELD)
@@ -201,8 +248,12 @@ def test_shipped_three_point_model_beats_ik_on_a_held_out_walk(clip_index):
 def _knee_twist_deg(local, offsets) -> float:
     """The largest turn of a shin about its own length in the knees' local rotations."""
     from sparse_body.core.rotations import angle_between, rotation_between
-    turns = [angle_between(rotation_between(offsets[ankle], r[knee] @ offsets[ankle]), r[knee])
-             for r in local for knee, ankle in ((J["left_knee"], J["left_ankle"]), (J["right_knee"], J["right_ankle"]))]
+
+    turns = [
+        angle_between(rotation_between(offsets[ankle], r[knee] @ offsets[ankle]), r[knee])
+        for r in local
+        for knee, ankle in ((J["left_knee"], J["left_ankle"]), (J["right_knee"], J["right_ankle"]))
+    ]
     return float(np.rad2deg(np.max(turns)))
 
 
@@ -212,18 +263,24 @@ def test_shipped_three_point_legs_are_not_turned_and_rebuilding_them_moves_no_jo
     hinges; legs_from_positions=true on it moves no knee or ankle, keeps the knees hinges and
     turns no hip by as much as a quarter turn."""
     from sparse_body.estimators.avatarjlm import AvatarJlmModel
+
     assert not AvatarJlmModel(models_dir() / "avatarjlm.onnx").turned_legs
     motion = load_clip(clip_index["05_02"]).slice(0, 120)
     stream = list(synthesize_trackers(motion, THREE))
     poses = {}
-    for name, options in {"default": {}, "hinged": {"legs_from_positions": False},
-                          "rebuilt": {"legs_from_positions": True}, "raw": {"legs_from_positions": False,
-                                                                           "hinge_knees": False}}.items():
+    for name, options in {
+        "default": {},
+        "hinged": {"legs_from_positions": False},
+        "rebuilt": {"legs_from_positions": True},
+        "raw": {"legs_from_positions": False, "hinge_knees": False},
+    }.items():
         est = create_estimator("avatarjlm", THREE, motion.skeleton, filter=False, **options)
         poses[name] = [est.step(f) for f in stream]
     local = {k: quat_to_matrix(np.stack([p.local_quats for p in v])) for k, v in poses.items()}
-    pos = {k: forward_kinematics(local[k], np.stack([p.root_position for p in poses[k]]), motion.skeleton.offsets)[1]
-           for k in poses}
+    pos = {
+        k: forward_kinematics(local[k], np.stack([p.root_position for p in poses[k]]), motion.skeleton.offsets)[1]
+        for k in poses
+    }
     np.testing.assert_allclose(local["default"], local["hinged"], atol=1e-12)
     legs = [J["left_knee"], J["right_knee"], J["left_ankle"], J["right_ankle"]]
     np.testing.assert_allclose(pos["rebuilt"][:, legs], pos["raw"][:, legs], atol=1e-9)
@@ -237,6 +294,7 @@ def test_legs_rebuilt_from_positions_undo_a_leg_turned_about_its_thigh(clip_inde
     turning back, positions the same) they come back to the truth wherever the knee is bent."""
     from sparse_body.core.rotations import axis_angle_to_matrix
     from sparse_body.estimators.avatarjlm import legs_from_positions
+
     motion = load_clip(clip_index["08_01"])
     offsets, true = motion.skeleton.offsets, motion.local_rotations[::4]
     half = axis_angle_to_matrix(np.pi * offsets[J["left_knee"]] / np.linalg.norm(offsets[J["left_knee"]]))
@@ -249,8 +307,11 @@ def test_legs_rebuilt_from_positions_undo_a_leg_turned_about_its_thigh(clip_inde
         np.testing.assert_allclose(legs_from_positions(true[t], offsets), true[t], atol=1e-6)
         rebuilt = legs_from_positions(turned[t], offsets)
         knee_ankle = [J["left_knee"], J["left_ankle"]]
-        np.testing.assert_allclose(forward_kinematics(rebuilt, np.zeros(3), offsets)[1][knee_ankle],
-                                   forward_kinematics(turned[t], np.zeros(3), offsets)[1][knee_ankle], atol=1e-9)
+        np.testing.assert_allclose(
+            forward_kinematics(rebuilt, np.zeros(3), offsets)[1][knee_ankle],
+            forward_kinematics(turned[t], np.zeros(3), offsets)[1][knee_ankle],
+            atol=1e-9,
+        )
         error = np.rad2deg(angle_between(rebuilt[joints], true[t][joints])).max()
         assert error < 0.1 if bent[t] else True
     assert bent.sum() > 10
@@ -259,11 +320,22 @@ def test_legs_rebuilt_from_positions_undo_a_leg_turned_about_its_thigh(clip_inde
 def test_estimator_node_runs_avatarjlm_over_dds(tiny_models, tmp_path, clip, ros_env):
     """estimator:=avatarjlm with the three-point configuration, fed by the tracker bridge from a bag."""
     import rclpy
+
     pytest.importorskip("tf2_msgs.msg")
     from ros_helpers import during_playback, replay_bag
-    listener = replay_bag(rclpy, ros_env, tmp_path, clip.slice(0, 180), THREE,
-                          {"estimator": "avatarjlm", "model_path": str(tiny_models / "three_point.onnx"),
-                           "height": clip.skeleton.height()})
+
+    listener = replay_bag(
+        rclpy,
+        ros_env,
+        tmp_path,
+        clip.slice(0, 180),
+        THREE,
+        {
+            "estimator": "avatarjlm",
+            "model_path": str(tiny_models / "three_point.onnx"),
+            "height": clip.skeleton.height(),
+        },
+    )
     statuses = during_playback(listener, "estimate_status")
     valid = sum(s.valid for s in statuses)
     assert valid >= 0.9 * len(statuses) and valid >= 30, (tmp_path / "sparse_body_estimator.log").read_text()
@@ -274,14 +346,17 @@ def test_leg_term_judges_the_legs_own_swing_not_the_root(clip):
     from sparse_body.core.rotations import matrix_to_6d
     from sparse_body.train.avatarjlm_model import AvatarJlmConfig, AvatarJlmNet, leg_positions
     from sparse_body.train.avatarjlm_train import train
+
     net = AvatarJlmNet(AvatarJlmConfig.named("tiny"))
     local = clip.local_rotations[:10].copy()
     turned = local.copy()
     turned[:, 0] = yaw_matrix(np.array(1.3)) @ turned[:, 0]
     bent = local.copy()
     bent[:, J["left_knee"]] = bent[:, J["left_knee"]] @ quat_to_matrix(np.array([np.sin(0.4), 0, 0, np.cos(0.4)]))
-    legs = [leg_positions(torch.tensor(matrix_to_6d(r), dtype=torch.float32), net.offsets) for r in (local, turned, bent)]
-    assert torch.allclose(legs[0], legs[1], atol=1e-5)             # the root's turn is not the legs'
-    assert (legs[0] - legs[2]).norm(dim=-1).max() > 0.05           # a bent knee moves the foot
+    legs = [
+        leg_positions(torch.tensor(matrix_to_6d(r), dtype=torch.float32), net.offsets) for r in (local, turned, bent)
+    ]
+    assert torch.allclose(legs[0], legs[1], atol=1e-5)  # the root's turn is not the legs'
+    assert (legs[0] - legs[2]).norm(dim=-1).max() > 0.05  # a bent knee moves the foot
     with pytest.raises(ValueError, match="train_noise must be one of"):
         train(replace(AvatarJlmConfig.named("tiny"), train_noise="loud"), None, None)

@@ -1,14 +1,16 @@
 """The closed-form body IK (core/body_ik.py) and the estimator template it runs in."""
+
 import numpy as np
 import pytest
-
 from conftest import random_rotations
+
 from sparse_body.core.body_ik import LIMBS, SOFT_REACH, fit_spine, hinge_angle, reach_angle, soft_distance, solve_body
 from sparse_body.core.kinematics import forward_kinematics
 from sparse_body.core.rotations import rotation_about
 from sparse_body.core.skeleton import JOINT_INDEX as J
 from sparse_body.core.skeleton import Skeleton
 from sparse_body.estimators.reference import standing_pose
+
 
 def _limb_length(offsets, limb):
     return np.linalg.norm(offsets[limb.hinge]) + np.linalg.norm(offsets[limb.end])
@@ -40,14 +42,14 @@ def test_solved_limbs_reach_reachable_targets_with_exact_hinges_within_limits(rn
             targets[end] = rest[limb.upper] + direction * rng.uniform(0.35, 0.98) * _limb_length(offsets, limb)
         local, glob, pos = solve_body(start, root, offsets, targets)
         _, fk = forward_kinematics(local, root, offsets)
-        np.testing.assert_allclose(fk, pos, atol=1e-12)        # what it returns is the pose's own FK
+        np.testing.assert_allclose(fk, pos, atol=1e-12)  # what it returns is the pose's own FK
         for end, limb in LIMBS.items():
             assert np.linalg.norm(fk[end] - targets[end]) < 1e-6
             hinge = local[limb.hinge]
             angle = hinge_angle(hinge, limb.axis)
-            np.testing.assert_allclose(hinge @ limb.axis, limb.axis, atol=1e-12)   # a rotation about its axis only
+            np.testing.assert_allclose(hinge @ limb.axis, limb.axis, atol=1e-12)  # a rotation about its axis only
             assert limb.limits[0] - 1e-9 <= angle <= limb.limits[1] + 1e-9
-        np.testing.assert_allclose(local[0], start[0])                # the root is not the limbs' to move
+        np.testing.assert_allclose(local[0], start[0])  # the root is not the limbs' to move
 
 
 def test_a_target_out_of_reach_gets_the_stretched_limb_pointing_at_it():
@@ -71,7 +73,7 @@ def test_the_swivel_follows_from_the_previous_pose_without_jumps():
     _, pos = forward_kinematics(local, root, offsets)
     shoulder = pos[J["left_shoulder"]]
     elbows, hands = [], []
-    for t in np.linspace(0, 2 * np.pi, 400):                       # a circle in front of the body
+    for t in np.linspace(0, 2 * np.pi, 400):  # a circle in front of the body
         target = shoulder + np.array([0.35 + 0.1 * np.cos(t), 0.15 * np.sin(t), -0.15 + 0.1 * np.sin(2 * t)])
         local, _, pos = solve_body(local, root, offsets, {J["left_wrist"]: target})
         elbows.append(pos[J["left_elbow"]])
@@ -92,7 +94,7 @@ def test_the_spine_puts_the_head_on_its_target_and_leaves_the_pelvis(rng):
         direction = rng.normal(size=3)
         direction /= np.linalg.norm(direction)
         s1 = root + local[0] @ offsets[J["spine1"]]
-        target = s1 + direction * spine_length * rng.uniform(0.85, 1.0)     # leaning and bending
+        target = s1 + direction * spine_length * rng.uniform(0.85, 1.0)  # leaning and bending
         before = local.copy()
         fit_spine(local, root, offsets, target)
         _, pos = forward_kinematics(local, root, offsets)
@@ -136,7 +138,7 @@ def test_keep_shape_only_turns_a_decoded_elbow_about_its_axis(rng):
     target = pos[J["right_wrist"]] + np.array([0.03, 0.02, 0.05])
     solved, _, solved_pos = solve_body(local, root, offsets, {J["right_wrist"]: target}, keep_shape=True)
     assert np.linalg.norm(solved_pos[J["right_wrist"]] - target) < 1e-6
-    turn = local[limb.hinge].T @ solved[limb.hinge]             # the change is a turn about the hinge axis
+    turn = local[limb.hinge].T @ solved[limb.hinge]  # the change is a turn about the hinge axis
     np.testing.assert_allclose(turn @ limb.axis, limb.axis, atol=1e-9)
 
 
@@ -149,13 +151,13 @@ def test_keep_shape_turns_the_collar_as_far_as_a_hand_just_out_of_reach_needs(be
     local = standing_pose()
     limb = LIMBS[J["left_wrist"]]
     _, pos = forward_kinematics(local, root, offsets)
-    down = np.array([0.0, 0.0, -1.0])                          # a hanging arm, the hand just too far
+    down = np.array([0.0, 0.0, -1.0])  # a hanging arm, the hand just too far
     target = pos[limb.upper] + down * (_limb_length(offsets, limb) + beyond)
     solved, glob, solved_pos = solve_body(local, root, offsets, {limb.end: target}, keep_shape=True)
     assert np.linalg.norm(solved_pos[limb.end] - target) < 1e-6
     collar = J["left_collar"]
     turned = np.degrees(np.arccos(np.clip((np.trace(local[collar].T @ solved[collar]) - 1) / 2, -1, 1)))
-    assert 0 < turned < 45                                     # the collar did it, and no more than needed
+    assert 0 < turned < 45  # the collar did it, and no more than needed
     _, _, ik_pos = solve_body(local, root, offsets, {limb.end: target})
     assert np.linalg.norm(ik_pos[limb.end] - target) > 0.5 * beyond
 
@@ -169,6 +171,7 @@ def test_the_estimator_template_holds_the_last_pose_and_starts_over_after_a_non_
 
     class Scripted(Estimator):
         """Returns what it is told to: a pose, None (too little input) or NaN."""
+
         name = "scripted"
 
         def __init__(self, *args):
@@ -193,10 +196,10 @@ def test_the_estimator_template_holds_the_last_pose_and_starts_over_after_a_non_
     est.script = ["pose", "none", "nan", "pose"]
     first, held, broken, again = (est.step(stream.frame(i)) for i in range(4))
     assert first.valid and not held.valid and not broken.valid and again.valid
-    np.testing.assert_allclose(held.root_position, first.root_position)    # the last pose, at the new stamp
+    np.testing.assert_allclose(held.root_position, first.root_position)  # the last pose, at the new stamp
     assert held.stamp == stream.times[1]
-    assert broken.is_finite() and est.resets == 2                          # started over, nothing non-finite out
-    np.testing.assert_allclose(broken.root_position, 0.0)                  # after the reset: the starting pose
+    assert broken.is_finite() and est.resets == 2  # started over, nothing non-finite out
+    np.testing.assert_allclose(broken.root_position, 0.0)  # after the reset: the starting pose
 
 
 @pytest.mark.parametrize("sensors", ["three_point", "four_point", "six_point"])
@@ -206,6 +209,7 @@ def test_ik_puts_every_tracked_joint_on_its_tracker(sensors):
     from sparse_body.data.synthetic import synthetic_walk
     from sparse_body.data.virtual_trackers import synthesize_trackers
     from sparse_body.estimators import create_estimator
+
     config = load_sensor_config(sensors)
     motion = synthetic_walk(3.0)
     stream = synthesize_trackers(motion, config)
@@ -214,8 +218,9 @@ def test_ik_puts_every_tracked_joint_on_its_tracker(sensors):
     for i, frame in enumerate(stream):
         pose = est.step(frame)
         _, pos = forward_kinematics(quat_to_matrix(pose.local_quats), pose.root_position, motion.skeleton.offsets)
-        errors.append([np.linalg.norm(pos[J[SITE_JOINTS[s]]] - motion.positions[i, J[SITE_JOINTS[s]]])
-                       for s in config.site_names])
+        errors.append(
+            [np.linalg.norm(pos[J[SITE_JOINTS[s]]] - motion.positions[i, J[SITE_JOINTS[s]]]) for s in config.site_names]
+        )
     # exact but for the soft reach of nearly straight legs and arms (at most 0.63 of it short)
-    assert np.max(errors) < 0.63 * SOFT_REACH + 0.001, dict(zip(config.site_names, np.max(errors, axis=0)))
+    assert np.max(errors) < 0.63 * SOFT_REACH + 0.001, dict(zip(config.site_names, np.max(errors, axis=0), strict=True))
     assert np.mean(errors) < 0.002

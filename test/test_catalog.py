@@ -1,4 +1,5 @@
 """The CMU index, the committed split and the parse cache (needs ../shared/mocap)."""
+
 import time
 
 import numpy as np
@@ -25,7 +26,7 @@ def test_committed_split_is_the_computed_one_and_keeps_people_apart(clip_index):
     subjects = {s: {clip_index[c].subject for c in split[s]} for s in SPLITS}
     assert not subjects["train"] & (subjects["test"] | subjects["validation"])
     assert not subjects["test"] & subjects["validation"]
-    assert len(subjects["test"]) >= 3 and len(subjects["validation"]) >= 3    # several people, not one
+    assert len(subjects["test"]) >= 3 and len(subjects["validation"]) >= 3  # several people, not one
     total = sum(c.seconds for c in clip_index.values())
     for part in ("test", "validation"):
         share = sum(clip_index[c].seconds for c in split[part]) / total

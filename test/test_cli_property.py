@@ -1,6 +1,7 @@
 """Generated command lines, option strings and files thrown at the `sparse-body` command: it
 either succeeds and writes only the bag it was asked for, or ends with one line on stderr,
 a non-zero exit code and nothing written (never a traceback, never a hang)."""
+
 import contextlib
 import io
 import tempfile
@@ -17,24 +18,73 @@ from sparse_body.core.sensors import load_sensor_config  # noqa: E402
 from sparse_body.data.synthetic import synthetic_walk  # noqa: E402
 from sparse_body.offline import make_bag  # noqa: E402
 
-WORDS = ["0", "-1", "1e9", "nan", "inf", "-inf", "2.5", "true", "[1, 2]", "{a: 1}", "[[[[", "!!python/name:os.system",
-         "", "~nouser/x", "/dev/zero", "/dev/null", "..", "\x00", "é", "60", "1.75", "0.3"]
-NUMBERS = st.one_of(st.sampled_from(WORDS), st.floats(allow_nan=True, allow_infinity=True).map(repr),
-                    st.integers(-10**12, 10**12).map(str))
-OPTION_NAMES = ["floor_height", "max_gap", "foot_trust", "iterations", "contact_threshold", "filter", "smooth",
-                "filter_position_noise", "model_path", "threads", "bogus", "base", "model"]
-ESTIMATOR = st.builds(lambda name, opts: name + (":" + ",".join(f"{k}={v}" for k, v in opts) if opts else ""),
-                      st.sampled_from(["ik", "reference", "dtp", "lobstr", "refined", "bogus", ""]),
-                      st.lists(st.tuples(st.sampled_from(OPTION_NAMES), NUMBERS), max_size=3))
-FILE = st.tuples(st.sampled_from([".yaml", ".bvh", ".amc", ".npz", ".gz", ""]),
-                 st.one_of(st.binary(max_size=600), st.text(max_size=600).map(str.encode),
-                           st.sampled_from([b"sites: [", b"HIERARCHY\nROOT a\n{\n", b"height: 1.7\n",
-                                            b"rosbag2_bagfile_information: {}\n"])))
+WORDS = [
+    "0",
+    "-1",
+    "1e9",
+    "nan",
+    "inf",
+    "-inf",
+    "2.5",
+    "true",
+    "[1, 2]",
+    "{a: 1}",
+    "[[[[",
+    "!!python/name:os.system",
+    "",
+    "~nouser/x",
+    "/dev/zero",
+    "/dev/null",
+    "..",
+    "\x00",
+    "é",
+    "60",
+    "1.75",
+    "0.3",
+]
+NUMBERS = st.one_of(
+    st.sampled_from(WORDS),
+    st.floats(allow_nan=True, allow_infinity=True).map(repr),
+    st.integers(-(10**12), 10**12).map(str),
+)
+OPTION_NAMES = [
+    "floor_height",
+    "max_gap",
+    "foot_trust",
+    "iterations",
+    "contact_threshold",
+    "filter",
+    "smooth",
+    "filter_position_noise",
+    "model_path",
+    "threads",
+    "bogus",
+    "base",
+    "model",
+]
+ESTIMATOR = st.builds(
+    lambda name, opts: name + (":" + ",".join(f"{k}={v}" for k, v in opts) if opts else ""),
+    st.sampled_from(["ik", "reference", "dtp", "lobstr", "refined", "bogus", ""]),
+    st.lists(st.tuples(st.sampled_from(OPTION_NAMES), NUMBERS), max_size=3),
+)
+FILE = st.tuples(
+    st.sampled_from([".yaml", ".bvh", ".amc", ".npz", ".gz", ""]),
+    st.one_of(
+        st.binary(max_size=600),
+        st.text(max_size=600).map(str.encode),
+        st.sampled_from(
+            [b"sites: [", b"HIERARCHY\nROOT a\n{\n", b"height: 1.7\n", b"rosbag2_bagfile_information: {}\n"]
+        ),
+    ),
+)
 
 
 def _files(root: Path) -> dict:
-    return {str(p.relative_to(root)): (p.stat().st_size, p.stat().st_mtime_ns)
-            for p in sorted(root.rglob("*")) if p.is_file()}
+    return {
+        str(p.relative_to(root)): (p.stat().st_size, p.stat().st_mtime_ns)
+        for p in sorted(root.rglob("*"))
+        if p.is_file()
+    }
 
 
 @pytest.fixture(scope="module")
@@ -45,14 +95,37 @@ def tracker_bag(tmp_path_factory) -> Path:
 
 
 @settings(max_examples=40, deadline=None, derandomize=True, database=None, suppress_health_check=list(HealthCheck))
-@given(command=st.sampled_from(["process", "make-bag", "eval"]), estimator=ESTIMATOR,
-       flags=st.lists(st.tuples(st.sampled_from(["--fps", "--height", "--seconds", "--sensors", "--calibration",
-                                                 "--limit", "--mounting-error", "--faulty", "--clip", "--skeleton"]),
-                                NUMBERS), max_size=3),
-       user_file=FILE, file_flag=st.sampled_from(["--sensors", "--calibration", "--motion", None]),
-       overwrite=st.booleans(), out_name=st.sampled_from(["out", "walk", "existing", "user.txt", "."]))
-def test_generated_command_lines_end_cleanly_and_write_nothing_on_error(tracker_bag, command, estimator, flags,
-                                                                        user_file, file_flag, overwrite, out_name):
+@given(
+    command=st.sampled_from(["process", "make-bag", "eval"]),
+    estimator=ESTIMATOR,
+    flags=st.lists(
+        st.tuples(
+            st.sampled_from(
+                [
+                    "--fps",
+                    "--height",
+                    "--seconds",
+                    "--sensors",
+                    "--calibration",
+                    "--limit",
+                    "--mounting-error",
+                    "--faulty",
+                    "--clip",
+                    "--skeleton",
+                ]
+            ),
+            NUMBERS,
+        ),
+        max_size=3,
+    ),
+    user_file=FILE,
+    file_flag=st.sampled_from(["--sensors", "--calibration", "--motion", None]),
+    overwrite=st.booleans(),
+    out_name=st.sampled_from(["out", "walk", "existing", "user.txt", "."]),
+)
+def test_generated_command_lines_end_cleanly_and_write_nothing_on_error(
+    tracker_bag, command, estimator, flags, user_file, file_flag, overwrite, out_name
+):
     with tempfile.TemporaryDirectory() as tmp:
         work = Path(tmp)
         (work / "user.txt").write_text("a user's file")
@@ -62,10 +135,21 @@ def test_generated_command_lines_end_cleanly_and_write_nothing_on_error(tracker_
         given_file = work / f"given{suffix}"
         given_file.write_bytes(content)
         out = work / out_name
-        argv = {"process": [command, str(tracker_bag), str(out), "--estimator", estimator, "--quiet"],
-                "make-bag": [command, str(out), "--seconds", "0.3"],
-                "eval": [command, "--estimator", estimator, "--motion", str(given_file), "--quiet", "--no-compare",
-                         "--output", str(out)]}[command]
+        argv = {
+            "process": [command, str(tracker_bag), str(out), "--estimator", estimator, "--quiet"],
+            "make-bag": [command, str(out), "--seconds", "0.3"],
+            "eval": [
+                command,
+                "--estimator",
+                estimator,
+                "--motion",
+                str(given_file),
+                "--quiet",
+                "--no-compare",
+                "--output",
+                str(out),
+            ],
+        }[command]
         for flag, value in flags:
             argv += [flag, value]
         if file_flag:
@@ -74,11 +158,14 @@ def test_generated_command_lines_end_cleanly_and_write_nothing_on_error(tracker_
             argv.append("--overwrite")
         before, bag_before = _files(work), _files(tracker_bag)
         stderr = io.StringIO()
-        with contextlib.redirect_stderr(stderr), contextlib.redirect_stdout(io.StringIO()):
-            with pytest.raises(SystemExit) as ended:
-                main(argv)
+        with (
+            contextlib.redirect_stderr(stderr),
+            contextlib.redirect_stdout(io.StringIO()),
+            pytest.raises(SystemExit) as ended,
+        ):
+            main(argv)
         code, err = ended.value.code, stderr.getvalue()
-        assert _files(tracker_bag) == bag_before                      # the input is never touched
+        assert _files(tracker_bag) == bag_before  # the input is never touched
         assert "Traceback" not in err
         after = _files(work)
         if code in (0, None):
@@ -87,7 +174,8 @@ def test_generated_command_lines_end_cleanly_and_write_nothing_on_error(tracker_
             assert out.exists()
         else:
             assert isinstance(code, int) and code > 0, (argv, code, err)
-            lines = [ln for ln in err.strip().splitlines() if ln.strip() and "Warning" not in ln and
-                     not ln.startswith("  ")]
+            lines = [
+                ln for ln in err.strip().splitlines() if ln.strip() and "Warning" not in ln and not ln.startswith("  ")
+            ]
             assert len(lines) == 1, (argv, err)
             assert after == before, (argv, err)

@@ -1,4 +1,5 @@
 """Contact labels and every metric on hand-computed cases."""
+
 import numpy as np
 import pytest
 
@@ -16,8 +17,8 @@ def _still(T=10):
 
 def test_contact_labels_from_height_and_speed():
     pos = _still(6)
-    pos[:, RF, 2] = [0.0, 0.0, 0.1, 0.1, 0.0, 0.0]        # right foot lifted in frames 2-3
-    pos[:, LF, 0] = np.arange(6) * 0.01                    # left toe slides 1 cm/frame = 0.6 m/s at 60 Hz
+    pos[:, RF, 2] = [0.0, 0.0, 0.1, 0.1, 0.0, 0.0]  # right foot lifted in frames 2-3
+    pos[:, LF, 0] = np.arange(6) * 0.01  # left toe slides 1 cm/frame = 0.6 m/s at 60 Hz
     labels = contact_labels(pos, fps=60.0, floor=0.0)
     np.testing.assert_array_equal(labels[:, 0], False)
     np.testing.assert_array_equal(labels[:, 1], [True, True, False, False, True, True])
@@ -28,16 +29,16 @@ def test_contact_labels_from_height_and_speed():
 def test_position_velocity_and_jitter_errors():
     gt = _still(4)
     pred = gt.copy()
-    pred[:, :, 0] += 0.03                                     # 3 cm everywhere
+    pred[:, :, 0] += 0.03  # 3 cm everywhere
     assert M.mpjpe(pred, gt) == pytest.approx(3.0)
-    pred[:, J["left_wrist"], 1] += 0.04                       # left hand 5 cm off
+    pred[:, J["left_wrist"], 1] += 0.04  # left hand 5 cm off
     assert M.mpjpe(pred, gt, M.HAND) == pytest.approx(4.0)
     moving = gt.copy()
-    moving[:, 0, 0] = np.arange(4) * 0.01                     # root moves 1 cm/frame
-    assert M.mpjve(moving, gt, fps=10) == pytest.approx(10.0 / 22)   # 10 cm/s on one joint of 22
+    moving[:, 0, 0] = np.arange(4) * 0.01  # root moves 1 cm/frame
+    assert M.mpjve(moving, gt, fps=10) == pytest.approx(10.0 / 22)  # 10 cm/s on one joint of 22
     jerky = _still(5)
-    jerky[:, 0, 2] = [0, 0, 0, 0.001, 0]                      # one bump
-    jerk = np.abs(np.diff(jerky[:, 0, 2], n=3)) * 10 ** 3      # m/s^3 at 10 fps
+    jerky[:, 0, 2] = [0, 0, 0, 0.001, 0]  # one bump
+    jerk = np.abs(np.diff(jerky[:, 0, 2], n=3)) * 10**3  # m/s^3 at 10 fps
     assert M.jitter(jerky, fps=10, joints=[0]) == pytest.approx(jerk.mean() / 100)
 
 
@@ -53,7 +54,7 @@ def test_ground_skate_and_contact_accuracy():
     pos = _still(3)
     pos[:, LF, 2] = [-0.02, 0.0, 0.05]
     pos[:, RF, 2] = 0.1
-    assert M.ground_penetration(pos, floor=0.0) == pytest.approx(2 / 3)   # 2 cm in one of three frames
+    assert M.ground_penetration(pos, floor=0.0) == pytest.approx(2 / 3)  # 2 cm in one of three frames
     pos[:, LF, 0] = [0.0, 0.01, 0.03]
     contacts = np.array([[True, False], [True, False], [True, False]])
     # Left toe moves 1 then 2 cm between contact frames at 10 fps: 10 and 20 cm/s.

@@ -1,5 +1,6 @@
 """DragPoser: pose representation, constraints (numpy and torch alike), the Gauss-Newton latent
 optimiser against the autograd reference, and the estimator on any sensor subset."""
+
 import json
 import subprocess
 import sys
@@ -15,8 +16,15 @@ from sparse_body.core.skeleton import Skeleton
 from sparse_body.data.synthetic import synthetic_walk
 from sparse_body.data.virtual_trackers import TrackerNoise, synthesize_trackers
 from sparse_body.estimators import create_estimator
-from sparse_body.estimators.constraints import (AboveFloor, AngleLimit, ConstraintSet, LookAt, Orientation, OverPoint,
-                                                Position)
+from sparse_body.estimators.constraints import (
+    AboveFloor,
+    AngleLimit,
+    ConstraintSet,
+    LookAt,
+    Orientation,
+    OverPoint,
+    Position,
+)
 from sparse_body.estimators.dragposer_pose import dual_quaternions, split_heading
 from sparse_body.resources import models_dir
 
@@ -27,14 +35,17 @@ torch = pytest.importorskip("torch")
 def tiny_vae(tmp_path_factory, mocap_root):
     from sparse_body.train.dragposer_train import train_vae
     from sparse_body.train.dragposer_vae import VaeConfig
+
     out = tmp_path_factory.mktemp("dragposer")
     config = VaeConfig.named("tiny")
     config.hidden, config.steps = 64, 20
     train_vae(config, mocap_root, out, limit=2, log=lambda *_: None)
     from sparse_body.train.dragposer_temporal import TemporalConfig
     from sparse_body.train.dragposer_temporal_train import train_temporal
+
     train_temporal(TemporalConfig.named("tiny"), mocap_root, out, limit=2, log=lambda *_: None)
     from sparse_body.train.dragposer_tracker_prior import TrackerPriorConfig, train_tracker_prior
+
     train_tracker_prior(TrackerPriorConfig.named("tiny"), mocap_root, out, limit=2, log=lambda *_: None)
     return out
 
@@ -47,8 +58,9 @@ def test_encoder_input_ignores_heading_and_place():
     a = dual_quaternions(split_heading(local)[0], motion.root_positions[:, 2], motion.skeleton.offsets)
     b = dual_quaternions(split_heading(turned)[0], motion.root_positions[:, 2], motion.skeleton.offsets)
     np.testing.assert_allclose(a, b, atol=1e-9)
-    np.testing.assert_allclose(split_heading(turned)[1] - split_heading(local)[1],
-                               np.angle(np.exp(1j * 2.0)), atol=1e-9)
+    np.testing.assert_allclose(
+        split_heading(turned)[1] - split_heading(local)[1], np.angle(np.exp(1j * 2.0)), atol=1e-9
+    )
     # unit real parts, dual parts orthogonal to them (a proper dual quaternion)
     dq = a.reshape(len(a), 22, 8)
     np.testing.assert_allclose(np.linalg.norm(dq[..., :4], axis=-1), 1.0, atol=1e-9)
@@ -57,6 +69,7 @@ def test_encoder_input_ignores_heading_and_place():
 
 def _random_pose(rng):
     from scipy.spatial.transform import Rotation
+
     local = Rotation.from_rotvec(rng.normal(0, 0.4, (22, 3))).as_matrix()
     glob, pos = forward_kinematics(local, rng.normal(0, 0.5, 3), Skeleton.canonical().offsets)
     return local, glob, pos
@@ -76,7 +89,7 @@ def test_constraints_give_the_same_residuals_in_numpy_and_torch(rng):
     t = lambda a: torch.as_tensor(a, dtype=torch.float64)  # noqa: E731
     r_t = set_.residual(t(glob), t(pos), t(local), xp=torch).numpy()
     assert r_np.shape == (3 + 3 + 1 + 3 + 1 + 2,)
-    np.testing.assert_allclose(r_np[-2:], 0.3 * (pos[0, :2] - [0.2, -0.1]))   # at any height
+    np.testing.assert_allclose(r_np[-2:], 0.3 * (pos[0, :2] - [0.2, -0.1]))  # at any height
     np.testing.assert_allclose(r_np, r_t, atol=1e-12)
     np.testing.assert_allclose(r_np[:3], pos[20] - target_pos[20])
     assert r_np[6] == pytest.approx(10.0 - pos[10, 2])
@@ -93,6 +106,7 @@ def test_constraints_give_the_same_residuals_in_numpy_and_torch(rng):
 def test_gauss_newton_reaches_a_decodable_pose_like_the_autograd_reference(tiny_vae, rng):
     from sparse_body.estimators.dragposer import LatentOptimizer, PoseVaeRuntime
     from sparse_body.train.dragposer_reference import load_vae, optimise
+
     skeleton = Skeleton.canonical()
     vae = PoseVaeRuntime(tiny_vae)
     opt = LatentOptimizer(vae, skeleton.offsets, prior_weight=0.0, latent_weight=0.0)
@@ -116,9 +130,19 @@ def test_gauss_newton_reaches_a_decodable_pose_like_the_autograd_reference(tiny_
     assert np.linalg.norm(pos_gn[ends] - pos[ends], axis=-1).max() < 0.02
     # the reference: autograd + Adam on the same objective, from the same start
     torch_vae = load_vae(tiny_vae)
-    z_ref, root_ref, yaw_ref = optimise(torch_vae, constraints, skeleton.offsets, z0,
-                                        root_true + [0.1, 0.1, -0.05], yaw_true - 0.3, np.zeros(24),
-                                        prior_weight=0.0, latent_weight=0.0, iterations=2000, lr=0.02)
+    z_ref, root_ref, yaw_ref = optimise(
+        torch_vae,
+        constraints,
+        skeleton.offsets,
+        z0,
+        root_true + [0.1, 0.1, -0.05],
+        yaw_true - 0.3,
+        np.zeros(24),
+        prior_weight=0.0,
+        latent_weight=0.0,
+        iterations=2000,
+        lr=0.02,
+    )
     _, _, pos_ref = opt.pose(z_ref, root_ref, yaw_ref)
     assert np.linalg.norm(pos_ref - pos_gn, axis=-1).mean() < 0.01
 
@@ -132,9 +156,9 @@ def test_estimator_works_on_any_sensor_subset_and_survives_faulty_sensors(tiny_v
         est = create_estimator("dragposer", config, motion.skeleton, model_dir=str(tiny_vae), iterations=3)
         poses = est.process(stream)
         assert len(poses) == len(stream) and all(p.is_finite() for p in poses), name
-        assert all(p.valid for p in poses), name       # some tracker is always there
+        assert all(p.valid for p in poses), name  # some tracker is always there
     stream = synthesize_trackers(motion, load_sensor_config("four_point"))
-    stream.valid[50:60] = False                         # every tracker gone
+    stream.valid[50:60] = False  # every tracker gone
     stream.positions[50:60] = np.nan
     est = create_estimator("dragposer", load_sensor_config("four_point"), motion.skeleton, model_dir=str(tiny_vae))
     poses = est.process(stream)
@@ -149,14 +173,15 @@ def test_user_constraints_are_added_and_removed_at_runtime(tiny_vae):
     for frame in list(stream)[:10]:
         est.step(frame)
     assert sorted(est.constraints.names()) == ["floor:10", "floor:11"]
-    assert est.constraints.user_names() == []                     # the floor is built in, not the user's
+    assert est.constraints.user_names() == []  # the floor is built in, not the user's
     est.constraints.add(AboveFloor("left_foot", 5.0, name="lift", height=0.4))
     assert est.constraints.user_names() == ["lift"]
     pose = est.step(stream.frame(10))
     from sparse_body.core.rotations import quat_to_matrix
+
     local = quat_to_matrix(pose.local_quats)
     _, pos = forward_kinematics(local, pose.root_position, motion.skeleton.offsets)
-    assert pos[J["left_foot"], 2] > 0.3                 # the foot went up to the new floor
+    assert pos[J["left_foot"], 2] > 0.3  # the foot went up to the new floor
     assert est.constraints.remove("lift")
     assert sorted(est.constraints.names()) == ["floor:10", "floor:11"]
 
@@ -167,10 +192,31 @@ def test_missing_model_is_a_clear_error(tmp_path):
 
 
 def test_train_dragposer_is_one_command(tmp_path, mocap_root):
-    subprocess.run([sys.executable, "-m", "sparse_body.cli", "train", "dragposer", "--config", "tiny", "--steps", "2",
-                    "--limit", "1", "--out", str(tmp_path), "--no-card"], check=True, capture_output=True)
-    for report in ("dragposer.train.json", "dragposer_temporal.train.json",      # the VAE, then the priors
-                   "dragposer_tracker_prior.train.json"):
+    subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "sparse_body.cli",
+            "train",
+            "dragposer",
+            "--config",
+            "tiny",
+            "--steps",
+            "2",
+            "--limit",
+            "1",
+            "--out",
+            str(tmp_path),
+            "--no-card",
+        ],
+        check=True,
+        capture_output=True,
+    )
+    for report in (
+        "dragposer.train.json",
+        "dragposer_temporal.train.json",  # the VAE, then the priors
+        "dragposer_tracker_prior.train.json",
+    ):
         assert json.loads((tmp_path / report).read_text())["steps"] == 2
     for part in ("decoder", "encoder", "temporal", "tracker_prior"):
         assert (tmp_path / f"dragposer_{part}.onnx").is_file()
@@ -179,20 +225,32 @@ def test_train_dragposer_is_one_command(tmp_path, mocap_root):
 def test_constraint_node_refines_an_estimator_over_dds_and_takes_new_constraints(tiny_vae, tmp_path, ros_env):
     """estimator (ik) -> constraint node (refined/...), with constraints changed by service."""
     import rclpy
+
     pytest.importorskip("tf2_msgs.msg")
     from ros_helpers import STARTUP_LIMIT, Listener, start_node, stop
     from sensor_msgs.msg import JointState
+
     from sparse_body.msg import EstimateStatus
     from sparse_body.offline import make_bag
     from sparse_body.srv import SetConstraint
+
     config = load_sensor_config("four_point")
     make_bag(synthetic_walk(8.0), config, tmp_path / "trackers")
-    est = start_node("sparse_body.ros.estimator_node", {"sensors": "four_point", "estimator": "ik", "autostart": True},
-                     "sparse_body_estimator", tmp_path, ros_env)
-    refiner = start_node("sparse_body.ros.constraint_node",
-                         {"sensors": "four_point", "model_path": str(tiny_vae), "autostart": True, "iterations": 2},
-                         "sparse_body_constraint", tmp_path, ros_env,
-                         remaps={"input/joint_states": "/joint_states"})
+    est = start_node(
+        "sparse_body.ros.estimator_node",
+        {"sensors": "four_point", "estimator": "ik", "autostart": True},
+        "sparse_body_estimator",
+        tmp_path,
+        ros_env,
+    )
+    refiner = start_node(
+        "sparse_body.ros.constraint_node",
+        {"sensors": "four_point", "model_path": str(tiny_vae), "autostart": True, "iterations": 2},
+        "sparse_body_constraint",
+        tmp_path,
+        ros_env,
+        remaps={"input/joint_states": "/joint_states"},
+    )
     listener = Listener(rclpy, {"refined/joint_states": JointState, "refined/estimate_status": EstimateStatus})
     client = listener.node.create_client(SetConstraint, "/sparse_body_constraint/set_constraint")
     bridge = None
@@ -201,15 +259,23 @@ def test_constraint_node_refines_an_estimator_over_dds_and_takes_new_constraints
         future = client.call_async(SetConstraint.Request(**fields))
         listener.spin_until(future.done, STARTUP_LIMIT)
         return future.result()
+
     try:
-        assert listener.spin_until(lambda: listener.received["refined/joint_states"], STARTUP_LIMIT), \
-            (tmp_path / "sparse_body_constraint.log").read_text()
+        assert listener.spin_until(lambda: listener.received["refined/joint_states"], STARTUP_LIMIT), (
+            tmp_path / "sparse_body_constraint.log"
+        ).read_text()
         # The bag loops: on a starved machine the refined estimates come slower, and the test
         # waits for them (their number is bench's business, not this test's).
-        bridge = start_node("sparse_body.ros.tracker_bridge_node", {"bag": str(tmp_path / "trackers"), "loop": True,
-                                                                    "min_subscribers": 2, "start_delay": 0.5},
-                            "sparse_body_tracker_bridge", tmp_path, ros_env)
-        listener.spin_until(lambda: sum(s.valid for s in listener.received["refined/estimate_status"]) >= 20, STARTUP_LIMIT)
+        bridge = start_node(
+            "sparse_body.ros.tracker_bridge_node",
+            {"bag": str(tmp_path / "trackers"), "loop": True, "min_subscribers": 2, "start_delay": 0.5},
+            "sparse_body_tracker_bridge",
+            tmp_path,
+            ros_env,
+        )
+        listener.spin_until(
+            lambda: sum(s.valid for s in listener.received["refined/estimate_status"]) >= 20, STARTUP_LIMIT
+        )
         assert client.wait_for_service(timeout_sec=STARTUP_LIMIT)
         added = call(name="lift", type="above_floor", joint="left_foot", weight=2.0, values=[0.3])
         bad = call(name="x", type="teleport", joint="head", values=[1.0])
@@ -222,7 +288,7 @@ def test_constraint_node_refines_an_estimator_over_dds_and_takes_new_constraints
     valid = sum(s.valid for s in statuses)
     assert valid >= 20, (len(statuses), {s.message for s in statuses})
     assert all(np.all(np.isfinite(m.position)) for m in listener.received["refined/joint_states"])
-    assert added.success and added.active == ["lift"]          # the user's only: not the built-in floor ones
+    assert added.success and added.active == ["lift"]  # the user's only: not the built-in floor ones
     assert not bad.success and "unknown constraint type 'teleport'" in bad.message
     assert removed.success and "lift" not in removed.active
     assert not missing.success
@@ -230,34 +296,37 @@ def test_constraint_node_refines_an_estimator_over_dds_and_takes_new_constraints
 
 def test_temporal_context_ignores_where_the_person_stands_and_faces(rng):
     from sparse_body.estimators.dragposer_pose import temporal_context
+
     root = np.cumsum(rng.normal(0, 0.05, (10, 3)), axis=0)
     yaw = np.cumsum(rng.normal(0, 0.1, 10))
     heights = rng.uniform(0, 1.7, (10, 6))
     turn, shift = 2.0, np.array([3.0, -1.0, 0.0])
     moved = root @ yaw_matrix(turn).T + shift
-    np.testing.assert_allclose(temporal_context(moved, yaw + turn, heights), temporal_context(root, yaw, heights),
-                               atol=1e-9)
+    np.testing.assert_allclose(
+        temporal_context(moved, yaw + turn, heights), temporal_context(root, yaw, heights), atol=1e-9
+    )
     step = temporal_context(np.array([[0, 0, 0.9], [0.1, 0, 0.9]]), np.array([np.pi / 2, np.pi / 2]), heights[:2])
-    np.testing.assert_allclose(step[1, :3], [0, -0.1, 0], atol=1e-9)    # moved to the person's right
+    np.testing.assert_allclose(step[1, :3], [0, -0.1, 0], atol=1e-9)  # moved to the person's right
 
 
 def test_limb_noise_turns_whole_limbs_and_nothing_else(rng):
     from sparse_body.estimators.dragposer_pose import LIMBS
     from sparse_body.train.dragposer_temporal_train import limb_noise
+
     motion = synthetic_walk(seconds=4.0)
     local = motion.local_rotations.astype(np.float32)
     noisy = limb_noise(local, 0.3, 10.0, rng)
-    changed = ~np.all(np.isclose(noisy, local, atol=1e-6), axis=(-1, -2))   # (T, 22)
+    changed = ~np.all(np.isclose(noisy, local, atol=1e-6), axis=(-1, -2))  # (T, 22)
     limb_joints = {J[j] for joints in LIMBS.values() for j in joints}
-    assert not changed[:, sorted(set(range(22)) - limb_joints)].any()   # spine, head, pelvis untouched
+    assert not changed[:, sorted(set(range(22)) - limb_joints)].any()  # spine, head, pelvis untouched
     for joints in LIMBS.values():
         idx = [J[j] for j in joints]
         hit = changed[:, idx]
-        assert np.all(hit.all(1) == hit.any(1))                         # a limb is turned whole or not at all
-        assert 0.15 < hit.all(1).mean() < 0.45                          # about 30 % of frames
+        assert np.all(hit.all(1) == hit.any(1))  # a limb is turned whole or not at all
+        assert 0.15 < hit.all(1).mean() < 0.45  # about 30 % of frames
         turn = np.einsum("tjba,tjbc->tjac", local[hit.all(1)][:, idx], noisy[hit.all(1)][:, idx])
         angle = np.degrees(np.arccos(np.clip((np.trace(turn, axis1=-2, axis2=-1) - 1) / 2, -1, 1)))
-        assert 5 < np.median(angle) < 30                                # 10 degrees per axis
+        assert 5 < np.median(angle) < 30  # 10 degrees per axis
     assert noisy.dtype == local.dtype and np.all(np.isfinite(noisy))
 
 
@@ -265,40 +334,46 @@ def test_temporal_predictor_onnx_matches_torch_and_is_causal(tiny_vae, rng):
     import onnxruntime as ort
 
     from sparse_body.train.dragposer_temporal import TemporalConfig, TemporalPredictor
+
     session = ort.InferenceSession(str(tiny_vae / "dragposer_temporal.onnx"))
     config = TemporalConfig(**json.loads(session.get_modelmeta().custom_metadata_map["config"]))
-    model = TemporalPredictor(config).eval()   # random weights: the graph, not the training, is under test
+    model = TemporalPredictor(config).eval()  # random weights: the graph, not the training, is under test
     path = tiny_vae / "check_temporal.onnx"
     from sparse_body.train.dragposer_temporal_train import export
+
     export(model, path, {"method": "dragposer"})
     past = rng.normal(size=(1, config.past, 24)).astype(np.float32)
     context = rng.normal(size=(1, config.past, 9)).astype(np.float32)
     future = rng.normal(size=(1, config.future, 24)).astype(np.float32)
     run = ort.InferenceSession(str(path)).run
     names = ["past_latents", "past_context", "future_latents"]
-    out = run(None, dict(zip(names, [past, context, future])))[0]
+    out = run(None, dict(zip(names, [past, context, future], strict=True)))[0]
     with torch.no_grad():
         ref = model(*(torch.from_numpy(a) for a in (past, context, future))).numpy()
     np.testing.assert_allclose(out, ref, atol=1e-4)
     later = future.copy()
-    later[:, 1:] = 0                                   # what the runtime pads with
-    np.testing.assert_allclose(run(None, dict(zip(names, [past, context, later])))[0][:, 0], out[:, 0], atol=1e-5)
+    later[:, 1:] = 0  # what the runtime pads with
+    np.testing.assert_allclose(
+        run(None, dict(zip(names, [past, context, later], strict=True)))[0][:, 0], out[:, 0], atol=1e-5
+    )
 
 
 def test_temporal_prior_waits_for_history_then_feeds_its_own_predictions(tiny_vae, rng):
     from sparse_body.estimators.dragposer_temporal import TemporalPrior
+
     def run(ahead, last_z):
         prior = TemporalPrior(tiny_vae, ahead=ahead)
         n, predictions = prior.every, []
         for tick in range(prior.past + 2):
             z = rng.normal(size=24) if tick < prior.past + 1 else last_z
-            for frame in range(n):
+            for _ in range(n):
                 prior.observe(z, np.array([0.01 * tick, 0, 0.9]), 0.0, np.full(6, 0.5))
                 predictions.append(None if prior.prediction is None else prior.prediction.copy())
         return prior, predictions
+
     prior, predictions = run(1, np.zeros(24))
     first = next(i for i, p in enumerate(predictions) if p is not None)
-    assert first == prior.past * prior.every                 # W_p steps of history, then the next tick
+    assert first == prior.past * prior.every  # W_p steps of history, then the next tick
     assert np.all(np.isfinite(predictions[-1]))
     # ahead=1: every prediction restarts from the newest solved latent; ahead>1: the decoder
     # is fed its own predictions, so what was solved in between does not change it
@@ -318,14 +393,16 @@ def test_temporal_prior_waits_for_history_then_feeds_its_own_predictions(tiny_va
 
 def test_temporal_target_ramps_from_the_solved_latent_to_the_prediction(tiny_vae, rng):
     from sparse_body.estimators.dragposer_temporal import TemporalPrior
+
     ramped, held = TemporalPrior(tiny_vae), TemporalPrior(tiny_vae, ramp=False)
-    n, tick = ramped.every, ramped.past * ramped.every       # the first tick with W_p steps of history
+    n, tick = ramped.every, ramped.past * ramped.every  # the first tick with W_p steps of history
 
     def observe(z, frame):
         for prior in (ramped, held):
             prior.observe(z, np.array([0.01 * frame, 0, 0.9]), 0.0, np.full(6, 0.5))
+
     for frame in range(tick + 1):
-        assert ramped.target() is None and held.target() is None   # nothing before the history
+        assert ramped.target() is None and held.target() is None  # nothing before the history
         tick_z = rng.normal(size=24)
         observe(tick_z, frame)
     prediction = ramped.prediction
@@ -336,7 +413,7 @@ def test_temporal_target_ramps_from_the_solved_latent_to_the_prediction(tiny_vae
         np.testing.assert_allclose(ramped.target(), tick_z + k / n * (prediction - tick_z), atol=1e-12)
         np.testing.assert_allclose(held.target(), prediction)
         if k < n:
-            observe(rng.normal(size=24), tick + k)               # between ticks: no new prediction
+            observe(rng.normal(size=24), tick + k)  # between ticks: no new prediction
             np.testing.assert_allclose(ramped.prediction, prediction)
 
 
@@ -345,25 +422,32 @@ def test_polish_puts_end_effectors_on_their_trackers_without_moving_the_latent()
     """With the shipped model: a barely trained VAE decodes spines that put the shoulders out
     of the hands' reach, which no polish can mend."""
     from sparse_body.core.rotations import quat_to_matrix
+
     motion = synthetic_walk(1.0)
     config = load_sensor_config("six_point")
     stream = synthesize_trackers(motion, config)
     errors, states = {}, {}
     for polish in (False, True):
-        est = create_estimator("dragposer", config, motion.skeleton, polish=polish,
-                               filter=False)       # the constraints below are the unfiltered samples
+        est = create_estimator(
+            "dragposer", config, motion.skeleton, polish=polish, filter=False
+        )  # the constraints below are the unfiltered samples
         per_joint = []
         for frame in list(stream)[:20]:
             pose = est.step(frame)
             _, pos = forward_kinematics(quat_to_matrix(pose.local_quats), pose.root_position, motion.skeleton.offsets)
-            per_joint.append({c.joint: np.linalg.norm(pos[c.joint] - c.target) for c in est.tracker_constraints(frame)
-                              if isinstance(c, Position)})
+            per_joint.append(
+                {
+                    c.joint: np.linalg.norm(pos[c.joint] - c.target)
+                    for c in est.tracker_constraints(frame)
+                    if isinstance(c, Position)
+                }
+            )
         errors[polish] = {j: np.mean([e[j] for e in per_joint]) for j in per_joint[0]}
         states[polish] = est._state[0].copy()
-    for joint in ("pelvis", "head", "left_wrist", "right_wrist"):   # the tiny VAE's legs can be far off
+    for joint in ("pelvis", "head", "left_wrist", "right_wrist"):  # the tiny VAE's legs can be far off
         assert errors[True][J[joint]] < 0.01, joint
     assert np.mean(list(errors[True].values())) < np.mean(list(errors[False].values()))
-    np.testing.assert_allclose(states[True], states[False])     # the search itself is not changed
+    np.testing.assert_allclose(states[True], states[False])  # the search itself is not changed
 
 
 def test_missing_temporal_predictor_names_the_file_and_the_way_out(tiny_vae, tmp_path):
@@ -372,14 +456,31 @@ def test_missing_temporal_predictor_names_the_file_and_the_way_out(tiny_vae, tmp
     with pytest.raises(FileNotFoundError, match="dragposer_temporal.onnx.*temporal_weight to 0"):
         create_estimator("dragposer", load_sensor_config("six_point"), Skeleton.canonical(), model_dir=str(tmp_path))
     with pytest.raises(FileNotFoundError, match="dragposer_tracker_prior.onnx.*tracker_prior to 0"):
-        create_estimator("dragposer", load_sensor_config("six_point"), Skeleton.canonical(), model_dir=str(tmp_path),
-                         temporal_weight=0)
-    est = create_estimator("dragposer", load_sensor_config("six_point"), Skeleton.canonical(), model_dir=str(tmp_path),
-                           temporal_weight=0, tracker_prior=0)
+        create_estimator(
+            "dragposer",
+            load_sensor_config("six_point"),
+            Skeleton.canonical(),
+            model_dir=str(tmp_path),
+            temporal_weight=0,
+        )
+    est = create_estimator(
+        "dragposer",
+        load_sensor_config("six_point"),
+        Skeleton.canonical(),
+        model_dir=str(tmp_path),
+        temporal_weight=0,
+        tracker_prior=0,
+    )
     assert est.temporal is None and est.guesser is None
     with pytest.raises(ValueError, match="tracker_prior must be from 0 to 100"):
-        create_estimator("dragposer", load_sensor_config("six_point"), Skeleton.canonical(), model_dir=str(tmp_path),
-                         temporal_weight=0, tracker_prior=-1)
+        create_estimator(
+            "dragposer",
+            load_sensor_config("six_point"),
+            Skeleton.canonical(),
+            model_dir=str(tmp_path),
+            temporal_weight=0,
+            tracker_prior=-1,
+        )
 
 
 def test_polished_root_turns_with_the_pelvis_tracker_and_untracked_legs_keep_their_direction(clip_index):
@@ -389,6 +490,7 @@ def test_polished_root_turns_with_the_pelvis_tracker_and_untracked_legs_keep_the
     thigh keeps the direction the search decoded."""
     from sparse_body.core.rotations import quat_to_matrix
     from sparse_body.data.catalog import load_clip
+
     motion = load_clip(clip_index["16_15"]).slice(0, 90)
     lower = [J[j] for j in ("left_hip", "right_hip", "left_knee", "right_knee")]
     for sensors in ("six_point", "four_point"):
@@ -400,10 +502,15 @@ def test_polished_root_turns_with_the_pelvis_tracker_and_untracked_legs_keep_the
             glob[follow], error[follow] = [], []
             for i, frame in enumerate(stream):
                 pose = est.step(frame)
-                g, pos = forward_kinematics(quat_to_matrix(pose.local_quats), pose.root_position, motion.skeleton.offsets)
+                g, pos = forward_kinematics(
+                    quat_to_matrix(pose.local_quats), pose.root_position, motion.skeleton.offsets
+                )
                 if follow:
-                    pelvis = [c.target for c in est.tracker_constraints(frame)
-                              if isinstance(c, Orientation) and c.joint == J["pelvis"]][0]
+                    pelvis = [
+                        c.target
+                        for c in est.tracker_constraints(frame)
+                        if isinstance(c, Orientation) and c.joint == J["pelvis"]
+                    ][0]
                     np.testing.assert_allclose(g[0], pelvis, atol=1e-9)
                 glob[follow].append(g)
                 error[follow].append(np.linalg.norm(pos[lower] - motion.positions[i, lower], axis=-1).mean())
@@ -420,6 +527,7 @@ def test_root_prior_pulls_an_untracked_root_below_the_headset_and_only_then(clip
     headset than without the prior; with a pelvis tracker, or root_prior=0, there is no such
     constraint; a weight that is not one is refused."""
     from sparse_body.data.catalog import load_clip
+
     motion = load_clip(clip_index["49_22"]).slice(0, 180)
     config = load_sensor_config("three_point")
     stream = list(synthesize_trackers(motion, config))
@@ -431,7 +539,7 @@ def test_root_prior_pulls_an_untracked_root_below_the_headset_and_only_then(clip
             pose = est.step(frame)
             prior = [c for c in est.tracker_constraints(frame) if isinstance(c, OverPoint)]
             assert len(prior) == (1 if weight else 0)
-            if prior:    # the point below the headset, kept for the run without the prior
+            if prior:  # the point below the headset, kept for the run without the prior
                 distance.setdefault("under", []).append(np.asarray(prior[0].target))
             distance[weight].append(pose.root_position[:2])
     for weight in (0.3, 0.0):
@@ -449,12 +557,13 @@ def test_tracker_prior_features_ignore_where_the_person_stands_and_faces_and_str
     from scipy.spatial.transform import Rotation
 
     from sparse_body.estimators.dragposer_tracker_prior import SITE_FEATURES, SITES, sequence_features
+
     T, S = 6, len(SITES)
     pos = rng.normal(0, 0.5, (T, S, 3)) + [0, 0, 1]
     rot = Rotation.random(T * S, random_state=1).as_matrix().reshape(T, S, 3, 3)
     present = np.ones((T, S), bool)
-    present[2:4, SITES.index("pelvis")] = False            # a pelvis sample lost for two frames
-    present[:, SITES.index("left_foot")] = False           # no feet tracker on this side
+    present[2:4, SITES.index("pelvis")] = False  # a pelvis sample lost for two frames
+    present[:, SITES.index("left_foot")] = False  # no feet tracker on this side
     x = sequence_features(pos, rot, present, 60.0)
     turn = yaw_matrix(1.3)
     moved = sequence_features(pos @ turn.T + [2.0, -1.0, 0.0], turn @ rot, present, 60.0)
@@ -467,8 +576,18 @@ def test_tracker_prior_features_ignore_where_the_person_stands_and_faces_and_str
     stream = [sequence_features(pos[:1], rot[:1], present[:1], 60.0)]
     for t in range(1, T):
         from sparse_body.core.rotations import heading
-        stream.append(sequence_features(pos[t:t + 1], rot[t:t + 1], present[t:t + 1], 60.0, pos[t - 1],
-                                        present[t - 1], float(heading(rot[t - 1, 0]))))
+
+        stream.append(
+            sequence_features(
+                pos[t : t + 1],
+                rot[t : t + 1],
+                present[t : t + 1],
+                60.0,
+                pos[t - 1],
+                present[t - 1],
+                float(heading(rot[t - 1, 0])),
+            )
+        )
     np.testing.assert_allclose(np.concatenate(stream), x, atol=1e-9)
 
 
@@ -477,7 +596,8 @@ def test_tracker_prior_onnx_matches_torch_step_by_step(tiny_vae, rng):
 
     from sparse_body.estimators.dragposer_tracker_prior import FEATURES
     from sparse_body.train.dragposer_tracker_prior import TrackerPriorConfig, TrackerPriorNet, export
-    net = TrackerPriorNet(TrackerPriorConfig.named("tiny")).eval()   # random weights: the graph is under test
+
+    net = TrackerPriorNet(TrackerPriorConfig.named("tiny")).eval()  # random weights: the graph is under test
     path = tiny_vae / "check_tracker_prior.onnx"
     export(net, path, {"method": "dragposer", "part": "tracker_prior"})
     x = rng.normal(size=(1, 12, FEATURES)).astype(np.float32)
@@ -492,6 +612,7 @@ def test_tracker_prior_onnx_matches_torch_step_by_step(tiny_vae, rng):
 
 def test_tracker_prior_pulls_the_latent_towards_its_guess_and_leaves_the_trackers_reached(tiny_vae):
     from sparse_body.core.rotations import quat_to_matrix
+
     motion = synthetic_walk(1.0)
     config = load_sensor_config("four_point")
     stream = list(synthesize_trackers(motion, config))[:30]
@@ -499,28 +620,34 @@ def test_tracker_prior_pulls_the_latent_towards_its_guess_and_leaves_the_tracker
     for weight in (1e-6, 1.0):
         est = create_estimator("dragposer", config, motion.skeleton, model_dir=str(tiny_vae), tracker_prior=weight)
         guesses, predict = [], est.guesser.predict
-        est.guesser.predict = lambda targets: guesses.append(predict(targets)) or guesses[-1]   # a spy
+        est.guesser.predict = lambda targets, guesses=guesses, predict=predict: (  # a spy
+            guesses.append(predict(targets)) or guesses[-1]
+        )
         gap, miss = [], []
         for frame in stream:
             pose = est.step(frame)
             assert pose.is_finite()
             gap.append(np.linalg.norm(est._state[0] - guesses[-1]))
             _, pos = forward_kinematics(quat_to_matrix(pose.local_quats), pose.root_position, motion.skeleton.offsets)
-            miss += [np.linalg.norm(pos[c.joint] - c.target) for c in est.tracker_constraints(frame)
-                     if isinstance(c, Position)]
-        assert len(guesses) == len(stream)                  # the GRU reads every frame
+            miss += [
+                np.linalg.norm(pos[c.joint] - c.target)
+                for c in est.tracker_constraints(frame)
+                if isinstance(c, Position)
+            ]
+        assert len(guesses) == len(stream)  # the GRU reads every frame
         gaps[weight], reach[weight] = np.mean(gap[1:]), np.mean(miss)
     assert gaps[1.0] < 0.5 * gaps[1e-6]
-    assert reach[1.0] < 0.01                                # the polish still puts them on their trackers
+    assert reach[1.0] < 0.01  # the polish still puts them on their trackers
     prior = create_estimator("dragposer", config, motion.skeleton, model_dir=str(tiny_vae)).guesser
-    assert prior.predict({"head": None}) is None            # no headset: no guess
+    assert prior.predict({"head": None}) is None  # no headset: no guess
 
 
 def test_tracker_prior_trains_through_the_shipped_decoder_as_onnx_runs_it(tiny_vae, rng):
     from sparse_body.estimators.dragposer import PoseVaeRuntime
     from sparse_body.train.dragposer_tracker_prior import frozen_decoder
+
     z = rng.normal(size=(5, 24)).astype(np.float32)
     decoder = frozen_decoder(tiny_vae)
     assert not any(p.requires_grad for p in decoder.parameters())
-    with torch.no_grad():   # float32 Gram-Schmidt of a barely trained decoder's columns: 1e-4 apart
+    with torch.no_grad():  # float32 Gram-Schmidt of a barely trained decoder's columns: 1e-4 apart
         np.testing.assert_allclose(decoder(torch.from_numpy(z)).numpy(), PoseVaeRuntime(tiny_vae).decode(z), atol=1e-3)

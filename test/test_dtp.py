@@ -1,6 +1,7 @@
 """DTP: features, the ONNX export against torch, the estimator on real clips with occluded and
 missing feet, the lookahead variant offline, and the occlusion protocol every estimator is
 measured under."""
+
 import json
 import subprocess
 import sys
@@ -32,11 +33,14 @@ def tiny_models(tmp_path_factory, mocap_root):
     """Tiny online and lookahead models trained for a few steps by the real training code."""
     from sparse_body.train.dtp_model import DtpConfig
     from sparse_body.train.dtp_train import train
+
     folder = tmp_path_factory.mktemp("dtp")
     online = DtpConfig.named("tiny")
     lookahead = replace(DtpConfig.named("tiny"), future=2)
-    reports = {name: train(config, mocap_root, folder / f"{name}.onnx", limit=2, log=lambda *_: None)
-               for name, config in (("online", online), ("lookahead", lookahead))}
+    reports = {
+        name: train(config, mocap_root, folder / f"{name}.onnx", limit=2, log=lambda *_: None)
+        for name, config in (("online", online), ("lookahead", lookahead))
+    }
     return folder, reports
 
 
@@ -52,6 +56,7 @@ def test_window_features_do_not_depend_on_where_the_person_stands_or_faces(clip)
     moved = replace(window, root_positions=window.root_positions @ turn.T + [3.0, -2.0, 0.0])
     quats = moved.local_quats.copy()
     from scipy.spatial.transform import Rotation
+
     quats[:, 0] = (Rotation.from_matrix(turn) * Rotation.from_quat(quats[:, 0])).as_quat()
     moved = replace(moved, local_quats=quats)
     np.testing.assert_allclose(_features(moved), _features(window), atol=1e-9)
@@ -63,8 +68,10 @@ def test_onnx_gives_the_torch_models_output_on_the_same_window(tmp_path, clip):
     """Any window length up to the trained one, online and with future frames; a token never
     sees further ahead than `future` frames."""
     import onnxruntime as ort
+
     from sparse_body.train.dtp_model import DtpConfig, DtpNet
     from sparse_body.train.dtp_train import export_onnx
+
     x = _features(clip.slice(0, 26), current=20).astype(np.float32)
     for future in (0, 5):
         torch.manual_seed(0)
@@ -82,17 +89,18 @@ def test_onnx_gives_the_torch_models_output_on_the_same_window(tmp_path, clip):
             with torch.no_grad():
                 torch_out = net(torch.from_numpy(x[None, :n]))[0].numpy()
             np.testing.assert_allclose(onnx_out, torch_out, atol=1e-4)
-        window = x[:config.window]
+        window = x[: config.window]
         changed = window.copy()
         changed[15:] += 1.0
         out = session.run(None, {"window": changed[None]})[0][0]
         base = session.run(None, {"window": window[None]})[0][0]
-        np.testing.assert_allclose(out[:15 - future], base[:15 - future], atol=1e-5)
-        assert np.abs(out[15 - future:] - base[15 - future:]).max() > 1e-3
+        np.testing.assert_allclose(out[: 15 - future], base[: 15 - future], atol=1e-5)
+        assert np.abs(out[15 - future :] - base[15 - future :]).max() > 1e-3
 
 
 def test_onnx_metadata_carries_the_configuration_and_both_stages_are_kept(tiny_models):
     import onnxruntime as ort
+
     folder, reports = tiny_models
     meta = ort.InferenceSession(str(folder / "online.onnx"), providers=["CPUExecutionProvider"]).get_modelmeta()
     assert json.loads(meta.custom_metadata_map["method"]) == "dtp"
@@ -107,10 +115,10 @@ def test_missing_feet_read_as_occluded_and_the_body_goes_on(tiny_models, clip):
     folder, _ = tiny_models
     stream = synthesize_trackers(clip, SIX, VR_NOISE, seed=3)
     foot, head = stream.sites.index("left_foot"), stream.sites.index("head")
-    stream.valid[50:110, foot] = False                  # a foot tracker gone for a second
+    stream.valid[50:110, foot] = False  # a foot tracker gone for a second
     stream.positions[50:110, foot] = np.nan
-    stream.orientations[130:140, stream.sites.index("right_foot")] = np.nan   # and one giving NaN
-    stream.positions[160:165, head] = np.nan            # the headset gone: no pose
+    stream.orientations[130:140, stream.sites.index("right_foot")] = np.nan  # and one giving NaN
+    stream.positions[160:165, head] = np.nan  # the headset gone: no pose
     est = create_estimator("dtp", SIX, clip.skeleton, model_path=str(folder / "online.onnx"), filter=False)
     poses = est.process(stream)
     assert len(poses) == len(stream) and all(p.is_finite() for p in poses)
@@ -121,11 +129,14 @@ def test_missing_feet_read_as_occluded_and_the_body_goes_on(tiny_models, clip):
     from sparse_body.core.kinematics import forward_kinematics
     from sparse_body.core.rotations import quat_to_matrix
     from sparse_body.core.skeleton import JOINT_INDEX as J
-    raw = create_estimator("dtp", SIX, clip.skeleton, model_path=str(folder / "online.onnx"), filter=False,
-                           polish=False).process(stream)
+
+    raw = create_estimator(
+        "dtp", SIX, clip.skeleton, model_path=str(folder / "online.onnx"), filter=False, polish=False
+    ).process(stream)
 
     def joints(pose):
         return forward_kinematics(quat_to_matrix(pose.local_quats), pose.root_position, clip.skeleton.offsets)[1]
+
     wrists = [J["left_wrist"], J["right_wrist"]]
     for t in (30, 80, 200):
         polished = np.linalg.norm(joints(poses[t])[wrists] - clip.positions[t, wrists], axis=-1)
@@ -142,7 +153,7 @@ def test_a_gap_starts_the_window_over(tiny_models, clip):
     for t in range(100):
         est.step(stream.frame(t))
     late = stream.frame(150)
-    late = replace(late, stamp=late.stamp + 5.0)          # seconds later: nothing before it counts
+    late = replace(late, stamp=late.stamp + 5.0)  # seconds later: nothing before it counts
     after_gap = est.step(late)
     fresh = create_estimator("dtp", SIX, clip.skeleton, model_path=str(folder / "online.onnx"), filter=False)
     fresh.reset()
@@ -157,10 +168,10 @@ def test_lookahead_sees_the_frames_after_each_one_offline(tiny_models, clip):
     offline = est.process(stream)
     assert len(offline) == len(stream) and all(p.valid and p.is_finite() for p in offline)
     changed = synthesize_trackers(clip.slice(0, 60), SIX, seed=2)
-    changed.positions[40:, :, 0] += 0.3                      # everything from frame 40 on moves
+    changed.positions[40:, :, 0] += 0.3  # everything from frame 40 on moves
     again = est.process(changed)
-    same = [np.allclose(a.local_quats, b.local_quats, atol=1e-6) for a, b in zip(offline, again)]
-    assert all(same[:40 - future]) and not any(same[40 - future:40])
+    same = [np.allclose(a.local_quats, b.local_quats, atol=1e-6) for a, b in zip(offline, again, strict=True)]
+    assert all(same[: 40 - future]) and not any(same[40 - future : 40])
     # live, step() cannot see the future: it differs from the offline pose
     est.reset()
     live = [est.step(f) for f in stream]
@@ -186,21 +197,40 @@ def test_occlusion_protocol_occludes_the_share_asked_one_or_both_feet_both_ways(
         seen["origin"] += at_origin.sum()
         seen["bounded"] += ((off[left] | off[right]) & ~at_origin).sum()
         np.testing.assert_array_equal(stream.positions[:, others], clean.positions[:, others])
-        assert stream.valid.all()          # an occluded tracker lies; it does not fall silent
+        assert stream.valid.all()  # an occluded tracker lies; it does not fall silent
     assert all(n > 0 for n in seen.values()), seen
     # the T-pose calibration is taken with the feet in view: the same body with or without occlusion
     occluded = Protocol.named(occluded_percent=20)
     assert "feet occluded in 20 % of frames" in occluded.label
     assert user_view(motion, SIX, occluded, seed=4).skeleton.offsets == pytest.approx(
-        user_view(motion, SIX, FIELD, seed=4).skeleton.offsets)
+        user_view(motion, SIX, FIELD, seed=4).skeleton.offsets
+    )
     with pytest.raises(ValueError, match="occluded share"):
         VR_NOISE.occluding(100)
 
 
 def test_train_dtp_is_one_command(tmp_path, mocap_root):
     out = tmp_path / "dtp.onnx"
-    subprocess.run([sys.executable, "-m", "sparse_body.cli", "train", "dtp", "--config", "tiny", "--steps", "2",
-                    "--limit", "1", "--out", str(out), "--no-card"], check=True, capture_output=True)
+    subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "sparse_body.cli",
+            "train",
+            "dtp",
+            "--config",
+            "tiny",
+            "--steps",
+            "2",
+            "--limit",
+            "1",
+            "--out",
+            str(out),
+            "--no-card",
+        ],
+        check=True,
+        capture_output=True,
+    )
     report = json.loads(out.with_suffix(".train.json").read_text())
     assert out.is_file() and (tmp_path / "dtp.pretrained.onnx").is_file()
     assert report["stages"]["pretrain"]["steps"] == 2 and report["train_clips"] == 1
@@ -209,6 +239,7 @@ def test_train_dtp_is_one_command(tmp_path, mocap_root):
 def test_resume_after_the_pre_training_goes_on_with_the_fine_tuning(tmp_path, mocap_root, monkeypatch):
     import sparse_body.train.dtp_train as dtp_train
     from sparse_body.train.dtp_model import DtpConfig
+
     config = replace(DtpConfig.named("tiny"), finetune_steps=4)
     checkpoint, out, fit = tmp_path / "dtp.checkpoint.npz", tmp_path / "dtp.onnx", dtp_train.fit
     calls = []
@@ -219,6 +250,7 @@ def test_resume_after_the_pre_training_goes_on_with_the_fine_tuning(tmp_path, mo
             fit(*args, **{**kwargs, "steps": 2})
             raise KeyboardInterrupt
         return fit(*args, **kwargs)
+
     monkeypatch.setattr(dtp_train, "fit", interrupted_in_the_fine_tuning)
     with pytest.raises(KeyboardInterrupt):
         dtp_train.train(config, mocap_root, out, limit=1, checkpoint=checkpoint, log=lambda *_: None)
@@ -233,13 +265,16 @@ def test_resume_after_the_pre_training_goes_on_with_the_fine_tuning(tmp_path, mo
     assert sorted(p.name for p in tmp_path.iterdir()) == ["dtp.onnx", "dtp.pretrained.onnx"]
 
 
-@pytest.mark.skipif(not (models_dir() / "dtp.onnx").is_file() or not (models_dir() / "dtp.pretrained.onnx").is_file(),
-                    reason="no shipped DTP models")
+@pytest.mark.skipif(
+    not (models_dir() / "dtp.onnx").is_file() or not (models_dir() / "dtp.pretrained.onnx").is_file(),
+    reason="no shipped DTP models",
+)
 def test_shipped_fine_tuning_pays_off_on_occluded_feet(clip_index):
     """A held-out person's walk with feet occluded in a fifth of the frames: the fine-tuned
     model places the body better than the one before fine-tuning."""
     from sparse_body.data.catalog import load_split
     from sparse_body.evaluation import evaluate_motion
+
     assert "16_17" in load_split()["test"]
     motion = load_clip(clip_index["16_17"])
     protocol = Protocol.named(occluded_percent=20)
@@ -252,12 +287,19 @@ def test_shipped_fine_tuning_pays_off_on_occluded_feet(clip_index):
 def test_estimator_node_runs_dtp_over_dds(tiny_models, tmp_path, clip, ros_env):
     """estimator:=dtp with the six-point configuration, fed by the tracker bridge from a bag."""
     import rclpy
+
     pytest.importorskip("tf2_msgs.msg")
     from ros_helpers import during_playback, replay_bag
+
     folder, _ = tiny_models
-    listener = replay_bag(rclpy, ros_env, tmp_path, clip.slice(0, 180), SIX,
-                          {"estimator": "dtp", "model_path": str(folder / "online.onnx"),
-                           "height": clip.skeleton.height()})
+    listener = replay_bag(
+        rclpy,
+        ros_env,
+        tmp_path,
+        clip.slice(0, 180),
+        SIX,
+        {"estimator": "dtp", "model_path": str(folder / "online.onnx"), "height": clip.skeleton.height()},
+    )
     statuses = during_playback(listener, "estimate_status")
     valid = sum(s.valid for s in statuses)
     assert valid >= 0.9 * len(statuses) and valid >= 30, (tmp_path / "sparse_body_estimator.log").read_text()

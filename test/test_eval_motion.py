@@ -3,13 +3,14 @@ distributions are (test/generated_mocap.py): every actor's ASF beside the AMC fi
 folder per motion class, an upper-case .AMC, stray files. Skeleton matching, the AMC rate,
 results written clip by clip and resumed, bad files skipped, seeds from identity, balanced
 --limit, groups with intervals, one parse per file, output in a named results folder."""
+
 import json
 import os
 import shutil
 
+import generated_mocap as gen
 import pytest
 
-import generated_mocap as gen
 from sparse_body import evaluation
 from sparse_body.cli import EXIT_INPUT, main
 from sparse_body.data import catalog
@@ -36,11 +37,21 @@ def test_each_amc_gets_its_actors_asf_by_name_prefix(tmp_path):
     dist = gen.by_motion_class(tmp_path / "dist")
     inputs = find_inputs([dist])
     assert {i.path.name: i.skeleton.name for i in inputs} == {
-        "actorA_run01.amc": "actorA.asf", "actorB_run01.amc": "actorB.asf", "actorA_walk01.amc": "actorA.asf",
-        "actorA_walk02.amc": "actorA.asf", "actorB_walk01.AMC": "actorB.asf"}     # .DS_Store, notes.mat left out
+        "actorA_run01.amc": "actorA.asf",
+        "actorB_run01.amc": "actorB.asf",
+        "actorA_walk01.amc": "actorA.asf",
+        "actorA_walk02.amc": "actorA.asf",
+        "actorB_walk01.AMC": "actorB.asf",
+    }  # .DS_Store, notes.mat left out
     assert {i.how for i in inputs} == {"name prefix"}
     assert [i.group for i in inputs] == ["run", "run", "walk", "walk", "walk"]
-    assert [i.group for i in find_inputs([dist], group_by="prefix")] == ["actorA", "actorB", "actorA", "actorA", "actorB"]
+    assert [i.group for i in find_inputs([dist], group_by="prefix")] == [
+        "actorA",
+        "actorB",
+        "actorA",
+        "actorA",
+        "actorB",
+    ]
     # CMU's own naming is a prefix too: 16.asf beside 16_05.amc, with another subject's ASF there
     gen.write(tmp_path / "cmu" / "16.asf", gen.asf())
     gen.write(tmp_path / "cmu" / "161.asf", gen.asf())
@@ -57,19 +68,22 @@ def test_an_amc_without_a_matching_asf_is_an_error_listing_the_candidates(tmp_pa
     assert "actorA.asf, actorB.asf" in err and "--skeleton-file" in err and "AMC=ASF" in err
     assert not (tmp_path / "r.json").exists()
     # paired on the command line, or one skeleton for all: both run
-    code, out, err = run_cli(capsys, *eval_args("--motion", f"{amc}={tmp_path / 'a' / 'actorB.asf'}",
-                                                "--output", tmp_path / "r.json"))
+    code, out, err = run_cli(
+        capsys, *eval_args("--motion", f"{amc}={tmp_path / 'a' / 'actorB.asf'}", "--output", tmp_path / "r.json")
+    )
     assert code == 0, err
     assert "1 paired" in err
-    code, out, err = run_cli(capsys, *eval_args("--motion", amc, "--skeleton-file", tmp_path / "a" / "actorA.asf",
-                                                "--output", tmp_path / "r2.json"))
+    code, out, err = run_cli(
+        capsys,
+        *eval_args("--motion", amc, "--skeleton-file", tmp_path / "a" / "actorA.asf", "--output", tmp_path / "r2.json"),
+    )
     assert code == 0 and "1 given" in err, err
     source = json.loads((tmp_path / "r2.json").read_text())[0]["clips"][0]["source"]
     assert "actorA.asf (given)" in source
 
 
 def test_another_actors_skeleton_is_said(tmp_path, capsys):
-    gen.write(tmp_path / "a" / "tall.asf", gen.asf(1.25))          # the only ASF: used, but the feet go through the floor
+    gen.write(tmp_path / "a" / "tall.asf", gen.asf(1.25))  # the only ASF: used, but the feet go through the floor
     gen.write(tmp_path / "a" / "short_walk.amc", gen.amc(120))
     code, out, err = run_cli(capsys, *eval_args("--motion", tmp_path / "a", "--output", tmp_path / "r.json"))
     assert code == 0, err
@@ -84,19 +98,21 @@ def test_the_amc_rate_is_an_option_and_said(tmp_path, capsys):
     dist = gen.by_motion_class(tmp_path / "dist", frames=120)
     code, _, err = run_cli(capsys, *eval_args("--motion", dist / "run", "--output", tmp_path / "r120.json"))
     assert code == 0 and "captured at 120 Hz" in err, err
-    code, _, err = run_cli(capsys, *eval_args("--motion", dist / "run", "--amc-fps", 60, "--output", tmp_path / "r60.json"))
+    code, _, err = run_cli(
+        capsys, *eval_args("--motion", dist / "run", "--amc-fps", 60, "--output", tmp_path / "r60.json")
+    )
     assert code == 0 and "captured at 60 Hz" in err, err
     frames = {name: json.loads((tmp_path / name).read_text())[0]["frames"] for name in ("r120.json", "r60.json")}
-    assert frames["r60.json"] == 2 * frames["r120.json"] == 2 * 2 * 60      # 120 frames: 1 s at 120 Hz, 2 s at 60 Hz
+    assert frames["r60.json"] == 2 * frames["r120.json"] == 2 * 2 * 60  # 120 frames: 1 s at 120 Hz, 2 s at 60 Hz
 
 
 def test_a_bad_file_is_skipped_and_a_stopped_run_resumes(tmp_path, capsys, monkeypatch):
     dist = gen.by_motion_class(tmp_path / "dist", frames=60)
-    gen.write(dist / "walk" / "actorA_walk03.amc", ":FULLY-SPECIFIED\n:DEGREES\n1\nroot 0 1 0\n")   # broken
+    gen.write(dist / "walk" / "actorA_walk03.amc", ":FULLY-SPECIFIED\n:DEGREES\n1\nroot 0 1 0\n")  # broken
     out = tmp_path / "r.json"
     real, calls = evaluation.evaluate_motion, []
 
-    def stopping(motion, *args, **kwargs):     # the third clip: the user presses Ctrl-C
+    def stopping(motion, *args, **kwargs):  # the third clip: the user presses Ctrl-C
         calls.append(motion.name)
         if len(calls) == 3:
             raise KeyboardInterrupt
@@ -106,17 +122,17 @@ def test_a_bad_file_is_skipped_and_a_stopped_run_resumes(tmp_path, capsys, monke
     code, _, err = run_cli(capsys, *eval_args("--motion", dist, "--output", out))
     assert code == 130
     kept = json.loads(out.read_text())[0]
-    assert len(kept["clips"]) == 2                                      # written as they came
+    assert len(kept["clips"]) == 2  # written as they came
     calls.clear()
     monkeypatch.setattr(evaluation, "evaluate_motion", lambda m, *a, **k: calls.append(m.name) or real(m, *a, **k))
     code, stdout, err = run_cli(capsys, *eval_args("--motion", dist, "--output", out))
     assert code == EXIT_INPUT and "1 of 6 clips skipped" in err and "actorA_walk03.amc" in err, err
-    assert len(calls) == 3                                              # only what was left
+    assert len(calls) == 3  # only what was left
     result = json.loads(out.read_text())[0]
     assert len(result["clips"]) == 5 and [s["clip"] for s in result["skipped"]] == ["actorA_walk03.amc"]
     assert result["clips"][:2] == kept["clips"]
     calls.clear()
-    code, _, _ = run_cli(capsys, *eval_args("--motion", dist, "--output", out))     # all done: nothing to do
+    code, _, _ = run_cli(capsys, *eval_args("--motion", dist, "--output", out))  # all done: nothing to do
     assert code == EXIT_INPUT and calls == []
 
 
@@ -125,7 +141,10 @@ def test_a_clips_draws_follow_its_identity_not_its_place(tmp_path, capsys):
     walk = sorted((dist / "walk").glob("*.[aA][mM][cC]"))
     first = evaluation.evaluate("ik", _six(), None, motions=[walk[0], walk[1]], progress=False)
     again = evaluation.evaluate("ik", _six(), None, motions=[walk[2], walk[1], walk[0]], progress=False)
-    per_clip = lambda r: {c: json.dumps(m, sort_keys=True) for c, m in zip(r.clips, r.per_clip)}  # NaN == NaN  # noqa: E731
+
+    def per_clip(r):  # as JSON text: NaN == NaN
+        return {c: json.dumps(m, sort_keys=True) for c, m in zip(r.clips, r.per_clip, strict=True)}
+
     assert per_clip(again)[walk[1].name] == per_clip(first)[walk[1].name]
     assert per_clip(again)[walk[0].name] == per_clip(first)[walk[0].name]
     # the same content under another name is another clip: its own draws
@@ -137,6 +156,7 @@ def test_a_clips_draws_follow_its_identity_not_its_place(tmp_path, capsys):
 
 def _six():
     from sparse_body.core.sensors import load_sensor_config
+
     return load_sensor_config("six_point")
 
 
@@ -144,8 +164,9 @@ def test_limit_is_balanced_over_folders_and_groups_are_tabled(tmp_path, capsys):
     dist = gen.by_motion_class(tmp_path / "dist", frames=60)
     picked = balanced(find_inputs([dist]), 3)
     assert [i.group for i in picked] == ["run", "walk", "run"]
-    code, stdout, err = run_cli(capsys, *eval_args("--estimator", "reference", "--motion", dist, "--limit", 4,
-                                                   "--output", tmp_path / "r.json"))
+    code, stdout, err = run_cli(
+        capsys, *eval_args("--estimator", "reference", "--motion", dist, "--limit", 4, "--output", tmp_path / "r.json")
+    )
     assert code == 0, err
     assert "MPJPE [cm] by folder" in stdout and "run (2 clips)" in stdout and "walk (2 clips)" in stdout
     result = json.loads((tmp_path / "r.json").read_text())
@@ -160,12 +181,14 @@ def test_each_file_is_parsed_once_for_every_estimator_and_not_again(tmp_path, ca
     dist = gen.by_motion_class(tmp_path / "dist", frames=60)
     real, parsed = catalog.load_amc, []
     monkeypatch.setattr(catalog, "load_amc", lambda path, *a, **k: parsed.append(path.name) or real(path, *a, **k))
-    code, _, err = run_cli(capsys, *eval_args("--estimator", "reference", "--motion", dist, "--output", tmp_path / "a.json"))
+    code, _, err = run_cli(
+        capsys, *eval_args("--estimator", "reference", "--motion", dist, "--output", tmp_path / "a.json")
+    )
     assert code == 0, err
-    assert sorted(parsed) == sorted(p.name for p in dist.rglob("*.[aA][mM][cC]"))       # 5 files, 2 estimators
+    assert sorted(parsed) == sorted(p.name for p in dist.rglob("*.[aA][mM][cC]"))  # 5 files, 2 estimators
     parsed.clear()
     code, _, err = run_cli(capsys, *eval_args("--motion", dist, "--output", tmp_path / "b.json"))
-    assert code == 0 and parsed == [], err                                           # another run: the cache
+    assert code == 0 and parsed == [], err  # another run: the cache
 
 
 def test_results_go_to_a_named_results_folder(tmp_path, capsys, monkeypatch):

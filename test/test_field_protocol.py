@@ -1,4 +1,5 @@
 """The user's body from a T-pose, the tracker filter and the field protocol of `sparse-body eval`."""
+
 import subprocess
 import sys
 
@@ -22,27 +23,34 @@ from sparse_body.evaluation import evaluate_motion
 def _tpose_joints(skeleton: Skeleton) -> dict:
     rest = skeleton.rest_positions()
     rest[:, 2] -= rest[:, 2].min()
-    sites = {"head": "head", "left_hand": "left_wrist", "right_hand": "right_wrist", "pelvis": "pelvis",
-             "left_foot": "left_ankle", "right_foot": "right_ankle"}
+    sites = {
+        "head": "head",
+        "left_hand": "left_wrist",
+        "right_hand": "right_wrist",
+        "pelvis": "pelvis",
+        "left_foot": "left_ankle",
+        "right_foot": "right_ankle",
+    }
     return {site: rest[J[joint]] for site, joint in sites.items()}
 
 
 def test_fit_skeleton_recovers_arms_legs_and_torso_of_an_exact_tpose():
     person = Skeleton.canonical(1.68).offsets.copy()
     for side in ("left", "right"):
-        person[J[f"{side}_elbow"]] *= 1.12          # long arms
-        person[J[f"{side}_knee"]] *= 0.93           # short thighs
+        person[J[f"{side}_elbow"]] *= 1.12  # long arms
+        person[J[f"{side}_knee"]] *= 0.93  # short thighs
     person[J["spine3"]] *= 1.2
     person = Skeleton(person)
     fitted = fit_skeleton(_tpose_joints(person), person.height())
     assert abs(arm_span(fitted) - arm_span(person)) < 1e-6
-    assert abs(leg_length(fitted) - leg_length(person)) < 0.001       # (the hip joints' drop is a prior)
+    assert abs(leg_length(fitted) - leg_length(person)) < 0.001  # (the hip joints' drop is a prior)
     rest, truth = fitted.rest_positions(), person.rest_positions()
     for joint in ("head", "left_wrist", "right_ankle", "left_collar"):
         assert np.linalg.norm(rest[J[joint]] - truth[J[joint]]) < 0.005, joint
     # without pelvis and feet the torso-leg split is the canonical one, the sum still right
-    three = fit_skeleton({k: v for k, v in _tpose_joints(person).items() if k in ("head", "left_hand", "right_hand")},
-                         person.height())
+    three = fit_skeleton(
+        {k: v for k, v in _tpose_joints(person).items() if k in ("head", "left_hand", "right_hand")}, person.height()
+    )
     assert abs(three.height() - person.height()) < 0.01
 
 
@@ -52,6 +60,7 @@ def test_calibration_recovers_real_subjects_arms_legs_and_height(clip_index, sen
     """Noisy trackers, mounted as a user wears them, an imperfect T-pose: every validation and
     test subject (none trained on), two sessions each."""
     from sparse_body.data.catalog import load_clip, load_split
+
     split = load_split()
     first = {}
     for clip in split["validation"] + split["test"]:
@@ -77,8 +86,9 @@ def test_calibration_file_keeps_the_fitted_body_and_refuses_a_broken_one(tmp_pat
     cal.save(tmp_path / "cal.yaml")
     back = Calibration.load(tmp_path / "cal.yaml")
     np.testing.assert_allclose(back.body().offsets, body.offsets, atol=1e-5)
-    assert Calibration(1.6, 0.0).body().height() == pytest.approx(1.6)      # no fitted body: scaled by height
+    assert Calibration(1.6, 0.0).body().height() == pytest.approx(1.6)  # no fitted body: scaled by height
     import yaml
+
     data = yaml.safe_load((tmp_path / "cal.yaml").read_text())
     del data["skeleton"]["right_wrist"]
     (tmp_path / "short.yaml").write_text(yaml.safe_dump(data))
@@ -101,7 +111,7 @@ def _frame(t, pos, quat, valid=True):
 def test_filter_follows_constant_velocity_without_lag_and_removes_noise(rng):
     f = TrackerFilter(FilterConfig(position_noise=0.01, rotation_noise=1.0), ("head",))
     out = [f(_frame(i / 60, [0.5 * i / 60, 0.0, 1.6], [0, 0, 0, 1])).positions[0] for i in range(240)]
-    assert abs(out[-1][0] - 0.5 * 239 / 60) < 0.001                  # walking at 0.5 m/s: no lag left
+    assert abs(out[-1][0] - 0.5 * 239 / 60) < 0.001  # walking at 0.5 m/s: no lag left
     f.reset()
     noisy, smooth = [], []
     spin = Rotation.from_euler("z", 0.3)
@@ -124,12 +134,12 @@ def test_filter_passes_bad_samples_and_starts_over_after_a_jump_or_a_gap():
     for i in range(30):
         f(_frame(i / 60, [0.0, 0.0, 1.6], [0, 0, 0, 1]))
     bad = f(_frame(0.5, [np.nan] * 3, [0, 0, 0, 1]))
-    assert np.isnan(bad.positions[0]).all()                       # passed through, not invented
+    assert np.isnan(bad.positions[0]).all()  # passed through, not invented
     dropped = f(_frame(0.52, [9.0, 9.0, 9.0], [0, 0, 0, 1], valid=False))
     assert dropped.positions[0][0] == 9.0 and not dropped.valid[0]
-    moved = f(_frame(0.54, [3.0, 0.0, 1.6], [0, 0, 0, 1]))      # relocalised: 3 m away
+    moved = f(_frame(0.54, [3.0, 0.0, 1.6], [0, 0, 0, 1]))  # relocalised: 3 m away
     assert moved.positions[0][0] == 3.0
-    back = f(_frame(0.1, [0.0, 0.0, 1.6], [0, 0, 0, 1]))         # the clock went back
+    back = f(_frame(0.1, [0.0, 0.0, 1.6], [0, 0, 0, 1]))  # the clock went back
     assert back.positions[0][0] == 0.0
     off = TrackerFilter(NO_FILTER, ("head",))
     assert all(off(_frame(i / 60, [i, 2.0, 3.0], [0, 0, 0, 1])).positions[0][0] == i for i in range(5))
@@ -144,7 +154,7 @@ def test_lab_protocol_is_the_true_skeleton_and_exact_mounting():
     assert lab.skeleton is motion.skeleton and lab.calibration is None
     field = user_view(motion, config, FIELD)
     assert field.calibration is not None and not np.allclose(field.skeleton.offsets, motion.skeleton.offsets)
-    assert all(s.offset_rotation == (0.0, 0.0, 0.0, 1.0) for s in field.sensors.sites)   # calibrated away
+    assert all(s.offset_rotation == (0.0, 0.0, 0.0, 1.0) for s in field.sensors.sites)  # calibrated away
     assert Protocol.named("oracle", "none") == LAB and Protocol.named() == FIELD
     assert FIELD.label == "field, vr noise" and LAB.label == "lab"
     with pytest.raises(ValueError, match="noise must be one of"):
@@ -160,8 +170,9 @@ def test_six_point_ik_in_the_field_keeps_its_end_effectors_on_the_trackers():
     assert field["MPJPE [cm]"] < 1.5 * lab["MPJPE [cm]"] + 0.5
     # the filter, set for LoBSTr's noise, takes most of it out of the joints' velocities
     noisy = evaluate_motion(motion, "ik", config, Protocol("calibrated", LOBSTR_NOISE))
-    raw = evaluate_motion(motion, "ik", config, Protocol("calibrated", LOBSTR_NOISE),
-                          filter_position_noise=0.0, filter_rotation_noise=0.0)
+    raw = evaluate_motion(
+        motion, "ik", config, Protocol("calibrated", LOBSTR_NOISE), filter_position_noise=0.0, filter_rotation_noise=0.0
+    )
     assert noisy["MPJVE [cm/s]"] < 0.6 * raw["MPJVE [cm/s]"]
     assert noisy["Jitter [100m/s3]"] < 0.6 * raw["Jitter [100m/s3]"]
     clean = evaluate_motion(motion, "ik", config, Protocol("calibrated", NO_NOISE))
@@ -170,15 +181,32 @@ def test_six_point_ik_in_the_field_keeps_its_end_effectors_on_the_trackers():
 
 @pytest.mark.mocap
 def test_eval_command_runs_the_field_protocol_by_default_and_the_lab_on_request(tmp_path):
-    common = [sys.executable, "-m", "sparse_body.cli", "eval", "--estimator", "ik", "--sensors", "six_point",
-              "--limit", "2", "--quiet", "--no-compare"]
+    common = [
+        sys.executable,
+        "-m",
+        "sparse_body.cli",
+        "eval",
+        "--estimator",
+        "ik",
+        "--sensors",
+        "six_point",
+        "--limit",
+        "2",
+        "--quiet",
+        "--no-compare",
+    ]
     field = subprocess.run(common + ["--output", str(tmp_path / "f.json")], capture_output=True, text=True, timeout=600)
-    lab = subprocess.run(common + ["--skeleton", "oracle", "--noise", "none", "--output", str(tmp_path / "l.json")],
-                         capture_output=True, text=True, timeout=600)
+    lab = subprocess.run(
+        common + ["--skeleton", "oracle", "--noise", "none", "--output", str(tmp_path / "l.json")],
+        capture_output=True,
+        text=True,
+        timeout=600,
+    )
     assert field.returncode == 0 and lab.returncode == 0, field.stderr + lab.stderr
     assert "field, vr noise protocol" in field.stdout and "lab protocol" in lab.stdout
     import json
-    f, l = (json.loads((tmp_path / n).read_text())[0] for n in ("f.json", "l.json"))
-    assert f["protocol"] == "field, vr noise" and l["protocol"] == "lab"
-    assert f["summary"]["MPJPE [cm]"] > l["summary"]["MPJPE [cm]"]
-    assert l["summary"]["End-effector PE [cm]"] < 0.2
+
+    field, lab = (json.loads((tmp_path / n).read_text())[0] for n in ("f.json", "l.json"))
+    assert field["protocol"] == "field, vr noise" and lab["protocol"] == "lab"
+    assert field["summary"]["MPJPE [cm]"] > lab["summary"]["MPJPE [cm]"]
+    assert lab["summary"]["End-effector PE [cm]"] < 0.2

@@ -21,7 +21,8 @@ def test_ik_with_feet_trackers_recovers_the_legs():
 
 
 def test_ik_takes_position_only_trackers():
-    config = parse_sensor_config({"sites": {"pelvis": {}, "left_hand": {"measures": "position"},
-                                            "right_hand": {"measures": "position"}}})
+    config = parse_sensor_config(
+        {"sites": {"pelvis": {}, "left_hand": {"measures": "position"}, "right_hand": {"measures": "position"}}}
+    )
     metrics = evaluate_motion(synthetic_walk(2.0), "ik", config)
     assert np.isfinite(metrics["MPJPE [cm]"]) and metrics["Hand PE [cm]"] < 2.0

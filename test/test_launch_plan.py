@@ -1,13 +1,18 @@
 """What the launch file starts, without starting it: needs the launch and launch_ros Python
 packages (not on PyPI: make setup installs them from ../shared/ros, or a ROS install) but no
 running nodes."""
+
 import importlib.util
 from pathlib import Path
 
 import pytest
 
-pytest.importorskip("launch_ros", reason="launch_ros is not installed (make setup installs it from ../shared/ros; or a ROS install)")
-pytest.importorskip("launch.actions", reason="launch is not installed (make setup installs it from ../shared/ros; or a ROS install)")
+pytest.importorskip(
+    "launch_ros", reason="launch_ros is not installed (make setup installs it from ../shared/ros; or a ROS install)"
+)
+pytest.importorskip(
+    "launch.actions", reason="launch is not installed (make setup installs it from ../shared/ros; or a ROS install)"
+)
 pytest.importorskip("ament_index_python.packages", reason="ament_index_python is not installed (make setup)")
 
 
@@ -21,20 +26,31 @@ def _launch_module():
 
 def test_a_missing_robot_state_publisher_is_said_and_nothing_is_started_for_it(monkeypatch):
     """It used to fail after the estimator had started, leaving it running as an orphan."""
-    from launch import LaunchContext
     from launch.actions import LogInfo
     from launch_ros.actions import Node
+
+    from launch import LaunchContext
+
     module = _launch_module()
     monkeypatch.setattr(module, "_installed", lambda package: package != "robot_state_publisher")
     monkeypatch.setattr(module, "get_package_share_directory", lambda package: str(Path(__file__).resolve().parents[1]))
     context = LaunchContext()
-    for name, value in {"sensors": "three_point", "estimator": "reference", "model_path": "", "height": "1.75",
-                        "calibration": "", "bag": "", "refine": "false", "robot_state_publisher": "true"}.items():
+    for name, value in {
+        "sensors": "three_point",
+        "estimator": "reference",
+        "model_path": "",
+        "height": "1.75",
+        "calibration": "",
+        "bag": "",
+        "refine": "false",
+        "robot_state_publisher": "true",
+    }.items():
         context.launch_configurations[name] = value
     actions = module._nodes(context)
     assert any(isinstance(a, LogInfo) for a in actions)
-    assert not any(isinstance(a, Node) and "robot_state_publisher" in str(getattr(a, "node_package", ""))
-                   for a in actions)
+    assert not any(
+        isinstance(a, Node) and "robot_state_publisher" in str(getattr(a, "node_package", "")) for a in actions
+    )
     assert not module._installed("robot_state_publisher")
 
 
@@ -43,6 +59,7 @@ def test_a_calibration_file_is_the_body_of_the_estimator_and_of_robot_state_publ
     from sparse_body.adapters.calibration import Calibration
     from sparse_body.core.skeleton import Skeleton
     from sparse_body.urdf import body_urdf
+
     module = _launch_module()
     monkeypatch.setattr(module, "_installed", lambda package: True)
     monkeypatch.setattr(module, "get_package_share_directory", lambda package: str(Path(__file__).resolve().parents[1]))
@@ -50,12 +67,19 @@ def test_a_calibration_file_is_the_body_of_the_estimator_and_of_robot_state_publ
     monkeypatch.setattr(module, "LifecycleNode", lambda **kw: ("lifecycle", kw))
     monkeypatch.setattr(module, "Node", lambda **kw: ("node", kw))
     offsets = Skeleton.canonical(1.62).offsets.copy()
-    offsets[18] *= 1.2                                             # a long left upper arm
+    offsets[18] *= 1.2  # a long left upper arm
     Calibration(1.62, 0.0, {}, Skeleton(offsets)).save(tmp_path / "me.yaml")
     context = LaunchContext()
-    for name, value in {"sensors": "six_point", "estimator": "ik", "model_path": "", "height": "1.75",
-                        "calibration": str(tmp_path / "me.yaml"), "bag": "", "refine": "false",
-                        "robot_state_publisher": "true"}.items():
+    for name, value in {
+        "sensors": "six_point",
+        "estimator": "ik",
+        "model_path": "",
+        "height": "1.75",
+        "calibration": str(tmp_path / "me.yaml"),
+        "bag": "",
+        "refine": "false",
+        "robot_state_publisher": "true",
+    }.items():
         context.launch_configurations[name] = value
     actions = module._nodes(context)
     estimator = next(kw for kind, kw in actions if kind == "lifecycle")

@@ -1,4 +1,6 @@
-"""BVH and ASF/AMC loaders on tiny files (sparse_body/data/samples.py) with hand-computed answers, and on broken ones."""
+"""BVH and ASF/AMC loaders on tiny files (sparse_body/data/samples.py) with hand-computed answers,
+and on broken ones."""
+
 import gzip
 
 import numpy as np
@@ -26,7 +28,7 @@ def test_bvh_positions_hand_computed(tmp_path):
 
 def test_truncated_bvh_names_file_and_problem(tmp_path):
     path = tmp_path / "cut.bvh"
-    path.write_text(BVH.rsplit("\n", 2)[0] + "\n")       # last frame lost
+    path.write_text(BVH.rsplit("\n", 2)[0] + "\n")  # last frame lost
     with pytest.raises(MotionFileError, match=r"cut\.bvh: MOTION declares 2 frames of 9 channels but holds 1"):
         load_bvh(path)
     path.write_text(BVH.split("MOTION")[0])
@@ -43,14 +45,11 @@ def test_truncated_bvh_names_file_and_problem(tmp_path):
         load_bvh(tmp_path / "absent.bvh")
 
 
-
-
-
 def test_asf_amc_positions_hand_computed(tmp_path):
     (tmp_path / "t.asf").write_text(ASF)
     (tmp_path / "t_01.amc").write_text(AMC)
     m = load_amc(tmp_path / "t_01.amc", load_asf(tmp_path / "t.asf"))
-    u = 0.254   # 10 units of 1/1.0 inch
+    u = 0.254  # 10 units of 1/1.0 inch
     assert m.joint_names == ["root", "a", "b", "c"]
     a, b, c = 1, 2, 3
     np.testing.assert_allclose(m.positions[0, [b, c]], [[u, 0, 0], [u, u, 0]], atol=1e-12)
@@ -59,7 +58,7 @@ def test_asf_amc_positions_hand_computed(tmp_path):
     # Frame 3: b's rx acts in b's axis frame C = Rz(90), i.e. about world y: b's vector
     # (0, 1, 0) lies on that axis, so c stays put, but b's frame has turned.
     np.testing.assert_allclose(m.positions[2, [b, c]], [[u, 0, 0], [u, u, 0]], atol=1e-12)
-    expected = np.array([[0, 0, 1], [0, 1, 0], [-1, 0, 0]], dtype=float)   # 90 degrees about y
+    expected = np.array([[0, 0, 1], [0, 1, 0], [-1, 0, 0]], dtype=float)  # 90 degrees about y
     np.testing.assert_allclose(m.rotations[2, b], expected, atol=1e-12)
     np.testing.assert_allclose(m.rotations[2, a], np.eye(3), atol=1e-12)
 
@@ -83,6 +82,7 @@ def _refused_quickly(load, path, *args):
 
     def hang(*_):
         raise TimeoutError(f"{path.name}: the loader hangs")
+
     old = signal.signal(signal.SIGALRM, hang)
     signal.alarm(5)
     try:
@@ -95,37 +95,45 @@ def _refused_quickly(load, path, *args):
     return str(err.value)
 
 
-@pytest.mark.parametrize("old,new,problem", [
-    ("CHANNELS 3 Zrotation", "CHANNELS -2 Zrotation", "CHANNELS"),                 # looped forever
-    ("Frame Time: 0.5", "Frame Time: 0", "Frame Time"),                             # ZeroDivisionError
-    ("Frame Time: 0.5", "Frame Time: inf", "Frame Time"),                           # OverflowError
-    ("Frame Time: 0.5", "Frame Time: nan", "Frame Time"),
-    ("Frame Time: 0.5", "Frame Time: -0.5", "Frame Time"),
-    ("Frame Time: 0.5", "Frame Time: 1e-300", "Frame Time"),                        # frames collapsed
-    ("Zrotation Xrotation Yrotation\n    End", "Wposition Xrotation Yrotation\n    End", "unknown channel"),
-    ("CHANNELS 3 Zrotation Xrotation Yrotation", "CHANNELS 3 Xrotation Xrotation Yrotation", "twice"),
-    ("CHANNELS 3 Zrotation Xrotation Yrotation", "CHANNELS 2 Xrotation Yrotation", "rotation channels"),
-])
+@pytest.mark.parametrize(
+    "old,new,problem",
+    [
+        ("CHANNELS 3 Zrotation", "CHANNELS -2 Zrotation", "CHANNELS"),  # looped forever
+        ("Frame Time: 0.5", "Frame Time: 0", "Frame Time"),  # ZeroDivisionError
+        ("Frame Time: 0.5", "Frame Time: inf", "Frame Time"),  # OverflowError
+        ("Frame Time: 0.5", "Frame Time: nan", "Frame Time"),
+        ("Frame Time: 0.5", "Frame Time: -0.5", "Frame Time"),
+        ("Frame Time: 0.5", "Frame Time: 1e-300", "Frame Time"),  # frames collapsed
+        ("Zrotation Xrotation Yrotation\n    End", "Wposition Xrotation Yrotation\n    End", "unknown channel"),
+        ("CHANNELS 3 Zrotation Xrotation Yrotation", "CHANNELS 3 Xrotation Xrotation Yrotation", "twice"),
+        ("CHANNELS 3 Zrotation Xrotation Yrotation", "CHANNELS 2 Xrotation Yrotation", "rotation channels"),
+    ],
+)
 def test_malformed_bvh_is_a_clear_error_naming_the_file(tmp_path, old, new, problem):
     assert old in BVH
     path = tmp_path / "bad.bvh"
     text = BVH.replace(old, new, 1)
-    if "CHANNELS 2" in new:       # keep the data consistent: one value fewer per frame
-        text = text.replace("0 100 0 0 0 0 0 0 0", "0 100 0 0 0 0 0 0").replace("20 100 0 0 0 0 90 0 0", "20 100 0 0 0 0 90 0")
+    if "CHANNELS 2" in new:  # keep the data consistent: one value fewer per frame
+        text = text.replace("0 100 0 0 0 0 0 0 0", "0 100 0 0 0 0 0 0").replace(
+            "20 100 0 0 0 0 90 0 0", "20 100 0 0 0 0 90 0"
+        )
     path.write_text(text)
     assert problem in _refused_quickly(load_bvh, path)
 
 
-@pytest.mark.parametrize("old,new,problem", [
-    ("    b c\n", "    b c\n    a a\n", "second parent"),                          # a bone its own child: looped forever
-    ("  length 1.0\n", "  length 0\n", "units length"),                           # ZeroDivisionError
-    ("order TX TY TZ RX RY RZ", "order X", "root order"),                         # IndexError
-    ("order TX TY TZ RX RY RZ", "order TX TY TW", "root order"),
-    ("    dof rz", "    dof rx rx", "dof"),
-    ("direction 1 0 0", "direction 1 0", "three finite numbers"),         # found by make fuzz: a matmul error
-    ("    b c\n", "    b c\n    c b\n", "second parent"),                # found by make fuzz: a KeyError
-    ("     length 10\n", "     length nan\n", "bone length"),
-])
+@pytest.mark.parametrize(
+    "old,new,problem",
+    [
+        ("    b c\n", "    b c\n    a a\n", "second parent"),  # a bone its own child: looped forever
+        ("  length 1.0\n", "  length 0\n", "units length"),  # ZeroDivisionError
+        ("order TX TY TZ RX RY RZ", "order X", "root order"),  # IndexError
+        ("order TX TY TZ RX RY RZ", "order TX TY TW", "root order"),
+        ("    dof rz", "    dof rx rx", "dof"),
+        ("direction 1 0 0", "direction 1 0", "three finite numbers"),  # found by make fuzz: a matmul error
+        ("    b c\n", "    b c\n    c b\n", "second parent"),  # found by make fuzz: a KeyError
+        ("     length 10\n", "     length nan\n", "bone length"),
+    ],
+)
 def test_malformed_asf_is_a_clear_error_naming_the_file(tmp_path, old, new, problem):
     assert old in ASF
     path = tmp_path / "bad.asf"
@@ -141,14 +149,17 @@ def test_angle_units_are_read_from_the_asf_and_the_amc(tmp_path):
     degrees = load_amc(tmp_path / "deg.amc", load_asf(tmp_path / "deg.asf"))
     rad = ASF.replace("angle deg", "angle rad").replace("axis 0 0 90 XYZ", f"axis 0 0 {np.pi / 2!r} XYZ")
     (tmp_path / "rad.asf").write_text(rad)
-    amc_rad = AMC.replace(":DEGREES", ":RADIANS").replace("a 90", f"a {np.pi / 2!r}").replace("b 90", f"b {np.pi / 2!r}")
+    amc_rad = (
+        AMC.replace(":DEGREES", ":RADIANS").replace("a 90", f"a {np.pi / 2!r}").replace("b 90", f"b {np.pi / 2!r}")
+    )
     (tmp_path / "rad.amc").write_text(amc_rad)
     radians = load_amc(tmp_path / "rad.amc", load_asf(tmp_path / "rad.asf"))
     np.testing.assert_allclose(radians.positions, degrees.positions, atol=1e-12)
     # an AMC in radians under a degrees ASF: its own header decides
     (tmp_path / "mixed.amc").write_text(amc_rad)
-    np.testing.assert_allclose(load_amc(tmp_path / "mixed.amc", load_asf(tmp_path / "deg.asf")).positions,
-                               degrees.positions, atol=1e-12)
+    np.testing.assert_allclose(
+        load_amc(tmp_path / "mixed.amc", load_asf(tmp_path / "deg.asf")).positions, degrees.positions, atol=1e-12
+    )
     (tmp_path / "bad.asf").write_text(ASF.replace("angle deg", "angle grad"))
     assert "deg or rad" in _refused_quickly(load_asf, tmp_path / "bad.asf")
 
@@ -156,8 +167,10 @@ def test_angle_units_are_read_from_the_asf_and_the_amc(tmp_path):
 def test_user_motion_files_upper_case_and_unknown_layouts(tmp_path, mocap_root):
     import gzip
     import shutil
+
     from sparse_body.data.catalog import load_motion_file
     from sparse_body.data.motion_inputs import find_inputs
+
     subject = mocap_root / "asfamc" / "subjects" / "02"
     if not subject.is_dir():
         pytest.skip("the CMU ASF/AMC subject 02 is not in ../shared/mocap")
@@ -166,6 +179,6 @@ def test_user_motion_files_upper_case_and_unknown_layouts(tmp_path, mocap_root):
     assert [i.path for i in find_inputs([tmp_path])] == [tmp_path / "02_05.AMC"]
     motion = load_motion_file(tmp_path / "02_05.AMC", 60.0)
     assert len(motion) > 100 and np.all(np.isfinite(motion.positions))
-    (tmp_path / "other.bvh").write_text(BVH)                       # a layout we have no joint map for
+    (tmp_path / "other.bvh").write_text(BVH)  # a layout we have no joint map for
     with pytest.raises(MotionFileError, match=r"other\.bvh: .*known layouts: cmu_asf, cmu_bvh_mb2"):
         load_motion_file(tmp_path / "other.bvh", 60.0)

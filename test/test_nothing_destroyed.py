@@ -1,6 +1,7 @@
 """A user's files survive every command: outputs replace only bags this package wrote, never
 an input, a plain file, a folder of other files or a device; interrupted and terminated runs
 leave nothing behind; every error a user can cause ends in one line and its own exit code."""
+
 import os
 import signal
 import subprocess
@@ -39,7 +40,7 @@ def test_the_input_is_never_the_output(bag, capsys):
     before = tree(bag)
     code, err = run_cli(capsys, "process", bag, bag, "--overwrite", "--quiet")
     assert code == EXIT_OUTPUT and "is (or holds) the input" in err and len(err.strip().splitlines()) == 1
-    code, err = run_cli(capsys, "process", bag, bag.parent, "--overwrite", "--quiet")    # a folder holding it
+    code, err = run_cli(capsys, "process", bag, bag.parent, "--overwrite", "--quiet")  # a folder holding it
     assert code == EXIT_OUTPUT
     assert tree(bag) == before
 
@@ -56,7 +57,7 @@ def test_overwrite_never_replaces_what_is_not_our_bag(bag, tmp_path, capsys, kin
         os.mkfifo(target)
     else:
         make_bag(synthetic_walk(0.5), load_sensor_config("six_point"), tmp_path / "ours")
-        target.symlink_to(tmp_path / "ours")          # even a link to our own bag: the link is the user's
+        target.symlink_to(tmp_path / "ours")  # even a link to our own bag: the link is the user's
     before = os.lstat(target)
     code, err = run_cli(capsys, "process", bag, target, "--overwrite", "--quiet")
     assert code == EXIT_OUTPUT and "never replaced" in err and len(err.strip().splitlines()) == 1
@@ -92,13 +93,25 @@ def test_sigterm_during_process_leaves_nothing_behind(tmp_path):
     bag = tmp_path / "long"
     make_bag(synthetic_walk(60.0), load_sensor_config("six_point"), bag)
     before = sorted(p.name for p in tmp_path.iterdir())
-    proc = subprocess.Popen([sys.executable, "-m", "sparse_body.cli", "process", str(bag), str(tmp_path / "out"),
-                             "--estimator", "dragposer"], stderr=subprocess.PIPE, text=True)
+    proc = subprocess.Popen(
+        [
+            sys.executable,
+            "-m",
+            "sparse_body.cli",
+            "process",
+            str(bag),
+            str(tmp_path / "out"),
+            "--estimator",
+            "dragposer",
+        ],
+        stderr=subprocess.PIPE,
+        text=True,
+    )
     try:
-        deadline = time.monotonic() + 300                # a busy machine loads the model slowly
+        deadline = time.monotonic() + 300  # a busy machine loads the model slowly
         started = ""
         while "frame" not in started and time.monotonic() < deadline and proc.poll() is None:
-            started += os.read(proc.stderr.fileno(), 256).decode(errors="replace")   # the progress bar
+            started += os.read(proc.stderr.fileno(), 256).decode(errors="replace")  # the progress bar
         assert proc.poll() is None, f"ended before it could be terminated: {started}"
         proc.send_signal(signal.SIGTERM)
         _, err = proc.communicate(timeout=120)
@@ -117,9 +130,22 @@ def test_ctrl_c_at_any_moment_ends_in_one_line(tmp_path, delay):
     make_bag(synthetic_walk(30.0), load_sensor_config("six_point"), bag)
     before = sorted(p.name for p in tmp_path.iterdir())
     # SIGINT as a terminal delivers it: a script's background job (CI) starts with it ignored
-    proc = subprocess.Popen([sys.executable, "-m", "sparse_body.cli", "process", str(bag), str(tmp_path / "out"),
-                             "--estimator", "dragposer", "--quiet"], stderr=subprocess.PIPE, text=True,
-                            preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
+    proc = subprocess.Popen(
+        [
+            sys.executable,
+            "-m",
+            "sparse_body.cli",
+            "process",
+            str(bag),
+            str(tmp_path / "out"),
+            "--estimator",
+            "dragposer",
+            "--quiet",
+        ],
+        stderr=subprocess.PIPE,
+        text=True,
+        preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL),
+    )
     try:
         time.sleep(delay)
         proc.send_signal(signal.SIGINT)
@@ -139,30 +165,61 @@ def _nested_yaml(path: Path) -> Path:
     return path
 
 
-@pytest.mark.parametrize("case", ["parent not a folder", "read-only folder", "parent is a file", "nested sensors", "nested calibration",
-                                  "yaml option", "python tag", "huge seconds", "fps zero", "fps nan",
-                                  "negative option", "option type", "huge yaml", "calibration device",
-                                  "bvh joints"])
+@pytest.mark.parametrize(
+    "case",
+    [
+        "parent not a folder",
+        "read-only folder",
+        "parent is a file",
+        "nested sensors",
+        "nested calibration",
+        "yaml option",
+        "python tag",
+        "huge seconds",
+        "fps zero",
+        "fps nan",
+        "negative option",
+        "option type",
+        "huge yaml",
+        "calibration device",
+        "bvh joints",
+    ],
+)
 def test_every_user_error_is_one_line_and_its_exit_code(bag, tmp_path, capsys, case):
     out = tmp_path / "out"
     argv, code, said = {
         "parent not a folder": (["process", bag, "/proc/version/out"], EXIT_OUTPUT, "is not an existing folder"),
         "read-only folder": (["process", bag, "/proc/sparse_body_out"], EXIT_OS, "/proc/"),
         "parent is a file": (["process", bag, bag / "metadata.yaml" / "out"], EXIT_OUTPUT, "input"),
-        "nested sensors": (["process", bag, out, "--sensors", _nested_yaml(tmp_path / "s.yaml")], EXIT_INPUT,
-                           "nested too deeply"),
-        "nested calibration": (["process", bag, out, "--calibration", _nested_yaml(tmp_path / "c.yaml")],
-                               EXIT_INPUT, "nested too deeply"),
+        "nested sensors": (
+            ["process", bag, out, "--sensors", _nested_yaml(tmp_path / "s.yaml")],
+            EXIT_INPUT,
+            "nested too deeply",
+        ),
+        "nested calibration": (
+            ["process", bag, out, "--calibration", _nested_yaml(tmp_path / "c.yaml")],
+            EXIT_INPUT,
+            "nested too deeply",
+        ),
         "yaml option": (["process", bag, out, "--estimator", "ik:filter=[[[["], EXIT_INPUT, "not a plain YAML"),
-        "python tag": (["process", bag, out, "--estimator", "ik:floor_height=!!python/object/apply:os.system [ls]"],
-                       EXIT_INPUT, "not a plain YAML"),
+        "python tag": (
+            ["process", bag, out, "--estimator", "ik:floor_height=!!python/object/apply:os.system [ls]"],
+            EXIT_INPUT,
+            "not a plain YAML",
+        ),
         "huge seconds": (["make-bag", out, "--seconds", "1e9"], EXIT_USAGE, "from 0 to 3600"),
         "fps zero": (["process", bag, out, "--fps", "0"], EXIT_USAGE, "from 1 to 1000"),
         "fps nan": (["eval", "--estimator", "ik", "--fps", "nan"], EXIT_USAGE, "from 1 to 1000"),
-        "negative option": (["process", bag, out, "--estimator", "dtp:foot_trust=-5"], EXIT_INPUT,
-                            "foot_trust must be from 0 to 5"),
-        "option type": (["process", bag, out, "--estimator", "dragposer:iterations=2.5"], EXIT_INPUT,
-                        "iterations takes an integer"),
+        "negative option": (
+            ["process", bag, out, "--estimator", "dtp:foot_trust=-5"],
+            EXIT_INPUT,
+            "foot_trust must be from 0 to 5",
+        ),
+        "option type": (
+            ["process", bag, out, "--estimator", "dragposer:iterations=2.5"],
+            EXIT_INPUT,
+            "iterations takes an integer",
+        ),
         "huge yaml": (["process", bag, out, "--sensors", tmp_path / "big.yaml"], EXIT_INPUT, "MiB allowed"),
         "calibration device": (["process", bag, out, "--calibration", "/dev/zero"], EXIT_INPUT, "MiB allowed"),
         "bvh joints": (["make-bag", out, "--motion", tmp_path / "many.bvh"], EXIT_INPUT, "more than 1000 joints"),
@@ -170,13 +227,18 @@ def test_every_user_error_is_one_line_and_its_exit_code(bag, tmp_path, capsys, c
     if case == "huge yaml":
         (tmp_path / "big.yaml").write_text("# padding\n" * 200_000)
     if case == "bvh joints":
-        joints = "".join(f"JOINT j{i}\n{{\nOFFSET 0 0 1\nCHANNELS 3 Zrotation Xrotation Yrotation\n"
-                         for i in range(100_000))
-        (tmp_path / "many.bvh").write_text("HIERARCHY\nROOT r\n{\nOFFSET 0 0 0\nCHANNELS 0\n" + joints
-                                           + "}\n" * 100_001 + "MOTION\nFrames: 0\nFrame Time: 0.01\n")
+        joints = "".join(
+            f"JOINT j{i}\n{{\nOFFSET 0 0 1\nCHANNELS 3 Zrotation Xrotation Yrotation\n" for i in range(100_000)
+        )
+        (tmp_path / "many.bvh").write_text(
+            "HIERARCHY\nROOT r\n{\nOFFSET 0 0 0\nCHANNELS 0\n"
+            + joints
+            + "}\n" * 100_001
+            + "MOTION\nFrames: 0\nFrame Time: 0.01\n"
+        )
     started = time.monotonic()
     got, err = run_cli(capsys, *argv, *(["--quiet"] if argv[0] in ("process", "eval") else []))
     assert (got, len(err.strip().splitlines())) == (code, 1), err
     assert said in err and "Traceback" not in err
     assert time.monotonic() - started < 60
-    assert not out.exists() and not [p for p in tmp_path.iterdir() if p.name.startswith('.')]
+    assert not out.exists() and not [p for p in tmp_path.iterdir() if p.name.startswith(".")]

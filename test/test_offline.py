@@ -1,9 +1,18 @@
 """Tracker bags in, estimate bags out, without ROS (real rosbag2 MCAP files via rosbags)."""
+
 import numpy as np
 import pytest
 
-from sparse_body.bagio import (BagError, CONTACTS_TOPIC, JOINT_STATES_TOPIC, STATUS_TOPIC, TF_TOPIC, read_topic,
-                               read_tracker_stream, write_tracker_bag)
+from sparse_body.bagio import (
+    CONTACTS_TOPIC,
+    JOINT_STATES_TOPIC,
+    STATUS_TOPIC,
+    TF_TOPIC,
+    BagError,
+    read_topic,
+    read_tracker_stream,
+    write_tracker_bag,
+)
 from sparse_body.core.sensors import load_sensor_config
 from sparse_body.core.skeleton import JOINT_INDEX as J
 from sparse_body.data.synthetic import synthetic_walk
@@ -40,6 +49,7 @@ def test_process_writes_one_estimate_per_frame(tmp_path):
     # The IK baseline puts the wrists where the controllers say.
     from sparse_body.core.kinematics import forward_kinematics
     from sparse_body.core.rotations import quat_to_matrix
+
     local = quat_to_matrix(np.stack([p.local_quats for p in poses]))
     _, pos = forward_kinematics(local, np.stack([p.root_position for p in poses]), motion.skeleton.offsets)
     err = np.linalg.norm(pos[:, J["left_wrist"]] - motion.positions[:, J["left_wrist"]], axis=-1)
@@ -51,26 +61,27 @@ def test_bad_tracker_samples_keep_one_finite_output_per_frame(tmp_path, smooth):
     motion = synthetic_walk(3.0)
     config = load_sensor_config("four_point")
     stream = synthesize_trackers(motion, config)
-    stream.positions[20:25, 0] = np.nan                  # NaN headset poses
-    stream.orientations[30, 1] = 0.0                     # a zero quaternion
-    stream.valid[40:80, 3] = False                       # the pelvis tracker stops for 2/3 s
-    stream.valid[90, :] = False                          # a frame with no tracker at all
-    stream.valid[140:160, [0, 3]] = False                # headset and pelvis both gone
-    stream.times[100], stream.times[101] = stream.times[101], stream.times[100]   # out of order
-    stream.times[120:] -= 2.0                            # the clock jumps back (a bag loop)
+    stream.positions[20:25, 0] = np.nan  # NaN headset poses
+    stream.orientations[30, 1] = 0.0  # a zero quaternion
+    stream.valid[40:80, 3] = False  # the pelvis tracker stops for 2/3 s
+    stream.valid[90, :] = False  # a frame with no tracker at all
+    stream.valid[140:160, [0, 3]] = False  # headset and pelvis both gone
+    stream.times[100], stream.times[101] = stream.times[101], stream.times[100]  # out of order
+    stream.times[120:] -= 2.0  # the clock jumps back (a bag loop)
     write_tracker_bag(tmp_path / "bad", stream, config)
     back = read_tracker_stream(tmp_path / "bad", config)
     # Frame 90 carried no transform at all, so it is no input frame; every other one is.
     assert len(back) == len(motion) - 1
-    poses = process_bag(tmp_path / "bad", tmp_path / "out", "ik", config, motion.skeleton, progress=False,
-                        smooth=smooth)
+    poses = process_bag(
+        tmp_path / "bad", tmp_path / "out", "ik", config, motion.skeleton, progress=False, smooth=smooth
+    )
     assert len(poses) == len(back)
     assert all(p.is_finite() for p in poses)
     valid = np.array([p.valid for p in poses])
     pelvis = back.sites.index("pelvis")
-    assert not back.valid[50:78, pelvis].any()   # stale after 0.1 s
-    assert valid[50:78].all()                    # ...and the root then hangs from the headset
-    assert not valid[145:158].any()              # no headset, no pelvis: held and marked invalid
+    assert not back.valid[50:78, pelvis].any()  # stale after 0.1 s
+    assert valid[50:78].all()  # ...and the root then hangs from the headset
+    assert not valid[145:158].any()  # no headset, no pelvis: held and marked invalid
     assert valid[:20].all() and valid[-20:].all()
     statuses = read_topic(tmp_path / "out", STATUS_TOPIC)
     assert [s.valid for s in statuses] == list(valid)
@@ -94,22 +105,24 @@ def test_frames_whose_samples_were_all_refused_are_invalid_and_counted(tmp_path)
     motion = synthetic_walk(2.0)
     config = load_sensor_config("four_point")
     stream = synthesize_trackers(motion, config)
-    stream.positions[50, :] = np.nan                     # every tracker of frame 50: NaN
-    stream.orientations[60, :] = 0.0                     # every tracker of frame 60: a zero quaternion
+    stream.positions[50, :] = np.nan  # every tracker of frame 50: NaN
+    stream.orientations[60, :] = 0.0  # every tracker of frame 60: a zero quaternion
     write_tracker_bag(tmp_path / "bad", stream, config)
     refused = {}
-    poses = process_bag(tmp_path / "bad", tmp_path / "out", "ik", config, motion.skeleton, progress=False,
-                        refused=refused)
+    poses = process_bag(
+        tmp_path / "bad", tmp_path / "out", "ik", config, motion.skeleton, progress=False, refused=refused
+    )
     assert len(poses) == len(motion)
     assert not poses[50].valid and not poses[60].valid and poses[49].valid and poses[61].valid
     assert refused == {"non-finite": 4, "degenerate quaternion": 4}
     stamps = [p.stamp for p in poses]
-    assert len(set(stamps)) == len(stamps)               # each frame keeps its own stamp
+    assert len(set(stamps)) == len(stamps)  # each frame keeps its own stamp
 
 
 def test_outputs_are_never_half_written_nor_silently_replaced(tmp_path, monkeypatch):
     import sparse_body.bagio as bagio
     from sparse_body.cli import main
+
     motion = synthetic_walk(1.0)
     config = load_sensor_config("three_point")
     make_bag(motion, config, tmp_path / "in")
@@ -130,6 +143,7 @@ def test_outputs_are_never_half_written_nor_silently_replaced(tmp_path, monkeypa
         if len(calls) > 5:
             raise KeyboardInterrupt
         return np.zeros((2, 3))
+
     monkeypatch.setattr(bagio, "contact_points", interrupted)
     before = sorted(p.name for p in tmp_path.iterdir())
     with pytest.raises(SystemExit) as ended:
@@ -140,55 +154,76 @@ def test_outputs_are_never_half_written_nor_silently_replaced(tmp_path, monkeypa
 
 def test_empty_bags_are_refused(tmp_path, capsys):
     from rosbags.rosbag2 import StoragePlugin, Writer
+
     from sparse_body.bagio import TF_TYPE, typestore
     from sparse_body.cli import main
     from sparse_body.core.types import TrackerStream
+
     config = load_sensor_config("three_point")
-    with pytest.raises(SystemExit) as ended:          # wrote a 0-frame bag before
+    with pytest.raises(SystemExit) as ended:  # wrote a 0-frame bag before
         main(["make-bag", str(tmp_path / "nothing")])
     assert ended.value.code == 1 and "make-bag needs a motion" in capsys.readouterr().err
     assert not (tmp_path / "nothing").exists()
-    empty = TrackerStream(config.site_names, np.zeros(0), np.zeros((0, 3, 3)), np.zeros((0, 3, 4)), np.zeros((0, 3), bool))
+    empty = TrackerStream(
+        config.site_names, np.zeros(0), np.zeros((0, 3, 3)), np.zeros((0, 3, 4)), np.zeros((0, 3), bool)
+    )
     with pytest.raises(BagError, match="no frames"):
         write_tracker_bag(tmp_path / "empty", empty, config)
     with Writer(tmp_path / "silent", version=8, storage_plugin=StoragePlugin.MCAP) as writer:
-        writer.add_connection(TF_TOPIC, TF_TYPE, typestore=typestore())        # a /tf topic, no message
+        writer.add_connection(TF_TOPIC, TF_TYPE, typestore=typestore())  # a /tf topic, no message
     pytest.importorskip("rclpy", reason="the bridge needs rclpy")
     from sparse_body.ros.tracker_bridge_node import load_tf_frames
-    with pytest.raises(BagError, match=r"silent: no /tf messages"):          # the bridge's loop spun a core
+
+    with pytest.raises(BagError, match=r"silent: no /tf messages"):  # the bridge's loop spun a core
         load_tf_frames(str(tmp_path / "silent"))
 
 
 def test_stamps_that_round_up_carry_into_the_seconds_on_both_paths():
     from sparse_body.bagio import _time, typestore
     from sparse_body.output import stamp_parts
-    assert stamp_parts(5.9999999999) == (6, 0)                              # the bag path wrapped to (5, 0)
+
+    assert stamp_parts(5.9999999999) == (6, 0)  # the bag path wrapped to (5, 0)
     assert stamp_parts(1_700_000_000.25) == (1_700_000_000, 250_000_000)
     t = _time(typestore(), 5.9999999999)
     assert (t.sec, t.nanosec) == (6, 0)
     pytest.importorskip("rclpy", reason="rclpy is not installed")
     from sparse_body.ros.messages import to_time
+
     assert (to_time(5.9999999999).sec, to_time(5.9999999999).nanosec) == (6, 0)
 
 
 def test_cli_refuses_bad_arguments_and_lists_what_is_there(tmp_path, capsys):
     from sparse_body.cli import main
-    for argv, said in [(["eval", "--estimator", "ik", "--limit", "0"], "must be at least 1"),
-                       (["eval", "--estimator", "ik", "--limit", "-1"], "must be at least 1"),
-                       (["eval", "--estimator", "ik", "--faulty", "150"], "must be from 0 to 100 %")]:
+
+    for argv, said in [
+        (["eval", "--estimator", "ik", "--limit", "0"], "must be at least 1"),
+        (["eval", "--estimator", "ik", "--limit", "-1"], "must be at least 1"),
+        (["eval", "--estimator", "ik", "--faulty", "150"], "must be from 0 to 100 %"),
+    ]:
         with pytest.raises(SystemExit):
             main(argv)
         assert said in capsys.readouterr().err
     motion = synthetic_walk(1.0)
     make_bag(motion, load_sensor_config("three_point"), tmp_path / "three")
     with pytest.raises(SystemExit) as ended:
-        main(["process", str(tmp_path / "three"), str(tmp_path / "o"), "--estimator", "ik:bogus=1",
-              "--sensors", "three_point", "--quiet"])
+        main(
+            [
+                "process",
+                str(tmp_path / "three"),
+                str(tmp_path / "o"),
+                "--estimator",
+                "ik:bogus=1",
+                "--sensors",
+                "three_point",
+                "--quiet",
+            ]
+        )
     assert ended.value.code == 1
     assert "estimator 'ik' has no option 'bogus'; its options are floor_height" in capsys.readouterr().err
     with pytest.warns(UserWarning, match="tracker.s. pelvis, left_foot, right_foot of 'six_point' never appear"):
-        process_bag(tmp_path / "three", tmp_path / "six", "ik", load_sensor_config("six_point"), motion.skeleton,
-                    progress=False)
+        process_bag(
+            tmp_path / "three", tmp_path / "six", "ik", load_sensor_config("six_point"), motion.skeleton, progress=False
+        )
     with pytest.raises(SystemExit):
         main(["process", "--help"])
     help_text = capsys.readouterr().out
@@ -199,29 +234,34 @@ def test_setup_py_defers_to_pyproject():
     """ROS Python tooling still looks for a setup.py; it must give pyproject.toml's metadata."""
     import subprocess
     import sys
-    import tomllib
     from pathlib import Path
+
+    import tomllib
+
     root = Path(__file__).resolve().parents[1]
     project = tomllib.loads((root / "pyproject.toml").read_text())["project"]
-    out = subprocess.run([sys.executable, "setup.py", "--name", "--version"], cwd=root, capture_output=True,
-                         text=True, timeout=120)
+    out = subprocess.run(
+        [sys.executable, "setup.py", "--name", "--version"], cwd=root, capture_output=True, text=True, timeout=120
+    )
     assert out.returncode == 0, out.stderr[-2000:]
     assert out.stdout.split()[-2:] == [project["name"], project["version"]]
 
 
 def test_the_demo_draws_the_skull_above_the_head_joint_and_its_output_is_not_committed():
     from pathlib import Path
+
     from sparse_body.core.kinematics import forward_kinematics
+    from sparse_body.core.skeleton import Skeleton
     from sparse_body.demo import HEAD, head_tops
     from sparse_body.estimators.reference import standing_pose
-    from sparse_body.core.skeleton import Skeleton
+
     glob, pos = forward_kinematics(standing_pose()[None], np.zeros((1, 3)), Skeleton.canonical().offsets)
     top = head_tops(pos, glob, 0.1)
     np.testing.assert_allclose(top[0] - pos[0, HEAD], [0.0, 0.0, 0.1], atol=1e-12)
     root = Path(__file__).resolve().parents[1]
     assert "/sparse_body_demo/" in (root / ".gitignore").read_text().split()
     recipe = (root / "Makefile").read_text().split("\ntest: setup-dev\n")[1].splitlines()[0]
-    assert "pytest" in recipe and "-rs" in recipe            # make test says what it skipped and why
+    assert "pytest" in recipe and "-rs" in recipe  # make test says what it skipped and why
 
 
 def test_process_takes_the_body_of_a_calibration_file(tmp_path, capsys):
@@ -233,33 +273,48 @@ def test_process_takes_the_body_of_a_calibration_file(tmp_path, capsys):
     from sparse_body.core.rotations import euler_to_matrix, quat_to_matrix
     from sparse_body.core.skeleton import Skeleton
     from sparse_body.data.motion import Motion
+
     walk = synthetic_walk(2.0)
     offsets = walk.skeleton.offsets.copy()
-    offsets[[J["left_elbow"], J["right_elbow"], J["left_knee"], J["right_knee"]]] *= 1.1     # not the canonical build
+    offsets[[J["left_elbow"], J["right_elbow"], J["left_knee"], J["right_knee"]]] *= 1.1  # not the canonical build
     motion = Motion(walk.name, walk.fps, Skeleton(offsets), walk.local_quats, walk.root_positions)
     config = load_sensor_config("six_point")
     make_bag(motion, config, tmp_path / "in")
     Calibration(motion.skeleton.height(), 0.0, {}, motion.skeleton).save(tmp_path / "cal.yaml")
     errors = {}
-    for name, args in (("calibrated", ["--calibration", str(tmp_path / "cal.yaml")]),
-                       ("height", ["--height", str(motion.skeleton.height())])):
+    for name, args in (
+        ("calibrated", ["--calibration", str(tmp_path / "cal.yaml")]),
+        ("height", ["--height", str(motion.skeleton.height())]),
+    ):
         with pytest.raises(SystemExit) as ended:
             main(["process", str(tmp_path / "in"), str(tmp_path / name), "--quiet", *args])
         assert ended.value.code == 0
-        body = Calibration.load(tmp_path / "cal.yaml").body() if name == "calibrated" else \
-            Skeleton.canonical(motion.skeleton.height())
+        body = (
+            Calibration.load(tmp_path / "cal.yaml").body()
+            if name == "calibrated"
+            else Skeleton.canonical(motion.skeleton.height())
+        )
         states, tfs = read_topic(tmp_path / name, JOINT_STATES_TOPIC), read_topic(tmp_path / name, TF_TOPIC)
         assert len(states) == len(motion)
         local = np.tile(np.eye(3), (len(states), 22, 1, 1))
         local[:, 1:] = euler_to_matrix(np.array([s.position for s in states]).reshape(-1, 21, 3), "ZYX")
         root = [next(t for t in m.transforms if t.child_frame_id == "pelvis").transform for m in tfs]
         local[:, 0] = quat_to_matrix(np.array([[r.rotation.x, r.rotation.y, r.rotation.z, r.rotation.w] for r in root]))
-        _, pos = forward_kinematics(local, np.array([[r.translation.x, r.translation.y, r.translation.z]
-                                                     for r in root]), body.offsets)
+        _, pos = forward_kinematics(
+            local, np.array([[r.translation.x, r.translation.y, r.translation.z] for r in root]), body.offsets
+        )
         errors[name] = np.linalg.norm(pos[:, J["left_wrist"]] - motion.positions[:, J["left_wrist"]], axis=-1).mean()
     assert errors["calibrated"] < 0.01 and errors["calibrated"] < errors["height"]
     (tmp_path / "broken.yaml").write_text("height: 1.7\nskeleton: {pelvis: [0, 0, 0]}\n")
     with pytest.raises(SystemExit) as ended:
-        main(["process", str(tmp_path / "in"), str(tmp_path / "x"), "--quiet", "--calibration",
-              str(tmp_path / "broken.yaml")])
+        main(
+            [
+                "process",
+                str(tmp_path / "in"),
+                str(tmp_path / "x"),
+                "--quiet",
+                "--calibration",
+                str(tmp_path / "broken.yaml"),
+            ]
+        )
     assert ended.value.code == 1 and "broken.yaml: 'skeleton' must give" in capsys.readouterr().err

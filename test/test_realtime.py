@@ -3,6 +3,7 @@
 CPU starvation must show up as latency, never as lost or invalid estimates: with the
 default parameters, a replayed bag still gives at least 95 % valid estimates while it
 plays. (Rates and latencies are measured by `sparse-body bench`, not asserted here.)"""
+
 import numpy as np
 import pytest
 
@@ -10,6 +11,7 @@ rclpy = pytest.importorskip("rclpy", reason="rclpy is not installed (run the set
 pytest.importorskip("tf2_msgs.msg", reason="tf2_msgs is not available (run the setup command)")
 
 from ros_helpers import CpuBurners, during_playback, replay_bag  # noqa: E402
+
 from sparse_body.core.sensors import load_sensor_config  # noqa: E402
 from sparse_body.data.synthetic import synthetic_walk  # noqa: E402
 

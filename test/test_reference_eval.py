@@ -46,7 +46,10 @@ def test_bad_tracker_samples_give_finite_invalid_poses():
 
 def test_unknown_estimator_and_missing_sites_are_clear_errors():
     config = load_sensor_config("three_point")
-    with pytest.raises(ValueError, match="unknown estimator 'lobstr2'; available: avatarjlm, dragposer, dtp, ik, lobstr, reference, refined"):
+    with pytest.raises(
+        ValueError,
+        match="unknown estimator 'lobstr2'; available: avatarjlm, dragposer, dtp, ik, lobstr, reference, refined",
+    ):
         create_estimator("lobstr2", config, synthetic_walk(0.1).skeleton)
     hands = config.subset(["left_hand", "right_hand"])
     with pytest.raises(ValueError, match="needs a head or a pelvis tracker"):
@@ -56,26 +59,68 @@ def test_unknown_estimator_and_missing_sites_are_clear_errors():
 @pytest.mark.mocap
 def test_eval_command_prints_the_table_and_writes_json(mocap_root, tmp_path):
     out = tmp_path / "eval.json"
-    proc = subprocess.run([sys.executable, "-m", "sparse_body.cli", "eval", "--estimator", "reference",
-                           "--sensors", "four_point", "--limit", "3", "--quiet", "--output", str(out)],
-                          capture_output=True, text=True, timeout=600, env={**os.environ, "SPARSE_BODY_MOCAP": str(mocap_root)})
+    proc = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "sparse_body.cli",
+            "eval",
+            "--estimator",
+            "reference",
+            "--sensors",
+            "four_point",
+            "--limit",
+            "3",
+            "--quiet",
+            "--output",
+            str(out),
+        ],
+        capture_output=True,
+        text=True,
+        timeout=600,
+        env={**os.environ, "SPARSE_BODY_MOCAP": str(mocap_root)},
+    )
     assert proc.returncode == 0, proc.stderr
-    assert "reference/four_point" in proc.stdout and "MPJPE [cm]" in proc.stdout and "3 clips of the test split" in proc.stdout
+    assert (
+        "reference/four_point" in proc.stdout
+        and "MPJPE [cm]" in proc.stdout
+        and "3 clips of the test split" in proc.stdout
+    )
     result = json.loads(out.read_text())[0]
     assert result["estimator"] == "reference" and len(result["clips"]) == 3
     assert 2.0 < result["summary"]["MPJPE [cm]"] < 40.0
-    assert result["summary"]["Root PE [cm]"] < 10.0      # the pelvis tracker places the root
+    assert result["summary"]["Root PE [cm]"] < 10.0  # the pelvis tracker places the root
 
 
 def test_eval_per_joint_rows_say_where_the_error_sits_and_average_to_the_totals(mocap_root, tmp_path):
     out = tmp_path / "eval.json"
-    proc = subprocess.run([sys.executable, "-m", "sparse_body.cli", "eval", "--estimator", "ik", "--sensors",
-                           "four_point", "--limit", "2", "--quiet", "--per-joint", "--output", str(out)],
-                          capture_output=True, text=True, timeout=600, env={**os.environ, "SPARSE_BODY_MOCAP": str(mocap_root)})
+    proc = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "sparse_body.cli",
+            "eval",
+            "--estimator",
+            "ik",
+            "--sensors",
+            "four_point",
+            "--limit",
+            "2",
+            "--quiet",
+            "--per-joint",
+            "--output",
+            str(out),
+        ],
+        capture_output=True,
+        text=True,
+        timeout=600,
+        env={**os.environ, "SPARSE_BODY_MOCAP": str(mocap_root)},
+    )
     assert proc.returncode == 0, proc.stderr
     assert "PE left_knee [cm]" in proc.stdout and "RE right_elbow [deg]" in proc.stdout
     summary = json.loads(out.read_text())[0]["summary"]
     from sparse_body.core.skeleton import JOINT_NAMES
+
     pe = [summary[f"PE {j} [cm]"] for j in JOINT_NAMES]
     re = [summary[f"RE {j} [deg]"] for j in JOINT_NAMES]
     assert np.isclose(np.mean(pe), summary["MPJPE [cm]"]) and np.isclose(np.mean(re), summary["MPJRE [deg]"])
@@ -84,32 +129,56 @@ def test_eval_per_joint_rows_say_where_the_error_sits_and_average_to_the_totals(
 
 
 def test_eval_without_mocap_says_where_to_point(tmp_path):
-    proc = subprocess.run([sys.executable, "-m", "sparse_body.cli", "eval", "--estimator", "reference",
-                           "--mocap", str(tmp_path)], capture_output=True, text=True, timeout=120)
+    proc = subprocess.run(
+        [sys.executable, "-m", "sparse_body.cli", "eval", "--estimator", "reference", "--mocap", str(tmp_path)],
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
     assert proc.returncode != 0 and "no clips.tsv there" in proc.stderr
 
 
 def test_wide_eval_tables_fit_a_terminal_with_their_columns_named_below():
     from sparse_body.evaluation import EvalResult, format_table
+
     metrics = {"MPJPE [cm]": 4.4, "Contact acc [%]": 79.3, "End-effector PE [cm]": 0.1}
-    results = [EvalResult(name, "four_point", "test", ["02_05"], [100], [metrics])
-               for name in ("lobstr", "lobstr:contact_ik=false", "ik", "refined:base=lobstr,iterations=5")]
+    results = [
+        EvalResult(name, "four_point", "test", ["02_05"], [100], [metrics])
+        for name in ("lobstr", "lobstr:contact_ik=false", "ik", "refined:base=lobstr,iterations=5")
+    ]
     table = format_table(results, {"LoBSTr paper": {"Contact acc [%]": 85.77}})
     assert max(len(line) for line in table.splitlines()) <= 100, table
     assert "[2] lobstr:contact_ik=false/four_point" in table and "[5] LoBSTr paper" in table
     narrow = format_table(results[:1])
-    assert "lobstr/four_point" in narrow.splitlines()[0]        # a narrow table keeps its names on top
+    assert "lobstr/four_point" in narrow.splitlines()[0]  # a narrow table keeps its names on top
 
 
 def test_eval_takes_a_users_own_motion_files(tmp_path, mocap_root, capsys):
     import json
+
     from sparse_body.cli import main
+
     subject = mocap_root / "asfamc" / "subjects" / "02"
     if not subject.is_dir():
         pytest.skip("the CMU ASF/AMC subject 02 is not in ../shared/mocap")
     with pytest.raises(SystemExit) as ended:
-        main(["eval", "--estimator", "ik", "--sensors", "six_point", "--motion", str(subject), "--limit", "2",
-              "--quiet", "--no-compare", "--output", str(tmp_path / "out.json")])
+        main(
+            [
+                "eval",
+                "--estimator",
+                "ik",
+                "--sensors",
+                "six_point",
+                "--motion",
+                str(subject),
+                "--limit",
+                "2",
+                "--quiet",
+                "--no-compare",
+                "--output",
+                str(tmp_path / "out.json"),
+            ]
+        )
     assert ended.value.code == 0
     assert "(2 clips of the motion files given" in capsys.readouterr().out
     result = json.loads((tmp_path / "out.json").read_text())[0]

@@ -1,4 +1,5 @@
 """Retargeting real CMU clips onto the 22-joint body (needs ../shared/mocap)."""
+
 import numpy as np
 import pytest
 
@@ -33,11 +34,11 @@ def test_retargeted_fk_reproduces_source_joints_within_1cm(clip_index, clip_id):
 def test_retargeted_body_is_upright_and_faces_forward(clip_index, clip_id):
     motion = retarget(_source(clip_index[clip_id]))
     rest = motion.skeleton.rest_positions()
-    assert rest[J["left_hip"], 1] > 0.03 > -0.03 > rest[J["right_hip"], 1]       # left is +y
-    assert rest[J["left_foot"], 0] - rest[J["left_ankle"], 0] > 0.05              # toes point +x
+    assert rest[J["left_hip"], 1] > 0.03 > -0.03 > rest[J["right_hip"], 1]  # left is +y
+    assert rest[J["left_foot"], 0] - rest[J["left_ankle"], 0] > 0.05  # toes point +x
     assert 1.3 < motion.skeleton.height() < 2.0
     pos = motion.positions
-    assert np.all(pos[:, J["head"], 2] > pos[:, J["pelvis"], 2])                  # walking: head above pelvis
+    assert np.all(pos[:, J["head"], 2] > pos[:, J["pelvis"], 2])  # walking: head above pelvis
     assert 0.7 < np.median(pos[:, J["pelvis"], 2] - pos[:, J["left_foot"], 2]) < 1.2
     # Walking bends the knee forward: flexion is a positive rotation about +y.
     knee = matrix_to_axis_angle(motion.local_rotations[:, J["left_knee"]])
@@ -51,4 +52,6 @@ def test_resampling_to_60hz_keeps_positions(clip_index):
     # Every second 120 Hz frame is a 60 Hz frame: slerp there returns the source sample.
     np.testing.assert_allclose(at_60.positions, at_120.positions[::2], atol=1e-6)
     mid = at_120.resampled(240.0)
-    assert np.abs(mid.positions[1::2][:len(at_120) - 1] - (at_120.positions[:-1] + at_120.positions[1:]) / 2).max() < 0.01
+    assert (
+        np.abs(mid.positions[1::2][: len(at_120) - 1] - (at_120.positions[:-1] + at_120.positions[1:]) / 2).max() < 0.01
+    )

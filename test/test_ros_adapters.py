@@ -1,6 +1,7 @@
 """Real transports into the real nodes: VMC datagrams from a python-osc client over loopback,
 and serial frames from the reference sender through a pseudo-terminal, each through the
 tracker bridge into the estimator node, out as JointState; and the calibration service."""
+
 import socket
 import subprocess
 import sys
@@ -13,10 +14,10 @@ rclpy = pytest.importorskip("rclpy", reason="rclpy is not installed (run the set
 pytest.importorskip("tf2_msgs.msg", reason="tf2_msgs is not available (run the setup command)")
 
 from diagnostic_msgs.msg import DiagnosticArray  # noqa: E402
+from ros_helpers import STARTUP_LIMIT, Listener, diagnostic_values, stamp_key, start_node, stop  # noqa: E402
 from sensor_msgs.msg import JointState  # noqa: E402
 from tf2_msgs.msg import TFMessage  # noqa: E402
 
-from ros_helpers import STARTUP_LIMIT, Listener, diagnostic_values, stamp_key, start_node, stop  # noqa: E402
 from sparse_body.core.sensors import load_sensor_config  # noqa: E402
 from sparse_body.data.synthetic import synthetic_walk  # noqa: E402
 from sparse_body.data.virtual_trackers import synthesize_trackers  # noqa: E402
@@ -26,10 +27,12 @@ pytestmark = pytest.mark.ros
 ESTIMATOR = "sparse_body.ros.estimator_node"
 BRIDGE = "sparse_body.ros.tracker_bridge_node"
 VMC_DEVICES = ["hmd:*=head", "con:LEFT=left_hand", "con:RIGHT=right_hand", "tra:WAIST=pelvis"]
-VMC_NAMES = {"head": ("/VMC/Ext/Hmd/Pos", "HMD"), "left_hand": ("/VMC/Ext/Con/Pos", "LEFT"),
-             "right_hand": ("/VMC/Ext/Con/Pos", "RIGHT"), "pelvis": ("/VMC/Ext/Tra/Pos", "WAIST")}
-
-
+VMC_NAMES = {
+    "head": ("/VMC/Ext/Hmd/Pos", "HMD"),
+    "left_hand": ("/VMC/Ext/Con/Pos", "LEFT"),
+    "right_hand": ("/VMC/Ext/Con/Pos", "RIGHT"),
+    "pelvis": ("/VMC/Ext/Tra/Pos", "WAIST"),
+}
 
 
 def _free_udp_port() -> int:
@@ -47,16 +50,35 @@ def to_unity(position, quat):
 
 def test_vmc_over_loopback_reaches_joint_states(ros_env, tmp_path):
     from pythonosc.udp_client import SimpleUDPClient
+
     config = load_sensor_config("four_point")
     motion = synthetic_walk(6.0)
     stream = synthesize_trackers(motion, config)
     port = _free_udp_port()
-    est = start_node(ESTIMATOR, {"sensors": "four_point", "estimator": "ik", "autostart": True},
-                     "sparse_body_estimator", tmp_path, ros_env)
-    bridge = start_node(BRIDGE, {"source": "vmc", "sensors": "four_point", "vmc_port": port, "devices": VMC_DEVICES},
-                        "sparse_body_tracker_bridge", tmp_path, ros_env)
-    listener = Listener(rclpy, {"joint_states": JointState, "estimate_status": EstimateStatus, "/tf": TFMessage,
-                                "/diagnostics": DiagnosticArray}, qos={"/tf": 500})
+    est = start_node(
+        ESTIMATOR,
+        {"sensors": "four_point", "estimator": "ik", "autostart": True},
+        "sparse_body_estimator",
+        tmp_path,
+        ros_env,
+    )
+    bridge = start_node(
+        BRIDGE,
+        {"source": "vmc", "sensors": "four_point", "vmc_port": port, "devices": VMC_DEVICES},
+        "sparse_body_tracker_bridge",
+        tmp_path,
+        ros_env,
+    )
+    listener = Listener(
+        rclpy,
+        {
+            "joint_states": JointState,
+            "estimate_status": EstimateStatus,
+            "/tf": TFMessage,
+            "/diagnostics": DiagnosticArray,
+        },
+        qos={"/tf": 500},
+    )
     client = SimpleUDPClient("127.0.0.1", port)
     try:
         assert listener.spin_until(lambda: listener.received["joint_states"], STARTUP_LIMIT), "estimator did not start"
@@ -67,7 +89,7 @@ def test_vmc_over_loopback_reaches_joint_states(ros_env, tmp_path):
                 p, q = to_unity(stream.positions[i, s], stream.orientations[i, s])
                 client.send_message(address, [name, *p, *q])
             client.send_message("/VMC/Ext/Con/Pos", ["UNKNOWN", 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0])
-            listener.spin_until(lambda: time.monotonic() > start + (i + 1) / motion.fps, 1.0)
+            listener.spin_until(lambda i=i: time.monotonic() > start + (i + 1) / motion.fps, 1.0)
         listener.spin_for(1.5)
     finally:
         listener.destroy()
@@ -78,9 +100,14 @@ def test_vmc_over_loopback_reaches_joint_states(ros_env, tmp_path):
     # the estimated pelvis lies on the true pelvis path: the Unity axes were converted right
     # (the valid estimates' roots: before the trackers come, the held pose stands at the origin)
     valid_stamps = {stamp_key(st.header.stamp) for st in listener.received["estimate_status"] if st.valid}
-    roots = np.array([[tf.transform.translation.x, tf.transform.translation.y, tf.transform.translation.z]
-                      for m in listener.received["/tf"] for tf in m.transforms
-                      if tf.child_frame_id == "pelvis" and stamp_key(tf.header.stamp) in valid_stamps])
+    roots = np.array(
+        [
+            [tf.transform.translation.x, tf.transform.translation.y, tf.transform.translation.z]
+            for m in listener.received["/tf"]
+            for tf in m.transforms
+            if tf.child_frame_id == "pelvis" and stamp_key(tf.header.stamp) in valid_stamps
+        ]
+    )
     truth = motion.positions[:, 0]
     nearest = np.min(np.linalg.norm(roots[:, None] - truth[None], axis=-1), axis=1)
     # (a starved listener may lose /tf messages the estimator no longer holds: enough of them to
@@ -92,20 +119,54 @@ def test_vmc_over_loopback_reaches_joint_states(ros_env, tmp_path):
 
 def test_serial_trackers_through_a_pty_reach_joint_states_across_a_reconnect(ros_env, tmp_path):
     link = tmp_path / "ttyTRACKERS"
-    est = start_node(ESTIMATOR, {"sensors": "four_point", "estimator": "ik", "autostart": True},
-                     "sparse_body_estimator", tmp_path, ros_env)
-    bridge = start_node(BRIDGE, {"source": "serial", "sensors": "four_point", "serial_port": str(link)},
-                        "sparse_body_tracker_bridge", tmp_path, ros_env)
-    listener = Listener(rclpy, {"joint_states": JointState, "estimate_status": EstimateStatus,
-                                "/diagnostics": DiagnosticArray})
+    est = start_node(
+        ESTIMATOR,
+        {"sensors": "four_point", "estimator": "ik", "autostart": True},
+        "sparse_body_estimator",
+        tmp_path,
+        ros_env,
+    )
+    bridge = start_node(
+        BRIDGE,
+        {"source": "serial", "sensors": "four_point", "serial_port": str(link)},
+        "sparse_body_tracker_bridge",
+        tmp_path,
+        ros_env,
+    )
+    listener = Listener(
+        rclpy, {"joint_states": JointState, "estimate_status": EstimateStatus, "/diagnostics": DiagnosticArray}
+    )
     sender = None
     try:
         assert listener.spin_until(lambda: listener.received["joint_states"], STARTUP_LIMIT), "estimator did not start"
         listener.spin_for(1.0)
-        sender = subprocess.Popen([sys.executable, "-m", "sparse_body.adapters.serial_sender", "--pty", str(link),
-                                   "--sensors", "four_point", "--rate", "200", "--seconds", "6", "--garbage", "0.05",
-                                   "--bad-crc", "0.02", "--split", "--disconnect-at", "2.5", "--offline", "1.0"],
-                                  stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+        sender = subprocess.Popen(
+            [
+                sys.executable,
+                "-m",
+                "sparse_body.adapters.serial_sender",
+                "--pty",
+                str(link),
+                "--sensors",
+                "four_point",
+                "--rate",
+                "200",
+                "--seconds",
+                "6",
+                "--garbage",
+                "0.05",
+                "--bad-crc",
+                "0.02",
+                "--split",
+                "--disconnect-at",
+                "2.5",
+                "--offline",
+                "1.0",
+            ],
+            stdout=subprocess.PIPE,
+            stderr=subprocess.STDOUT,
+            text=True,
+        )
         listener.spin_until(lambda: sender.poll() is not None, STARTUP_LIMIT)
         listener.spin_for(1.5)
     finally:
@@ -133,22 +194,34 @@ def test_serial_trackers_through_a_pty_reach_joint_states_across_a_reconnect(ros
 def test_calibration_service_measures_offsets_and_height_and_applies_them(ros_env, tmp_path):
     from pythonosc.udp_client import SimpleUDPClient
     from scipy.spatial.transform import Rotation
+
     from sparse_body.adapters.calibration import Calibration
     from sparse_body.core.kinematics import forward_kinematics
     from sparse_body.core.rotations import yaw_matrix
     from sparse_body.core.skeleton import JOINT_INDEX as J
     from sparse_body.core.skeleton import Skeleton
     from sparse_body.srv import Calibrate
+
     skeleton = Skeleton.canonical(1.68)
     local = np.tile(np.eye(3), (22, 1, 1))
     local[0] = yaw_matrix(1.0)
     glob, pos = forward_kinematics(local, [0.0, 0.0, -skeleton.rest_positions()[:, 2].min()], skeleton.offsets)
-    grip = Rotation.from_euler("xy", [0.8, -0.3])                   # how the left controller is held
+    grip = Rotation.from_euler("xy", [0.8, -0.3])  # how the left controller is held
     joints = {"head": J["head"], "left_hand": J["left_wrist"], "right_hand": J["right_wrist"], "pelvis": J["pelvis"]}
     port = _free_udp_port()
-    bridge = start_node(BRIDGE, {"source": "vmc", "sensors": "four_point", "vmc_port": port, "devices": VMC_DEVICES,
-                                 "calibration": str(tmp_path / "calibration.yaml")},
-                        "sparse_body_tracker_bridge", tmp_path, ros_env)
+    bridge = start_node(
+        BRIDGE,
+        {
+            "source": "vmc",
+            "sensors": "four_point",
+            "vmc_port": port,
+            "devices": VMC_DEVICES,
+            "calibration": str(tmp_path / "calibration.yaml"),
+        },
+        "sparse_body_tracker_bridge",
+        tmp_path,
+        ros_env,
+    )
     listener = Listener(rclpy, {"/tf": TFMessage}, qos={"/tf": 500})
     client = SimpleUDPClient("127.0.0.1", port)
     calibrate = listener.node.create_client(Calibrate, "/sparse_body_tracker_bridge/calibrate")
@@ -161,6 +234,7 @@ def test_calibration_service_measures_offsets_and_height_and_applies_them(ros_en
             mounted = pos[j] + glob[j] @ np.array(config.site(site).offset_translation)
             p, q = to_unity(mounted, rot.as_quat())
             client.send_message(VMC_NAMES[site][0], [VMC_NAMES[site][1], *p, *q])
+
     try:
         assert calibrate.wait_for_service(timeout_sec=STARTUP_LIMIT), "no calibration service"
         future = calibrate.call_async(Calibrate.Request(seconds=0.5))
@@ -182,19 +256,36 @@ def test_calibration_service_measures_offsets_and_height_and_applies_them(ros_en
     saved = Calibration.load(tmp_path / "calibration.yaml")
     assert (Rotation.from_quat(saved.offsets["left_hand"]) * grip.inv()).magnitude() < 0.01
     # after calibration the left controller's frame carries the wrist's orientation, grip removed
-    lefts = [tf.transform.rotation for m in listener.received["/tf"] for tf in m.transforms
-             if tf.child_frame_id == "left_controller"]
+    lefts = [
+        tf.transform.rotation
+        for m in listener.received["/tf"]
+        for tf in m.transforms
+        if tf.child_frame_id == "left_controller"
+    ]
     assert lefts
     q = lefts[-1]
-    assert (Rotation.from_quat([q.x, q.y, q.z, q.w]) * Rotation.from_matrix(glob[J["left_wrist"]]).inv()).magnitude() < 0.01
+    assert (
+        Rotation.from_quat([q.x, q.y, q.z, q.w]) * Rotation.from_matrix(glob[J["left_wrist"]]).inv()
+    ).magnitude() < 0.01
 
 
 def test_calibration_requests_are_bounded_and_write_only_under_the_calibration_dir(ros_env, tmp_path):
     from sparse_body.srv import Calibrate
+
     (tmp_path / "cal").mkdir()
-    bridge = start_node(BRIDGE, {"source": "vmc", "sensors": "four_point", "vmc_port": _free_udp_port(),
-                                 "devices": VMC_DEVICES, "calibration_dir": str(tmp_path / "cal")},
-                        "sparse_body_tracker_bridge", tmp_path, ros_env)
+    bridge = start_node(
+        BRIDGE,
+        {
+            "source": "vmc",
+            "sensors": "four_point",
+            "vmc_port": _free_udp_port(),
+            "devices": VMC_DEVICES,
+            "calibration_dir": str(tmp_path / "cal"),
+        },
+        "sparse_body_tracker_bridge",
+        tmp_path,
+        ros_env,
+    )
     listener = Listener(rclpy, {"/diagnostics": DiagnosticArray})
     calibrate = listener.node.create_client(Calibrate, "/sparse_body_tracker_bridge/calibrate")
 
@@ -202,16 +293,17 @@ def test_calibration_requests_are_bounded_and_write_only_under_the_calibration_d
         future = calibrate.call_async(Calibrate.Request(**fields))
         assert listener.spin_until(future.done, STARTUP_LIMIT), f"no answer to {fields}"
         return future.result()
+
     try:
         assert calibrate.wait_for_service(timeout_sec=STARTUP_LIMIT), "no calibration service"
-        endless = call(seconds=float("inf"))                        # killed the bridge (OverflowError)
-        forever = call(seconds=2e9)                                  # blocked its executor for ever
+        endless = call(seconds=float("inf"))  # killed the bridge (OverflowError)
+        forever = call(seconds=2e9)  # blocked its executor for ever
         outside = call(seconds=0.1, save_path=str(tmp_path / "elsewhere" / "x.yaml"))
         sneaky = call(seconds=0.1, save_path="../escape.yaml")
-        tilde = call(seconds=0.1, save_path="~nosuchuser/a.yaml")             # expanduser() raised: the bridge died
+        tilde = call(seconds=0.1, save_path="~nosuchuser/a.yaml")  # expanduser() raised: the bridge died
         # while a calibration waits for samples the bridge's other work goes on
         listener.received["/diagnostics"].clear()
-        waiting = call(seconds=2.5, save_path="mine.yaml")            # no trackers: fails, but only after 2.5 s
+        waiting = call(seconds=2.5, save_path="mine.yaml")  # no trackers: fails, but only after 2.5 s
         heard = len(listener.received["/diagnostics"])
         alive = bridge.poll() is None
     finally:

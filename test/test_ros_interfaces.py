@@ -1,4 +1,5 @@
 """The generated sparse_body interfaces over real rclpy and Fast DDS, between two processes."""
+
 import os
 import random
 import subprocess
@@ -70,13 +71,33 @@ def test_cmake_configures_with_the_build_directory_outside_the_source_tree(tmp_p
     import subprocess
     import sys
     from pathlib import Path
+
     root = Path(__file__).resolve().parents[1]
     venv = Path(sys.prefix)
     if shutil.which("cmake") is None or not (venv / "share" / "ament_cmake" / "cmake").is_dir():
         pytest.skip("cmake or the ament CMake packages of the setup are not there")
-    env = {**os.environ, "AMENT_PREFIX_PATH": str(venv), "CMAKE_PREFIX_PATH": str(venv),
-           "PATH": f"{venv / 'bin'}:{os.environ['PATH']}", "_ROS_WHEELS_BOOTSTRAP_COMPLETE": "1"}
-    out = subprocess.run(["cmake", "-S", str(root), "-B", str(tmp_path / "build"), "-DBUILD_TESTING=OFF",
-                          "-DSPARSE_BODY_INSTALL_PYTHON=OFF", f"-DCMAKE_INSTALL_PREFIX={tmp_path / 'install'}",
-                          f"-DPython3_EXECUTABLE={sys.executable}"], env=env, capture_output=True, text=True, timeout=600)
+    env = {
+        **os.environ,
+        "AMENT_PREFIX_PATH": str(venv),
+        "CMAKE_PREFIX_PATH": str(venv),
+        "PATH": f"{venv / 'bin'}:{os.environ['PATH']}",
+        "_ROS_WHEELS_BOOTSTRAP_COMPLETE": "1",
+    }
+    out = subprocess.run(
+        [
+            "cmake",
+            "-S",
+            str(root),
+            "-B",
+            str(tmp_path / "build"),
+            "-DBUILD_TESTING=OFF",
+            "-DSPARSE_BODY_INSTALL_PYTHON=OFF",
+            f"-DCMAKE_INSTALL_PREFIX={tmp_path / 'install'}",
+            f"-DPython3_EXECUTABLE={sys.executable}",
+        ],
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=600,
+    )
     assert out.returncode == 0, (out.stdout + out.stderr)[-3000:]

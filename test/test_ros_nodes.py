@@ -1,4 +1,5 @@
 """The estimator and tracker bridge nodes as real processes over real rclpy and Fast DDS."""
+
 import subprocess
 import time
 
@@ -12,25 +13,31 @@ from diagnostic_msgs.msg import DiagnosticArray  # noqa: E402
 from lifecycle_msgs.msg import State, Transition  # noqa: E402
 from lifecycle_msgs.srv import ChangeState, GetState  # noqa: E402
 from rclpy.qos import DurabilityPolicy, QoSProfile  # noqa: E402
+from ros_helpers import (  # noqa: E402
+    STARTUP_LIMIT,
+    Listener,
+    diagnostic_values,
+    during_playback,
+    replay_bag,
+    stamp_key,
+    start_node,
+    stop,
+)
 from sensor_msgs.msg import JointState  # noqa: E402
-from std_msgs.msg import String  # noqa: E402
 from tf2_msgs.msg import TFMessage  # noqa: E402
 
-from ros_helpers import STARTUP_LIMIT, Listener, diagnostic_values, during_playback, replay_bag, stamp_key, start_node, stop  # noqa: E402
 from sparse_body.core.kinematics import forward_kinematics  # noqa: E402
 from sparse_body.core.rotations import euler_to_matrix, quat_to_matrix  # noqa: E402
 from sparse_body.core.sensors import load_sensor_config  # noqa: E402
 from sparse_body.core.skeleton import Skeleton  # noqa: E402
 from sparse_body.data.synthetic import synthetic_walk  # noqa: E402
-from sparse_body.msg import EstimateStatus, FootContacts  # noqa: E402
+from sparse_body.msg import EstimateStatus  # noqa: E402
 from sparse_body.offline import make_bag  # noqa: E402
 from sparse_body.output import joint_state_names  # noqa: E402
 
 pytestmark = pytest.mark.ros
 ESTIMATOR = "sparse_body.ros.estimator_node"
 BRIDGE = "sparse_body.ros.tracker_bridge_node"
-
-
 
 
 def _call(node, client, request, timeout=STARTUP_LIMIT):
@@ -42,8 +49,9 @@ def _call(node, client, request, timeout=STARTUP_LIMIT):
 
 
 def test_lifecycle_transitions_gate_the_outputs(ros_env, tmp_path):
-    proc = start_node(ESTIMATOR, {"sensors": "three_point", "estimator": "reference"}, "sparse_body_estimator",
-                      tmp_path, ros_env)
+    proc = start_node(
+        ESTIMATOR, {"sensors": "three_point", "estimator": "reference"}, "sparse_body_estimator", tmp_path, ros_env
+    )
     listener = Listener(rclpy, {"joint_states": JointState})
     try:
         node = listener.node
@@ -59,7 +67,7 @@ def test_lifecycle_transitions_gate_the_outputs(ros_env, tmp_path):
         assert state() == State.PRIMARY_STATE_UNCONFIGURED
         assert transition(Transition.TRANSITION_CONFIGURE) and state() == State.PRIMARY_STATE_INACTIVE
         listener.spin_for(1.0)
-        assert listener.received["joint_states"] == []          # inactive: nothing published
+        assert listener.received["joint_states"] == []  # inactive: nothing published
         assert transition(Transition.TRANSITION_ACTIVATE) and state() == State.PRIMARY_STATE_ACTIVE
         assert listener.spin_until(lambda: len(listener.received["joint_states"]) >= 10, STARTUP_LIMIT)
         # With no trackers at all the node still publishes: finite, held poses.
@@ -68,14 +76,16 @@ def test_lifecycle_transitions_gate_the_outputs(ros_env, tmp_path):
         listener.spin_for(0.5)
         count = len(listener.received["joint_states"])
         listener.spin_for(1.0)
-        assert len(listener.received["joint_states"]) == count   # deactivated: stopped
+        assert len(listener.received["joint_states"]) == count  # deactivated: stopped
         assert transition(Transition.TRANSITION_CLEANUP) and state() == State.PRIMARY_STATE_UNCONFIGURED
         # Reconfigure with a bad parameter: configure fails, the node stays up and unconfigured.
         from rcl_interfaces.msg import Parameter, ParameterType, ParameterValue
         from rcl_interfaces.srv import SetParameters
+
         setp = node.create_client(SetParameters, "/sparse_body_estimator/set_parameters")
-        bad = Parameter(name="sensors", value=ParameterValue(type=ParameterType.PARAMETER_STRING,
-                                                                string_value="seven_point"))
+        bad = Parameter(
+            name="sensors", value=ParameterValue(type=ParameterType.PARAMETER_STRING, string_value="seven_point")
+        )
         _call(node, setp, SetParameters.Request(parameters=[bad]))
         assert not transition(Transition.TRANSITION_CONFIGURE)
         assert state() == State.PRIMARY_STATE_UNCONFIGURED and proc.poll() is None
@@ -88,6 +98,7 @@ def test_lifecycle_transitions_gate_the_outputs(ros_env, tmp_path):
 def _motion(request):
     """A real CMU clip when ../shared/mocap is there, else the synthetic walk."""
     from sparse_body.data.catalog import find_mocap_root, load_clip, read_index
+
     root = find_mocap_root()
     if root is None:
         return synthetic_walk(6.0)
@@ -95,7 +106,9 @@ def _motion(request):
     return load_clip(clip).slice(0, 360)
 
 
-def test_replayed_bag_gives_one_valid_estimate_per_tracker_frame_with_small_end_effector_error(ros_env, tmp_path, request):
+def test_replayed_bag_gives_one_valid_estimate_per_tracker_frame_with_small_end_effector_error(
+    ros_env, tmp_path, request
+):
     motion = _motion(request)
     config = load_sensor_config("six_point")
     height = motion.skeleton.height()
@@ -107,8 +120,11 @@ def test_replayed_bag_gives_one_valid_estimate_per_tracker_frame_with_small_end_
     # sample's stamp, and each tracker frame gets at most one (bursts are coalesced).
     # (The node's own clock stamps only what it holds for want of any tracker input: a tick
     # just before the first sample is taken in.)
-    no_input = {stamp_key(s.header.stamp) for s in listener.received["estimate_status"]
-                if s.message.startswith("held: no tracker input")}
+    no_input = {
+        stamp_key(s.header.stamp)
+        for s in listener.received["estimate_status"]
+        if s.message.startswith("held: no tracker input")
+    }
     played = [m for m in during_playback(listener, "joint_states") if stamp_key(m.header.stamp) not in no_input]
     keys = [stamp_key(m.header.stamp) for m in played]
     tracker = set(listener.tracker_stamps)
@@ -118,7 +134,7 @@ def test_replayed_bag_gives_one_valid_estimate_per_tracker_frame_with_small_end_
     statuses = during_playback(listener, "estimate_status")
     assert sum(s.valid for s in statuses) >= 0.95 * len(statuses), {s.message for s in statuses if not s.valid}
     values = diagnostic_values(listener, "estimator")
-    assert int(values["estimates driven by input"]) >= 10, values    # the trackers drove estimates
+    assert int(values["estimates driven by input"]) >= 10, values  # the trackers drove estimates
     contacts = listener.received["foot_contacts"]
     assert contacts and [c.name for c in contacts[-1].contacts] == ["left_foot", "right_foot"]
     urdf = listener.received["robot_description"][0].data
@@ -143,7 +159,7 @@ def _end_effector_errors(listener, config, skeleton) -> list[float]:
             elif tf.child_frame_id in {s.frame_id for s in config.sites}:
                 tracker_tf.setdefault(key, {})[tf.child_frame_id] = pose
     errors = []
-    for msg, status in zip(states, listener.received["estimate_status"]):
+    for msg, status in zip(states, listener.received["estimate_status"], strict=False):
         key = stamp_key(msg.header.stamp)
         if not status.valid or key not in tracker_tf or key not in root_tf or len(tracker_tf[key]) < 6:
             continue
@@ -155,19 +171,25 @@ def _end_effector_errors(listener, config, skeleton) -> list[float]:
             spec = config.site(site)
             target, _ = spec.joint_pose(*tracker_tf[key][spec.frame_id])
             errors.append(np.linalg.norm(pos[spec.joint_index] - target))
-    assert len(errors) >= 4 * 25, (f"too few estimates matched their tracker frames: {len(states)} JointStates, "
-                                   f"{sum(s.valid for s in listener.received['estimate_status'])} valid, "
-                                   f"{len(tracker_tf)} tracker stamps, {len(root_tf)} root stamps, "
-                                   f"{len(set(tracker_tf) & set(root_tf))} in both")
+    assert len(errors) >= 4 * 25, (
+        f"too few estimates matched their tracker frames: {len(states)} JointStates, "
+        f"{sum(s.valid for s in listener.received['estimate_status'])} valid, "
+        f"{len(tracker_tf)} tracker stamps, {len(root_tf)} root stamps, "
+        f"{len(set(tracker_tf) & set(root_tf))} in both"
+    )
     return errors
 
 
 def _urdf_offsets(urdf: str) -> dict[str, np.ndarray]:
     """Each joint's rest offset from the URDF: the origin of the first of its three revolute joints."""
     import re
+
     offsets = {}
-    for name, xyz in re.findall(r'<joint name="([^"]+)_r[xyz]" type="continuous">\s*<parent link="[^"]+"/>'
-                                r'<child link="[^"]+"/>\s*<origin xyz="([^"]+)"', urdf):
+    for name, xyz in re.findall(
+        r'<joint name="([^"]+)_r[xyz]" type="continuous">\s*<parent link="[^"]+"/>'
+        r'<child link="[^"]+"/>\s*<origin xyz="([^"]+)"',
+        urdf,
+    ):
         offsets.setdefault(name, np.array([float(v) for v in xyz.split()]))
     return offsets
 
@@ -177,23 +199,25 @@ def test_a_calibration_file_gives_the_body_the_node_estimates_and_publishes(ros_
     the height-scaled canonical one: in the URDF, and in the JointState that puts the hands
     and feet on their trackers with that body."""
     from sparse_body.adapters.calibration import Calibration
-    from sparse_body.data.field_protocol import FIELD, calibrate_from_tpose, tpose_motion
     from sparse_body.core.skeleton import JOINT_INDEX as J
+    from sparse_body.data.field_protocol import FIELD, calibrate_from_tpose, tpose_motion
     from sparse_body.data.motion import Motion
     from sparse_body.data.virtual_trackers import NO_NOISE, synthesize_trackers
+
     motion = _motion(request)
-    offsets = motion.skeleton.offsets.copy()      # longer forearms and shins than any canonical body has
+    offsets = motion.skeleton.offsets.copy()  # longer forearms and shins than any canonical body has
     offsets[[J["left_wrist"], J["right_wrist"], J["left_ankle"], J["right_ankle"]]] *= 1.15
     motion = Motion(motion.name, motion.fps, Skeleton(offsets), motion.local_quats, motion.root_positions)
     config = load_sensor_config("six_point")
     rng = np.random.default_rng(0)
     calibration = calibrate_from_tpose(synthesize_trackers(tpose_motion(motion, FIELD, rng), config, NO_NOISE), config)
     calibration.save(tmp_path / "calibration.yaml")
-    body = Calibration.load(tmp_path / "calibration.yaml").body()        # as saved (rounded to 0.01 mm)
+    body = Calibration.load(tmp_path / "calibration.yaml").body()  # as saved (rounded to 0.01 mm)
     canonical = Skeleton.canonical(calibration.height)
-    assert np.abs(body.offsets - canonical.offsets).max() > 0.01      # a body the height alone does not give
-    listener = replay_bag(rclpy, ros_env, tmp_path, motion, config,
-                          {"estimator": "ik", "calibration": str(tmp_path / "calibration.yaml")})
+    assert np.abs(body.offsets - canonical.offsets).max() > 0.01  # a body the height alone does not give
+    listener = replay_bag(
+        rclpy, ros_env, tmp_path, motion, config, {"estimator": "ik", "calibration": str(tmp_path / "calibration.yaml")}
+    )
     published = _urdf_offsets(listener.received["robot_description"][0].data)
     assert len(published) >= 20
     for name, offset in published.items():
@@ -207,15 +231,23 @@ def test_a_calibration_file_gives_the_body_the_node_estimates_and_publishes(ros_
 def test_bad_tracker_input_is_reported_and_never_gives_non_finite_output(ros_env, tmp_path):
     """NaN poses, a tracker that stops, one never seen, out-of-order stamps, a clock jump back."""
     from geometry_msgs.msg import TransformStamped
-    from sparse_body.ros.messages import to_time
+
     from sparse_body.data.virtual_trackers import synthesize_trackers
+    from sparse_body.ros.messages import to_time
+
     config = load_sensor_config("four_point")
     motion = synthetic_walk(8.0)
     stream = synthesize_trackers(motion, config)
-    est = start_node(ESTIMATOR, {"sensors": "four_point", "estimator": "ik", "autostart": True},
-                     "sparse_body_estimator", tmp_path, ros_env)
-    listener = Listener(rclpy, {"joint_states": JointState, "estimate_status": EstimateStatus,
-                                "/diagnostics": DiagnosticArray})
+    est = start_node(
+        ESTIMATOR,
+        {"sensors": "four_point", "estimator": "ik", "autostart": True},
+        "sparse_body_estimator",
+        tmp_path,
+        ros_env,
+    )
+    listener = Listener(
+        rclpy, {"joint_states": JointState, "estimate_status": EstimateStatus, "/diagnostics": DiagnosticArray}
+    )
     pub = listener.node.create_publisher(TFMessage, "/tf", 100)
     try:
         assert listener.spin_until(lambda: listener.received["joint_states"], STARTUP_LIMIT), "estimator did not start"
@@ -223,24 +255,25 @@ def test_bad_tracker_input_is_reported_and_never_gives_non_finite_output(ros_env
         for i in range(len(motion)):
             t = time.monotonic() - start
             now = listener.node.get_clock().now().nanoseconds * 1e-9
-            stamp = now - 5.0 if t > 6.0 else now                   # from 6 s on: the clock jumps back 5 s
+            stamp = now - 5.0 if t > 6.0 else now  # from 6 s on: the clock jumps back 5 s
             msgs = []
             for s, site in enumerate(config.sites):
                 pos, rot = stream.positions[i, s].copy(), stream.orientations[i, s]
                 if site.site == "right_hand":
-                    continue                                        # never seen at all
+                    continue  # never seen at all
                 if site.site == "head" and 1.0 < t < 1.5:
-                    pos[:] = np.nan                                 # NaN poses
+                    pos[:] = np.nan  # NaN poses
                 if site.site == "pelvis" and 2.0 < t < 4.0:
-                    continue                                        # stops for 2 s
+                    continue  # stops for 2 s
                 if site.site == "head" and 3.0 < t < 4.0:
-                    continue                                        # ...and the headset too for 1 s
-                site_stamp = stamp - 0.3 if (site.site == "left_hand" and 4.5 < t < 5.0) else stamp   # out of order
+                    continue  # ...and the headset too for 1 s
+                site_stamp = stamp - 0.3 if (site.site == "left_hand" and 4.5 < t < 5.0) else stamp  # out of order
                 m = TransformStamped()
                 m.header.frame_id, m.child_frame_id, m.header.stamp = "world", site.frame_id, to_time(site_stamp)
                 m.transform.translation.x, m.transform.translation.y, m.transform.translation.z = map(float, pos)
-                (m.transform.rotation.x, m.transform.rotation.y, m.transform.rotation.z,
-                 m.transform.rotation.w) = map(float, rot)
+                (m.transform.rotation.x, m.transform.rotation.y, m.transform.rotation.z, m.transform.rotation.w) = map(
+                    float, rot
+                )
                 msgs.append(m)
             pub.publish(TFMessage(transforms=msgs))
             listener.spin_for(1.0 / 60)
@@ -275,11 +308,29 @@ def test_plain_process_takes_the_shipped_parameter_file(ros_env, tmp_path):
     """What the launch file gives the node, by hand: --params-file config/estimator.yaml -p ..."""
     import subprocess
     import sys
+
     from sparse_body.resources import config_dir
-    log = open(tmp_path / "plain.log", "w")
-    proc = subprocess.Popen([sys.executable, "-m", ESTIMATOR, "--ros-args", "--params-file",
-                             str(config_dir() / "estimator.yaml"), "-p", "autostart:=true", "-p", "sensors:=three_point",
-                             "-p", "estimator:=reference"], stdout=log, stderr=subprocess.STDOUT, env=ros_env)
+
+    with open(tmp_path / "plain.log", "w") as log:  # the child holds its own copy
+        proc = subprocess.Popen(
+            [
+                sys.executable,
+                "-m",
+                ESTIMATOR,
+                "--ros-args",
+                "--params-file",
+                str(config_dir() / "estimator.yaml"),
+                "-p",
+                "autostart:=true",
+                "-p",
+                "sensors:=three_point",
+                "-p",
+                "estimator:=reference",
+            ],
+            stdout=log,
+            stderr=subprocess.STDOUT,
+            env=ros_env,
+        )
     listener = Listener(rclpy, {"joint_states": JointState})
     try:
         assert listener.spin_until(lambda: len(listener.received["joint_states"]) >= 5, STARTUP_LIMIT)
@@ -291,9 +342,19 @@ def test_plain_process_takes_the_shipped_parameter_file(ros_env, tmp_path):
 
 def test_a_qos_override_changes_only_the_publisher_it_names(ros_env, tmp_path):
     from rclpy.qos import ReliabilityPolicy
-    proc = start_node(ESTIMATOR, {"sensors": "three_point", "estimator": "reference", "autostart": True,
-                                  "qos_overrides": {"/joint_states": {"publisher": {"reliability": "best_effort"}}}},
-                      "sparse_body_estimator", tmp_path, ros_env)
+
+    proc = start_node(
+        ESTIMATOR,
+        {
+            "sensors": "three_point",
+            "estimator": "reference",
+            "autostart": True,
+            "qos_overrides": {"/joint_states": {"publisher": {"reliability": "best_effort"}}},
+        },
+        "sparse_body_estimator",
+        tmp_path,
+        ros_env,
+    )
     listener = Listener(rclpy, {"joint_states": JointState})
     try:
         node = listener.node
@@ -301,8 +362,10 @@ def test_a_qos_override_changes_only_the_publisher_it_names(ros_env, tmp_path):
         def reliability(topic):
             infos = node.get_publishers_info_by_topic(topic)
             return infos[0].qos_profile.reliability if infos else None
-        assert listener.spin_until(lambda: reliability("/estimate_status") is not None, STARTUP_LIMIT), \
-            (tmp_path / "sparse_body_estimator.log").read_text()
+
+        assert listener.spin_until(lambda: reliability("/estimate_status") is not None, STARTUP_LIMIT), (
+            tmp_path / "sparse_body_estimator.log"
+        ).read_text()
         assert reliability("/joint_states") == ReliabilityPolicy.BEST_EFFORT
         assert reliability("/foot_contacts") == ReliabilityPolicy.RELIABLE
         assert reliability("/estimate_status") == ReliabilityPolicy.RELIABLE
@@ -313,7 +376,9 @@ def test_a_qos_override_changes_only_the_publisher_it_names(ros_env, tmp_path):
 
 def test_the_tf_reader_ignores_the_frames_its_node_publishes(ros_env):
     from geometry_msgs.msg import TransformStamped
+
     from sparse_body.ros.tf_input import TfReader
+
     node = rclpy.create_node("tf_reader_test")
     moved = []
     try:
@@ -326,7 +391,7 @@ def test_the_tf_reader_ignores_the_frames_its_node_publishes(ros_env):
             tf.transform.rotation.w = 1.0
             msg.transforms.append(tf)
         reader._on_tf(msg, False)
-        assert reader.lookup("world", "hmd") is not None          # a tracker frame is never ignored
+        assert reader.lookup("world", "hmd") is not None  # a tracker frame is never ignored
         assert reader.lookup("world", "pelvis") is None and reader.lookup("world", "head") is None
         assert moved == [1]
         reader.destroy()
@@ -334,21 +399,30 @@ def test_the_tf_reader_ignores_the_frames_its_node_publishes(ros_env):
         node.destroy_node()
 
 
-@pytest.mark.parametrize("spec,parameters,expected", [
-    ("ik:filter_position_noise=0.02", {}, 0.02),                       # ran with 0.001: configure set it again
-    ("ik", {"filter_position_noise": 0.03}, 0.03),
-    ("ik:filter_position_noise=0.02", {"filter_position_noise": 0.03}, 0.03),   # a parameter set wins
-])
+@pytest.mark.parametrize(
+    "spec,parameters,expected",
+    [
+        ("ik:filter_position_noise=0.02", {}, 0.02),  # ran with 0.001: configure set it again
+        ("ik", {"filter_position_noise": 0.03}, 0.03),
+        ("ik:filter_position_noise=0.02", {"filter_position_noise": 0.03}, 0.03),  # a parameter set wins
+    ],
+)
 def test_the_filter_takes_the_spec_string_then_the_parameters_set(ros_env, spec, parameters, expected):
     from rclpy.parameter import Parameter
+
     from sparse_body.ros.estimator_node import EstimatorNode
-    node = EstimatorNode(parameter_overrides=[Parameter("estimator", value=spec),
-                                              *(Parameter(k, value=v) for k, v in parameters.items())])
+
+    node = EstimatorNode(
+        parameter_overrides=[
+            Parameter("estimator", value=spec),
+            *(Parameter(k, value=v) for k, v in parameters.items()),
+        ]
+    )
     try:
         node.trigger_configure()
         assert node.estimator is not None
         assert node.estimator.input_filter.config.position_noise == expected
-        assert node.estimator.input_filter.config.rotation_noise == 0.33      # the others keep their defaults
+        assert node.estimator.input_filter.config.rotation_noise == 0.33  # the others keep their defaults
     finally:
         node.destroy_node()
 
@@ -360,19 +434,40 @@ def test_every_node_ends_cleanly_on_a_signal_while_data_flows(ros_env, tmp_path,
     Python had put the default handler back, and killed it (-2)."""
     import signal
     import time
+
     config = load_sensor_config("four_point")
     make_bag(synthetic_walk(4.0), config, tmp_path / "trackers")
-    est = start_node(ESTIMATOR, {"sensors": "four_point", "estimator": "ik", "autostart": True},
-                     "sparse_body_estimator", tmp_path, ros_env)
-    refiner = start_node("sparse_body.ros.constraint_node", {"sensors": "four_point", "autostart": True},
-                         "sparse_body_constraint", tmp_path, ros_env, remaps={"input/joint_states": "/joint_states"})
-    bridge = start_node(BRIDGE, {"bag": str(tmp_path / "trackers"), "loop": True, "min_subscribers": 2},
-                        "sparse_body_tracker_bridge", tmp_path, ros_env)
+    est = start_node(
+        ESTIMATOR,
+        {"sensors": "four_point", "estimator": "ik", "autostart": True},
+        "sparse_body_estimator",
+        tmp_path,
+        ros_env,
+    )
+    refiner = start_node(
+        "sparse_body.ros.constraint_node",
+        {"sensors": "four_point", "autostart": True},
+        "sparse_body_constraint",
+        tmp_path,
+        ros_env,
+        remaps={"input/joint_states": "/joint_states"},
+    )
+    bridge = start_node(
+        BRIDGE,
+        {"bag": str(tmp_path / "trackers"), "loop": True, "min_subscribers": 2},
+        "sparse_body_tracker_bridge",
+        tmp_path,
+        ros_env,
+    )
     procs = {"sparse_body_estimator": est, "sparse_body_constraint": refiner, "sparse_body_tracker_bridge": bridge}
     listener = Listener(rclpy, {"joint_states": JointState, "refined/joint_states": JointState})
     try:
-        flowing = listener.spin_until(lambda: len(listener.received["joint_states"]) >= 30
-                                      and len(listener.received["refined/joint_states"]) >= 5, 90.0)
+        flowing = listener.spin_until(
+            lambda: (
+                len(listener.received["joint_states"]) >= 30 and len(listener.received["refined/joint_states"]) >= 5
+            ),
+            90.0,
+        )
         for k, signal_name in enumerate(signal_names):
             time.sleep(0.5 * k)
             for p in procs.values():
@@ -397,19 +492,38 @@ def test_every_node_ends_cleanly_on_a_signal_while_data_flows(ros_env, tmp_path,
 @pytest.mark.parametrize("height", [-1.0, float("nan"), float("inf"), 100.0, "tall"])
 def test_a_bad_height_refuses_configure_with_the_reason_and_the_node_stays_up(ros_env, tmp_path, height):
     import sys
+
     # given on the command line, as `ros2 run ... -p height:=...` gives it (it ended the process before)
-    log = open(tmp_path / "bad_height.log", "w")
-    value = height if isinstance(height, str) else repr(height).replace("nan", ".nan").replace("inf", ".inf")
-    proc = subprocess.Popen([sys.executable, "-m", ESTIMATOR, "--ros-args", "-p", "sensors:=three_point",
-                             "-p", "estimator:=reference", "-p", f"height:={value}"],
-                            stdout=log, stderr=subprocess.STDOUT, env=ros_env)
+    with open(tmp_path / "bad_height.log", "w") as log:  # the child holds its own copy
+        value = height if isinstance(height, str) else repr(height).replace("nan", ".nan").replace("inf", ".inf")
+        proc = subprocess.Popen(
+            [
+                sys.executable,
+                "-m",
+                ESTIMATOR,
+                "--ros-args",
+                "-p",
+                "sensors:=three_point",
+                "-p",
+                "estimator:=reference",
+                "-p",
+                f"height:={value}",
+            ],
+            stdout=log,
+            stderr=subprocess.STDOUT,
+            env=ros_env,
+        )
     listener = Listener(rclpy, {})
     try:
         node = listener.node
         change = node.create_client(ChangeState, "/sparse_body_estimator/change_state")
         get = node.create_client(GetState, "/sparse_body_estimator/get_state")
-        assert not _call(node, change, ChangeState.Request(transition=Transition(id=Transition.TRANSITION_CONFIGURE)),
-                         timeout=STARTUP_LIMIT).success
+        assert not _call(
+            node,
+            change,
+            ChangeState.Request(transition=Transition(id=Transition.TRANSITION_CONFIGURE)),
+            timeout=STARTUP_LIMIT,
+        ).success
         assert _call(node, get, GetState.Request()).current_state.id == State.PRIMARY_STATE_UNCONFIGURED
         assert proc.poll() is None
     finally:
@@ -422,8 +536,14 @@ def test_a_bad_height_refuses_configure_with_the_reason_and_the_node_stays_up(ro
 def test_parameters_set_while_configured_apply_live_or_are_refused_with_the_reason(ros_env, tmp_path):
     from rcl_interfaces.msg import Parameter, ParameterType, ParameterValue
     from rcl_interfaces.srv import SetParameters
-    proc = start_node(ESTIMATOR, {"sensors": "three_point", "estimator": "reference", "autostart": True},
-                      "sparse_body_estimator", tmp_path, ros_env)
+
+    proc = start_node(
+        ESTIMATOR,
+        {"sensors": "three_point", "estimator": "reference", "autostart": True},
+        "sparse_body_estimator",
+        tmp_path,
+        ros_env,
+    )
     listener = Listener(rclpy, {"joint_states": JointState})
     try:
         node = listener.node
@@ -451,12 +571,18 @@ def test_parameters_set_while_configured_apply_live_or_are_refused_with_the_reas
 def test_trackers_on_a_static_chain_count_as_current(ros_env, tmp_path):
     """Frames published once on /tf_static (a fixed tracker, a mock-up) are never stale."""
     from geometry_msgs.msg import TransformStamped
-    from rclpy.qos import DurabilityPolicy, QoSProfile
+
     from sparse_body.data.virtual_trackers import synthesize_trackers
+
     config = load_sensor_config("three_point")
     stream = synthesize_trackers(synthetic_walk(1.0), config)
-    proc = start_node(ESTIMATOR, {"sensors": "three_point", "estimator": "ik", "autostart": True},
-                      "sparse_body_estimator", tmp_path, ros_env)
+    proc = start_node(
+        ESTIMATOR,
+        {"sensors": "three_point", "estimator": "ik", "autostart": True},
+        "sparse_body_estimator",
+        tmp_path,
+        ros_env,
+    )
     listener = Listener(rclpy, {"estimate_status": EstimateStatus})
     latched = QoSProfile(depth=10, durability=DurabilityPolicy.TRANSIENT_LOCAL)
     pub = listener.node.create_publisher(TFMessage, "/tf_static", latched)
@@ -464,24 +590,29 @@ def test_trackers_on_a_static_chain_count_as_current(ros_env, tmp_path):
     for s, site in enumerate(config.sites):
         tf = TransformStamped()
         tf.header.frame_id, tf.child_frame_id = "world", site.frame_id
-        tf.transform.translation.x, tf.transform.translation.y, tf.transform.translation.z = map(float, stream.positions[0, s])
-        (tf.transform.rotation.x, tf.transform.rotation.y, tf.transform.rotation.z,
-         tf.transform.rotation.w) = map(float, stream.orientations[0, s])
+        tf.transform.translation.x, tf.transform.translation.y, tf.transform.translation.z = map(
+            float, stream.positions[0, s]
+        )
+        (tf.transform.rotation.x, tf.transform.rotation.y, tf.transform.rotation.z, tf.transform.rotation.w) = map(
+            float, stream.orientations[0, s]
+        )
         msg.transforms.append(tf)
     pub.publish(msg)
     try:
-        assert listener.spin_until(lambda: sum(s.valid for s in listener.received["estimate_status"]) >= 10, STARTUP_LIMIT), \
-            {s.message for s in listener.received["estimate_status"]}
+        assert listener.spin_until(
+            lambda: sum(s.valid for s in listener.received["estimate_status"]) >= 10, STARTUP_LIMIT
+        ), {s.message for s in listener.received["estimate_status"]}
     finally:
         listener.destroy()
         stop(proc)
 
 
 def test_the_estimator_parameter_names_every_estimator():
-    from sparse_body.estimators.base import ESTIMATORS
+    from sparse_body.estimators.base import estimator_names
     from sparse_body.ros.estimator_node import PARAMETERS
+
     text = PARAMETERS["estimator"][1]
-    assert all(name in text for name in ESTIMATORS), text
+    assert all(name in text for name in estimator_names()), text
 
 
 def test_a_node_stopped_longer_than_tracker_timeout_is_late_not_invalid_when_it_resumes(ros_env, tmp_path):
@@ -491,17 +622,25 @@ def test_a_node_stopped_longer_than_tracker_timeout_is_late_not_invalid_when_it_
     every estimate after the pause is valid."""
     import os
     import signal
+
     config = load_sensor_config("six_point")
     make_bag(synthetic_walk(4.0), config, tmp_path / "trackers")
-    est = start_node(ESTIMATOR, {"sensors": "six_point", "estimator": "ik", "autostart": True, "tracker_timeout": 1.0},
-                     "sparse_body_estimator", tmp_path, ros_env)
-    bridge = start_node(BRIDGE, {"bag": str(tmp_path / "trackers"), "loop": True}, "sparse_body_tracker_bridge",
-                        tmp_path, ros_env)
+    est = start_node(
+        ESTIMATOR,
+        {"sensors": "six_point", "estimator": "ik", "autostart": True, "tracker_timeout": 1.0},
+        "sparse_body_estimator",
+        tmp_path,
+        ros_env,
+    )
+    bridge = start_node(
+        BRIDGE, {"bag": str(tmp_path / "trackers"), "loop": True}, "sparse_body_tracker_bridge", tmp_path, ros_env
+    )
     listener = Listener(rclpy, {"estimate_status": EstimateStatus}, qos={"estimate_status": 1000})
     statuses = listener.received["estimate_status"]
     try:
-        assert listener.spin_until(lambda: sum(s.valid for s in statuses) >= 30, STARTUP_LIMIT), \
-            (tmp_path / "sparse_body_estimator.log").read_text()
+        assert listener.spin_until(lambda: sum(s.valid for s in statuses) >= 30, STARTUP_LIMIT), (
+            tmp_path / "sparse_body_estimator.log"
+        ).read_text()
         os.kill(est.pid, signal.SIGSTOP)
         try:
             listener.spin_for(2.0)

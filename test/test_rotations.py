@@ -1,9 +1,9 @@
 import numpy as np
 import pytest
+from conftest import random_rotations
 from scipy.spatial.transform import Rotation
 
 from sparse_body.core import rotations as R
-from conftest import random_rotations
 
 
 def test_quaternion_matrix_round_trip_keeps_batch_shape(rng):
@@ -42,8 +42,9 @@ def test_joint_euler_order_is_intrinsic_zyx():
     np.testing.assert_allclose(R.euler_to_matrix([yaw, pitch, roll]), rz @ ry @ rx, atol=1e-12)
 
 
-@pytest.mark.parametrize("a,b", [([1, 0, 0], [0, 1, 0]), ([0, 0, -1], [0.3, 0.1, -0.9]), ([1, 0, 0], [-1, 0, 0]),
-                                 ([0, 1, 0], [0, 1, 0])])
+@pytest.mark.parametrize(
+    "a,b", [([1, 0, 0], [0, 1, 0]), ([0, 0, -1], [0.3, 0.1, -0.9]), ([1, 0, 0], [-1, 0, 0]), ([0, 1, 0], [0, 1, 0])]
+)
 def test_rotation_between_maps_a_onto_b(a, b):
     m = R.rotation_between(a, b)
     np.testing.assert_allclose(m @ (np.array(a) / np.linalg.norm(a)), np.array(b) / np.linalg.norm(b), atol=1e-12)

@@ -8,11 +8,14 @@ from sparse_body.data.synthetic import synthetic_walk
 from sparse_body.data.virtual_trackers import LOBSTR_NOISE, TrackerNoise, synthesize_trackers
 
 
-@pytest.mark.parametrize("name,sites", [
-    ("three_point", ("head", "left_hand", "right_hand")),
-    ("four_point", ("head", "left_hand", "right_hand", "pelvis")),
-    ("six_point", ("head", "left_hand", "right_hand", "pelvis", "left_foot", "right_foot")),
-])
+@pytest.mark.parametrize(
+    "name,sites",
+    [
+        ("three_point", ("head", "left_hand", "right_hand")),
+        ("four_point", ("head", "left_hand", "right_hand", "pelvis")),
+        ("six_point", ("head", "left_hand", "right_hand", "pelvis", "left_foot", "right_foot")),
+    ],
+)
 def test_shipped_configurations(name, sites):
     config = load_sensor_config(name)
     assert config.name == name and config.site_names == sites
@@ -36,13 +39,13 @@ def test_unknown_site_is_named_with_the_file(tmp_path):
         load_sensor_config(path)
     with pytest.raises(SensorConfigError, match="no sensor configuration 'seven_point'; shipped ones are four_point"):
         load_sensor_config("seven_point")
-    path.write_text("sites:\n  head: {offset: [1, 2, 3]}\n")               # was an AttributeError
+    path.write_text("sites:\n  head: {offset: [1, 2, 3]}\n")  # was an AttributeError
     with pytest.raises(SensorConfigError, match=r"mine\.yaml: site 'head': offset must be a mapping"):
         load_sensor_config(path)
-    path.write_text("sites:\n  head: {true: 1}\n")                          # found by make fuzz: a TypeError
+    path.write_text("sites:\n  head: {true: 1}\n")  # found by make fuzz: a TypeError
     with pytest.raises(SensorConfigError, match="unknown key.s. True"):
         load_sensor_config(path)
-    path.write_bytes(b"sites:\n  head: {frame: \xff\xfe}\n")                 # not UTF-8: the file is named
+    path.write_bytes(b"sites:\n  head: {frame: \xff\xfe}\n")  # not UTF-8: the file is named
     with pytest.raises(SensorConfigError, match=r"mine\.yaml: not UTF-8 text"):
         load_sensor_config(path)
 
@@ -60,7 +63,9 @@ def test_clean_trackers_follow_joints_through_their_mounting():
     assert stream.positions.shape == (len(motion), 6, 3) and stream.valid.all()
     for s, site in enumerate(config.sites):
         j = site.joint_index
-        expected = motion.positions[:, j] + np.einsum("tab,b->ta", motion.global_rotations[:, j], site.offset_translation)
+        expected = motion.positions[:, j] + np.einsum(
+            "tab,b->ta", motion.global_rotations[:, j], site.offset_translation
+        )
         np.testing.assert_allclose(stream.positions[:, s], expected, atol=1e-9)
         # Undoing the mounting recovers the joint.
         pos, rot = site.joint_pose(stream.positions[10, s], stream.orientations[10, s])
@@ -75,8 +80,10 @@ def test_lobstr_noise_has_the_papers_scale():
     noisy = synthesize_trackers(motion, config, LOBSTR_NOISE, seed=3)
     diff = noisy.positions - clean.positions
     assert np.std(diff) == pytest.approx(0.01, rel=0.1)
-    angle = (Rotation.from_quat(noisy.orientations.reshape(-1, 4)).inv()
-             * Rotation.from_quat(clean.orientations.reshape(-1, 4))).magnitude()
+    angle = (
+        Rotation.from_quat(noisy.orientations.reshape(-1, 4)).inv()
+        * Rotation.from_quat(clean.orientations.reshape(-1, 4))
+    ).magnitude()
     assert np.degrees(angle).max() <= 1.5 + 1e-9 and np.degrees(angle).mean() > 0.5
 
 
@@ -95,7 +102,12 @@ def test_drops_occlusion_and_orientation_only():
     np.testing.assert_array_equal(stream.orientations[at_origin, foot], [[0, 0, 0, 1]] * int(at_origin.sum()))
     assert not np.all(stream.positions[:, stream.sites.index("head")] == 0.0, axis=-1).any()
     hand = stream.sites.index("right_hand")
-    assert np.isnan(stream.positions[:, hand]).all() and np.isfinite(stream.orientations[stream.valid[:, hand], hand]).all()
-    bounded = synthesize_trackers(motion, config, TrackerNoise(occlusion_probability=0.05, occlusion_mode="bounded"), seed=2)
+    assert (
+        np.isnan(stream.positions[:, hand]).all()
+        and np.isfinite(stream.orientations[stream.valid[:, hand], hand]).all()
+    )
+    bounded = synthesize_trackers(
+        motion, config, TrackerNoise(occlusion_probability=0.05, occlusion_mode="bounded"), seed=2
+    )
     err = np.linalg.norm(bounded.positions[:, foot] - motion.positions[:, J["left_ankle"]], axis=-1)
     assert err.max() <= motion.skeleton.leg_length() + 0.1 and err.max() > 0.1

@@ -1,12 +1,13 @@
 import numpy as np
 import pytest
 import torch
+from conftest import random_rotations
 
 from sparse_body.core.kinematics import forward_kinematics, global_to_local
 from sparse_body.core.rotations import euler_to_matrix
-from sparse_body.core.skeleton import JOINT_INDEX as J, JOINT_NAMES, NUM_JOINTS, PARENTS, Skeleton, joint_indices
+from sparse_body.core.skeleton import JOINT_INDEX as J
+from sparse_body.core.skeleton import JOINT_NAMES, NUM_JOINTS, PARENTS, Skeleton, joint_indices
 from sparse_body.train import torch_body
-from conftest import random_rotations
 
 
 def test_topology_is_smpl_body():
@@ -18,9 +19,9 @@ def test_topology_is_smpl_body():
 
 def test_canonical_rest_pose_is_a_t_pose_facing_x():
     rest = Skeleton.canonical().rest_positions()
-    assert rest[J["left_wrist"], 1] > 0.6 and rest[J["right_wrist"], 1] < -0.6   # arms along +-y
-    assert rest[J["head"], 2] > 0.4 and rest[J["left_ankle"], 2] < -0.8          # z up
-    assert rest[J["left_foot"], 0] > rest[J["left_ankle"], 0] + 0.1             # toes forward (+x)
+    assert rest[J["left_wrist"], 1] > 0.6 and rest[J["right_wrist"], 1] < -0.6  # arms along +-y
+    assert rest[J["head"], 2] > 0.4 and rest[J["left_ankle"], 2] < -0.8  # z up
+    assert rest[J["left_foot"], 0] > rest[J["left_ankle"], 0] + 0.1  # toes forward (+x)
 
 
 def test_height_scaling():
@@ -56,7 +57,9 @@ def test_numpy_and_torch_fk_agree(rng):
     local = random_rotations(rng, (8, 22))
     root = rng.normal(size=(8, 3))
     g_np, p_np = forward_kinematics(local, root, s.offsets)
-    g_t, p_t = torch_body.forward_kinematics(torch.from_numpy(local), torch.from_numpy(root), torch.from_numpy(s.offsets))
+    g_t, p_t = torch_body.forward_kinematics(
+        torch.from_numpy(local), torch.from_numpy(root), torch.from_numpy(s.offsets)
+    )
     np.testing.assert_allclose(g_t.numpy(), g_np, atol=1e-6)
     np.testing.assert_allclose(p_t.numpy(), p_np, atol=1e-6)
     np.testing.assert_allclose(global_to_local(g_np), local, atol=1e-10)
@@ -64,6 +67,7 @@ def test_numpy_and_torch_fk_agree(rng):
 
 def test_torch_rotation_helpers_match_numpy(rng):
     from sparse_body.core.rotations import matrix_to_6d, matrix_to_quat, sixd_to_matrix
+
     m = random_rotations(rng, (16,))
     d6 = matrix_to_6d(m) + rng.normal(0, 0.1, (16, 6))
     np.testing.assert_allclose(torch_body.sixd_to_matrix(torch.from_numpy(d6)).numpy(), sixd_to_matrix(d6), atol=1e-6)

@@ -1,5 +1,6 @@
 """The shared training loop (train/harness.py) through the real LoBSTr trainer on real clips:
 checkpoints without pickle, resuming, the best weights kept."""
+
 import json
 from dataclasses import replace
 
@@ -24,12 +25,19 @@ def test_an_interrupted_training_resumes_from_its_checkpoint(tmp_path, mocap_roo
     checkpoint = tmp_path / "lobstr.checkpoint.npz"
     first = train(tiny, mocap_root, tmp_path / "a.onnx", limit=2, log=quiet, checkpoint=checkpoint)
     assert [h["step"] for h in first["history"]] == [2, 4]
-    with np.load(checkpoint, allow_pickle=False) as saved:      # plain arrays and a JSON state, no pickle
+    with np.load(checkpoint, allow_pickle=False) as saved:  # plain arrays and a JSON state, no pickle
         state = json.loads(str(saved["state"]))
         assert state["step"] == 4 and any(k.startswith("best.") for k in saved.files)
     lines = []
-    second = train(replace(tiny, steps=8), mocap_root, tmp_path / "b.onnx", limit=2, log=lines.append,
-                   checkpoint=checkpoint, resume=True)
+    second = train(
+        replace(tiny, steps=8),
+        mocap_root,
+        tmp_path / "b.onnx",
+        limit=2,
+        log=lines.append,
+        checkpoint=checkpoint,
+        resume=True,
+    )
     assert any("resumed" in line and "step 4" in line for line in lines)
     assert second["steps"] == 8
     assert [h["step"] for h in second["history"]] == [2, 4, 6, 8]
@@ -53,13 +61,21 @@ def test_a_checkpoint_of_another_configuration_is_refused_by_name(tmp_path, moca
     checkpoint = tmp_path / "lobstr.checkpoint.npz"
     train(tiny, mocap_root, tmp_path / "a.onnx", limit=2, log=quiet, checkpoint=checkpoint)
     with pytest.raises(ValueError, match="lobstr.checkpoint.npz: the checkpoint does not fit"):
-        train(replace(tiny, hidden=24), mocap_root, tmp_path / "b.onnx", limit=2, log=quiet,
-              checkpoint=checkpoint, resume=True)
+        train(
+            replace(tiny, hidden=24),
+            mocap_root,
+            tmp_path / "b.onnx",
+            limit=2,
+            log=quiet,
+            checkpoint=checkpoint,
+            resume=True,
+        )
 
 
 def test_the_dragposer_card_renders_its_runtime_choices_from_the_measured_file(tmp_path):
     from sparse_body.resources import models_dir
     from sparse_body.train.model_card import RUNTIME_METRICS, runtime_choices_table
+
     measured = json.loads((models_dir() / "dragposer.runtime.json").read_text())
     table = runtime_choices_table(models_dir() / "dragposer.runtime.json")
     assert table.count("\n| `dragposer") == len(measured) >= 2

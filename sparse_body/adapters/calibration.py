@@ -16,6 +16,7 @@ the fitted body, so every node and the offline tools use the same one.
 Applying a calibration turns a tracker orientation into its joint's orientation
 (q offset^-1); the bridge publishes that, so estimators see joint-aligned trackers.
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass, field
@@ -37,9 +38,9 @@ class CalibrationError(ValueError):
 @dataclass
 class Calibration:
     height: float
-    facing_yaw: float                                      # radians, the facing during calibration
-    offsets: dict[str, np.ndarray] = field(default_factory=dict)   # site -> (4,) x y z w
-    skeleton: Skeleton | None = None                       # the fitted body (None: scale by height)
+    facing_yaw: float  # radians, the facing during calibration
+    offsets: dict[str, np.ndarray] = field(default_factory=dict)  # site -> (4,) x y z w
+    skeleton: Skeleton | None = None  # the fitted body (None: scale by height)
 
     def body(self) -> Skeleton:
         """The person's body: the fitted one, else the canonical body at their height."""
@@ -53,18 +54,26 @@ class Calibration:
         return (Rotation.from_quat(quat) * Rotation.from_quat(self.offsets[site]).inv()).as_quat()
 
     def save(self, path: str | Path) -> None:
-        data = {"height": round(float(self.height), 4), "facing_yaw": round(float(self.facing_yaw), 6),
-                "offsets": {s: [round(float(v), 8) for v in q] for s, q in self.offsets.items()}}
+        data = {
+            "height": round(float(self.height), 4),
+            "facing_yaw": round(float(self.facing_yaw), 6),
+            "offsets": {s: [round(float(v), 8) for v in q] for s, q in self.offsets.items()},
+        }
         if self.skeleton is not None:
-            data["skeleton"] = {n: [round(float(v), 5) for v in o] for n, o in zip(JOINT_NAMES, self.skeleton.offsets)}
+            data["skeleton"] = {
+                n: [round(float(v), 5) for v in o] for n, o in zip(JOINT_NAMES, self.skeleton.offsets, strict=True)
+            }
         Path(path).parent.mkdir(parents=True, exist_ok=True)
-        Path(path).write_text("# T-pose calibration written by sparse_body (rotation offsets x y z w:\n"
-                              "# the tracker's orientation in its joint's frame; skeleton: each joint's rest\n"
-                              "# offset from its parent, metres)\n" + yaml.safe_dump(data, sort_keys=False))
+        Path(path).write_text(
+            "# T-pose calibration written by sparse_body (rotation offsets x y z w:\n"
+            "# the tracker's orientation in its joint's frame; skeleton: each joint's rest\n"
+            "# offset from its parent, metres)\n" + yaml.safe_dump(data, sort_keys=False)
+        )
 
     @classmethod
-    def load(cls, path: str | Path) -> "Calibration":
+    def load(cls, path: str | Path) -> Calibration:
         from ..core.sensors import SITE_JOINTS, read_yaml
+
         path = Path(path)
         data = read_yaml(path, CalibrationError)
         if not isinstance(data, dict) or not isinstance(data.get("offsets", {}), dict):
@@ -99,8 +108,9 @@ def _read_skeleton(path: Path, data) -> Skeleton | None:
     if data is None:
         return None
     if not isinstance(data, dict) or set(map(str, data)) != set(JOINT_NAMES):
-        raise CalibrationError(f"{path}: 'skeleton' must give the rest offset of each of the 22 joints "
-                               f"({', '.join(JOINT_NAMES)})")
+        raise CalibrationError(
+            f"{path}: 'skeleton' must give the rest offset of each of the 22 joints ({', '.join(JOINT_NAMES)})"
+        )
     try:
         offsets = np.array([[float(v) for v in data[n]] for n in JOINT_NAMES])
     except (TypeError, ValueError):
@@ -120,8 +130,11 @@ def _mean_rotation(quats: np.ndarray) -> Rotation:
     return Rotation.from_quat(np.asarray(quats)).mean()
 
 
-def calibrate_tpose(samples: dict[str, list[tuple[np.ndarray | None, np.ndarray | None]]], floor: float = 0.0,
-                    translations: dict[str, np.ndarray] | None = None) -> Calibration:
+def calibrate_tpose(
+    samples: dict[str, list[tuple[np.ndarray | None, np.ndarray | None]]],
+    floor: float = 0.0,
+    translations: dict[str, np.ndarray] | None = None,
+) -> Calibration:
     """samples: site -> [(position or None, orientation x y z w or None)] collected during the
     T-pose (a position-only tracker has no rotation offset to find).
 
@@ -130,14 +143,14 @@ def calibrate_tpose(samples: dict[str, list[tuple[np.ndarray | None, np.ndarray 
     samples = {s: v for s, v in samples.items() if v}
     if not samples:
         raise CalibrationError("no tracker samples arrived during the calibration")
-    mean_pos = {s: np.mean([p for p, _ in v], axis=0) for s, v in samples.items()
-                if all(p is not None for p, _ in v)}
+    mean_pos = {s: np.mean([p for p, _ in v], axis=0) for s, v in samples.items() if all(p is not None for p, _ in v)}
     if "left_hand" in mean_pos and "right_hand" in mean_pos:
         left = mean_pos["left_hand"] - mean_pos["right_hand"]
         left[2] = 0.0
         if np.linalg.norm(left) < 0.5:
-            raise CalibrationError(f"the hands are {np.linalg.norm(left):.2f} m apart: not a T-pose "
-                                   "(arms straight out to the sides)")
+            raise CalibrationError(
+                f"the hands are {np.linalg.norm(left):.2f} m apart: not a T-pose (arms straight out to the sides)"
+            )
         forward = np.cross(left / np.linalg.norm(left), [0.0, 0.0, 1.0])
         yaw = float(np.arctan2(forward[1], forward[0]))
     elif "head" in samples and all(q is not None for _, q in samples["head"]):
@@ -146,19 +159,24 @@ def calibrate_tpose(samples: dict[str, list[tuple[np.ndarray | None, np.ndarray 
     else:
         raise CalibrationError("facing cannot be found: calibration needs both hands or the headset")
     facing = Rotation.from_matrix(yaw_matrix(yaw))
-    offsets = {s: (facing.inv() * _mean_rotation([q for _, q in v])).as_quat() for s, v in samples.items()
-               if all(q is not None for _, q in v)}
+    offsets = {
+        s: (facing.inv() * _mean_rotation([q for _, q in v])).as_quat()
+        for s, v in samples.items()
+        if all(q is not None for _, q in v)
+    }
     if "head" not in mean_pos and not {"left_hand", "right_hand"} <= set(mean_pos):
         raise CalibrationError("the height needs a headset with a position, or both hand trackers")
     # In the T-pose every joint frame is the facing frame: a tracker sits at its joint plus
     # the facing-rotated mounting translation.
     translations = translations or {}
-    joints = {s: facing.inv().apply(p - facing.apply(np.asarray(translations.get(s, np.zeros(3)), float)))
-              - [0.0, 0.0, floor] for s, p in mean_pos.items()}
+    joints = {
+        s: facing.inv().apply(p - facing.apply(np.asarray(translations.get(s, np.zeros(3)), float))) - [0.0, 0.0, floor]
+        for s, p in mean_pos.items()
+    }
     if "head" in joints:
-        height = standing_height(joints["head"][2])    # as Skeleton.height(): head joint above the toes
+        height = standing_height(joints["head"][2])  # as Skeleton.height(): head joint above the toes
         where = f"the headset is {joints['head'][2]:.2f} m above the floor"
-    else:        # no headset: the canonical body's height for this arm span
+    else:  # no headset: the canonical body's height for this arm span
         span = float(np.linalg.norm(joints["left_hand"] - joints["right_hand"]))
         height = span * CANONICAL_HEIGHT / arm_span(Skeleton.canonical())
         where = f"the hands are {span:.2f} m apart"

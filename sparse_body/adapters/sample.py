@@ -1,4 +1,5 @@
 """One tracker reading as the adapters deliver it (no ROS types)."""
+
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -13,9 +14,9 @@ class TrackerSample:
     position is None for orientation-only devices (IMUs): nothing downstream invents one.
     """
 
-    device: str                        # the device's own name or id, mapped to a body site later
-    stamp: float                       # host time, seconds
-    orientation: np.ndarray            # (4,) x y z w, unit
+    device: str  # the device's own name or id, mapped to a body site later
+    stamp: float  # host time, seconds
+    orientation: np.ndarray  # (4,) x y z w, unit
     position: np.ndarray | None = None
 
 

@@ -11,6 +11,7 @@ CRC-16/CCITT-FALSE (poly 0x1021, init 0xFFFF) over everything after the sync byt
 FrameDecoder takes bytes as they arrive (any split) and resynchronises after garbage: a
 header that does not fit, or a checksum that fails, costs one byte and the search goes on.
 """
+
 from __future__ import annotations
 
 import binascii
@@ -23,7 +24,7 @@ SYNC = b"\xa5\x5a"
 VERSION = 1
 ORIENTATION, POSE = 1, 2
 PAYLOAD_LENGTH = {ORIENTATION: 16, POSE: 28}
-_HEADER = struct.Struct("<2sBBBBI")          # sync, version, type, device, length, device time
+_HEADER = struct.Struct("<2sBBBBI")  # sync, version, type, device, length, device time
 MAX_BUFFER = 4096
 
 
@@ -35,8 +36,8 @@ def crc16(data: bytes) -> int:
 class Frame:
     device_id: int
     device_time_us: int
-    orientation: np.ndarray             # (4,) x y z w
-    position: np.ndarray | None         # (3,) or None for orientation-only devices
+    orientation: np.ndarray  # (4,) x y z w
+    position: np.ndarray | None  # (3,) or None for orientation-only devices
 
 
 def encode_frame(device_id: int, device_time_us: int, orientation, position=None) -> bytes:
@@ -52,7 +53,7 @@ class DecoderStats:
     frames: int = 0
     garbage_bytes: int = 0
     bad_checksums: int = 0
-    bad_values: int = 0          # well-formed frames whose numbers are not a pose (NaN, zero quaternion)
+    bad_values: int = 0  # well-formed frames whose numbers are not a pose (NaN, zero quaternion)
     counts: dict = field(default_factory=dict)
 
 
@@ -67,9 +68,9 @@ class FrameDecoder:
         while True:
             start = self._buf.find(SYNC)
             if start < 0:
-                keep = 1 if self._buf.endswith(SYNC[:1]) else 0   # a sync split across reads
+                keep = 1 if self._buf.endswith(SYNC[:1]) else 0  # a sync split across reads
                 self.stats.garbage_bytes += len(self._buf) - keep
-                del self._buf[:len(self._buf) - keep]
+                del self._buf[: len(self._buf) - keep]
                 break
             if start:
                 self.stats.garbage_bytes += start
@@ -84,7 +85,7 @@ class FrameDecoder:
             if len(self._buf) < end:
                 break
             (crc,) = struct.unpack_from("<H", self._buf, end - 2)
-            if crc != crc16(bytes(self._buf[2:end - 2])):
+            if crc != crc16(bytes(self._buf[2 : end - 2])):
                 self.stats.bad_checksums += 1
                 self._skip()
                 continue
@@ -93,7 +94,7 @@ class FrameDecoder:
             frame = self._frame(kind, device, dev_time, values)
             if frame is not None:
                 frames.append(frame)
-        if len(self._buf) > MAX_BUFFER:        # cannot happen with valid lengths; a guard all the same
+        if len(self._buf) > MAX_BUFFER:  # cannot happen with valid lengths; a guard all the same
             self.stats.garbage_bytes += len(self._buf)
             self._buf.clear()
         return frames

@@ -4,8 +4,10 @@ The port is anything pyserial's serial_for_url opens: /dev/ttyUSB0, a pseudo-ter
 loop:// or socket://host:port. When the device goes away (unplugged, the port vanishes)
 the reader keeps trying to open it again every reconnect_interval seconds.
 """
+
 from __future__ import annotations
 
+import contextlib
 import threading
 import time
 
@@ -15,8 +17,9 @@ from .serial_protocol import FrameDecoder
 
 
 class SerialTrackerReader:
-    def __init__(self, port: str, on_samples, baudrate: int = 921600, reconnect_interval: float = 0.5,
-                 clock_window: float = 5.0) -> None:
+    def __init__(
+        self, port: str, on_samples, baudrate: int = 921600, reconnect_interval: float = 0.5, clock_window: float = 5.0
+    ) -> None:
         if not port:
             raise ValueError("no serial port given")
         self.port, self.baudrate, self.reconnect_interval = port, baudrate, reconnect_interval
@@ -34,6 +37,7 @@ class SerialTrackerReader:
 
     def _open(self):
         import serial
+
         try:
             return serial.serial_for_url(self.port, baudrate=self.baudrate, timeout=0.05)
         except (serial.SerialException, OSError, ValueError) as err:
@@ -42,6 +46,7 @@ class SerialTrackerReader:
 
     def _run(self) -> None:
         import serial
+
         while not self._stop.is_set():
             port = self._open()
             if port is None:
@@ -61,10 +66,8 @@ class SerialTrackerReader:
                 self.disconnects += 1
             finally:
                 self.connected.clear()
-                try:
+                with contextlib.suppress(Exception):  # closing a dead port may fail in any way
                     port.close()
-                except Exception:  # noqa: BLE001 - closing a dead port may fail in any way
-                    pass
             self._stop.wait(self.reconnect_interval)
 
     def _handle(self, data: bytes, arrival: float) -> None:
@@ -75,6 +78,19 @@ class SerialTrackerReader:
             samples.append(TrackerSample(f"serial:{frame.device_id}", stamp, frame.orientation, frame.position))
         if samples:
             self._on_samples(samples)
+
+    def diagnostics(self) -> tuple[str | None, dict[str, str]]:
+        """(the problem, if any; figures) for the bridge's diagnostic status."""
+        st = self.decoder.stats
+        values = {
+            "frames": str(st.frames),
+            "garbage bytes": str(st.garbage_bytes),
+            "bad checksums": str(st.bad_checksums),
+            "bad values": str(st.bad_values),
+            "connects": str(self.connects),
+            "disconnects": str(self.disconnects),
+        }
+        return (None if self.connected.is_set() else f"{self.port} not open: {self.last_error}"), values
 
     def close(self) -> None:
         self._stop.set()

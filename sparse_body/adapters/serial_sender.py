@@ -11,6 +11,7 @@ pseudo-terminal and links its device to the given path; --disconnect-at closes i
 --offline seconds and opens a fresh one under the same path, as an unplugged USB device
 would. --garbage, --bad-crc and --split disturb the byte stream on purpose.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -29,6 +30,7 @@ class PtyPort:
 
     def __init__(self, link: Path) -> None:
         import tty
+
         self.link = Path(link)
         self.master, self.slave = os.openpty()
         tty.setraw(self.slave)
@@ -50,6 +52,7 @@ def open_port(args):
     if args.pty:
         return PtyPort(Path(args.pty))
     import serial
+
     return serial.serial_for_url(args.port, baudrate=args.baudrate)
 
 
@@ -58,6 +61,7 @@ def main(argv=None) -> int:
     from ..data.catalog import load_motion_file
     from ..data.synthetic import synthetic_walk
     from ..data.virtual_trackers import synthesize_trackers
+
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     where = p.add_mutually_exclusive_group(required=True)
     where.add_argument("--port", help="a serial port or pyserial URL to write to")
@@ -77,8 +81,9 @@ def main(argv=None) -> int:
     args = p.parse_args(argv)
 
     config = load_sensor_config(args.sensors)
-    motion = (load_motion_file(Path(args.motion), args.rate) if args.motion
-              else synthetic_walk(args.seconds, fps=args.rate))
+    motion = (
+        load_motion_file(Path(args.motion), args.rate) if args.motion else synthetic_walk(args.seconds, fps=args.rate)
+    )
     stream = synthesize_trackers(motion, config)
     rng = np.random.default_rng(args.seed)
     port = open_port(args)

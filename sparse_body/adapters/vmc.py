@@ -13,6 +13,7 @@ to a body site. Everything else VMC sends (bones, blendshapes, status) is ignore
 datagram that is not OSC, or a tracking message with the wrong arguments, is counted and
 dropped. Parsing is python-osc's; decoding a datagram never raises.
 """
+
 from __future__ import annotations
 
 import fnmatch
@@ -42,14 +43,16 @@ def unity_to_rep103(position, quat) -> tuple[np.ndarray, np.ndarray]:
 def parse_device_map(entries) -> list[tuple[str, str]]:
     """["hmd:*=head", "con:LHR-1234=left_hand"] -> [(pattern, site)]; first match wins."""
     from ..core.sensors import SITE_JOINTS
+
     out = []
     for entry in entries:
         pattern, eq, site = str(entry).partition("=")
         if not eq or not pattern.strip():
             raise ValueError(f"device map entry {entry!r} is not PATTERN=SITE")
         if site.strip() not in SITE_JOINTS:
-            raise ValueError(f"device map entry {entry!r}: unknown body site {site.strip()!r}; "
-                             f"sites are {', '.join(SITE_JOINTS)}")
+            raise ValueError(
+                f"device map entry {entry!r}: unknown body site {site.strip()!r}; sites are {', '.join(SITE_JOINTS)}"
+            )
         out.append((pattern.strip(), site.strip()))
     return out
 
@@ -73,10 +76,10 @@ def _structure_is_sane(data: bytes, depth: int = 0) -> bool:
     while i < len(data):
         if i + 4 > len(data):
             return False
-        size = int.from_bytes(data[i:i + 4], "big", signed=True)
+        size = int.from_bytes(data[i : i + 4], "big", signed=True)
         if size <= 0 or size % 4 or i + 4 + size > len(data):
             return False
-        if not _structure_is_sane(data[i + 4:i + 4 + size], depth + 1):
+        if not _structure_is_sane(data[i + 4 : i + 4 + size], depth + 1):
             return False
         i += 4 + size
     return True
@@ -89,6 +92,7 @@ class VmcDecoder:
 
     def datagram(self, data: bytes, arrival: float) -> list[TrackerSample]:
         from pythonosc.osc_packet import OscPacket
+
         data = bytes(data)
         if not _structure_is_sane(data):
             self.errors["not OSC"] += 1
@@ -148,13 +152,19 @@ class VmcReceiver:
         while not self._stop.is_set():
             try:
                 data, _ = self._sock.recvfrom(65536)
-            except socket.timeout:
+            except TimeoutError:
                 continue
             except OSError:
                 break
             samples = self.decoder.datagram(data, time.time())
             if samples:
                 self._on_samples(samples)
+
+    def diagnostics(self) -> tuple[str | None, dict[str, str]]:
+        """(the problem, if any; figures) for the bridge's diagnostic status."""
+        values = {f"errors: {k}": str(v) for k, v in self.decoder.errors.items()}
+        values["devices seen"] = ", ".join(sorted(self.decoder.devices)) or "none"
+        return None, values
 
     def close(self) -> None:
         self._stop.set()

@@ -14,6 +14,7 @@ on the whole body:
   at spine2, spine3 and neck until the pelvis-to-head distance is right (a 1-D monotone
   search in complex arithmetic, no matrices), then spine1 turns to point it at the head.
 """
+
 from __future__ import annotations
 
 import math
@@ -33,11 +34,11 @@ X, Y, Z = np.eye(3)
 
 @dataclass(frozen=True)
 class Limb:
-    upper: int          # ball joint (shoulder, hip)
-    hinge: int          # elbow, knee
-    axis: np.ndarray    # the hinge's local axis
+    upper: int  # ball joint (shoulder, hip)
+    hinge: int  # elbow, knee
+    axis: np.ndarray  # the hinge's local axis
     limits: tuple[float, float]
-    end: int            # wrist, ankle
+    end: int  # wrist, ankle
 
 
 LIMBS = {
@@ -46,10 +47,10 @@ LIMBS = {
     J["left_ankle"]: Limb(J["left_hip"], J["left_knee"], Y, (0.0, 2.6), J["left_ankle"]),
     J["right_ankle"]: Limb(J["right_hip"], J["right_knee"], Y, (0.0, 2.6), J["right_ankle"]),
 }
-_FOOT_OF = {J["left_ankle"]: J["left_foot"], J["right_ankle"]: J["right_foot"]}   # hangs below the limb's end
+_FOOT_OF = {J["left_ankle"]: J["left_foot"], J["right_ankle"]: J["right_foot"]}  # hangs below the limb's end
 _ARMS = (J["left_wrist"], J["right_wrist"])
 SPINE_BEND = (J["spine2"], J["spine3"], J["neck"])
-MAX_BEND = 0.6          # radians per spine joint: about 100 degrees over the three
+MAX_BEND = 0.6  # radians per spine joint: about 100 degrees over the three
 # Near full extension the bend that gives a length changes like the square root of what is
 # missing: a millimetre of tracker noise swings a nearly straight knee, elbow or spine by
 # degrees. Within SOFT_REACH of the full length the solvers aim for a length that approaches
@@ -82,9 +83,9 @@ def reach_angle(a, w, axis, distance: float, current: float, limits: tuple[float
     wx, wy, wz = (float(v) for v in w)
     kx, ky, kz = (float(v) for v in axis)
     along = kx * wx + ky * wy + kz * wz
-    px, py, pz = wx - kx * along, wy - ky * along, wz - kz * along          # w across the axis
+    px, py, pz = wx - kx * along, wy - ky * along, wz - kz * along  # w across the axis
     A = ax * px + ay * py + az * pz
-    B = ax * (ky * pz - kz * py) + ay * (kz * px - kx * pz) + az * (kx * py - ky * px)   # a . (k x p)
+    B = ax * (ky * pz - kz * py) + ay * (kz * px - kx * pz) + az * (kx * py - ky * px)  # a . (k x p)
     fixed = ax * ax + ay * ay + az * az + wx * wx + wy * wy + wz * wz + 2 * (ax * kx + ay * ky + az * kz) * along
     C = math.hypot(A, B)
     if C < 1e-12:
@@ -102,8 +103,16 @@ def reach_angle(a, w, axis, distance: float, current: float, limits: tuple[float
     return best
 
 
-def reach(local: np.ndarray, parent_rot: np.ndarray, upper_pos: np.ndarray, offsets: np.ndarray, limb: Limb,
-          target: np.ndarray, end_vector: np.ndarray | None = None, exact_hinge: bool = True):
+def reach(
+    local: np.ndarray,
+    parent_rot: np.ndarray,
+    upper_pos: np.ndarray,
+    offsets: np.ndarray,
+    limb: Limb,
+    target: np.ndarray,
+    end_vector: np.ndarray | None = None,
+    exact_hinge: bool = True,
+):
     """Turn the limb's ball joint and hinge (in place in local) so that its end reaches target.
 
     parent_rot: global rotation of the ball joint's parent; upper_pos: the ball joint's
@@ -117,7 +126,7 @@ def reach(local: np.ndarray, parent_rot: np.ndarray, upper_pos: np.ndarray, offs
     w = offsets[limb.end] if end_vector is None else end_vector
     a = offsets[h]
     distance = soft_distance(float(np.linalg.norm(target - upper_pos)), float(np.linalg.norm(a) + np.linalg.norm(w)))
-    if not exact_hinge:   # solve in the hinge's own frame: |L_h^T a + R(t) w|
+    if not exact_hinge:  # solve in the hinge's own frame: |L_h^T a + R(t) w|
         base = local[h]
         turned = base @ about(limb.axis, reach_angle(base.T @ a, w, limb.axis, distance, 0.0, None))
         exact_hinge = abs(float(np.linalg.norm(a + turned @ w)) - distance) > 0.005
@@ -135,8 +144,14 @@ def reach(local: np.ndarray, parent_rot: np.ndarray, upper_pos: np.ndarray, offs
 KEEP_BEND_TOLERANCE = 0.005
 
 
-def fit_spine(local: np.ndarray, root: np.ndarray, offsets: np.ndarray, head_target: np.ndarray,
-              keep_bend: bool = False, tolerance: float = KEEP_BEND_TOLERANCE) -> None:
+def fit_spine(
+    local: np.ndarray,
+    root: np.ndarray,
+    offsets: np.ndarray,
+    head_target: np.ndarray,
+    keep_bend: bool = False,
+    tolerance: float = KEEP_BEND_TOLERANCE,
+) -> None:
     """Bend and turn the spine (in place in local) so that the head joint reaches head_target,
     the pelvis (local[0], root) staying where it is. keep_bend: only turn the spine as it is
     curved (a decoded pose), unless that curve leaves the head more than tolerance short or
@@ -149,8 +164,9 @@ def fit_spine(local: np.ndarray, root: np.ndarray, offsets: np.ndarray, head_tar
     to_target = head_target - s1_pos
     if keep_bend:
         b = [local[j] for j in SPINE_BEND]
-        head_vector = offsets[SPINE_BEND[0]] + b[0] @ (offsets[SPINE_BEND[1]] + b[1] @ (
-            offsets[SPINE_BEND[2]] + b[2] @ offsets[J["head"]]))
+        head_vector = offsets[SPINE_BEND[0]] + b[0] @ (
+            offsets[SPINE_BEND[1]] + b[1] @ (offsets[SPINE_BEND[2]] + b[2] @ offsets[J["head"]])
+        )
         if abs(math.sqrt(head_vector @ head_vector) - math.sqrt(to_target @ to_target)) < tolerance:
             s1_rot = pelvis @ local[s1]
             local[s1] = pelvis.T @ swing(s1_rot @ head_vector, to_target) @ s1_rot
@@ -169,7 +185,7 @@ def fit_spine(local: np.ndarray, root: np.ndarray, offsets: np.ndarray, head_tar
         return math.sqrt(abs(h) ** 2 + lateral * lateral)
 
     distance = soft_distance(distance, length(0.0))
-    forward = float((pelvis @ local[s1]).T[0] @ to_target) >= 0.0   # lean direction in spine1's frame
+    forward = float((pelvis @ local[s1]).T[0] @ to_target) >= 0.0  # lean direction in spine1's frame
     limit = MAX_BEND if forward else -MAX_BEND
     lo, hi = 0.0, limit
     if distance >= length(0.0):
@@ -177,15 +193,16 @@ def fit_spine(local: np.ndarray, root: np.ndarray, offsets: np.ndarray, head_tar
     elif distance <= length(limit):
         beta = limit
     else:
-        for _ in range(18):      # |head - spine1| shrinks monotonically as the bend grows
+        for _ in range(18):  # |head - spine1| shrinks monotonically as the bend grows
             mid = 0.5 * (lo + hi)
             lo, hi = (mid, hi) if length(mid) > distance else (lo, mid)
         beta = 0.5 * (lo + hi)
     bend = about(Y, beta)
     for j in SPINE_BEND:
         local[j] = bend
-    head_vector = offsets[SPINE_BEND[0]] + bend @ (offsets[SPINE_BEND[1]] + bend @ (
-        offsets[SPINE_BEND[2]] + bend @ offsets[J["head"]]))
+    head_vector = offsets[SPINE_BEND[0]] + bend @ (
+        offsets[SPINE_BEND[1]] + bend @ (offsets[SPINE_BEND[2]] + bend @ offsets[J["head"]])
+    )
     s1_rot = pelvis @ local[s1]
     local[s1] = pelvis.T @ swing(s1_rot @ head_vector, to_target) @ s1_rot
 
@@ -224,7 +241,7 @@ def _collar_within_reach(local, glob, pos, offsets, limb: Limb, target: np.ndarr
     sin_now = math.sqrt(axis @ axis)
     if r < 1e-9 or d < 1e-9 or sin_now < 1e-12:
         return
-    now = math.atan2(sin_now, float(arm @ goal))     # the angle between arm and goal
+    now = math.atan2(sin_now, float(arm @ goal))  # the angle between arm and goal
     reach_length = length - 1.5 * SOFT_REACH
     cos_wanted = (r * r + d * d - reach_length * reach_length) / (2 * r * d)
     wanted = math.acos(min(1.0, max(-1.0, cos_wanted)))
@@ -236,8 +253,14 @@ def _collar_within_reach(local, glob, pos, offsets, limb: Limb, target: np.ndarr
     glob[limb.upper] = glob[collar] @ local[limb.upper]
 
 
-def solve_body(local: np.ndarray, root: np.ndarray, offsets: np.ndarray, targets: dict[int, np.ndarray],
-               keep_shape: bool = False, spine_tolerance: float = KEEP_BEND_TOLERANCE):
+def solve_body(
+    local: np.ndarray,
+    root: np.ndarray,
+    offsets: np.ndarray,
+    targets: dict[int, np.ndarray],
+    keep_shape: bool = False,
+    spine_tolerance: float = KEEP_BEND_TOLERANCE,
+):
     """A copy of local (22, 3, 3) with the spine fitted to a head target and each limb with
     a target (wrist or ankle joint index -> position) reaching it. The root stays.
     keep_shape: the pose's own spine curve, elbows and knees are kept and only turned (a
@@ -256,8 +279,9 @@ def solve_body(local: np.ndarray, root: np.ndarray, offsets: np.ndarray, targets
         if end in _ARMS:
             # the IK baseline keeps its single turn (its figures are every comparison's bar)
             (_collar_within_reach if keep_shape else _collar_towards)(local, glob, pos, offsets, limb, target)
-        upper, hinge = reach(local, glob[PARENTS[limb.upper]], pos[limb.upper], offsets, limb, target,
-                             exact_hinge=not keep_shape)
+        upper, hinge = reach(
+            local, glob[PARENTS[limb.upper]], pos[limb.upper], offsets, limb, target, exact_hinge=not keep_shape
+        )
         # the limbs are independent: update only what this one moved
         glob[limb.upper], glob[limb.hinge], glob[end] = upper, hinge, hinge @ local[end]
         pos[limb.hinge] = pos[limb.upper] + upper @ offsets[limb.hinge]

@@ -9,6 +9,7 @@ from the canonical body scaled to the person's height, as everything does withou
 fit_skeleton works in the person's facing frame (x forward, y left, z up, the floor at
 z = 0) on joint positions, the trackers' mounting offsets already undone.
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -16,10 +17,10 @@ import numpy as np
 from .skeleton import JOINT_INDEX, STATURE_RATIO, Skeleton
 
 _J = JOINT_INDEX
-ARM = ("shoulder", "elbow", "wrist")          # clavicle, upper arm, forearm (offsets of these joints)
-LEG = ("knee", "ankle")                       # thigh, shin
-SPINE = ("spine2", "spine3")                  # pelvis -> spine3 (spine1 sits at the pelvis)
-NECK = ("neck", "left_collar", "right_collar")   # spine3 -> base of the neck / clavicles
+ARM = ("shoulder", "elbow", "wrist")  # clavicle, upper arm, forearm (offsets of these joints)
+LEG = ("knee", "ankle")  # thigh, shin
+SPINE = ("spine2", "spine3")  # pelvis -> spine3 (spine1 sits at the pelvis)
+NECK = ("neck", "left_collar", "right_collar")  # spine3 -> base of the neck / clavicles
 
 
 def _length(offsets: np.ndarray, joints) -> float:
@@ -59,10 +60,11 @@ def fit_skeleton(joints: dict[str, np.ndarray], height: float) -> Skeleton:
     person's standing height (from the head, see calibrate_tpose)."""
     offsets = Skeleton.canonical(height).offsets.copy()
     head = joints.get("head")
-    hands = [joints.get("left_hand"), joints.get("right_hand")]
+    left, right = joints.get("left_hand"), joints.get("right_hand")
     if head is None:
         return Skeleton(offsets)
-    if all(h is not None for h in hands):
+    if left is not None and right is not None:
+        hands = [left, right]
         # Half the span is clavicle + upper arm + forearm; the clavicle keeps its canonical
         # share (no tracker sees the shoulder joint) and the arm the rest.
         chain = float(np.linalg.norm(hands[0] - hands[1])) / 2
@@ -77,15 +79,18 @@ def fit_skeleton(joints: dict[str, np.ndarray], height: float) -> Skeleton:
         shoulders = head[2] - offsets[_J["head"], 2]
     rest = Skeleton(offsets).rest_positions()
     ankles = [joints.get("left_foot"), joints.get("right_foot")]
-    ankle = (np.mean([a[2] for a in ankles if a is not None]) if any(a is not None for a in ankles)
-             else rest[_J["left_ankle"], 2] - rest[:, 2].min())   # the ankle's canonical height above the toes
+    ankle = (
+        np.mean([a[2] for a in ankles if a is not None])
+        if any(a is not None for a in ankles)
+        else rest[_J["left_ankle"], 2] - rest[:, 2].min()
+    )  # the ankle's canonical height above the toes
     hip_drop = -offsets[_J["left_hip"], 2]
     torso_now = _length(offsets, SPINE) + offsets[_J["neck"], 2]
     legs_now = _length(offsets, _sides(LEG)) / 2
     if joints.get("pelvis") is not None:
         pelvis = joints["pelvis"][2]
         torso, legs = shoulders - pelvis, pelvis - hip_drop - ankle
-    else:        # only the sum shows: share it as the canonical body does
+    else:  # only the sum shows: share it as the canonical body does
         both = shoulders - hip_drop - ankle
         torso, legs = both * torso_now / (torso_now + legs_now), both * legs_now / (torso_now + legs_now)
     if 0.5 < torso / torso_now < 2.0:

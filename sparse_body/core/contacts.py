@@ -5,6 +5,7 @@ percentile of the lower toe's height, so the joint's height above the sole cance
 LoBSTr labels contact below 1 cm on its skeleton; on CMU data a 2 cm height band together
 with a speed limit keeps swinging feet that brush the floor out of contact.
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -18,8 +19,8 @@ FOOT_JOINTS = (JOINT_INDEX["left_foot"], JOINT_INDEX["right_foot"])
 
 @dataclass(frozen=True)
 class ContactThresholds:
-    height: float = 0.02   # metres above the floor
-    speed: float = 0.30    # metres per second, horizontal
+    height: float = 0.02  # metres above the floor
+    speed: float = 0.30  # metres per second, horizontal
 
 
 def estimate_floor(positions: np.ndarray) -> float:
@@ -37,8 +38,9 @@ def toe_speeds(positions: np.ndarray, fps: float) -> np.ndarray:
     return np.concatenate([speed[:1], speed], axis=0)
 
 
-def contact_labels(positions: np.ndarray, fps: float, floor: float | None = None,
-                   thresholds: ContactThresholds = ContactThresholds()) -> np.ndarray:
+def contact_labels(
+    positions: np.ndarray, fps: float, floor: float | None = None, thresholds: ContactThresholds = ContactThresholds()
+) -> np.ndarray:
     """(T, 2) booleans, left then right: the toe is low and nearly still."""
     floor = estimate_floor(positions) if floor is None else floor
     low = positions[:, FOOT_JOINTS, 2] - floor < thresholds.height
@@ -46,8 +48,14 @@ def contact_labels(positions: np.ndarray, fps: float, floor: float | None = None
     return low & still
 
 
-def toe_contacts(toes: np.ndarray, last_toes: np.ndarray | None, fps: float, floor: float = 0.0,
-                 height: float = 0.05, speed: float = 0.3) -> np.ndarray:
+def toe_contacts(
+    toes: np.ndarray,
+    last_toes: np.ndarray | None,
+    fps: float,
+    floor: float = 0.0,
+    height: float = 0.05,
+    speed: float = 0.3,
+) -> np.ndarray:
     """Live contact flags (2,) for estimators without a contact model: toe (2, 3) low and
     slower than speed (m/s) since the last frame's toes."""
     moved = np.zeros(2) if last_toes is None else np.linalg.norm((toes - last_toes)[:, :2], axis=1) * fps

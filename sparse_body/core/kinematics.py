@@ -1,4 +1,5 @@
 """Forward kinematics of the 22-joint body in numpy (the torch twin is train/torch_body.py)."""
+
 from __future__ import annotations
 
 import numpy as np
@@ -17,13 +18,17 @@ def forward_kinematics(local_rot: np.ndarray, root_pos: np.ndarray, offsets: np.
     """
     local_rot = np.asarray(local_rot, dtype=np.float64)
     if local_rot.ndim == 3 and np.ndim(offsets) == 2:
-        return _forward_kinematics_one(local_rot, np.asarray(root_pos, dtype=np.float64), offsets,
-                                       range(1, NUM_JOINTS) if joints is None else joints)
+        return _forward_kinematics_one(
+            local_rot,
+            np.asarray(root_pos, dtype=np.float64),
+            offsets,
+            range(1, NUM_JOINTS) if joints is None else joints,
+        )
     if joints is not None:
         raise ValueError("a joint subset is for one pose with one skeleton")
     lead = local_rot.shape[:-3]
     offsets = np.asarray(offsets, dtype=np.float64)
-    shared = offsets.ndim == 2          # one body for the whole batch: a matrix-vector product per joint
+    shared = offsets.ndim == 2  # one body for the whole batch: a matrix-vector product per joint
     if not shared:
         offsets = np.broadcast_to(offsets, lead + (NUM_JOINTS, 3))
     glob = np.empty_like(local_rot)
@@ -41,8 +46,19 @@ def forward_kinematics(local_rot: np.ndarray, root_pos: np.ndarray, offsets: np.
 
 
 # the legs, parents before children: what a foot's IK needs, a third of the body's FK
-LEG_JOINTS = tuple(JOINT_INDEX[n] for n in ("left_hip", "right_hip", "left_knee", "right_knee", "left_ankle",
-                                            "right_ankle", "left_foot", "right_foot"))
+LEG_JOINTS = tuple(
+    JOINT_INDEX[n]
+    for n in (
+        "left_hip",
+        "right_hip",
+        "left_knee",
+        "right_knee",
+        "left_ankle",
+        "right_ankle",
+        "left_foot",
+        "right_foot",
+    )
+)
 
 
 def global_to_local(global_rot: np.ndarray) -> np.ndarray:

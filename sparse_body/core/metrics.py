@@ -3,6 +3,7 @@
 Positions are (T, 22, 3) metres, rotations (T, 22, 3, 3). Units follow the papers' tables:
 centimetres, degrees, cm/s, and Jitter in 100 m/s^3 (AvatarPoser, AvatarJLM).
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -42,7 +43,7 @@ def jitter(pos, fps: float, joints=None) -> float:
     """Mean jerk (third derivative of position) magnitude, 100 m/s^3."""
     if len(pos) < 4:
         return float("nan")
-    jerk = np.diff(_sel(pos, joints), n=3, axis=0) * fps ** 3
+    jerk = np.diff(_sel(pos, joints), n=3, axis=0) * fps**3
     return float(np.linalg.norm(jerk, axis=-1).mean() / 100)
 
 
@@ -70,8 +71,19 @@ def contact_accuracy(pred_contacts, gt_contacts) -> float:
     return float((np.asarray(pred_contacts) == np.asarray(gt_contacts)).mean() * 100)
 
 
-def sequence_metrics(pred_pos, pred_glob, pred_local, gt_pos, gt_glob, gt_local, fps: float,
-                     floor: float, gt_contacts, pred_contacts=None, tracked_joints=()) -> dict[str, float]:
+def sequence_metrics(
+    pred_pos,
+    pred_glob,
+    pred_local,
+    gt_pos,
+    gt_glob,
+    gt_local,
+    fps: float,
+    floor: float,
+    gt_contacts,
+    pred_contacts=None,
+    tracked_joints=(),
+) -> dict[str, float]:
     """Every metric of one sequence, keyed by the names used in the tables."""
     out = {
         "MPJPE [cm]": mpjpe(pred_pos, gt_pos),
@@ -98,8 +110,10 @@ def per_joint_metrics(pred_pos, gt_pos, pred_local, gt_local) -> dict[str, float
     joints are MPJPE and MPJRE."""
     pe = np.linalg.norm(pred_pos - gt_pos, axis=-1).mean(axis=0) * 100
     re = np.rad2deg(angle_between(pred_local, gt_local)).mean(axis=0)
-    return {**{f"PE {name} [cm]": float(e) for name, e in zip(JOINT_NAMES, pe)},
-            **{f"RE {name} [deg]": float(e) for name, e in zip(JOINT_NAMES, re)}}
+    return {
+        **{f"PE {name} [cm]": float(e) for name, e in zip(JOINT_NAMES, pe, strict=True)},
+        **{f"RE {name} [deg]": float(e) for name, e in zip(JOINT_NAMES, re, strict=True)},
+    }
 
 
 def weighted_mean(rows: list[dict[str, float]], weights: list[float]) -> dict[str, float]:

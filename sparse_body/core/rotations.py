@@ -4,6 +4,7 @@ Quaternions are (x, y, z, w) as in geometry_msgs and scipy. numpy conversions wr
 scipy.spatial.transform.Rotation; torch conversions wrap roma. Only what neither library
 offers in the needed shape is written here (6D, batched reshaping).
 """
+
 from __future__ import annotations
 
 import math
@@ -31,9 +32,13 @@ def unit_quat_matrix(q) -> np.ndarray:
     """One unit quaternion (x y z w) as a matrix, without scipy's per-call overhead (the
     trackers' hot path converts a handful per frame)."""
     x, y, z, w = (float(v) for v in q)
-    return np.array([[1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
-                     [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
-                     [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)]])
+    return np.array(
+        [
+            [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+            [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+            [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
+        ]
+    )
 
 
 def matrix_to_quat(m: np.ndarray) -> np.ndarray:
@@ -48,8 +53,9 @@ def rotations_to_quat(m: np.ndarray) -> np.ndarray:
     to about 1e-8 where a component is near zero."""
     m = np.asarray(m, dtype=np.float64)
     d0, d1, d2 = m[..., 0, 0], m[..., 1, 1], m[..., 2, 2]
-    q = 0.5 * np.sqrt(np.maximum(0.0, np.stack([1 + d0 - d1 - d2, 1 - d0 + d1 - d2, 1 - d0 - d1 + d2,
-                                                1 + d0 + d1 + d2], -1)))
+    q = 0.5 * np.sqrt(
+        np.maximum(0.0, np.stack([1 + d0 - d1 - d2, 1 - d0 + d1 - d2, 1 - d0 - d1 + d2, 1 + d0 + d1 + d2], -1))
+    )
     q[..., 0] = np.copysign(q[..., 0], m[..., 2, 1] - m[..., 1, 2])
     q[..., 1] = np.copysign(q[..., 1], m[..., 0, 2] - m[..., 2, 0])
     q[..., 2] = np.copysign(q[..., 2], m[..., 1, 0] - m[..., 0, 1])
@@ -102,9 +108,13 @@ def rotation_about(axis, angle: float) -> np.ndarray:
     x, y, z = (float(v) for v in axis)
     c, s = math.cos(angle), math.sin(angle)
     t = 1.0 - c
-    return np.array([[c + x * x * t, x * y * t - z * s, x * z * t + y * s],
-                     [y * x * t + z * s, c + y * y * t, y * z * t - x * s],
-                     [z * x * t - y * s, z * y * t + x * s, c + z * z * t]])
+    return np.array(
+        [
+            [c + x * x * t, x * y * t - z * s, x * z * t + y * s],
+            [y * x * t + z * s, c + y * y * t, y * z * t - x * s],
+            [z * x * t - y * s, z * y * t + x * s, c + z * z * t],
+        ]
+    )
 
 
 def rotation_between(a, b) -> np.ndarray:
@@ -116,7 +126,7 @@ def rotation_between(a, b) -> np.ndarray:
         return np.eye(3)
     a, b = a / na, b / nb
     c = float(a @ b)
-    if c < -1.0 + 1e-9:      # opposite directions: half a turn about any perpendicular axis
+    if c < -1.0 + 1e-9:  # opposite directions: half a turn about any perpendicular axis
         perp = cross3(a, [1.0, 0.0, 0.0] if abs(a[0]) < 0.9 else [0.0, 1.0, 0.0])
         return rotation_about(perp / math.sqrt(perp @ perp), math.pi)
     k = cross3(a, b)
@@ -142,7 +152,7 @@ def slerp_resample(quats: np.ndarray, src_times: np.ndarray, dst_times: np.ndarr
     return out.reshape((len(dst_times),) + tail + (4,))
 
 
-def yaw_matrix(yaw: np.ndarray) -> np.ndarray:
+def yaw_matrix(yaw: np.ndarray | float) -> np.ndarray:
     """Rotation about +z (REP-103 up) by yaw radians."""
     yaw = np.asarray(yaw, dtype=np.float64)
     c, s = np.cos(yaw), np.sin(yaw)

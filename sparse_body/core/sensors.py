@@ -1,5 +1,6 @@
 """Sensor configurations: which body sites carry a tracker, its TF frame, what it measures
 and how it is mounted. Configurations are YAML files under config/sensors/."""
+
 from __future__ import annotations
 
 from dataclasses import dataclass, field
@@ -91,13 +92,17 @@ class SensorConfig:
                 return s
         raise KeyError(f"sensor configuration {self.name!r} has no {name!r} tracker")
 
-    def subset(self, names) -> "SensorConfig":
+    def subset(self, names) -> SensorConfig:
         names = list(names)
         unknown = [n for n in names if n not in self.site_names]
         if unknown:
             raise SensorConfigError(f"{self.name}: no tracker on {', '.join(unknown)}")
-        return SensorConfig(f"{self.name}[{'+'.join(names)}]",
-                            tuple(s for s in self.sites if s.site in names), self.description, self.fixed_frame)
+        return SensorConfig(
+            f"{self.name}[{'+'.join(names)}]",
+            tuple(s for s in self.sites if s.site in names),
+            self.description,
+            self.fixed_frame,
+        )
 
 
 def _vector(where: str, value, size: int) -> tuple[float, ...]:
@@ -129,7 +134,9 @@ def parse_sensor_config(data: dict, source: str = "<dict>") -> SensorConfig:
             raise SensorConfigError(f"{where}: measures must be one of {', '.join(MEASURES)}, got {measures!r}")
         offset = spec.get("offset") or {}
         if not isinstance(offset, dict):
-            raise SensorConfigError(f"{where}: offset must be a mapping with translation and/or rotation, got {offset!r}")
+            raise SensorConfigError(
+                f"{where}: offset must be a mapping with translation and/or rotation, got {offset!r}"
+            )
         unknown = set(offset) - {"translation", "rotation"}
         if unknown:
             raise SensorConfigError(f"{where}: unknown offset key(s) {', '.join(sorted(map(str, unknown)))}")
@@ -138,15 +145,28 @@ def parse_sensor_config(data: dict, source: str = "<dict>") -> SensorConfig:
         norm = float(np.linalg.norm(rotation))
         if abs(norm - 1.0) > 1e-3:
             raise SensorConfigError(f"{where}: offset.rotation must be a unit quaternion (x y z w), norm is {norm:.4f}")
-        sites.append(TrackerSite(site, str(spec.get("frame", site)), measures, translation,
-                                 tuple(r / norm for r in rotation)))
-    return SensorConfig(str(data.get("name", Path(source).stem)), tuple(sites), str(data.get("description", "")),
-                        str(data.get("fixed_frame", "world")), source)
+        sites.append(
+            TrackerSite(
+                site,
+                str(spec.get("frame", site)),
+                measures,
+                (translation[0], translation[1], translation[2]),
+                (rotation[0] / norm, rotation[1] / norm, rotation[2] / norm, rotation[3] / norm),
+            )
+        )
+    return SensorConfig(
+        str(data.get("name", Path(source).stem)),
+        tuple(sites),
+        str(data.get("description", "")),
+        str(data.get("fixed_frame", "world")),
+        source,
+    )
 
 
 def load_sensor_config(name_or_path: str | Path) -> SensorConfig:
     """A configuration by name (config/sensors/NAME.yaml) or by path."""
     from ..resources import config_dir
+
     path = Path(name_or_path)
     if not path.suffix:
         path = config_dir() / "sensors" / f"{name_or_path}.yaml"
@@ -160,6 +180,7 @@ def read_yaml(path: Path, error: type[Exception] = ValueError):
     """A YAML file's content, or error naming the file and what is wrong with it (unreadable,
     over the size limit of core/textfile.py, not UTF-8, not YAML, nested too deeply)."""
     from .textfile import FileTooLarge, read_limited
+
     try:
         return yaml.safe_load(read_limited(path, "yaml"))
     except OSError as err:

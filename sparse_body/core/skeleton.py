@@ -6,6 +6,7 @@ Offsets are per person (a retargeted clip carries its subject's); the canonical 
 is the mean of the 22 CMU ASF subjects in ../shared/mocap, made left-right symmetric and
 scaled from their mean stature (1.55 m) to CANONICAL_HEIGHT.
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -13,17 +14,43 @@ from dataclasses import dataclass
 import numpy as np
 
 JOINT_NAMES: tuple[str, ...] = (
-    "pelvis", "left_hip", "right_hip", "spine1", "left_knee", "right_knee", "spine2",
-    "left_ankle", "right_ankle", "spine3", "left_foot", "right_foot", "neck",
-    "left_collar", "right_collar", "head", "left_shoulder", "right_shoulder",
-    "left_elbow", "right_elbow", "left_wrist", "right_wrist",
+    "pelvis",
+    "left_hip",
+    "right_hip",
+    "spine1",
+    "left_knee",
+    "right_knee",
+    "spine2",
+    "left_ankle",
+    "right_ankle",
+    "spine3",
+    "left_foot",
+    "right_foot",
+    "neck",
+    "left_collar",
+    "right_collar",
+    "head",
+    "left_shoulder",
+    "right_shoulder",
+    "left_elbow",
+    "right_elbow",
+    "left_wrist",
+    "right_wrist",
 )
 PARENTS: tuple[int, ...] = (-1, 0, 0, 0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 9, 9, 12, 13, 14, 16, 17, 18, 19)
 NUM_JOINTS = len(JOINT_NAMES)
 JOINT_INDEX = {name: i for i, name in enumerate(JOINT_NAMES)}
 
-LOWER_BODY = ("left_hip", "right_hip", "left_knee", "right_knee", "left_ankle", "right_ankle",
-              "left_foot", "right_foot")
+LOWER_BODY = (
+    "left_hip",
+    "right_hip",
+    "left_knee",
+    "right_knee",
+    "left_ankle",
+    "right_ankle",
+    "left_foot",
+    "right_foot",
+)
 UPPER_BODY = tuple(n for n in JOINT_NAMES if n not in LOWER_BODY and n != "pelvis")
 FEET = ("left_foot", "right_foot")
 HANDS = ("left_wrist", "right_wrist")
@@ -35,30 +62,32 @@ CANONICAL_HEIGHT = 1.75
 STATURE_RATIO = 1.10
 
 # Rest offsets (metres) of each joint from its parent, in the parent's rest frame.
-_CANONICAL_OFFSETS = np.array([
-    [0.000, 0.000, 0.000],    # pelvis (root; its position comes from the motion)
-    [0.047, 0.102, -0.112],   # left_hip (in front of the pelvis joint, as in every CMU subject)
-    [0.047, -0.102, -0.112],  # right_hip
-    [0.000, 0.000, 0.000],    # spine1 (at the pelvis: CMU's lower back starts at the root)
-    [0.000, 0.000, -0.450],   # left_knee
-    [0.000, 0.000, -0.450],   # right_knee
-    [0.000, 0.000, 0.132],    # spine2
-    [0.000, 0.000, -0.487],   # left_ankle
-    [0.000, 0.000, -0.487],   # right_ankle
-    [0.000, 0.000, 0.132],    # spine3
-    [0.132, 0.000, -0.033],   # left_foot (ball of the foot)
-    [0.132, 0.000, -0.033],   # right_foot
-    [0.004, 0.000, 0.133],    # neck (base of the neck)
-    [0.004, 0.000, 0.133],    # left_collar (where the clavicle starts)
-    [0.004, 0.000, 0.133],    # right_collar
-    [0.000, 0.000, 0.110],    # head (middle of the neck; rotation of the skull)
-    [0.000, 0.220, 0.000],    # left_shoulder
-    [0.000, -0.220, 0.000],   # right_shoulder
-    [0.000, 0.333, 0.000],    # left_elbow
-    [0.000, -0.333, 0.000],   # right_elbow
-    [0.000, 0.210, 0.000],    # left_wrist
-    [0.000, -0.210, 0.000],   # right_wrist
-])
+_CANONICAL_OFFSETS = np.array(
+    [
+        [0.000, 0.000, 0.000],  # pelvis (root; its position comes from the motion)
+        [0.047, 0.102, -0.112],  # left_hip (in front of the pelvis joint, as in every CMU subject)
+        [0.047, -0.102, -0.112],  # right_hip
+        [0.000, 0.000, 0.000],  # spine1 (at the pelvis: CMU's lower back starts at the root)
+        [0.000, 0.000, -0.450],  # left_knee
+        [0.000, 0.000, -0.450],  # right_knee
+        [0.000, 0.000, 0.132],  # spine2
+        [0.000, 0.000, -0.487],  # left_ankle
+        [0.000, 0.000, -0.487],  # right_ankle
+        [0.000, 0.000, 0.132],  # spine3
+        [0.132, 0.000, -0.033],  # left_foot (ball of the foot)
+        [0.132, 0.000, -0.033],  # right_foot
+        [0.004, 0.000, 0.133],  # neck (base of the neck)
+        [0.004, 0.000, 0.133],  # left_collar (where the clavicle starts)
+        [0.004, 0.000, 0.133],  # right_collar
+        [0.000, 0.000, 0.110],  # head (middle of the neck; rotation of the skull)
+        [0.000, 0.220, 0.000],  # left_shoulder
+        [0.000, -0.220, 0.000],  # right_shoulder
+        [0.000, 0.333, 0.000],  # left_elbow
+        [0.000, -0.333, 0.000],  # right_elbow
+        [0.000, 0.210, 0.000],  # left_wrist
+        [0.000, -0.210, 0.000],  # right_wrist
+    ]
+)
 
 
 @dataclass(frozen=True)
@@ -77,7 +106,7 @@ class Skeleton:
     parents = PARENTS
 
     @classmethod
-    def canonical(cls, height: float | None = None) -> "Skeleton":
+    def canonical(cls, height: float | None = None) -> Skeleton:
         skeleton = cls(_CANONICAL_OFFSETS.copy())
         return skeleton if height is None else skeleton.with_height(height)
 
@@ -93,12 +122,12 @@ class Skeleton:
         rest = self.rest_positions()
         return float((rest[JOINT_INDEX["head"], 2] - rest[:, 2].min()) * STATURE_RATIO)
 
-    def scaled(self, factor: float) -> "Skeleton":
+    def scaled(self, factor: float) -> Skeleton:
         if not np.isfinite(factor) or factor <= 0:
             raise ValueError(f"scale factor must be positive and finite, got {factor}")
         return Skeleton(self.offsets * factor)
 
-    def with_height(self, height: float) -> "Skeleton":
+    def with_height(self, height: float) -> Skeleton:
         if not np.isfinite(height) or not 0.5 <= height <= 2.5:
             raise ValueError(f"height must be between 0.5 m and 2.5 m, got {height}")
         return self.scaled(height / self.height())

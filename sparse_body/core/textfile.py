@@ -4,6 +4,7 @@ parsing or an exhausted memory.
 
 The limits suit every file this package ships or writes by a wide margin; a user whose files
 are larger raises them with the environment variables named in each error."""
+
 from __future__ import annotations
 
 import gzip
@@ -13,7 +14,7 @@ from pathlib import Path
 MIB = 1 << 20
 # kind -> (environment variable, default limit in MiB)
 LIMITS = {
-    "yaml": ("SPARSE_BODY_MAX_YAML_MIB", 1),        # sensor configurations, calibrations: a few kB
+    "yaml": ("SPARSE_BODY_MAX_YAML_MIB", 1),  # sensor configurations, calibrations: a few kB
     "motion": ("SPARSE_BODY_MAX_MOTION_MIB", 512),  # BVH / AMC: CMU's longest take is 8 MB
 }
 
@@ -46,6 +47,7 @@ def read_limited(path: str | os.PathLike, kind: str) -> str:
         data = f.read(limit + 1)
     if len(data) > limit:
         variable, _ = LIMITS[kind]
-        raise FileTooLarge(f"{path}: larger than the {limit / MIB:g} MiB allowed for a {kind} file "
-                           f"(set {variable} to raise it)")
+        raise FileTooLarge(
+            f"{path}: larger than the {limit / MIB:g} MiB allowed for a {kind} file (set {variable} to raise it)"
+        )
     return data.decode("utf-8")

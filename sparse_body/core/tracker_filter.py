@@ -18,6 +18,7 @@ Why not the usual 1-euro filter: measured on the validation split (six-point IK,
 gets to 63. The 1-euro's speed-driven cutoff opens on noise as well as on motion, and a
 first-order low-pass lags a moving hand by its speed times the time constant.
 """
+
 from __future__ import annotations
 
 import math
@@ -30,12 +31,12 @@ from .types import TrackerFrame
 
 @dataclass(frozen=True)
 class FilterConfig:
-    position_noise: float = 0.001       # metres: the trackers' position noise (std per axis); 0: no filter
-    rotation_noise: float = 0.33        # degrees: orientation noise (std per axis)
-    acceleration: float = 0.5           # m/s^2 / sqrt(Hz): how hard a tracked body part accelerates
-    spin_acceleration: float = 1.5      # rad/s^2 / sqrt(Hz), the same for turning
-    jump: float = 0.5                   # metres: a sample this far from the prediction starts the site over
-    gap: float = 0.25                   # seconds without a sample after which a site starts over
+    position_noise: float = 0.001  # metres: the trackers' position noise (std per axis); 0: no filter
+    rotation_noise: float = 0.33  # degrees: orientation noise (std per axis)
+    acceleration: float = 0.5  # m/s^2 / sqrt(Hz): how hard a tracked body part accelerates
+    spin_acceleration: float = 1.5  # rad/s^2 / sqrt(Hz), the same for turning
+    jump: float = 0.5  # metres: a sample this far from the prediction starts the site over
+    gap: float = 0.25  # seconds without a sample after which a site starts over
     # the offline smoother's (core/tracker_smoother.py, estimator option smooth=true): with the
     # future in view there is no lag to trade, so it follows harder accelerations
     smooth_acceleration: float = 0.7
@@ -53,7 +54,7 @@ class FilterConfig:
 
 
 NO_FILTER = FilterConfig(position_noise=0.0, rotation_noise=0.0)
-PREFIX = "filter_"      # how estimator options and node parameters name the fields
+PREFIX = "filter_"  # how estimator options and node parameters name the fields
 
 
 def filter_config(options: dict) -> FilterConfig:
@@ -73,11 +74,16 @@ def filter_config(options: dict) -> FilterConfig:
 # Plain floats from here: on 3- and 4-vectors of six trackers numpy's per-call cost is most
 # of the work (measured: 0.22 ms a frame vectorised, against the IK step's 0.3).
 
+
 def _qmul(a, b):
     ax, ay, az, aw = a
     bx, by, bz, bw = b
-    return (aw * bx + ax * bw + ay * bz - az * by, aw * by - ax * bz + ay * bw + az * bx,
-            aw * bz + ax * by - ay * bx + az * bw, aw * bw - ax * bx - ay * by - az * bz)
+    return (
+        aw * bx + ax * bw + ay * bz - az * by,
+        aw * by - ax * bz + ay * bw + az * bx,
+        aw * bz + ax * by - ay * bx + az * bw,
+        aw * bw - ax * bx - ay * by - az * bz,
+    )
 
 
 def _rotvec_quat(x, y, z):
@@ -98,7 +104,7 @@ def covariance_step(p: tuple[float, float, float], dt: float, q: float, r: float
     prediction by dt (process noise q), the gains (value, rate) of a sample with variance r,
     and the covariance after it. The live filter and the offline smoother both step this way."""
     p00, p01, p11 = p
-    a = p00 + 2 * dt * p01 + dt * dt * p11 + q * dt ** 3 / 3
+    a = p00 + 2 * dt * p01 + dt * dt * p11 + q * dt**3 / 3
     b = p01 + dt * p11 + q * dt * dt / 2
     c = p11 + q * dt
     k0, k1 = a / (a + r), b / (a + r)
@@ -113,6 +119,7 @@ class _Track:
 
     def __init__(self) -> None:
         self.value, self.stamp = None, -math.inf
+        self.p00 = self.p01 = self.p11 = 0.0  # set by start()
 
     def gains(self, dt: float, q: float, r: float) -> tuple[float, float]:
         """Predict the covariance by dt; the gains (value, rate) of this sample's innovation."""
@@ -136,8 +143,8 @@ class TrackerFilter:
         self.config = config
         self.sites = tuple(sites)
         c = config
-        self._pos_r, self._pos_q = max(c.position_noise, 1e-9) ** 2, c.acceleration ** 2
-        self._rot_r, self._rot_q = max(math.radians(c.rotation_noise), 1e-9) ** 2, c.spin_acceleration ** 2
+        self._pos_r, self._pos_q = max(c.position_noise, 1e-9) ** 2, c.acceleration**2
+        self._rot_r, self._rot_q = max(math.radians(c.rotation_noise), 1e-9) ** 2, c.spin_acceleration**2
         self.reset()
 
     def reset(self) -> None:
@@ -148,14 +155,14 @@ class TrackerFilter:
         c = self.config
         if not c.enabled:
             return frame
-        if tuple(frame.sites) != self.sites:       # another site set: filter it on its own terms
+        if tuple(frame.sites) != self.sites:  # another site set: filter it on its own terms
             self.sites = tuple(frame.sites)
             self.reset()
         positions = np.array(frame.positions, dtype=float)
         orientations = np.array(frame.orientations, dtype=float)
         valid = frame.valid.tolist()
         stamp = float(frame.stamp)
-        for i, (p, q) in enumerate(zip(positions.tolist(), orientations.tolist())):
+        for i, (p, q) in enumerate(zip(positions.tolist(), orientations.tolist(), strict=True)):
             if not valid[i]:
                 continue
             if c.position_noise > 0 and math.isfinite(p[0] + p[1] + p[2]):
@@ -172,7 +179,7 @@ class TrackerFilter:
             x, v = t.value, t.rate
             pred = (x[0] + v[0] * dt, x[1] + v[1] * dt, x[2] + v[2] * dt)
             e = (z[0] - pred[0], z[1] - pred[1], z[2] - pred[2])
-            if e[0] * e[0] + e[1] * e[1] + e[2] * e[2] <= self.config.jump ** 2:
+            if e[0] * e[0] + e[1] * e[1] + e[2] * e[2] <= self.config.jump**2:
                 k0, k1 = t.gains(dt, self._pos_q, self._pos_r)
                 t.value = (pred[0] + k0 * e[0], pred[1] + k0 * e[1], pred[2] + k0 * e[2])
                 t.rate = (v[0] + k1 * e[0], v[1] + k1 * e[1], v[2] + k1 * e[2])
@@ -188,7 +195,7 @@ class TrackerFilter:
             return z
         w = t.rate
         pred = _qmul(_rotvec_quat(w[0] * dt, w[1] * dt, w[2] * dt), t.value)
-        e = _quat_rotvec(_qmul(z, (-pred[0], -pred[1], -pred[2], pred[3])))    # world-frame rotation vector
+        e = _quat_rotvec(_qmul(z, (-pred[0], -pred[1], -pred[2], pred[3])))  # world-frame rotation vector
         k0, k1 = t.gains(dt, self._rot_q, self._rot_r)
         x, y, zz, ww = _qmul(_rotvec_quat(k0 * e[0], k0 * e[1], k0 * e[2]), pred)
         n = math.sqrt(x * x + y * y + zz * zz + ww * ww)

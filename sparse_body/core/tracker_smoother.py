@@ -16,6 +16,7 @@ filter's error state (world-frame rotation vectors about the forward estimate). 
 samples split into runs where the filter would start over (a gap longer than config.gap, time
 going back, a jump of more than config.jump); invalid and non-finite samples pass untouched.
 """
+
 from __future__ import annotations
 
 import math
@@ -66,9 +67,10 @@ class _Rotation:
 def _smooth_run(stamps: np.ndarray, samples: np.ndarray, q: float, r: float, space) -> np.ndarray:
     """The smoothed values of one run of samples (n, 3 or 4)."""
     n = len(stamps)
-    values, rates, covs = [samples[0]], [np.zeros(3)], [(r, 0.0, 1e4 * r)]     # as _Track.start
-    predicted = [None]                  # (value, rate, covariance) before each sample
-    for k in range(1, n):               # forwards: the live filter's recursion, every state kept
+    values, rates, covs = [samples[0]], [np.zeros(3)], [(r, 0.0, 1e4 * r)]  # as _Track.start
+    # (value, rate, covariance) before each sample
+    predicted: list[tuple[np.ndarray, np.ndarray, tuple[float, float, float]]] = []
+    for k in range(1, n):  # forwards: the live filter's recursion, every state kept
         dt = stamps[k] - stamps[k - 1]
         value, rate = space.advance(values[-1], rates[-1], dt), rates[-1]
         cov, (k0, k1), updated = covariance_step(covs[-1], dt, q, r)
@@ -79,8 +81,8 @@ def _smooth_run(stamps: np.ndarray, samples: np.ndarray, q: float, r: float, spa
         covs.append(updated)
     out = [None] * n
     out[-1], rate = values[-1], rates[-1]
-    for k in range(n - 2, -1, -1):      # backwards: each state corrected by what came after it
-        (p00, p01, p11), (value, pred_rate, (a, b, c)) = covs[k], predicted[k + 1]
+    for k in range(n - 2, -1, -1):  # backwards: each state corrected by what came after it
+        (p00, p01, p11), (value, pred_rate, (a, b, c)) = covs[k], predicted[k]
         dt = stamps[k + 1] - stamps[k]
         # C = P F^T inv(P predicted), F = [[1, dt], [0, 1]]
         gain = np.array([[p00 + dt * p01, p01], [p01 + dt * p11, p11]]) @ np.array([[c, -b], [-b, a]]) / (a * c - b * b)
@@ -97,7 +99,7 @@ def _runs(stamps: np.ndarray, samples: np.ndarray, config: FilterConfig, jump: b
     if jump:
         cut |= np.linalg.norm(np.diff(samples, axis=0), axis=-1) > config.jump
     edges = [0, *(np.flatnonzero(cut) + 1).tolist(), len(stamps)]
-    return [slice(a, b) for a, b in zip(edges[:-1], edges[1:]) if b > a]
+    return [slice(a, b) for a, b in zip(edges[:-1], edges[1:], strict=True) if b > a]
 
 
 def smooth_frames(frames: list[TrackerFrame], config: FilterConfig) -> list[TrackerFrame]:
@@ -108,14 +110,29 @@ def smooth_frames(frames: list[TrackerFrame], config: FilterConfig) -> list[Trac
     positions = [np.array(f.positions, dtype=float) for f in frames]
     orientations = [np.array(f.orientations, dtype=float) for f in frames]
     stamps = np.array([f.stamp for f in frames], dtype=float)
-    quantities = []     # (values, sample variance, process noise, space, usable sample, cut at jumps)
+    quantities: list[tuple] = []  # (values, sample variance, process noise, space, usable sample, cut at jumps)
     if config.position_noise > 0:
-        quantities.append((positions, config.position_noise ** 2, config.smooth_acceleration ** 2, _Vector,
-                           lambda v: np.isfinite(v).all(), True))
+        quantities.append(
+            (
+                positions,
+                config.position_noise**2,
+                config.smooth_acceleration**2,
+                _Vector,
+                lambda v: np.isfinite(v).all(),
+                True,
+            )
+        )
     if config.rotation_noise > 0:
-        quantities.append((orientations, math.radians(config.rotation_noise) ** 2,
-                           config.smooth_spin_acceleration ** 2, _Rotation,
-                           lambda v: np.isfinite(v).all() and 0.81 < v @ v < 1.21, False))
+        quantities.append(
+            (
+                orientations,
+                math.radians(config.rotation_noise) ** 2,
+                config.smooth_spin_acceleration**2,
+                _Rotation,
+                lambda v: np.isfinite(v).all() and 0.81 < v @ v < 1.21,
+                False,
+            )
+        )
     for site in dict.fromkeys(s for f in frames for s in f.sites):
         rows = [(k, f.sites.index(site)) for k, f in enumerate(frames) if site in f.sites]
         rows = [(k, i) for k, i in rows if frames[k].valid[i]]
@@ -129,6 +146,8 @@ def smooth_frames(frames: list[TrackerFrame], config: FilterConfig) -> list[Trac
                 samples /= np.linalg.norm(samples, axis=-1, keepdims=True)
             for run in _runs(times, samples, config, jump):
                 smoothed = _smooth_run(times[run], samples[run], q, r, space)
-                for (k, s), value in zip(kept[run], smoothed):
+                for (k, s), value in zip(kept[run], smoothed, strict=True):
                     arrays[k][s] = value
-    return [TrackerFrame(f.stamp, f.sites, p, o, f.valid) for f, p, o in zip(frames, positions, orientations)]
+    return [
+        TrackerFrame(f.stamp, f.sites, p, o, f.valid) for f, p, o in zip(frames, positions, orientations, strict=True)
+    ]

@@ -1,4 +1,5 @@
 """What flows between tracker sources, estimators and outputs (no ROS types here)."""
+
 from __future__ import annotations
 
 from dataclasses import dataclass, field
@@ -16,11 +17,11 @@ class TrackerFrame:
     orientation-only tracker has NaN position, a position-only tracker NaN orientation.
     """
 
-    stamp: float                   # seconds
+    stamp: float  # seconds
     sites: tuple[str, ...]
-    positions: np.ndarray          # (S, 3)
-    orientations: np.ndarray       # (S, 4) x y z w
-    valid: np.ndarray              # (S,) bool
+    positions: np.ndarray  # (S, 3)
+    orientations: np.ndarray  # (S, 4) x y z w
+    valid: np.ndarray  # (S,) bool
 
     def index(self, site: str) -> int:
         return self.sites.index(site)
@@ -31,10 +32,10 @@ class TrackerStream:
     """A recorded sequence of tracker frames (virtual trackers, a bag)."""
 
     sites: tuple[str, ...]
-    times: np.ndarray              # (T,) seconds
-    positions: np.ndarray          # (T, S, 3)
-    orientations: np.ndarray       # (T, S, 4)
-    valid: np.ndarray              # (T, S)
+    times: np.ndarray  # (T,) seconds
+    positions: np.ndarray  # (T, S, 3)
+    orientations: np.ndarray  # (T, S, 4)
+    valid: np.ndarray  # (T, S)
 
     def __len__(self) -> int:
         return len(self.times)
@@ -51,21 +52,27 @@ class BodyPose:
     """One estimate of the 22-joint body."""
 
     stamp: float
-    local_quats: np.ndarray        # (22, 4) x y z w; the root's is global
-    root_position: np.ndarray      # (3,)
+    local_quats: np.ndarray  # (22, 4) x y z w; the root's is global
+    root_position: np.ndarray  # (3,)
     contact_probability: np.ndarray = field(default_factory=lambda: np.full(2, np.nan))  # left, right
     contact: np.ndarray = field(default_factory=lambda: np.zeros(2, dtype=bool))
-    valid: bool = True             # False: the estimator had too little input; values hold the last pose
+    valid: bool = True  # False: the estimator had too little input; values hold the last pose
 
     def __post_init__(self) -> None:
         if self.local_quats.shape != (NUM_JOINTS, 4) or self.root_position.shape != (3,):
             raise ValueError("a body pose needs (22, 4) quaternions and a (3,) root position")
 
-    def held(self, stamp: float) -> "BodyPose":
+    def held(self, stamp: float) -> BodyPose:
         """This pose again at a later stamp, marked invalid: what an estimator or node
         outputs when it has too little input."""
-        return BodyPose(stamp, self.local_quats.copy(), self.root_position.copy(),
-                        self.contact_probability.copy(), self.contact.copy(), valid=False)
+        return BodyPose(
+            stamp,
+            self.local_quats.copy(),
+            self.root_position.copy(),
+            self.contact_probability.copy(),
+            self.contact.copy(),
+            valid=False,
+        )
 
     def is_finite(self) -> bool:
         return bool(np.all(np.isfinite(self.local_quats)) and np.all(np.isfinite(self.root_position)))

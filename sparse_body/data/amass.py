@@ -8,6 +8,7 @@ weights are never loaded with pickle here.
 SMPL's body frame is x left, y up, z forward; AMASS worlds are z-up. Body joints 0-21 of
 SMPL are our 22 joints in the same order, so only the basis changes.
 """
+
 from __future__ import annotations
 
 from pathlib import Path
@@ -54,7 +55,7 @@ def smpl_rest_joints(model_path: Path, betas: np.ndarray | None) -> np.ndarray:
 
 def load_amass(motion_path: Path, model_path: Path, fps: float | None = 60.0) -> Motion:
     motion_path, model_path = Path(motion_path), Path(model_path)
-    if model_path.suffix == ".pkl":   # say so before reading anything else
+    if model_path.suffix == ".pkl":  # say so before reading anything else
         raise MotionFileError(model_path, "pickled model files are not loaded; use the .npz version of the model")
     data = _load_npz(motion_path, ("poses", "trans"))
     poses, trans = data["poses"].astype(np.float64), data["trans"].astype(np.float64)
@@ -70,7 +71,7 @@ def load_amass(motion_path: Path, model_path: Path, fps: float | None = 60.0) ->
     offsets = np.zeros((NUM_JOINTS, 3))
     for j in range(1, NUM_JOINTS):
         offsets[j] = SMPL_TO_BODY @ (rest[j] - rest[PARENTS[j]])
-    rot = axis_angle_to_matrix(poses[:, :NUM_JOINTS * 3].reshape(len(poses), NUM_JOINTS, 3))
+    rot = axis_angle_to_matrix(poses[:, : NUM_JOINTS * 3].reshape(len(poses), NUM_JOINTS, 3))
     local = SMPL_TO_BODY @ rot @ SMPL_TO_BODY.T
     # The root rotation maps SMPL's body frame into the (z-up) world: undo the basis change
     # on the body side only.

@@ -2,10 +2,12 @@
 
 Conventions (CMU's, as their viewer applies them): a bone's axis gives its rest frame C; the
 motion angles (degrees; radians after the AMC's `:RADIANS` header, or by default when the ASF
-says `:units angle rad`, which also governs its own axis angles) compose as R = Rz @ Ry @ Rx over the bone's dof; the bone's global
-rotation is R_parent @ C @ R @ C^T and its end is start + rotation @ direction * length.
+says `:units angle rad`, which also governs its own axis angles) compose as R = Rz @ Ry @ Rx
+over the bone's dof; the bone's global rotation is R_parent @ C @ R @ C^T and its end is
+start + rotation @ direction * length.
 Lengths are in units of `:units length` inches/100, converted to metres.
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass, field
@@ -32,13 +34,13 @@ class Bone:
 @dataclass
 class AsfSkeleton:
     path: Path
-    length_unit: float            # metres per ASF length unit
+    length_unit: float  # metres per ASF length unit
     root_order: list[str]
     root_axis: np.ndarray
     root_position: np.ndarray
     bones: dict[str, Bone]
     children: dict[str, list[str]]
-    radians: bool = False          # `:units angle rad`: the ASF's angles (and by default the AMC's)
+    radians: bool = False  # `:units angle rad`: the ASF's angles (and by default the AMC's)
 
     def order(self) -> list[str]:
         """Bones with every parent before its children, starting at root; a bone reached
@@ -101,8 +103,11 @@ def load_asf(path: Path) -> AsfSkeleton:
                 if tok[0] == "order":
                     root_order = [t.upper() for t in tok[1:]]
                     if not set(root_order) <= ROOT_CHANNELS or len(set(root_order)) != len(root_order):
-                        raise MotionFileError(path, f"line {lineno}: root order {' '.join(tok[1:])!r}: each of "
-                                                    f"{', '.join(sorted(ROOT_CHANNELS))} at most once")
+                        raise MotionFileError(
+                            path,
+                            f"line {lineno}: root order {' '.join(tok[1:])!r}: each of "
+                            f"{', '.join(sorted(ROOT_CHANNELS))} at most once",
+                        )
                 elif tok[0] == "axis":
                     root_axis = _axis_matrix(["0", "0", "0"], tok[1])
                 elif tok[0] == "position":
@@ -110,13 +115,16 @@ def load_asf(path: Path) -> AsfSkeleton:
             elif section == ":bonedata":
                 if tok[0] == "begin":
                     if len(bones) >= MAX_JOINTS:
-                        raise MotionFileError(path, f"line {lineno}: more than {MAX_JOINTS} bones (a body has under 100)")
+                        raise MotionFileError(
+                            path, f"line {lineno}: more than {MAX_JOINTS} bones (a body has under 100)"
+                        )
                     current = {"dof": []}
                 elif tok[0] == "end":
                     if current is None or not {"name", "direction", "length", "axis"} <= current.keys():
                         raise MotionFileError(path, f"line {lineno}: incomplete bone definition")
-                    bones[current["name"]] = Bone(current["name"], current["direction"], current["length"],
-                                                  current["axis"], current["dof"])
+                    bones[current["name"]] = Bone(
+                        current["name"], current["direction"], current["length"], current["axis"], current["dof"]
+                    )
                     current = None
                 elif current is not None:
                     if tok[0] == "name":
@@ -126,14 +134,19 @@ def load_asf(path: Path) -> AsfSkeleton:
                     elif tok[0] == "length":
                         current["length"] = float(tok[1])
                         if not (np.isfinite(current["length"]) and current["length"] >= 0):
-                            raise MotionFileError(path, f"line {lineno}: bone length must be a number >= 0, got {tok[1]}")
+                            raise MotionFileError(
+                                path, f"line {lineno}: bone length must be a number >= 0, got {tok[1]}"
+                            )
                     elif tok[0] == "axis":
                         current["axis"] = _axis_matrix(tok[1:4], tok[4] if len(tok) > 4 else "XYZ", radians)
                     elif tok[0] == "dof":
                         current["dof"] = [t.lower() for t in tok[1:]]
-                        if not set(current["dof"]) <= {"rx", "ry", "rz"} or len(set(current["dof"])) != len(current["dof"]):
-                            raise MotionFileError(path, f"line {lineno}: dof {' '.join(tok[1:])!r}: each of rx, ry, rz "
-                                                        "at most once")
+                        if not set(current["dof"]) <= {"rx", "ry", "rz"} or len(set(current["dof"])) != len(
+                            current["dof"]
+                        ):
+                            raise MotionFileError(
+                                path, f"line {lineno}: dof {' '.join(tok[1:])!r}: each of rx, ry, rz at most once"
+                            )
             elif section == ":hierarchy" and tok[0] not in ("begin", "end"):
                 children.setdefault(tok[0], []).extend(tok[1:])
     except MotionFileError:
@@ -149,14 +162,15 @@ def load_asf(path: Path) -> AsfSkeleton:
     for parent, kids in children.items():
         for kid in kids:
             if kid in parents or kid == "root":
-                raise MotionFileError(path, f"the hierarchy gives bone {kid!r} a second parent ({parents.get(kid, 'none')} "
-                                            f"and {parent})")
+                raise MotionFileError(
+                    path, f"the hierarchy gives bone {kid!r} a second parent ({parents.get(kid, 'none')} and {parent})"
+                )
             parents[kid] = parent
     metres = INCH / length
     for bone in bones.values():
         bone.length *= metres
     skeleton = AsfSkeleton(path, metres, root_order, root_axis, root_position * metres, bones, children, radians)
-    skeleton.order()     # a cycle is an error here, not a hang later
+    skeleton.order()  # a cycle is an error here, not a hang later
     return skeleton
 
 
@@ -195,8 +209,9 @@ def _read_amc_frames(path: Path, skeleton: AsfSkeleton) -> tuple[dict[str, np.nd
         if name in seen:
             raise MotionFileError(path, f"line {lineno}: bone {name!r} twice in frame {frame_no}")
         if len(tok) - 1 != expected[name]:
-            raise MotionFileError(path, f"line {lineno}: bone {name!r} has {len(tok) - 1} values, "
-                                        f"its dof needs {expected[name]}")
+            raise MotionFileError(
+                path, f"line {lineno}: bone {name!r} has {len(tok) - 1} values, its dof needs {expected[name]}"
+            )
         try:
             values[name].append([float(v) for v in tok[1:]])
         except ValueError:
@@ -220,7 +235,7 @@ def load_amc(amc_path: Path, skeleton: AsfSkeleton, fps: float = 120.0) -> Sourc
     rot = np.empty((T, J, 3, 3))
     pos = np.empty((T, J, 3))
     rest = np.zeros((J, 3))
-    end = np.empty((T, J, 3))   # where each bone ends: its children start there
+    end = np.empty((T, J, 3))  # where each bone ends: its children start there
     rest_end = np.zeros((J, 3))
 
     root_vals = frames["root"]
@@ -254,5 +269,6 @@ def load_amc(amc_path: Path, skeleton: AsfSkeleton, fps: float = 120.0) -> Sourc
         rest_end[i] = rest_end[p] + vec
     if not np.all(np.isfinite(pos)):
         raise MotionFileError(amc_path, "non-finite values")
-    return SourceMotion(stem(amc_path), "cmu_asf", order, [index[parent[n]] if n != "root" else -1 for n in order],
-                        rest, pos, rot, fps)
+    return SourceMotion(
+        stem(amc_path), "cmu_asf", order, [index[parent[n]] if n != "root" else -1 for n in order], rest, pos, rot, fps
+    )

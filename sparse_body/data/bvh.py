@@ -4,6 +4,7 @@ Rotation channels compose in the listed order about the joint's own (moving) axe
 "Zrotation Xrotation Yrotation" is R = Rz @ Rx @ Ry. End Sites carry no channels and are
 dropped. Offsets are converted to metres with `length_unit`.
 """
+
 from __future__ import annotations
 
 from pathlib import Path
@@ -36,15 +37,13 @@ def _check_channels(path: Path, joint: str, channels: list[str]) -> None:
     """Known names, each at most once, and three rotations or none (scipy's Euler order)."""
     for ch in channels:
         if ch[:1].upper() + ch[1:].lower() not in _CHANNELS:
-            raise MotionFileError(path, f"joint {joint!r} has unknown channel {ch!r} "
-                                        f"(known: Xposition ... Zrotation)")
+            raise MotionFileError(path, f"joint {joint!r} has unknown channel {ch!r} (known: Xposition ... Zrotation)")
     lowered = [c.lower() for c in channels]
     if len(set(lowered)) != len(lowered):
         raise MotionFileError(path, f"joint {joint!r} lists a channel twice: {' '.join(channels)}")
     rotations = sum(c.endswith("rotation") for c in lowered)
     if rotations not in (0, 3):
         raise MotionFileError(path, f"joint {joint!r} has {rotations} rotation channels (0 or 3 allowed)")
-
 
 
 def default_unit(layout: str) -> float:
@@ -90,15 +89,17 @@ def load_bvh(path: Path, length_unit: float | None = None) -> SourceMotion:
                 stack.pop()
                 i += 1
             elif tok == "OFFSET":
-                offsets[-1] = [float(v) for v in tokens[i + 1:i + 4]]
+                offsets[-1] = [float(v) for v in tokens[i + 1 : i + 4]]
                 if len(offsets[-1]) != 3 or not np.all(np.isfinite(offsets[-1])):
                     raise MotionFileError(path, f"joint {names[-1]!r} has a malformed OFFSET")
                 i += 4
             elif tok == "CHANNELS":
                 n = int(tokens[i + 1])
                 if not 0 <= n <= 6 or len(tokens) < i + 2 + n:
-                    raise MotionFileError(path, f"joint {names[-1]!r} declares {tokens[i + 1]} CHANNELS (0 to 6 allowed)")
-                channels[-1] = tokens[i + 2:i + 2 + n]
+                    raise MotionFileError(
+                        path, f"joint {names[-1]!r} declares {tokens[i + 1]} CHANNELS (0 to 6 allowed)"
+                    )
+                channels[-1] = tokens[i + 2 : i + 2 + n]
                 _check_channels(path, names[-1], channels[-1])
                 i += 2 + n
             else:
@@ -125,8 +126,9 @@ def load_bvh(path: Path, length_unit: float | None = None) -> SourceMotion:
     n_channels = sum(len(c) for c in channels)
     if frames <= 0 or values.size != frames * n_channels:
         have = values.size / n_channels if n_channels else 0
-        raise MotionFileError(path, f"MOTION declares {frames} frames of {n_channels} channels "
-                                    f"but holds {have:g} frames (truncated?)")
+        raise MotionFileError(
+            path, f"MOTION declares {frames} frames of {n_channels} channels but holds {have:g} frames (truncated?)"
+        )
     values = values.reshape(frames, n_channels)
 
     layout = _layout(names)

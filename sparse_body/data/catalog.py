@@ -1,5 +1,6 @@
 """The CMU collection in ../shared/mocap: its clip index, the train/validation/test split,
 and a cache of retargeted clips so that only the first load parses the text files."""
+
 from __future__ import annotations
 
 import csv
@@ -27,8 +28,8 @@ SPLITS = ("train", "validation", "test")
 @dataclass(frozen=True)
 class Clip:
     clip_id: str
-    path: Path          # the motion file
-    format: str         # "asf/amc", or "bvh-mb2", "bvh-daz", "bvh-max"
+    path: Path  # the motion file
+    format: str  # "asf/amc", or "bvh-mb2", "bvh-daz", "bvh-max"
     fps: float
     category: str
     description: str
@@ -54,8 +55,11 @@ def find_mocap_root(explicit: str | os.PathLike | None = None) -> Path | None:
         candidates = [explicit]
     else:
         here = Path(__file__).resolve().parents[2]
-        candidates = [os.environ.get("SPARSE_BODY_MOCAP"), here.parent / "shared" / "mocap" / "cmu",
-                      Path.cwd().parent / "shared" / "mocap" / "cmu"]
+        candidates = [
+            os.environ.get("SPARSE_BODY_MOCAP"),
+            here.parent / "shared" / "mocap" / "cmu",
+            Path.cwd().parent / "shared" / "mocap" / "cmu",
+        ]
     for c in candidates:
         if c and (Path(c) / "clips.tsv").is_file():
             return Path(c)
@@ -72,8 +76,17 @@ def read_index(root: Path) -> list[Clip]:
     with open(path, newline="") as f:
         for n, row in enumerate(csv.DictReader(f, delimiter="\t"), 2):
             try:
-                clips.append(Clip(row["clip"], Path(root) / row["file"], row["format"], float(row["fps"]),
-                                  row["category"], row["description"], float(row.get("seconds") or 0.0)))
+                clips.append(
+                    Clip(
+                        row["clip"],
+                        Path(root) / row["file"],
+                        row["format"],
+                        float(row["fps"]),
+                        row["category"],
+                        row["description"],
+                        float(row.get("seconds") or 0.0),
+                    )
+                )
             except (KeyError, ValueError, TypeError) as err:
                 raise MotionFileError(path, f"line {n}: malformed row ({err})") from None
     return clips
@@ -120,7 +133,7 @@ def compute_split(clips: list[Clip]) -> dict[str, list[str]]:
 def split_yaml(parts: dict[str, list[str]], header: str) -> str:
     """A split as the YAML load_split reads, after a comment header (one '# ' line each)."""
     text = "".join(f"# {line}\n" for line in header.splitlines())
-    for part in SPLITS:   # quoted: YAML 1.1 would read 08_01 as a number
+    for part in SPLITS:  # quoted: YAML 1.1 would read 08_01 as a number
         text += f"{part}:\n" + "".join(f'  - "{c}"\n' for c in parts[part])
     return text
 
@@ -157,14 +170,16 @@ def _cache_file(clip: Clip, fps: float) -> Path:
 
 def load_clip(clip: Clip, fps: float = DEFAULT_FPS, use_cache: bool = True) -> Motion:
     """A clip retargeted onto the 22-joint body at fps, from the cache when it is there."""
+
     def parse() -> Motion:
-        if clip.format == "file":          # a user's file (import-mocap): its skeleton found beside it
+        if clip.format == "file":  # a user's file (import-mocap): its skeleton found beside it
             return load_motion_file(clip.path, fps)
         if clip.format == "asf/amc":
             return retarget(load_amc(clip.path, load_asf(clip.skeleton_path), fps=clip.fps), fps)
         if clip.format.startswith("bvh"):
             return retarget(load_bvh(clip.path), fps)
         raise MotionFileError(clip.path, f"unknown format {clip.format!r}")
+
     return cached_motion(_cache_file(clip, fps) if use_cache else None, parse, clip.clip_id)
 
 
@@ -174,13 +189,18 @@ def cached_motion(cached: Path | None, parse, name: str) -> Motion:
         try:
             return Motion.load(cached)
         except MotionFileError:
-            cached.unlink(missing_ok=True)   # a half-written entry: parse again
+            cached.unlink(missing_ok=True)  # a half-written entry: parse again
     motion = parse()
     # Exactly what the cache holds (float32 quaternions), so a clip gives bit-identical results
     # parsed or cached: the latent optimiser's accept/refuse decisions grow 1e-7 differences
     # into metric changes of a few hundredths (seen as two evaluations of one configuration).
-    motion = Motion(name, motion.fps, motion.skeleton,
-                    motion.local_quats.astype(np.float32).astype(np.float64), motion.root_positions)
+    motion = Motion(
+        name,
+        motion.fps,
+        motion.skeleton,
+        motion.local_quats.astype(np.float32).astype(np.float64),
+        motion.root_positions,
+    )
     if cached is not None:
         cached.parent.mkdir(parents=True, exist_ok=True)
         # a name of this process's own: two trainers filling the cache at once must not
@@ -200,26 +220,29 @@ MOTION_SUFFIXES = (".bvh", ".amc", ".npz")
 def _retargeted(path: Path, source, fps: float) -> Motion:
     try:
         return retarget(source, fps)
-    except ValueError as err:     # a skeleton layout with no joint map: say which file
+    except ValueError as err:  # a skeleton layout with no joint map: say which file
         raise MotionFileError(path, str(err)) from None
 
 
-def load_motion_file(path: Path, fps: float = DEFAULT_FPS, skeleton: Path | None = None,
-                     amc_fps: float = 120.0) -> Motion:
+def load_motion_file(
+    path: Path, fps: float = DEFAULT_FPS, skeleton: Path | None = None, amc_fps: float = 120.0
+) -> Motion:
     """Any supported motion file: .bvh, .amc (captured at amc_fps, with its .asf: given, or
     found beside it by the rule of motion_inputs.skeleton_for), AMASS .npz (needs an SMPL
     model, see amass.py) or a sparse_body motion .npz."""
     path = Path(path)
-    name = path.name.lower().removesuffix(".gz")       # .AMC, .BVH: the same formats
+    name = path.name.lower().removesuffix(".gz")  # .AMC, .BVH: the same formats
     if name.endswith(".bvh"):
         return _retargeted(path, load_bvh(path), fps)
     if name.endswith(".amc"):
         if skeleton is None:
             from .motion_inputs import skeleton_for
+
             skeleton, _ = skeleton_for(path)
         return _retargeted(path, load_amc(path, load_asf(skeleton), fps=amc_fps), fps)
     if name.endswith(".npz"):
         import numpy as np
+
         with np.load(path, allow_pickle=False) as z:
             keys = set(z.files)
         if {"local_quats", "root_positions"} <= keys:

@@ -14,6 +14,7 @@ field protocol gives it only what a user has:
   in their own body, held a second, never quite exact), then moves as in the clip.
 The lab protocol is the one the papers report: the true skeleton, exact mounting, no noise.
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass, replace
@@ -33,12 +34,12 @@ SKELETONS = ("calibrated", "height", "oracle")
 
 @dataclass(frozen=True)
 class Protocol:
-    skeleton: str = "calibrated"     # calibrated: fitted from the T-pose; height: canonical at the
+    skeleton: str = "calibrated"  # calibrated: fitted from the T-pose; height: canonical at the
     #                                  calibrated height; oracle: the subject's true skeleton
     noise: TrackerNoise = VR_NOISE
-    mounting_rotation_deg: float = 20.0      # uniform random axis, angle up to this, per site and clip
-    mounting_translation_std: float = 0.0    # metres per axis, per site and clip
-    tpose_wobble_deg: float = 2.0            # each segment of the calibration T-pose off by up to this
+    mounting_rotation_deg: float = 20.0  # uniform random axis, angle up to this, per site and clip
+    mounting_translation_std: float = 0.0  # metres per axis, per site and clip
+    tpose_wobble_deg: float = 2.0  # each segment of the calibration T-pose off by up to this
     tpose_seconds: float = 1.0
 
     def __post_init__(self) -> None:
@@ -50,21 +51,33 @@ class Protocol:
         """What the protocol is, for table footers and JSON results."""
         if self == LAB:
             return "lab"
-        plain = replace(self.noise, fault_probability=0.0, occlusion_probability=0.0, occlusion_frames=30,
-                        occlusion_mode="origin")
+        plain = replace(
+            self.noise, fault_probability=0.0, occlusion_probability=0.0, occlusion_frames=30, occlusion_mode="origin"
+        )
         noise = next((n for n, v in NOISE_MODELS.items() if v == plain), "custom")
         faults = f", {self.noise.fault_probability * 100:g} % faulty" if self.noise.fault_probability else ""
         if self.noise.occlusion_probability:
             faults += f", feet occluded in {self.noise.occluded_percent:.3g} % of frames"
-        name = "field" if replace(self, noise=VR_NOISE, mounting_translation_std=0.0) == FIELD \
+        name = (
+            "field"
+            if replace(self, noise=VR_NOISE, mounting_translation_std=0.0) == FIELD
             else f"{self.skeleton} skeleton"
-        mounting = f", {self.mounting_translation_std * 1000:g} mm mounting error" if self.mounting_translation_std else ""
+        )
+        mounting = (
+            f", {self.mounting_translation_std * 1000:g} mm mounting error" if self.mounting_translation_std else ""
+        )
         noise = "no noise" if noise == "none" else f"{noise} noise"
         return f"{name}, {noise}{faults}{mounting}"
 
     @classmethod
-    def named(cls, skeleton: str = "calibrated", noise: str = "vr", faulty_percent: float = 0.0,
-              mounting_error: float = 0.0, occluded_percent: float = 0.0) -> "Protocol":
+    def named(
+        cls,
+        skeleton: str = "calibrated",
+        noise: str = "vr",
+        faulty_percent: float = 0.0,
+        mounting_error: float = 0.0,
+        occluded_percent: float = 0.0,
+    ) -> Protocol:
         """The protocol of `sparse-body eval --skeleton S --noise N --faulty P --mounting-error M
         --occlusion O`: an oracle skeleton comes with the true mounting (the lab's), the others
         with a user's."""
@@ -89,9 +102,10 @@ LAB = Protocol("oracle", NO_NOISE, 0.0, 0.0, 0.0)
 @dataclass
 class UserView:
     """What the estimator is given for one clip."""
+
     skeleton: Skeleton
-    sensors: SensorConfig           # the configuration the user runs with (nominal mounting)
-    stream: TrackerStream           # the clip's tracker samples, calibrated as the bridge does
+    sensors: SensorConfig  # the configuration the user runs with (nominal mounting)
+    stream: TrackerStream  # the clip's tracker samples, calibrated as the bridge does
     calibration: Calibration | None = None
 
 
@@ -106,8 +120,13 @@ def mounted_as_worn(sensors: SensorConfig, protocol: Protocol, rng: np.random.Ge
     for site in sensors.sites:
         rot = Rotation.from_quat(site.offset_rotation) * _random_rotation(rng, protocol.mounting_rotation_deg)
         move = rng.normal(0.0, protocol.mounting_translation_std, 3)
-        sites.append(replace(site, offset_translation=tuple(np.add(site.offset_translation, move)),
-                             offset_rotation=tuple(rot.as_quat())))
+        sites.append(
+            replace(
+                site,
+                offset_translation=tuple(np.add(site.offset_translation, move)),
+                offset_rotation=tuple(rot.as_quat()),
+            )
+        )
     return replace(sensors, sites=tuple(sites))
 
 
@@ -134,8 +153,13 @@ def calibrate_from_tpose(stream: TrackerStream, sensors: SensorConfig) -> Calibr
     for s, site in enumerate(stream.sites):
         spec = sensors.site(site)
         ok = stream.valid[:, s]
-        samples[site] = [(stream.positions[t, s] if spec.has_position else None,
-                          stream.orientations[t, s] if spec.has_orientation else None) for t in np.flatnonzero(ok)]
+        samples[site] = [
+            (
+                stream.positions[t, s] if spec.has_position else None,
+                stream.orientations[t, s] if spec.has_orientation else None,
+            )
+            for t in np.flatnonzero(ok)
+        ]
     return calibrate_tpose(samples, translations={s.site: np.array(s.offset_translation) for s in sensors.sites})
 
 
@@ -162,8 +186,12 @@ def user_view(motion: Motion, sensors: SensorConfig, protocol: Protocol = FIELD,
     stream = calibrated_stream(synthesize_trackers(motion, worn, protocol.noise, seed), calibration)
     # the calibration has absorbed the mounting rotations: the user's configuration keeps
     # only the nominal translations
-    user_sensors = replace(sensors, sites=tuple(replace(s, offset_rotation=(0.0, 0.0, 0.0, 1.0))
-                                                for s in sensors.sites))
-    skeleton = {"calibrated": calibration.body(), "height": Skeleton.canonical(calibration.height),
-                "oracle": motion.skeleton}[protocol.skeleton]
+    user_sensors = replace(
+        sensors, sites=tuple(replace(s, offset_rotation=(0.0, 0.0, 0.0, 1.0)) for s in sensors.sites)
+    )
+    skeleton = {
+        "calibrated": calibration.body(),
+        "height": Skeleton.canonical(calibration.height),
+        "oracle": motion.skeleton,
+    }[protocol.skeleton]
     return UserView(skeleton, user_sensors, stream, calibration)

@@ -1,4 +1,5 @@
 """A motion of the 22-joint body: per-frame local rotations and root position."""
+
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -18,14 +19,16 @@ class Motion:
     name: str
     fps: float
     skeleton: Skeleton
-    local_quats: np.ndarray      # (T, 22, 4) x y z w, the root's global
-    root_positions: np.ndarray   # (T, 3) metres, REP-103
+    local_quats: np.ndarray  # (T, 22, 4) x y z w, the root's global
+    root_positions: np.ndarray  # (T, 3) metres, REP-103
 
     def __post_init__(self) -> None:
         T = len(self.root_positions)
         if self.local_quats.shape != (T, NUM_JOINTS, 4) or self.root_positions.shape != (T, 3):
-            raise ValueError(f"motion {self.name}: shapes {self.local_quats.shape} and "
-                             f"{self.root_positions.shape} do not describe {T} frames of {NUM_JOINTS} joints")
+            raise ValueError(
+                f"motion {self.name}: shapes {self.local_quats.shape} and "
+                f"{self.root_positions.shape} do not describe {T} frames of {NUM_JOINTS} joints"
+            )
 
     def __len__(self) -> int:
         return len(self.root_positions)
@@ -52,11 +55,16 @@ class Motion:
         """(T, 22, 3) joint positions in metres."""
         return self._fk[1]
 
-    def slice(self, start: int, stop: int) -> "Motion":
-        return Motion(self.name, self.fps, self.skeleton, self.local_quats[start:stop].copy(),
-                      self.root_positions[start:stop].copy())
+    def slice(self, start: int, stop: int) -> Motion:
+        return Motion(
+            self.name,
+            self.fps,
+            self.skeleton,
+            self.local_quats[start:stop].copy(),
+            self.root_positions[start:stop].copy(),
+        )
 
-    def resampled(self, fps: float) -> "Motion":
+    def resampled(self, fps: float) -> Motion:
         """The motion at another frame rate: slerp for rotations, linear for the root."""
         if fps <= 0:
             raise ValueError(f"frame rate must be positive, got {fps}")
@@ -70,14 +78,25 @@ class Motion:
         return Motion(self.name, fps, self.skeleton, quats, root)
 
     def save(self, path: Path) -> None:
-        np.savez(path, name=np.array(self.name), fps=np.array(self.fps), offsets=self.skeleton.offsets,
-                 local_quats=self.local_quats.astype(np.float32), root_positions=self.root_positions)
+        np.savez(
+            path,
+            name=np.array(self.name),
+            fps=np.array(self.fps),
+            offsets=self.skeleton.offsets,
+            local_quats=self.local_quats.astype(np.float32),
+            root_positions=self.root_positions,
+        )
 
     @classmethod
-    def load(cls, path: Path) -> "Motion":
+    def load(cls, path: Path) -> Motion:
         try:
             with np.load(path, allow_pickle=False) as z:
-                return cls(str(z["name"]), float(z["fps"]), Skeleton(z["offsets"]),
-                           z["local_quats"].astype(np.float64), z["root_positions"])
+                return cls(
+                    str(z["name"]),
+                    float(z["fps"]),
+                    Skeleton(z["offsets"]),
+                    z["local_quats"].astype(np.float64),
+                    z["root_positions"],
+                )
         except (OSError, KeyError, ValueError) as err:
             raise MotionFileError(path, f"not a sparse_body motion file ({err})") from None

@@ -10,6 +10,7 @@ skeleton of an AMC file is, in this order: the one paired with it on the command
 file's name (case ignored); the only ASF beside it. Anything else is an error that lists the
 ASFs found and states the rule.
 """
+
 from __future__ import annotations
 
 import hashlib
@@ -23,19 +24,19 @@ from . import MotionFileError
 from .catalog import CACHE_VERSION, MOTION_SUFFIXES, cache_dir, cached_motion, load_motion_file
 from .motion import Motion
 
-AMC_FPS = 120.0          # an AMC file names no rate; CMU's and most labs' systems capture at 120 Hz
+AMC_FPS = 120.0  # an AMC file names no rate; CMU's and most labs' systems capture at 120 Hz
 GROUP_BY = ("folder", "prefix", "none")
 # The lowest foot joint (ankle or ball) of a standing person is a few centimetres above the
 # floor (CMU: 2-7 cm in 5 % of frames, the median 3-7 cm). Outside these bounds the skeleton
 # does not fit the motion: another actor's bones, or another length unit.
-FEET_BELOW_FLOOR, FEET_ABOVE_FLOOR = -0.03, 0.25   # metres: median below / 5th percentile above
+FEET_BELOW_FLOOR, FEET_ABOVE_FLOOR = -0.03, 0.25  # metres: median below / 5th percentile above
 
 
 @dataclass(frozen=True)
 class MotionInput:
     path: Path
-    skeleton: Path | None = None     # the ASF of an AMC file
-    how: str = ""                    # how the skeleton was chosen (said in the results)
+    skeleton: Path | None = None  # the ASF of an AMC file
+    how: str = ""  # how the skeleton was chosen (said in the results)
     group: str = ""
 
     @property
@@ -67,9 +68,12 @@ def skeleton_for(amc: Path, given: Path | None = None) -> tuple[Path, str]:
     if len(beside) == 1:
         return beside[0], "the only ASF in its folder"
     found = ", ".join(p.name for p in beside) if beside else "none"
-    raise MotionFileError(amc, f"which skeleton? an AMC file gets the ASF beside it whose name starts its own name, "
-                               f"or the only ASF in its folder (ASF files there: {found}); pair them as "
-                               f"--motion AMC=ASF or pass --skeleton-file ASF")
+    raise MotionFileError(
+        amc,
+        f"which skeleton? an AMC file gets the ASF beside it whose name starts its own name, "
+        f"or the only ASF in its folder (ASF files there: {found}); pair them as "
+        f"--motion AMC=ASF or pass --skeleton-file ASF",
+    )
 
 
 def _group(path: Path, root: Path | None, group_by: str) -> str:
@@ -111,7 +115,9 @@ def find_inputs(specs, skeleton_file: str | None = None, group_by: str = "folder
         for f in files:
             if not _plain_name(f).endswith(MOTION_SUFFIXES):
                 raise MotionFileError(f, "unknown motion format (expected .bvh, .amc, .npz, optionally .gz)")
-            skeleton, how = skeleton_for(f, Path(pair) if pair else given) if _plain_name(f).endswith(".amc") else (None, "")
+            skeleton, how = (
+                skeleton_for(f, Path(pair) if pair else given) if _plain_name(f).endswith(".amc") else (None, "")
+            )
             out.append(MotionInput(f, skeleton, "paired" if pair else how, _group(f, root, group_by)))
     if not out:
         raise MotionFileError(Path(", ".join(map(str, specs))), "no motion files (.bvh, .amc, .npz) there")
@@ -154,14 +160,18 @@ def identity_seed(name: str, digest: str) -> int:
     return int(hashlib.sha1(f"{name}\0{digest}".encode()).hexdigest()[:8], 16)
 
 
-def load_input(inp: MotionInput, fps: float, amc_fps: float = AMC_FPS, digest: str | None = None,
-               use_cache: bool = True) -> Motion:
+def load_input(
+    inp: MotionInput, fps: float, amc_fps: float = AMC_FPS, digest: str | None = None, use_cache: bool = True
+) -> Motion:
     """The motion retargeted at fps, from a cache keyed by the content read (so a renamed or
     copied file is not parsed again, and an edited one is)."""
     digest = digest or content_digest(inp)
     key = hashlib.sha1(f"{CACHE_VERSION}:{digest}:{fps}:{amc_fps if inp.is_amc else ''}".encode()).hexdigest()[:20]
-    return cached_motion(cache_dir() / "motions" / f"file-{key}.npz" if use_cache else None,
-                         lambda: load_motion_file(inp.path, fps, inp.skeleton, amc_fps), inp.path.name)
+    return cached_motion(
+        cache_dir() / "motions" / f"file-{key}.npz" if use_cache else None,
+        lambda: load_motion_file(inp.path, fps, inp.skeleton, amc_fps),
+        inp.path.name,
+    )
 
 
 def implausible(motion: Motion) -> str | None:
@@ -169,6 +179,7 @@ def implausible(motion: Motion) -> str | None:
     through the floor or never near it, as another actor's skeleton or another length unit
     gives (the capture's floor is taken as z = 0, as capture systems calibrate it)."""
     from ..core.skeleton import JOINT_NAMES
+
     feet = [JOINT_NAMES.index(n) for n in ("left_ankle", "right_ankle", "left_foot", "right_foot")]
     lowest = motion.positions[:, feet, 2].min(axis=1)
     median, low = float(np.median(lowest)), float(np.percentile(lowest, 5))

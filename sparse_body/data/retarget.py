@@ -12,6 +12,7 @@ start, and the head joint at the middle of the neck (its rotation is the skull's
 After mapping, each joint's rotation is re-based so that identity is the canonical T-pose
 (legs straight down, arms along +-y, facing +x), whatever rest pose the source used.
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -26,69 +27,101 @@ from .source import SourceMotion
 JOINT_MAPS: dict[str, dict[str, tuple[str, str]]] = {
     "cmu_asf": {
         "pelvis": ("root", "root"),
-        "left_hip": ("lfemur", "lfemur"), "right_hip": ("rfemur", "rfemur"),
+        "left_hip": ("lfemur", "lfemur"),
+        "right_hip": ("rfemur", "rfemur"),
         "spine1": ("lowerback", "lowerback"),
-        "left_knee": ("ltibia", "ltibia"), "right_knee": ("rtibia", "rtibia"),
+        "left_knee": ("ltibia", "ltibia"),
+        "right_knee": ("rtibia", "rtibia"),
         "spine2": ("upperback", "upperback"),
-        "left_ankle": ("lfoot", "lfoot"), "right_ankle": ("rfoot", "rfoot"),
+        "left_ankle": ("lfoot", "lfoot"),
+        "right_ankle": ("rfoot", "rfoot"),
         "spine3": ("thorax", "thorax"),
-        "left_foot": ("ltoes", "ltoes"), "right_foot": ("rtoes", "rtoes"),
+        "left_foot": ("ltoes", "ltoes"),
+        "right_foot": ("rtoes", "rtoes"),
         "neck": ("lowerneck", "lowerneck"),
-        "left_collar": ("lclavicle", "lclavicle"), "right_collar": ("rclavicle", "rclavicle"),
+        "left_collar": ("lclavicle", "lclavicle"),
+        "right_collar": ("rclavicle", "rclavicle"),
         "head": ("upperneck", "head"),
-        "left_shoulder": ("lhumerus", "lhumerus"), "right_shoulder": ("rhumerus", "rhumerus"),
-        "left_elbow": ("lradius", "lradius"), "right_elbow": ("rradius", "rradius"),
-        "left_wrist": ("lwrist", "lhand"), "right_wrist": ("rwrist", "rhand"),
+        "left_shoulder": ("lhumerus", "lhumerus"),
+        "right_shoulder": ("rhumerus", "rhumerus"),
+        "left_elbow": ("lradius", "lradius"),
+        "right_elbow": ("rradius", "rradius"),
+        "left_wrist": ("lwrist", "lhand"),
+        "right_wrist": ("rwrist", "rhand"),
     },
     "cmu_bvh_mb2": {
         "pelvis": ("Hips", "Hips"),
-        "left_hip": ("LeftUpLeg", "LeftUpLeg"), "right_hip": ("RightUpLeg", "RightUpLeg"),
+        "left_hip": ("LeftUpLeg", "LeftUpLeg"),
+        "right_hip": ("RightUpLeg", "RightUpLeg"),
         "spine1": ("LowerBack", "LowerBack"),
-        "left_knee": ("LeftLeg", "LeftLeg"), "right_knee": ("RightLeg", "RightLeg"),
+        "left_knee": ("LeftLeg", "LeftLeg"),
+        "right_knee": ("RightLeg", "RightLeg"),
         "spine2": ("Spine", "Spine"),
-        "left_ankle": ("LeftFoot", "LeftFoot"), "right_ankle": ("RightFoot", "RightFoot"),
+        "left_ankle": ("LeftFoot", "LeftFoot"),
+        "right_ankle": ("RightFoot", "RightFoot"),
         "spine3": ("Spine1", "Spine1"),
-        "left_foot": ("LeftToeBase", "LeftToeBase"), "right_foot": ("RightToeBase", "RightToeBase"),
+        "left_foot": ("LeftToeBase", "LeftToeBase"),
+        "right_foot": ("RightToeBase", "RightToeBase"),
         "neck": ("Neck", "Neck"),
-        "left_collar": ("LeftShoulder", "LeftShoulder"), "right_collar": ("RightShoulder", "RightShoulder"),
+        "left_collar": ("LeftShoulder", "LeftShoulder"),
+        "right_collar": ("RightShoulder", "RightShoulder"),
         "head": ("Neck1", "Head"),
-        "left_shoulder": ("LeftArm", "LeftArm"), "right_shoulder": ("RightArm", "RightArm"),
-        "left_elbow": ("LeftForeArm", "LeftForeArm"), "right_elbow": ("RightForeArm", "RightForeArm"),
-        "left_wrist": ("LeftHand", "LeftHand"), "right_wrist": ("RightHand", "RightHand"),
+        "left_shoulder": ("LeftArm", "LeftArm"),
+        "right_shoulder": ("RightArm", "RightArm"),
+        "left_elbow": ("LeftForeArm", "LeftForeArm"),
+        "right_elbow": ("RightForeArm", "RightForeArm"),
+        "left_wrist": ("LeftHand", "LeftHand"),
+        "right_wrist": ("RightHand", "RightHand"),
     },
     "cmu_bvh_max": {
         "pelvis": ("Hips", "Hips"),
-        "left_hip": ("LeftHip", "LeftHip"), "right_hip": ("RightHip", "RightHip"),
+        "left_hip": ("LeftHip", "LeftHip"),
+        "right_hip": ("RightHip", "RightHip"),
         "spine1": ("lowerback", "lowerback"),
-        "left_knee": ("LeftKnee", "LeftKnee"), "right_knee": ("RightKnee", "RightKnee"),
+        "left_knee": ("LeftKnee", "LeftKnee"),
+        "right_knee": ("RightKnee", "RightKnee"),
         "spine2": ("Chest", "Chest"),
-        "left_ankle": ("LeftAnkle", "LeftAnkle"), "right_ankle": ("RightAnkle", "RightAnkle"),
+        "left_ankle": ("LeftAnkle", "LeftAnkle"),
+        "right_ankle": ("RightAnkle", "RightAnkle"),
         "spine3": ("Chest2", "Chest2"),
-        "left_foot": ("LeftToe", "LeftToe"), "right_foot": ("RightToe", "RightToe"),
+        "left_foot": ("LeftToe", "LeftToe"),
+        "right_foot": ("RightToe", "RightToe"),
         "neck": ("lowerneck", "lowerneck"),
-        "left_collar": ("LeftCollar", "LeftCollar"), "right_collar": ("RightCollar", "RightCollar"),
+        "left_collar": ("LeftCollar", "LeftCollar"),
+        "right_collar": ("RightCollar", "RightCollar"),
         "head": ("Neck", "Head"),
-        "left_shoulder": ("LeftShoulder", "LeftShoulder"), "right_shoulder": ("RightShoulder", "RightShoulder"),
-        "left_elbow": ("LeftElbow", "LeftElbow"), "right_elbow": ("RightElbow", "RightElbow"),
-        "left_wrist": ("LeftWrist", "lhand"), "right_wrist": ("RightWrist", "rhand"),
+        "left_shoulder": ("LeftShoulder", "LeftShoulder"),
+        "right_shoulder": ("RightShoulder", "RightShoulder"),
+        "left_elbow": ("LeftElbow", "LeftElbow"),
+        "right_elbow": ("RightElbow", "RightElbow"),
+        "left_wrist": ("LeftWrist", "lhand"),
+        "right_wrist": ("RightWrist", "rhand"),
     },
     # Daz figures have one joint fewer in the spine: spine2 sits where the chest starts and
     # turns with the abdomen. Their feet end in an End Site, used as the ball of the foot.
     "cmu_bvh_daz": {
         "pelvis": ("hip", "hip"),
-        "left_hip": ("lThigh", "lThigh"), "right_hip": ("rThigh", "rThigh"),
+        "left_hip": ("lThigh", "lThigh"),
+        "right_hip": ("rThigh", "rThigh"),
         "spine1": ("abdomen", "abdomen"),
-        "left_knee": ("lShin", "lShin"), "right_knee": ("rShin", "rShin"),
+        "left_knee": ("lShin", "lShin"),
+        "right_knee": ("rShin", "rShin"),
         "spine2": ("chest", "abdomen"),
-        "left_ankle": ("lFoot", "lFoot"), "right_ankle": ("rFoot", "rFoot"),
+        "left_ankle": ("lFoot", "lFoot"),
+        "right_ankle": ("rFoot", "rFoot"),
         "spine3": ("chest", "chest"),
-        "left_foot": ("lFoot_End", "lFoot"), "right_foot": ("rFoot_End", "rFoot"),
+        "left_foot": ("lFoot_End", "lFoot"),
+        "right_foot": ("rFoot_End", "rFoot"),
         "neck": ("neck", "neck"),
-        "left_collar": ("lCollar", "lCollar"), "right_collar": ("rCollar", "rCollar"),
+        "left_collar": ("lCollar", "lCollar"),
+        "right_collar": ("rCollar", "rCollar"),
         "head": ("head", "head"),
-        "left_shoulder": ("lShldr", "lShldr"), "right_shoulder": ("rShldr", "rShldr"),
-        "left_elbow": ("lForeArm", "lForeArm"), "right_elbow": ("rForeArm", "rForeArm"),
-        "left_wrist": ("lHand", "lHand"), "right_wrist": ("rHand", "rHand"),
+        "left_shoulder": ("lShldr", "lShldr"),
+        "right_shoulder": ("rShldr", "rShldr"),
+        "left_elbow": ("lForeArm", "lForeArm"),
+        "right_elbow": ("rForeArm", "rForeArm"),
+        "left_wrist": ("lHand", "lHand"),
+        "right_wrist": ("rHand", "rHand"),
     },
 }
 
@@ -128,8 +161,9 @@ def retarget(source: SourceMotion, fps: float | None = None) -> Motion:
     try:
         joint_map = JOINT_MAPS[source.layout]
     except KeyError:
-        raise ValueError(f"{source.name}: no joint map for skeleton layout {source.layout!r}; "
-                         f"known layouts: {', '.join(JOINT_MAPS)}") from None
+        raise ValueError(
+            f"{source.name}: no joint map for skeleton layout {source.layout!r}; known layouts: {', '.join(JOINT_MAPS)}"
+        ) from None
     missing = sorted({s for pair in joint_map.values() for s in pair} - set(source.joint_names))
     if missing:
         raise ValueError(f"{source.name}: the {source.layout} skeleton lacks joints {', '.join(missing)}")

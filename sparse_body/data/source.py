@@ -1,4 +1,5 @@
 """A motion on its source skeleton, as a loader reads it, before retargeting."""
+
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -22,14 +23,14 @@ class SourceMotion:
     """
 
     name: str
-    layout: str                  # key of the joint map in retarget.py ("cmu_asf", "cmu_bvh", ...)
+    layout: str  # key of the joint map in retarget.py ("cmu_asf", "cmu_bvh", ...)
     joint_names: list[str]
     parents: list[int]
-    rest_positions: np.ndarray   # (J, 3)
-    positions: np.ndarray        # (T, J, 3)
-    rotations: np.ndarray        # (T, J, 3, 3)
+    rest_positions: np.ndarray  # (J, 3)
+    positions: np.ndarray  # (T, J, 3)
+    rotations: np.ndarray  # (T, J, 3, 3)
     fps: float
-    up_axis: int = 1             # index of the source's up axis (CMU data: y)
+    up_axis: int = 1  # index of the source's up axis (CMU data: y)
 
     def index(self, name: str) -> int:
         return self.joint_names.index(name)
@@ -39,6 +40,7 @@ def read_text(path: Path) -> str:
     """The text of a motion file, gzip-compressed (.gz) or plain, within the motion size limit
     (core/textfile.py); bytes that are not UTF-8 are replaced (comments in other encodings)."""
     from ..core.textfile import FileTooLarge, read_limited
+
     path = Path(path)
     if not path.is_file():
         raise MotionFileError(path, "no such file")

@@ -1,5 +1,6 @@
 """What trackers would report for a motion: each site's joint pose composed with its
 mounting offset, with optional noise, dropped samples and occlusion."""
+
 from __future__ import annotations
 
 from dataclasses import dataclass, replace
@@ -11,15 +12,14 @@ from ..core.sensors import SensorConfig
 from ..core.types import TrackerStream
 from .motion import Motion
 
-
 OCCLUSION_MODES = ("origin", "bounded", "either")
 
 
 @dataclass(frozen=True)
 class TrackerNoise:
-    position_std: float = 0.0          # metres, Gaussian per axis
-    rotation_max_deg: float = 0.0      # uniform random axis, angle up to this
-    drop_probability: float = 0.0      # per sample: no sample at all (valid = False)
+    position_std: float = 0.0  # metres, Gaussian per axis
+    rotation_max_deg: float = 0.0  # uniform random axis, angle up to this
+    drop_probability: float = 0.0  # per sample: no sample at all (valid = False)
     # Occlusion (DTP): a foot tracker loses the base stations and keeps reporting garbage.
     # In each frame without an occlusion, one starts with this probability and lasts
     # occlusion_frames frames; it takes one of the configured occlusion_sites or all of them
@@ -39,15 +39,19 @@ class TrackerNoise:
         if self.occlusion_mode not in OCCLUSION_MODES:
             raise ValueError(f"occlusion_mode must be one of {', '.join(OCCLUSION_MODES)}, got {self.occlusion_mode!r}")
 
-    def occluding(self, percent: float, frames: int = 30) -> "TrackerNoise":
+    def occluding(self, percent: float, frames: int = 30) -> TrackerNoise:
         """This noise with feet occluded in about `percent` % of the frames, for `frames`
         frames at a time, both ways of failing (`sparse-body eval --occlusion`)."""
         if not 0.0 <= percent < 100.0:
             raise ValueError(f"the occluded share must be from 0 to under 100 %, got {percent!r}")
         share = percent / 100
         # an occlusion starts in a free frame with probability p: the occluded share is pL / (1 + pL)
-        return replace(self, occlusion_probability=share / (frames * (1.0 - share)), occlusion_frames=frames,
-                       occlusion_mode="either")
+        return replace(
+            self,
+            occlusion_probability=share / (frames * (1.0 - share)),
+            occlusion_frames=frames,
+            occlusion_mode="either",
+        )
 
     @property
     def occluded_percent(self) -> float:
@@ -62,7 +66,7 @@ LOBSTR_NOISE = TrackerNoise(position_std=0.01, rotation_max_deg=1.5)
 # millimetre of position jitter and half a degree of orientation jitter on average.
 VR_NOISE = TrackerNoise(position_std=0.001, rotation_max_deg=1.0)
 NOISE_MODELS = {"vr": VR_NOISE, "lobstr": LOBSTR_NOISE, "none": NO_NOISE}
-FAULTY_1PCT = TrackerNoise(fault_probability=0.01)      # DragPoser's faulty-sensor protocol
+FAULTY_1PCT = TrackerNoise(fault_probability=0.01)  # DragPoser's faulty-sensor protocol
 
 
 def _random_rotations(rng: np.random.Generator, n: int, max_deg: float) -> Rotation:
@@ -93,8 +97,9 @@ def _occlusions(T: int, sites: list[str], noise: TrackerNoise, rng: np.random.Ge
     return out
 
 
-def synthesize_trackers(motion: Motion, config: SensorConfig, noise: TrackerNoise = NO_NOISE,
-                        seed: int = 0) -> TrackerStream:
+def synthesize_trackers(
+    motion: Motion, config: SensorConfig, noise: TrackerNoise = NO_NOISE, seed: int = 0
+) -> TrackerStream:
     rng = np.random.default_rng(seed)
     T, S = len(motion), len(config.sites)
     positions = np.full((T, S, 3), np.nan)
@@ -133,8 +138,8 @@ def synthesize_trackers(motion: Motion, config: SensorConfig, noise: TrackerNois
     if noise.fault_probability > 0:
         for t in np.flatnonzero(rng.random(T) < noise.fault_probability):
             s = int(rng.integers(S))
-            valid[t:t + noise.fault_frames, s] = False
-            positions[t:t + noise.fault_frames, s] = np.nan
-            orientations[t:t + noise.fault_frames, s] = np.nan
+            valid[t : t + noise.fault_frames, s] = False
+            positions[t : t + noise.fault_frames, s] = np.nan
+            orientations[t : t + noise.fault_frames, s] = np.nan
     times = np.arange(T) / motion.fps
     return TrackerStream(config.site_names, times, positions, orientations, valid)

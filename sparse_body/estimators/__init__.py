@@ -1,4 +1,5 @@
 """Estimators: one module per method behind one streaming interface (base.Estimator)."""
-from .base import ESTIMATORS, Estimator, create_estimator
 
-__all__ = ["ESTIMATORS", "Estimator", "create_estimator"]
+from .base import Estimator, create_estimator, estimator_names
+
+__all__ = ["Estimator", "create_estimator", "estimator_names"]

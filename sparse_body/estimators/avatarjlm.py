@@ -30,6 +30,7 @@ Shipped models (model=NAME): three_point (models/avatarjlm.onnx) and four_point
 (avatarjlm_four_point.onnx, with the pelvis tracker: the paper's four-input row); auto (the
 default) takes four_point when the sensor configuration has a pelvis tracker.
 """
+
 from __future__ import annotations
 
 from pathlib import Path
@@ -45,12 +46,12 @@ from ..core.skeleton import JOINT_INDEX, PARENTS
 from ..core.types import BodyPose, TrackerFrame
 from .avatarjlm_features import SITES, features, reference
 from .base import Estimator
-from .options import FLOOR, MAX_GAP, THREADS
 from .lobstr_features import body_scale
 from .onnx_model import load_model, shipped_model_path
+from .options import FLOOR, MAX_GAP, THREADS
 
 HEAD = JOINT_INDEX["head"]
-LEGS = (LIMBS[JOINT_INDEX["left_ankle"]], LIMBS[JOINT_INDEX["right_ankle"]])   # hip, knee (a hinge), ankle
+LEGS = (LIMBS[JOINT_INDEX["left_ankle"]], LIMBS[JOINT_INDEX["right_ankle"]])  # hip, knee (a hinge), ankle
 
 
 def legs_from_positions(local: np.ndarray, offsets: np.ndarray) -> np.ndarray:
@@ -59,16 +60,17 @@ def legs_from_positions(local: np.ndarray, offsets: np.ndarray) -> np.ndarray:
     the hip-knee-ankle plane (the hip's own across a nearly straight leg, where that plane is
     not defined), the ankle keeps its local rotation. Hips, knees and ankles stay in place."""
     out = local.copy()
-    for leg in LEGS:                   # in the pelvis's frame: no forward kinematics of the body
+    for leg in LEGS:  # in the pelvis's frame: no forward kinematics of the body
         hip, knee, ankle = leg.upper, leg.hinge, leg.end
         thigh = local[hip] @ offsets[knee]
         shin = local[hip] @ local[knee] @ offsets[ankle]
         axis = np.cross(thigh, shin)
-        if np.linalg.norm(axis) < 0.1 * np.linalg.norm(thigh) * np.linalg.norm(shin):   # bent under 6 degrees
+        if np.linalg.norm(axis) < 0.1 * np.linalg.norm(thigh) * np.linalg.norm(shin):  # bent under 6 degrees
             axis = local[hip] @ leg.axis
         # each a frame of (thigh, knee axis): the rest thigh's turned onto the given one
-        out[hip] = sixd_to_matrix(np.concatenate([thigh, axis])) @ sixd_to_matrix(
-            np.concatenate([offsets[knee], leg.axis])).T
+        out[hip] = (
+            sixd_to_matrix(np.concatenate([thigh, axis])) @ sixd_to_matrix(np.concatenate([offsets[knee], leg.axis])).T
+        )
         out[knee] = rotation_between(offsets[ankle], out[hip].T @ shin)
     return out
 
@@ -81,8 +83,13 @@ class AvatarJlmModel:
 
     def __init__(self, path: str | Path, threads: int = 1) -> None:
         self.path = Path(path)
-        self.session, meta = load_model(self.path, ("method", "avatarjlm"), {"x": None, "past_k": None},
-                                        "train one with `sparse-body train avatarjlm`", threads)
+        self.session, meta = load_model(
+            self.path,
+            ("method", "avatarjlm"),
+            {"x": None, "past_k": None},
+            "train one with `sparse-body train avatarjlm`",
+            threads,
+        )
         try:
             c = meta["config"]
             self.sites = SITES[c["sensors"]]
@@ -99,7 +106,7 @@ class AvatarJlmModel:
         """Forget the past (a new stream, a gap)."""
         self.keys = np.zeros(self.cache_shape, np.float32)
         self.values = np.zeros(self.cache_shape, np.float32)
-        self.stamps = np.full(self.past, np.nan)     # of the frame in each slot (a ring)
+        self.stamps = np.full(self.past, np.nan)  # of the frame in each slot (a ring)
         self.slot = 0
 
     def step(self, x: np.ndarray, stamp: float) -> np.ndarray:
@@ -107,10 +114,16 @@ class AvatarJlmModel:
         the other joints' local rotations. The frame joins the past."""
         age = np.rint((stamp - self.stamps) * self.fps)
         kept = np.isfinite(age) & (age >= 1) & (age <= self.past)
-        pose, key, value = self.session.run(None, {
-            "x": x[None].astype(np.float32), "past_k": self.keys, "past_v": self.values,
-            "past_age": np.where(kept, age, 1).astype(np.int64),
-            "past_mask": np.where(kept, 0.0, -np.inf).astype(np.float32)})
+        pose, key, value = self.session.run(
+            None,
+            {
+                "x": x[None].astype(np.float32),
+                "past_k": self.keys,
+                "past_v": self.values,
+                "past_age": np.where(kept, age, 1).astype(np.int64),
+                "past_mask": np.where(kept, 0.0, -np.inf).astype(np.float32),
+            },
+        )
         self.keys[:, :, :, self.slot] = key[:, :, :, 0]
         self.values[:, :, :, self.slot] = value[:, :, :, 0]
         self.stamps[self.slot] = stamp
@@ -123,31 +136,43 @@ class AvatarJlmEstimator(Estimator):
     required_sites = frozenset(SITES["three_point"])
     option_ranges = {"floor_height": FLOOR, "max_gap": MAX_GAP, "threads": THREADS}
 
-    def __init__(self, sensors, skeleton, fps: float = 60.0, model: str = "auto", model_path: str | None = None,
-                 polish: bool = True, end_orientations: bool = True, hinge_knees: bool = True,
-                 legs_from_positions: bool | None = None, floor_height: float = 0.0, max_gap: float = 0.5,
-                 threads: int = 1) -> None:
+    def __init__(
+        self,
+        sensors,
+        skeleton,
+        fps: float = 60.0,
+        model: str = "auto",
+        model_path: str | None = None,
+        polish: bool = True,
+        end_orientations: bool = True,
+        hinge_knees: bool = True,
+        legs_from_positions: bool | None = None,
+        floor_height: float = 0.0,
+        max_gap: float = 0.5,
+        threads: int = 1,
+    ) -> None:
         super().__init__(sensors, skeleton, fps)
         if model == "auto":
             model = "four_point" if "pelvis" in sensors.site_names else "three_point"
         self.model = AvatarJlmModel(model_path or shipped_model_path("AvatarJLM", MODELS, model, "auto"), threads)
         missing = set(self.model.sites) - set(sensors.site_names)
         if missing:
-            raise ValueError(f"{self.model.path} needs trackers on {', '.join(sorted(missing))}; sensor configuration "
-                             f"{sensors.name!r} has {', '.join(sensors.site_names)} (use model:=three_point)")
+            raise ValueError(
+                f"{self.model.path} needs trackers on {', '.join(sorted(missing))}; sensor configuration "
+                f"{sensors.name!r} has {', '.join(sensors.site_names)} (use model:=three_point)"
+            )
         self.scale = body_scale(skeleton)
         self.polish, self.end_orientations, self.hinge_knees = polish, end_orientations, hinge_knees
         # None: rebuilt where the network's legs come out turned (AvatarJlmModel.turned_legs)
         self.four = "pelvis" in self.model.sites
-        self.legs_from_positions = (self.model.turned_legs if legs_from_positions is None
-                                    else bool(legs_from_positions))
+        self.legs_from_positions = self.model.turned_legs if legs_from_positions is None else bool(legs_from_positions)
         self.floor, self.max_gap = floor_height, max_gap
         self._joints = [sensors.site(s).joint_index for s in self.model.sites]
         self.reset()
 
     def _reset(self) -> None:
         self.model.start()
-        self._previous: tuple[float, np.ndarray, np.ndarray] | None = None    # stamp, scaled positions, rotations
+        self._previous: tuple[float, np.ndarray, np.ndarray] | None = None  # stamp, scaled positions, rotations
         self._last_toes: np.ndarray | None = None
 
     def _estimate(self, frame: TrackerFrame) -> BodyPose | None:
@@ -162,8 +187,13 @@ class AvatarJlmEstimator(Estimator):
             self.model.start()
             previous = None
         step = 1.0 if previous is None else (frame.stamp - previous[0]) * self.model.fps
-        x = features(pos, rot, pos if previous is None else previous[1], rot if previous is None else previous[2],
-                     step if abs(step - 1.0) > 0.05 else 1.0)
+        x = features(
+            pos,
+            rot,
+            pos if previous is None else previous[1],
+            rot if previous is None else previous[2],
+            step if abs(step - 1.0) > 0.05 else 1.0,
+        )
         self._previous = (frame.stamp, pos, rot)
         out = self.model.step(x, frame.stamp)
         return self._pose(frame.stamp, out, world, rot)
@@ -182,11 +212,11 @@ class AvatarJlmEstimator(Estimator):
         root = world[self.model.sites.index("pelvis")] if self.four else world[0] - pos[HEAD]
         pos = pos + root
         if self.polish:
-            goals = dict(zip(self._joints, world))
+            goals = dict(zip(self._joints, world, strict=True))
             local, glob, pos = solve_body(local, root, offsets, goals, keep_shape=True)
             if self.end_orientations:
-                for j, r in zip(self._joints, rot):
-                    if j:                     # the pelvis is the root already
+                for j, r in zip(self._joints, rot, strict=True):
+                    if j:  # the pelvis is the root already
                         local[j] = glob[PARENTS[j]].T @ r
                         glob[j] = r
         toes = np.stack([pos[PARENTS[t]] + glob[PARENTS[t]] @ offsets[t] for t in TOE_JOINTS])

@@ -14,6 +14,7 @@ velocity is the frame-to-frame rotation in the tracker's own frame (both per mod
 
 Positions are scaled to the canonical body (leg length) first, as LoBSTr's and DTP's are.
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -22,8 +23,10 @@ from ..core.rotations import heading, matrix_to_6d, yaw_matrix
 from ..core.sensors import SITE_JOINTS
 from ..core.skeleton import JOINT_INDEX
 
-SITES = {"three_point": ("head", "left_hand", "right_hand"),
-         "four_point": ("head", "left_hand", "right_hand", "pelvis")}
+SITES = {
+    "three_point": ("head", "left_hand", "right_hand"),
+    "four_point": ("head", "left_hand", "right_hand", "pelvis"),
+}
 PER_SITE = 18
 
 
@@ -40,8 +43,13 @@ def reference(head_pos: np.ndarray, head_rot: np.ndarray) -> tuple[np.ndarray, n
     return origin, yaw_matrix(heading(head_rot))
 
 
-def features(positions: np.ndarray, rotations: np.ndarray, previous_positions: np.ndarray,
-             previous_rotations: np.ndarray, step: float = 1.0) -> np.ndarray:
+def features(
+    positions: np.ndarray,
+    rotations: np.ndarray,
+    previous_positions: np.ndarray,
+    previous_rotations: np.ndarray,
+    step: float = 1.0,
+) -> np.ndarray:
     """(..., 18 n): n trackers (..., n, 3) / (..., n, 3, 3) now and at the previous sample
     (canonical scale, floor at z = 0; the head first). step: the time since the previous
     sample in model frames (velocities are per model frame)."""
@@ -51,10 +59,11 @@ def features(positions: np.ndarray, rotations: np.ndarray, previous_positions: n
     pos = (yaw_t @ (positions - origin[..., None, :])[..., None])[..., 0]
     vel = (yaw_t @ (positions - previous_positions)[..., None])[..., 0] / step
     turn = np.swapaxes(previous_rotations, -1, -2) @ rotations
-    if step != 1.0:      # the same turn per model frame: scale its angle (rare: a stream at another rate)
+    if step != 1.0:  # the same turn per model frame: scale its angle (rare: a stream at another rate)
         from ..core.rotations import axis_angle_to_matrix, matrix_to_axis_angle
+
         turn = axis_angle_to_matrix(matrix_to_axis_angle(turn) / step)
-    parts = np.concatenate([matrix_to_6d(rot), pos, vel, matrix_to_6d(turn)], axis=-1)   # (..., n, 18)
+    parts = np.concatenate([matrix_to_6d(rot), pos, vel, matrix_to_6d(turn)], axis=-1)  # (..., n, 18)
     return parts.reshape(parts.shape[:-2] + (-1,))
 
 

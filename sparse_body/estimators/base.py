@@ -1,11 +1,12 @@
 """The one interface every estimator implements, and the registry that names them."""
+
 from __future__ import annotations
 
-import importlib
 import inspect
 import math
 from abc import ABC, abstractmethod
-from typing import ClassVar, Iterable
+from collections.abc import Iterable
+from typing import ClassVar
 
 import numpy as np
 import yaml
@@ -17,17 +18,14 @@ from ..core.tracker_smoother import smooth_frames
 from ..core.types import BodyPose, TrackerFrame, TrackerStream
 from .options import Option, Range, check_value, options_of
 
+
 # name -> "module:Class"; modules are imported on first use so that an estimator's
 # dependencies (onnxruntime, a model file) are needed only when it is chosen.
-ESTIMATORS: dict[str, str] = {
-    "reference": "sparse_body.estimators.reference:ReferenceEstimator",
-    "ik": "sparse_body.estimators.ik:IKEstimator",
-    "lobstr": "sparse_body.estimators.lobstr:LobstrEstimator",
-    "dragposer": "sparse_body.estimators.dragposer:DragPoserEstimator",
-    "refined": "sparse_body.estimators.refined:RefinedEstimator",
-    "dtp": "sparse_body.estimators.dtp:DtpEstimator",
-    "avatarjlm": "sparse_body.estimators.avatarjlm:AvatarJlmEstimator",
-}
+def estimator_names() -> list[str]:
+    """The registered methods' names (sparse_body.methods)."""
+    from ..methods import METHODS  # the registry holds import paths only: no cycle at import
+
+    return sorted(METHODS)
 
 
 class Estimator(ABC):
@@ -52,8 +50,10 @@ class Estimator(ABC):
     def __init__(self, sensors: SensorConfig, skeleton: Skeleton, fps: float = 60.0) -> None:
         missing = self.required_sites - set(sensors.site_names)
         if missing:
-            raise ValueError(f"estimator {self.name!r} needs trackers on {', '.join(sorted(missing))}; "
-                             f"sensor configuration {sensors.name!r} has {', '.join(sensors.site_names)}")
+            raise ValueError(
+                f"estimator {self.name!r} needs trackers on {', '.join(sorted(missing))}; "
+                f"sensor configuration {sensors.name!r} has {', '.join(sensors.site_names)}"
+            )
         self.sensors = sensors
         self.skeleton = skeleton
         self.fps = fps
@@ -79,7 +79,7 @@ class Estimator(ABC):
         self.input_filter.reset()
         self._reset()
 
-    def _reset(self) -> None:
+    def _reset(self) -> None:  # noqa: B027 - optional: a method without history has nothing to forget
         """Forget the method's own history (recurrent state, contacts, the last latent)."""
 
     def step(self, frame: TrackerFrame) -> BodyPose:
@@ -126,7 +126,7 @@ class Estimator(ABC):
         norm = math.sqrt(q2) if math.isfinite(q2 := float(quat @ quat)) else 0.0
         has_rot = spec.has_orientation and 0.9 < norm < 1.1
         if spec.has_position and not has_pos:
-            return None                      # a position tracker without its position: unusable
+            return None  # a position tracker without its position: unusable
         if has_pos and has_rot:
             return spec.joint_pose(pos, quat / norm)
         if has_rot:
@@ -140,9 +140,11 @@ class Estimator(ABC):
         if last is None:
             from ..core.rotations import matrix_to_quat
             from .reference import standing_pose
+
             local = getattr(self, "_local", None)
-            return BodyPose(stamp, matrix_to_quat(standing_pose() if local is None else local), np.zeros(3),
-                            valid=False)
+            return BodyPose(
+                stamp, matrix_to_quat(standing_pose() if local is None else local), np.zeros(3), valid=False
+            )
         return last.held(stamp)
 
     def process(self, stream: TrackerStream | Iterable[TrackerFrame]) -> list[BodyPose]:
@@ -151,8 +153,8 @@ class Estimator(ABC):
         self.reset()
         poses, last = [], None
         for frame in self.filtered(stream):
-            if last is not None and frame.stamp < last - 1.0:   # the method starts over (the
-                self._last = None                                # filter did so by itself)
+            if last is not None and frame.stamp < last - 1.0:  # the method starts over (the
+                self._last = None  # filter did so by itself)
                 self._reset()
             last = frame.stamp
             poses.append(self._step_filtered(frame))
@@ -160,7 +162,7 @@ class Estimator(ABC):
 
 
 def parse_estimator_spec(spec: str) -> tuple[str, dict]:
-    """"name" or "name:key=value,key=value" (values read as YAML scalars) -> (name, options)."""
+    """ "name" or "name:key=value,key=value" (values read as YAML scalars) -> (name, options)."""
     name, _, rest = spec.partition(":")
     options = {}
     for item in filter(None, rest.split(",")):
@@ -174,29 +176,31 @@ def parse_estimator_spec(spec: str) -> tuple[str, dict]:
     return name.strip(), options
 
 
-def create_estimator(name: str, sensors: SensorConfig, skeleton: Skeleton, fps: float = 60.0,
-                     **options) -> Estimator:
+def create_estimator(name: str, sensors: SensorConfig, skeleton: Skeleton, fps: float = 60.0, **options) -> Estimator:
     """An estimator by name with its options; filter_<field> options (of FilterConfig) set
     the tracker filter every estimator has, filter=false turns it off; smooth=true smooths
     a whole recording in process() (offline) instead."""
-    try:
-        target = ESTIMATORS[name]
-    except KeyError:
-        raise ValueError(f"unknown estimator {name!r}; available: {', '.join(sorted(ESTIMATORS))}") from None
+    from ..methods import METHODS, load
+
+    if name not in METHODS:
+        raise ValueError(f"unknown estimator {name!r}; available: {', '.join(estimator_names())}")
     filtering = filter_config(options)
     smooth = options.pop("smooth", False)
     if not isinstance(smooth, bool):
         raise ValueError(f"smooth must be true or false, got {smooth!r}")
-    module, cls = target.split(":")
-    cls = getattr(importlib.import_module(module), cls)
+    cls = load(METHODS[name].estimator)
     known = cls.options()
-    takes_more = any(p.kind is inspect.Parameter.VAR_KEYWORD             # refined: its base's options
-                     for p in inspect.signature(cls.__init__).parameters.values())
+    takes_more = any(
+        p.kind is inspect.Parameter.VAR_KEYWORD  # refined: its base's options
+        for p in inspect.signature(cls.__init__).parameters.values()
+    )
     unknown = [k for k in options if k not in known]
     if unknown and not takes_more:
-        raise ValueError(f"estimator {name!r} has no option {', '.join(map(repr, unknown))}; "
-                         f"its options are {', '.join(known) or 'none'} and the filter's (filter_...)")
-    for key, value in options.items():       # before any model is loaded
+        raise ValueError(
+            f"estimator {name!r} has no option {', '.join(map(repr, unknown))}; "
+            f"its options are {', '.join(known) or 'none'} and the filter's (filter_...)"
+        )
+    for key, value in options.items():  # before any model is loaded
         if key in known:
             check_value(name, known[key], value, cls.option_ranges)
     try:

@@ -6,6 +6,7 @@ joint positions (..., 22, 3) and local rotations — to a residual vector (..., 
 weighted. The code works on numpy arrays and on torch tensors alike (`xp` is the module),
 so the Gauss-Newton runtime and the autograd reference share one definition.
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass, field
@@ -39,10 +40,10 @@ def _joint(name_or_index) -> int:
 
 @dataclass
 class Constraint:
-    size = 3                  # residual entries
+    size = 3  # residual entries
     joint: int | str
     weight: float = 1.0
-    name: str = ""            # to remove it again; defaults to a description
+    name: str = ""  # to remove it again; defaults to a description
 
     def __post_init__(self) -> None:
         self.joint = _joint(self.joint)
@@ -57,6 +58,7 @@ class Constraint:
 @dataclass
 class Position(Constraint):
     """The joint at a point (metres): a 6-DoF or a position-only tracker."""
+
     target: tuple = (0.0, 0.0, 0.0)
 
     def residual(self, glob, pos, local, xp=np):
@@ -67,6 +69,7 @@ class Position(Constraint):
 class OverPoint(Constraint):
     """The joint over a point on the floor plane (x, y in metres), at any height: a soft
     prior where no tracker says where the joint is (DragPoser's root_prior)."""
+
     size = 2
     target: tuple = (0.0, 0.0)
 
@@ -78,6 +81,7 @@ class OverPoint(Constraint):
 class Orientation(Constraint):
     """The joint's global rotation (3x3): a 6-DoF or an orientation-only (IMU) tracker.
     Residual: sin(angle) x axis of the difference, so 1 rad weighs like 0.84 m at weight 1."""
+
     target: np.ndarray = field(default_factory=lambda: np.eye(3))
 
     def residual(self, glob, pos, local, xp=np):
@@ -88,6 +92,7 @@ class Orientation(Constraint):
 @dataclass
 class AboveFloor(Constraint):
     """The joint no lower than the floor height plus a clearance (feet on or above the floor)."""
+
     size = 1
     height: float = 0.0
 
@@ -98,12 +103,13 @@ class AboveFloor(Constraint):
 @dataclass
 class LookAt(Constraint):
     """The joint's local axis (default +x, forward) pointing at a point."""
+
     target: tuple = (0.0, 0.0, 0.0)
     axis: tuple = (1.0, 0.0, 0.0)
 
     def residual(self, glob, pos, local, xp=np):
         d = _as(xp, pos, self.target) - pos[..., self.joint, :]
-        d = d / (((d ** 2).sum(-1, keepdims=True)) ** 0.5 + 1e-9)
+        d = d / (((d**2).sum(-1, keepdims=True)) ** 0.5 + 1e-9)
         a = glob[..., self.joint, :, :] @ _as(xp, pos, self.axis)
         return self.weight * (a - d)
 
@@ -111,13 +117,15 @@ class LookAt(Constraint):
 @dataclass
 class AngleLimit(Constraint):
     """The joint's local rotation no further than max_angle (radians) from its rest."""
+
     size = 1
     max_angle: float = 2.0
 
     def residual(self, glob, pos, local, xp=np):
         # 3 - trace = 2 (1 - cos angle): monotonic in the angle, smooth, no arccos
-        excess = (3.0 - local[..., self.joint, [0, 1, 2], [0, 1, 2]].sum(-1, keepdims=True)) \
-            - 2.0 * (1.0 - np.cos(self.max_angle))
+        excess = (3.0 - local[..., self.joint, [0, 1, 2], [0, 1, 2]].sum(-1, keepdims=True)) - 2.0 * (
+            1.0 - np.cos(self.max_angle)
+        )
         return self.weight * _relu(excess)
 
 
@@ -154,14 +162,15 @@ class ConstraintSet:
     def names(self) -> list[str]:
         return list(self._items)
 
-    def converged(self, residual: np.ndarray, position_tol: float, rotation_tol: float,
-                  skip_orientation: frozenset = frozenset()) -> bool:
+    def converged(
+        self, residual: np.ndarray, position_tol: float, rotation_tol: float, skip_orientation: frozenset = frozenset()
+    ) -> bool:
         """Whether the tracker constraints in a residual vector (this set's order) are met:
         positions within position_tol metres, orientations within rotation_tol radians
         (except on the joints in skip_orientation)."""
         i = 0
         for c in self:
-            part = residual[i:i + c.size]
+            part = residual[i : i + c.size]
             i += c.size
             if c.weight == 0:
                 continue

@@ -2,10 +2,11 @@
 
 When a foot's contact turns on, its toe's position becomes the contact point, and hip and
 knee are solved (the shared two-bone IK, with the toe as the limb's end) so that the toe
-stays there while contact lasts. When contact ends, the target moves from the contact point to where the network puts the toe over
-release_frames frames with a slow-in / slow-out (shifted sine) weight, so the foot does
-not snap. A contact point the leg can no longer reach is let go the same way.
+stays there while contact lasts. When contact ends, the target moves from the contact point to
+where the network puts the toe over release_frames frames with a slow-in / slow-out (shifted
+sine) weight, so the foot does not snap. A contact point the leg can no longer reach is let go the same way.
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -27,7 +28,7 @@ _KNEES = (J["left_knee"], J["right_knee"])
 
 @dataclass
 class _Foot:
-    anchor: np.ndarray | None = None        # the contact point while in contact
+    anchor: np.ndarray | None = None  # the contact point while in contact
     release_from: np.ndarray | None = None  # the contact point being let go
     release_step: int = 0
 
@@ -59,7 +60,7 @@ class ContactHold:
             span = 0.999 * (np.linalg.norm(knee - hip) + np.linalg.norm(toe - knee))
             if foot.anchor is not None and np.linalg.norm(foot.anchor - hip) > span:
                 contact = contact.copy()
-                contact[side] = False        # out of reach: let it go rather than stretch
+                contact[side] = False  # out of reach: let it go rather than stretch
             if contact[side]:
                 if foot.anchor is None:
                     foot.anchor = toe.copy()

@@ -16,30 +16,30 @@ frame becomes a Position and/or Orientation constraint on its joint, a missing o
 is not there; user constraints (feet above the floor, look-at, angle limits) are added and
 removed through `constraints`.
 """
+
 from __future__ import annotations
 
 from pathlib import Path
 
 import numpy as np
 
+from ..core.body_ik import solve_body
 from ..core.contacts import FOOT_JOINTS, toe_contacts
 from ..core.kinematics import forward_kinematics
 from ..core.rotations import heading, matrix_to_quat, yaw_matrix
 from ..core.sensors import SITE_JOINTS
 from ..core.skeleton import JOINT_INDEX as J
+from ..core.skeleton import Skeleton
 from ..core.types import BodyPose, TrackerFrame
 from .base import Estimator
-from .options import FLOOR, THREADS, Option, Range, options_of
 from .constraints import AboveFloor, ConstraintSet, Orientation, OverPoint, Position
-from ..core.skeleton import Skeleton
 from .dragposer_pose import HEIGHT_JOINTS, LATENT, dual_quaternions, split_heading
 from .dragposer_temporal import TemporalPrior
 from .dragposer_tracker_prior import FILE as TRACKER_PRIOR_FILE
 from .dragposer_tracker_prior import TrackerPrior
-from ..core.body_ik import solve_body
 from .lobstr_features import body_scale
 from .onnx_model import load_model
-
+from .options import FLOOR, THREADS, Option, Range, options_of
 
 HEIGHT_INDEX = [J[j] for j in HEIGHT_JOINTS]
 MODEL_FILES = ("dragposer_encoder.onnx", "dragposer_decoder.onnx", "dragposer_temporal.onnx", TRACKER_PRIOR_FILE)
@@ -52,6 +52,7 @@ END_JOINTS = frozenset(J[j] for j in ("head", "left_wrist", "right_wrist", "left
 
 def default_model_dir() -> Path:
     from ..resources import models_dir
+
     return models_dir()
 
 
@@ -61,10 +62,12 @@ class PoseVaeRuntime:
     def __init__(self, model_dir: str | Path | None = None, threads: int = 1) -> None:
         self.dir = Path(model_dir) if model_dir else default_model_dir()
         hint = "train one with `sparse-body train dragposer`"
-        self.decoder, _ = load_model(self.dir / "dragposer_decoder.onnx", ("method", "dragposer"), {"latent": LATENT},
-                                     hint, threads)
-        self.encoder, _ = load_model(self.dir / "dragposer_encoder.onnx", ("method", "dragposer"),
-                                     {"dual_quaternions": None}, hint, threads)
+        self.decoder, _ = load_model(
+            self.dir / "dragposer_decoder.onnx", ("method", "dragposer"), {"latent": LATENT}, hint, threads
+        )
+        self.encoder, _ = load_model(
+            self.dir / "dragposer_encoder.onnx", ("method", "dragposer"), {"dual_quaternions": None}, hint, threads
+        )
 
     def decode(self, z: np.ndarray) -> np.ndarray:
         """(B, 24) -> heading-free local rotations (B, 22, 3, 3)."""
@@ -76,13 +79,14 @@ class PoseVaeRuntime:
         free, _ = split_heading(local_rot[None])
         return self.encode_free(free, np.array([root_height]), offsets)[0].astype(np.float64)
 
-    def encode_free(self, free: np.ndarray, root_height: np.ndarray, offsets: np.ndarray,
-                    chunk: int = 4096) -> np.ndarray:
+    def encode_free(
+        self, free: np.ndarray, root_height: np.ndarray, offsets: np.ndarray, chunk: int = 4096
+    ) -> np.ndarray:
         """Heading-free local rotations (T, 22, 3, 3) and root heights (T,) -> latents (T, 24),
         float32, `chunk` poses an encoder pass."""
         out = []
         for i in range(0, len(free), chunk):
-            dq = dual_quaternions(free[i:i + chunk].astype(np.float64), root_height[i:i + chunk], offsets)
+            dq = dual_quaternions(free[i : i + chunk].astype(np.float64), root_height[i : i + chunk], offsets)
             out.append(self.encoder.run(None, {"dual_quaternions": dq.astype(np.float32)})[0])
         return np.concatenate(out)
 
@@ -92,8 +96,15 @@ class LatentOptimizer:
 
     # Priors: weak. They only break ties the constraints leave open; stronger ones pulled the
     # end effectors off their trackers (02_05, six-point: 5 cm at 0.05 / 0.01, 0.9 cm here).
-    def __init__(self, vae: PoseVaeRuntime, offsets: np.ndarray, damping: float = 1e-2,
-                 prior_weight: float = 0.001, latent_weight: float = 0.0002, eps: float = 1e-3) -> None:
+    def __init__(
+        self,
+        vae: PoseVaeRuntime,
+        offsets: np.ndarray,
+        damping: float = 1e-2,
+        prior_weight: float = 0.001,
+        latent_weight: float = 0.0002,
+        eps: float = 1e-3,
+    ) -> None:
         self.vae, self.offsets = vae, offsets
         self.damping, self.prior_weight, self.latent_weight, self.eps = damping, prior_weight, latent_weight, eps
         self.lam = damping
@@ -121,23 +132,23 @@ class LatentOptimizer:
         e = self.eps
         zs = np.repeat(z[None], LATENT + 1, axis=0)
         zs[1:] += e * np.eye(LATENT)
-        decoded = self.vae.decode(zs)                          # the one batched decoder pass
+        decoded = self.vae.decode(zs)  # the one batched decoder pass
         # poses: base, z perturbations, root x/y/z perturbations, heading perturbation
         Z = np.concatenate([zs, np.repeat(z[None], 4, 0)])
         R = np.repeat(root[None], n + 1, 0)
-        R[LATENT + 1:LATENT + 4] += e * np.eye(3)
+        R[LATENT + 1 : LATENT + 4] += e * np.eye(3)
         Y = np.full(n + 1, yaw)
         Y[-1] += e
         D = np.concatenate([decoded, np.repeat(decoded[:1], 4, 0)])
         res = self.residuals(constraints, Z, R, Y, z_prior[None], decoded=D, prior_weight=prior_weight)
         r0 = res[0]
-        jac = (res[1:] - r0).T / e                              # (m, 28)
+        jac = (res[1:] - r0).T / e  # (m, 28)
         h, g = jac.T @ jac, jac.T @ r0
         cost = r0 @ r0
         # Levenberg-Marquardt: a step that does not lower the cost is refused, with more damping
         for _ in range(6):
             delta = -np.linalg.solve(h + self.lam * np.diag(np.diag(h) + 1e-9), g)
-            cand = (z + delta[:LATENT], root + delta[LATENT:LATENT + 3], yaw + delta[-1])
+            cand = (z + delta[:LATENT], root + delta[LATENT : LATENT + 3], yaw + delta[-1])
             r1 = self.residuals(constraints, *cand, z_prior, prior_weight=prior_weight)
             if np.all(np.isfinite(r1)) and r1 @ r1 < cost:
                 self.lam = max(self.lam / 3, 1e-6)
@@ -150,34 +161,59 @@ class DragPoserEstimator(Estimator):
     name = "dragposer"
     option_ranges = {
         "iterations": Range(1, 100, "search steps a frame"),
-        "position_weight": Range(0.0, 1e3), "orientation_weight": Range(0.0, 1e3),
-        "floor_height": FLOOR, "threads": THREADS,
-        "tolerance": Range(0.0, 1.0, "metres"), "rotation_tolerance": Range(0.0, 3.1416, "radians"),
-        "temporal_weight": Range(0.0, 10.0), "ahead": Range(1, 16, "frames"),
-        "root_prior": Range(0.0, 100.0), "tracker_prior": Range(0.0, 100.0),
+        "position_weight": Range(0.0, 1e3),
+        "orientation_weight": Range(0.0, 1e3),
+        "floor_height": FLOOR,
+        "threads": THREADS,
+        "tolerance": Range(0.0, 1.0, "metres"),
+        "rotation_tolerance": Range(0.0, 3.1416, "radians"),
+        "temporal_weight": Range(0.0, 10.0),
+        "ahead": Range(1, 16, "frames"),
+        "root_prior": Range(0.0, 100.0),
+        "tracker_prior": Range(0.0, 100.0),
         # the optimiser's (LatentOptimizer)
-        "damping": Range(1e-9, 1e6), "prior_weight": Range(0.0, 10.0), "latent_weight": Range(0.0, 10.0),
+        "damping": Range(1e-9, 1e6),
+        "prior_weight": Range(0.0, 10.0),
+        "latent_weight": Range(0.0, 10.0),
         "eps": Range(1e-9, 1.0, "the finite-difference step"),
     }
 
     @classmethod
     def options(cls) -> dict[str, Option]:
-        return options_of(cls.__init__, LatentOptimizer.__init__)     # **optimizer goes there
+        return options_of(cls.__init__, LatentOptimizer.__init__)  # **optimizer goes there
 
-    def __init__(self, sensors, skeleton, fps: float = 60.0, model_dir: str | None = None,
-                 model_path: str | None = None, iterations: int = 3,
-                 position_weight: float = 1.0, orientation_weight: float = 0.1, floor_height: float | None = 0.0,
-                 tolerance: float = 0.01, rotation_tolerance: float = 0.087, threads: int = 1,
-                 temporal_weight: float = 0.002, ahead: int = 1, temporal_ramp: bool = True,
-                 polish: bool = True, pelvis_orientation: bool = True, root_prior: float = 0.3,
-                 tracker_prior: float = TRACKER_PRIOR_WEIGHT, **optimizer) -> None:
+    def __init__(
+        self,
+        sensors,
+        skeleton,
+        fps: float = 60.0,
+        model_dir: str | None = None,
+        model_path: str | None = None,
+        iterations: int = 3,
+        position_weight: float = 1.0,
+        orientation_weight: float = 0.1,
+        floor_height: float | None = 0.0,
+        tolerance: float = 0.01,
+        rotation_tolerance: float = 0.087,
+        threads: int = 1,
+        temporal_weight: float = 0.002,
+        ahead: int = 1,
+        temporal_ramp: bool = True,
+        polish: bool = True,
+        pelvis_orientation: bool = True,
+        root_prior: float = 0.3,
+        tracker_prior: float = TRACKER_PRIOR_WEIGHT,
+        **optimizer,
+    ) -> None:
         if iterations < 1:
             raise ValueError(f"iterations must be at least 1, got {iterations}")
         super().__init__(sensors, skeleton, fps)
-        if model_path and not model_dir:   # the nodes' model_path: the folder, or one of its files
+        if model_path and not model_dir:  # the nodes' model_path: the folder, or one of its files
             if not Path(model_path).is_dir() and Path(model_path).name not in MODEL_FILES:
-                raise ValueError(f"{model_path}: not a DragPoser model; name the folder holding "
-                                 f"{', '.join(MODEL_FILES)} (or one of them)")
+                raise ValueError(
+                    f"{model_path}: not a DragPoser model; name the folder holding "
+                    f"{', '.join(MODEL_FILES)} (or one of them)"
+                )
             model_dir = model_path if Path(model_path).is_dir() else str(Path(model_path).parent)
         self.vae = PoseVaeRuntime(model_dir, threads)
         # the temporal predictor's pull on the latent (the paper's lambda_T); 0: without it
@@ -198,7 +234,7 @@ class DragPoserEstimator(Estimator):
             raise ValueError(f"root_prior must be a finite weight, 0 or more, got {root_prior}")
         self.root_prior = root_prior
         self.floor = floor_height
-        self.constraints = ConstraintSet()      # the user's, kept across frames
+        self.constraints = ConstraintSet()  # the user's, kept across frames
         if floor_height is not None:
             for foot in FOOT_JOINTS:
                 self.constraints.add(AboveFloor(foot, 1.0, name=f"floor:{foot}", height=floor_height), builtin=True)
@@ -209,7 +245,7 @@ class DragPoserEstimator(Estimator):
         self.reset()
 
     def _reset(self) -> None:
-        self._state = None             # (z, root, yaw)
+        self._state: tuple[np.ndarray, np.ndarray, float] | None = None  # (z, root, yaw)
         self._last_toes = None
         if self.temporal is not None:
             self.temporal.reset()
@@ -232,8 +268,13 @@ class DragPoserEstimator(Estimator):
             if target[1] is not None:
                 out.add(Orientation(joint, self.weights[1], name=f"{site}:orientation", target=target[1]))
         pelvis, head = targets.get("pelvis"), targets.get("head")
-        if (self.root_prior > 0 and (pelvis is None or pelvis[0] is None)
-                and head is not None and head[0] is not None and head[1] is not None):
+        if (
+            self.root_prior > 0
+            and (pelvis is None or pelvis[0] is None)
+            and head is not None
+            and head[0] is not None
+            and head[1] is not None
+        ):
             out.add(self._under_head(*head))
         return out
 
@@ -272,16 +313,19 @@ class DragPoserEstimator(Estimator):
         if not pose.is_finite():
             return self.held_pose(frame.stamp)
         from ..core.rotations import quat_to_matrix
+
         local = quat_to_matrix(pose.local_quats)
         yaw = float(heading(local[0]))
         height = (pose.root_position[2] - (self.floor or 0.0)) * self._scale
         z = self.vae.encode(local, height, self._canonical_offsets)
-        return self._checked(frame.stamp, self._solve(frame, (z, np.asarray(pose.root_position, float), yaw), z_prior=z))
+        return self._checked(
+            frame.stamp, self._solve(frame, (z, np.asarray(pose.root_position, float), yaw), z_prior=z)
+        )
 
     def _estimate(self, frame: TrackerFrame) -> BodyPose | None:
         targets = self.tracker_targets(frame)
         trackers = self.tracker_constraints(frame, targets)
-        guess = self._guess(targets)         # every frame: the GRU keeps its state
+        guess = self._guess(targets)  # every frame: the GRU keeps its state
         if self._state is None:
             return self._solve(frame, None, trackers=trackers, observe=True, start=guess)
         # Every pull at once: sum_k w_k |z - z_k|^2 is one quadratic with the weights' sum,
@@ -302,8 +346,12 @@ class DragPoserEstimator(Estimator):
         if self.guesser is None:
             return None
         lift = np.array([0.0, 0.0, self.floor or 0.0])
-        return self.guesser.predict({site: None if t is None or t[0] is None else ((t[0] - lift) * self._scale, t[1])
-                                     for site, t in targets.items()})
+        return self.guesser.predict(
+            {
+                site: None if t is None or t[0] is None else ((t[0] - lift) * self._scale, t[1])
+                for site, t in targets.items()
+            }
+        )
 
     def _polish(self, local, root, trackers: ConstraintSet):
         """Put the tracked pelvis and end effectors exactly on their trackers (ours, not the
@@ -324,20 +372,28 @@ class DragPoserEstimator(Estimator):
                 root = np.array(c.target, float)
         goals = {c.joint: np.asarray(c.target, float) for c in positions if c.joint in END_JOINTS}
         pelvis = next((c.target for c in trackers if isinstance(c, Orientation) and c.joint == J["pelvis"]), None)
-        if self.pelvis_orientation and pelvis is not None:   # and turns with it: the hips hang from it
+        if self.pelvis_orientation and pelvis is not None:  # and turns with it: the hips hang from it
             local = local.copy()
             for child, end in ROOT_CHAINS.items():
-                if end not in goals:     # an untracked leg or spine keeps its decoded direction
+                if end not in goals:  # an untracked leg or spine keeps its decoded direction
                     local[child] = pelvis.T @ local[0] @ local[child]
-            local[0] = pelvis            # a tracked one turns with the pelvis, then reaches
+            local[0] = pelvis  # a tracked one turns with the pelvis, then reaches
         if goals:
             local, glob, _ = solve_body(local, root, self.skeleton.offsets, goals, keep_shape=True)
         else:
             glob, _ = forward_kinematics(local, root, self.skeleton.offsets)
         return local, glob, root
 
-    def _solve(self, frame: TrackerFrame, state, z_prior=None, prior_weight=None, observe=False,
-               trackers: ConstraintSet | None = None, start: np.ndarray | None = None) -> BodyPose:
+    def _solve(
+        self,
+        frame: TrackerFrame,
+        state,
+        z_prior=None,
+        prior_weight=None,
+        observe=False,
+        trackers: ConstraintSet | None = None,
+        start: np.ndarray | None = None,
+    ) -> BodyPose | None:
         """One frame's search from state (z, root, yaw), or from a standing start (latent
         `start`, else the Gaussian's centre) when state is None."""
         trackers = self.tracker_constraints(frame) if trackers is None else trackers
@@ -355,7 +411,7 @@ class DragPoserEstimator(Estimator):
         self.optimizer.lam = self.optimizer.damping
         iterations = 10 * self.iterations if first else self.iterations
         used = 0
-        for used in range(1, iterations + 1):
+        for used in range(1, iterations + 1):  # noqa: B007 - the count after the loop is the point
             z, root, yaw, r0 = self.optimizer.step(constraints, z, root, yaw, z_prior, prior_weight)
             if constraints.converged(r0, self.tolerance, self.rotation_tolerance, END_JOINTS):
                 break
@@ -365,7 +421,7 @@ class DragPoserEstimator(Estimator):
             return None
         self._state = (z, root, float(yaw))
         local, glob, pos = self.optimizer.pose(z, root, yaw)
-        if observe and self.temporal is not None:   # the search's pose: its heights belong to z
+        if observe and self.temporal is not None:  # the search's pose: its heights belong to z
             heights = pos[HEIGHT_INDEX, 2] - (self.floor or 0.0)
             self.temporal.observe(z, np.asarray(root) * self._scale, yaw, heights * self._scale)
         if self.polish:

@@ -10,6 +10,7 @@ spends its 24 dimensions on the body's shape of motion.
   paper ("rotations and translations in root space", Andreou et al. 2022).
 - Decoder output: 22 local rotations in 6D (the root's without heading): 132 numbers.
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -39,17 +40,22 @@ def dual_quaternions(local_rot: np.ndarray, root_height: np.ndarray, offsets: np
     root[..., 2] = root_height
     glob, pos = forward_kinematics(local_rot, root, offsets)
     pos = pos.copy()
-    pos[..., 1:, :] -= root[..., None, :]           # joints relative to the root; the root keeps its height
+    pos[..., 1:, :] -= root[..., None, :]  # joints relative to the root; the root keeps its height
     lead = glob.shape[:-2]
-    real = Rotation.from_matrix(glob.reshape(-1, 3, 3)).as_quat().reshape(lead + (4,))   # x y z w
-    real = real * np.where(real[..., 3:4] < 0, -1.0, 1.0)                                # one hemisphere
+    real = Rotation.from_matrix(glob.reshape(-1, 3, 3)).as_quat().reshape(lead + (4,))  # x y z w
+    real = real * np.where(real[..., 3:4] < 0, -1.0, 1.0)  # one hemisphere
     # dual part: 0.5 * (t, 0) * q, quaternion product in x y z w
     t, (qx, qy, qz, qw) = pos, np.moveaxis(real, -1, 0)
     tx, ty, tz = np.moveaxis(t, -1, 0)
-    dual = 0.5 * np.stack([tx * qw + ty * qz - tz * qy,
-                           -tx * qz + ty * qw + tz * qx,
-                           tx * qy - ty * qx + tz * qw,
-                           -tx * qx - ty * qy - tz * qz], axis=-1)
+    dual = 0.5 * np.stack(
+        [
+            tx * qw + ty * qz - tz * qy,
+            -tx * qz + ty * qw + tz * qx,
+            tx * qy - ty * qx + tz * qw,
+            -tx * qx - ty * qy - tz * qz,
+        ],
+        axis=-1,
+    )
     return np.concatenate([real, dual], axis=-1).reshape(lead[:-1] + (ENCODER_INPUT,))
 
 
@@ -58,7 +64,7 @@ def dual_quaternions(local_rot: np.ndarray, root_height: np.ndarray, offsets: np
 # for the root, head, hands, and feet" beside each past latent: the latent alone does not say
 # whether the person walks or stands, nor how high they are.
 HEIGHT_JOINTS = ("pelvis", "head", "left_wrist", "right_wrist", "left_foot", "right_foot")
-LIMBS = {   # the paper's noise unit: one limb at a time
+LIMBS = {  # the paper's noise unit: one limb at a time
     "left_arm": ("left_collar", "left_shoulder", "left_elbow", "left_wrist"),
     "right_arm": ("right_collar", "right_shoulder", "right_elbow", "right_wrist"),
     "left_leg": ("left_hip", "left_knee", "left_ankle", "left_foot"),

@@ -14,6 +14,7 @@ predictions, so with a large `ahead` it carries a motion (a walking cycle) throu
 ambiguity instead of copying the solved pose back. Until W_p steps of history exist (W_p x n
 frames, about a second) there is no prediction and the caller falls back to its own prior.
 """
+
 from __future__ import annotations
 
 from collections import deque
@@ -30,9 +31,12 @@ FILE = "dragposer_temporal.onnx"
 class TemporalPrior:
     def __init__(self, model_dir: str | Path, ahead: int = 1, threads: int = 1, ramp: bool = True) -> None:
         self.session, meta = load_model(
-            Path(model_dir) / FILE, ("part", "temporal_predictor"),
+            Path(model_dir) / FILE,
+            ("part", "temporal_predictor"),
             {"past_latents": LATENT, "past_context": None, "future_latents": LATENT},
-            "train one with `sparse-body train dragposer --part temporal`, or set temporal_weight to 0", threads)
+            "train one with `sparse-body train dragposer --part temporal`, or set temporal_weight to 0",
+            threads,
+        )
         config = meta["config"]
         self.past, self.window, self.every = config["past"], config["future"], config["every"]
         if not 1 <= ahead <= self.window:
@@ -41,13 +45,13 @@ class TemporalPrior:
         self.reset()
 
     def reset(self) -> None:
-        self._history: deque = deque(maxlen=self.past + 1)    # (z, root, yaw, heights), every n frames
+        self._history: deque = deque(maxlen=self.past + 1)  # (z, root, yaw, heights), every n frames
         self._frames = 0
-        self._past = None                                      # the encoder's window
+        self._past: tuple[np.ndarray, np.ndarray] | None = None  # the encoder's window
         self._decoder: list[np.ndarray] = []
         self.prediction: np.ndarray | None = None
-        self._anchor: np.ndarray | None = None                # the latent solved at the tick
-        self._since = 0                                        # frames observed since the tick
+        self._anchor: np.ndarray | None = None  # the latent solved at the tick
+        self._since = 0  # frames observed since the tick
 
     def target(self) -> np.ndarray | None:
         """The prior for the next frame: None until there is a prediction."""
@@ -63,22 +67,24 @@ class TemporalPrior:
         self._since += 1
         if not tick:
             return
-        self._history.append((np.asarray(z, np.float32), np.asarray(root, float), float(yaw),
-                              np.asarray(heights, float)))
+        self._history.append(
+            (np.asarray(z, np.float32), np.asarray(root, float), float(yaw), np.asarray(heights, float))
+        )
         if len(self._history) <= self.past:
             return
         if self._past is None or len(self._decoder) >= self.ahead:
             steps = list(self._history)
-            context = temporal_context(np.array([s[1] for s in steps]), np.array([s[2] for s in steps]),
-                                       np.array([s[3] for s in steps]))[:-1]
+            context = temporal_context(
+                np.array([s[1] for s in steps]), np.array([s[2] for s in steps]), np.array([s[3] for s in steps])
+            )[:-1]
             self._past = (np.stack([s[0] for s in steps[:-1]])[None], context[None].astype(np.float32))
             self._decoder = [steps[-1][0]]
-        else:
+        elif self.prediction is not None:
             self._decoder.append(self.prediction.astype(np.float32))
         future = np.zeros((1, self.window, LATENT), np.float32)
-        future[0, :len(self._decoder)] = self._decoder
-        out = self.session.run(None, {"past_latents": self._past[0], "past_context": self._past[1],
-                                      "future_latents": future})[0]
+        future[0, : len(self._decoder)] = self._decoder
+        out = self.session.run(
+            None, {"past_latents": self._past[0], "past_context": self._past[1], "future_latents": future}
+        )[0]
         self.prediction = out[0, len(self._decoder) - 1].astype(np.float64)
         self._anchor, self._since = np.asarray(z, np.float64), 0
-

@@ -19,6 +19,7 @@ for head, hands, pelvis and feet: the joint's position relative to the head's gr
 (x, y) and its height (z), its rotation in 6D, its velocity in m/s (0 on its first sample),
 a presence flag: 6 x 13; and the heading's rate (rad/s). 79 values.
 """
+
 from __future__ import annotations
 
 from pathlib import Path
@@ -26,7 +27,6 @@ from pathlib import Path
 import numpy as np
 
 from ..core.rotations import heading, matrix_to_6d, yaw_matrix
-from .dragposer_pose import LATENT
 from .onnx_model import load_model
 
 FILE = "dragposer_tracker_prior.onnx"
@@ -35,22 +35,30 @@ SITE_FEATURES = 13
 FEATURES = len(SITES) * SITE_FEATURES + 1
 
 
-def sequence_features(positions: np.ndarray, rotations: np.ndarray, present: np.ndarray, fps: float,
-                      last_positions: np.ndarray | None = None, last_present: np.ndarray | None = None,
-                      last_yaw: float | None = None) -> np.ndarray:
+def sequence_features(
+    positions: np.ndarray,
+    rotations: np.ndarray,
+    present: np.ndarray,
+    fps: float,
+    last_positions: np.ndarray | None = None,
+    last_present: np.ndarray | None = None,
+    last_yaw: float | None = None,
+) -> np.ndarray:
     """(T, 79) from the SITES' joint positions (T, 6, 3), rotations (T, 6, 3, 3) and presence
     (T, 6). The head must be present in every frame. last_*: the frame before the first
     (streaming: one frame at a time keeps the velocities)."""
     T = len(positions)
     yaw = heading(rotations[:, 0])
-    to_head = np.swapaxes(yaw_matrix(yaw), -1, -2)                              # (T, 3, 3)
+    to_head = np.swapaxes(yaw_matrix(yaw), -1, -2)  # (T, 3, 3)
     ground = positions[:, 0].copy()
     ground[:, 2] = 0.0
     rel = np.einsum("tij,tsj->tsi", to_head, positions - ground[:, None])
-    rot = matrix_to_6d(to_head[:, None] @ rotations)                             # (T, 6, 6)
+    rot = matrix_to_6d(to_head[:, None] @ rotations)  # (T, 6, 6)
     prev_pos = np.concatenate([positions[:1] if last_positions is None else last_positions[None], positions[:-1]])
-    prev_ok = np.concatenate([np.zeros((1, len(SITES)), bool) if last_present is None else last_present[None],
-                              present[:-1]]) & present
+    prev_ok = (
+        np.concatenate([np.zeros((1, len(SITES)), bool) if last_present is None else last_present[None], present[:-1]])
+        & present
+    )
     vel = np.einsum("tij,tsj->tsi", to_head, positions - prev_pos) * fps * prev_ok[..., None]
     prev_yaw = np.concatenate([[yaw[0] if last_yaw is None else last_yaw], yaw[:-1]])
     turn = np.angle(np.exp(1j * (yaw - prev_yaw))) * fps
@@ -63,15 +71,21 @@ class TrackerPrior:
 
     def __init__(self, model_dir: str | Path, fps: float, threads: int = 1) -> None:
         self.session, meta = load_model(
-            Path(model_dir) / FILE, ("part", "tracker_prior"), {"features": FEATURES, "state": None},
-            "train one with `sparse-body train dragposer --part tracker_prior`, or set tracker_prior to 0", threads)
+            Path(model_dir) / FILE,
+            ("part", "tracker_prior"),
+            {"features": FEATURES, "state": None},
+            "train one with `sparse-body train dragposer --part tracker_prior`, or set tracker_prior to 0",
+            threads,
+        )
         self.state_shape = meta["state_shape"]
         self.fps = fps
         self.reset()
 
     def reset(self) -> None:
         self._state = np.zeros(self.state_shape, np.float32)
-        self._last = None            # (positions, present, yaw) of the previous frame
+        self._last: tuple[np.ndarray, np.ndarray, float] | None = (
+            None  # (positions, present, yaw) of the previous frame
+        )
 
     def predict(self, targets: dict) -> np.ndarray | None:
         """targets: site -> (position, rotation) of its joint on the canonical body (floor

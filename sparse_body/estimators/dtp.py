@@ -22,12 +22,15 @@ lookahead model, process() (offline: `sparse-body eval`, `sparse-body process`) 
 frame the 5 frames after it (frames at the model's rate); step() cannot see the future, so a
 live node runs it without (worse than the online model: use that one live).
 """
+
 from __future__ import annotations
 
 import bisect
 from collections import deque
+from collections.abc import Iterable
 from dataclasses import dataclass
 from pathlib import Path
+from typing import cast
 
 import numpy as np
 
@@ -40,13 +43,13 @@ from ..core.sensors import SITE_JOINTS
 from ..core.skeleton import JOINT_INDEX, PARENTS
 from ..core.types import BodyPose, TrackerFrame, TrackerStream
 from .base import Estimator
-from .options import FLOOR, MAX_GAP, THREADS, Range
 from .dtp_features import FEATURES, FOOT_LEAVES, INPUT_SITES, LEAF_SITES, leaf_features, window_features
 from .lobstr_features import body_scale
 from .onnx_model import load_model, shipped_model_path
+from .options import FLOOR, MAX_GAP, THREADS, Range
 
 IDENTITY = np.array([0.0, 0.0, 0.0, 1.0])
-FOOT_JOINTS = frozenset(JOINT_INDEX[SITE_JOINTS[s]] for s in ("left_foot", "right_foot"))   # the ankles
+FOOT_JOINTS = frozenset(JOINT_INDEX[SITE_JOINTS[s]] for s in ("left_foot", "right_foot"))  # the ankles
 
 
 # the shipped models: model:=NAME
@@ -58,8 +61,9 @@ class DtpModel:
 
     def __init__(self, path: str | Path, threads: int = 1) -> None:
         self.path = Path(path)
-        self.session, meta = load_model(self.path, ("method", "dtp"), {"window": FEATURES},
-                                        "train one with `sparse-body train dtp`", threads)
+        self.session, meta = load_model(
+            self.path, ("method", "dtp"), {"window": FEATURES}, "train one with `sparse-body train dtp`", threads
+        )
         try:
             self.config = meta["config"]
             self.past, self.future = int(self.config["past"]), int(self.config["future"])
@@ -76,13 +80,14 @@ class DtpModel:
 @dataclass
 class Sample:
     """One frame as the network and the polish see it."""
+
     stamp: float
-    pelvis_pos: np.ndarray          # canonical scale, floor at z = 0
+    pelvis_pos: np.ndarray  # canonical scale, floor at z = 0
     pelvis_rot: np.ndarray
-    leaves: np.ndarray              # (60,) leaf_features
-    root: np.ndarray                # the pelvis joint as tracked (the person's scale)
-    goals: dict[int, np.ndarray]    # joint -> tracked position: head, hands, and the feet with a sample
-    turns: dict[int, np.ndarray]    # joint -> tracked rotation, for the same joints
+    leaves: np.ndarray  # (60,) leaf_features
+    root: np.ndarray  # the pelvis joint as tracked (the person's scale)
+    goals: dict[int, np.ndarray]  # joint -> tracked position: head, hands, and the feet with a sample
+    turns: dict[int, np.ndarray]  # joint -> tracked rotation, for the same joints
 
 
 class DtpEstimator(Estimator):
@@ -91,12 +96,26 @@ class DtpEstimator(Estimator):
     option_ranges = {
         "foot_trust": Range(0.0, 5.0, "metres between tracker and network foot fully trusted"),
         "foot_speed": Range(0.0, 100.0, "m/s: a foot tracker jumping faster is not followed"),
-        "floor_height": FLOOR, "max_gap": MAX_GAP, "threads": THREADS,
+        "floor_height": FLOOR,
+        "max_gap": MAX_GAP,
+        "threads": THREADS,
     }
 
-    def __init__(self, sensors, skeleton, fps: float = 60.0, model: str = "online", model_path: str | None = None,
-                 polish: bool = True, foot_trust: float = 0.4, foot_speed: float = 8.0, end_orientations: bool = True,
-                 floor_height: float = 0.0, max_gap: float = 0.5, threads: int = 1) -> None:
+    def __init__(
+        self,
+        sensors,
+        skeleton,
+        fps: float = 60.0,
+        model: str = "online",
+        model_path: str | None = None,
+        polish: bool = True,
+        foot_trust: float = 0.4,
+        foot_speed: float = 8.0,
+        end_orientations: bool = True,
+        floor_height: float = 0.0,
+        max_gap: float = 0.5,
+        threads: int = 1,
+    ) -> None:
         super().__init__(sensors, skeleton, fps)
         self.model = DtpModel(model_path or shipped_model_path("DTP", MODELS, model), threads)
         self.scale = body_scale(skeleton)
@@ -108,7 +127,7 @@ class DtpEstimator(Estimator):
 
     def _reset(self) -> None:
         self._history: deque[tuple[float, Sample]] = deque()
-        self._previous: Sample | None = None          # the last frame the polish saw
+        self._previous: Sample | None = None  # the last frame the polish saw
         self._last_toes: np.ndarray | None = None
 
     def sample(self, frame: TrackerFrame) -> Sample | None:
@@ -116,18 +135,28 @@ class DtpEstimator(Estimator):
         targets = [self.joint_target(frame, s) for s in INPUT_SITES]
         if any(t is None or t[0] is None or t[1] is None for t in targets[:4]):
             return None
-        usable = [(j, t) for j, t in zip(self._joints[1:], targets[1:])
-                  if t is not None and t[0] is not None and t[1] is not None]
+        usable = [
+            (j, t)
+            for j, t in zip(self._joints[1:], targets[1:], strict=True)
+            if t is not None and t[0] is not None and t[1] is not None
+        ]
         goals = {j: np.asarray(t[0], float) for j, t in usable}
         turns = {j: np.asarray(t[1], float) for j, t in usable}
-        for k in FOOT_LEAVES:        # a foot without a usable sample reads as an occluded tracker
+        for k in FOOT_LEAVES:  # a foot without a usable sample reads as an occluded tracker
             t = targets[1 + k]
             if t is None or t[0] is None or t[1] is None:
                 targets[1 + k] = self.sensors.site(LEAF_SITES[k]).joint_pose(np.zeros(3), IDENTITY)
         pos = (np.stack([t[0] for t in targets]) - [0.0, 0.0, self.floor]) * self.scale
         rot = np.stack([t[1] for t in targets])
-        return Sample(frame.stamp, pos[0], rot[0], leaf_features(pos[0], rot[0], pos[1:], rot[1:]),
-                      np.asarray(targets[0][0], float), goals, turns)
+        return Sample(
+            frame.stamp,
+            pos[0],
+            rot[0],
+            leaf_features(pos[0], rot[0], pos[1:], rot[1:]),
+            np.asarray(targets[0][0], float),
+            goals,
+            turns,
+        )
 
     def _estimate(self, frame: TrackerFrame) -> BodyPose | None:
         sample = self.sample(frame)
@@ -160,8 +189,12 @@ class DtpEstimator(Estimator):
 
     @staticmethod
     def _features(window: list[Sample], current: int) -> np.ndarray:
-        return window_features(np.stack([w.pelvis_pos for w in window]), np.stack([w.pelvis_rot for w in window]),
-                               np.stack([w.leaves for w in window]), current)
+        return window_features(
+            np.stack([w.pelvis_pos for w in window]),
+            np.stack([w.pelvis_rot for w in window]),
+            np.stack([w.leaves for w in window]),
+            current,
+        )
 
     def _pose(self, sample: Sample, local_1_21: np.ndarray) -> BodyPose:
         local = np.concatenate([sample.pelvis_rot[None], local_1_21])
@@ -189,8 +222,13 @@ class DtpEstimator(Estimator):
         for j, p in sample.goals.items():
             if j in FOOT_JOINTS:
                 w = np.clip(2.0 - np.linalg.norm(p - pos[j]) / self.foot_trust, 0.0, 1.0)
-                if self.foot_speed and previous is not None and j in previous.goals and \
-                        np.linalg.norm(p - previous.goals[j]) > self.foot_speed * max(sample.stamp - previous.stamp, 1e-3):
+                if (
+                    self.foot_speed
+                    and previous is not None
+                    and j in previous.goals
+                    and np.linalg.norm(p - previous.goals[j])
+                    > self.foot_speed * max(sample.stamp - previous.stamp, 1e-3)
+                ):
                     w = 0.0
                 if w == 0.0:
                     continue
@@ -199,13 +237,13 @@ class DtpEstimator(Estimator):
             if j not in FOOT_JOINTS or w == 1.0:
                 followed.append(j)
         local, glob, pos = solve_body(local, sample.root, offsets, goals, keep_shape=True)
-        if self.end_orientations:   # the tracked joints take their trackers' orientation, as the IK's do
+        if self.end_orientations:  # the tracked joints take their trackers' orientation, as the IK's do
             for j in followed:
                 local[j] = glob[PARENTS[j]].T @ sample.turns[j]
-                glob[j] = sample.turns[j]      # (what hangs below, a toe, is placed from it by the caller)
+                glob[j] = sample.turns[j]  # (what hangs below, a toe, is placed from it by the caller)
         return local, glob, pos
 
-    def process(self, stream: TrackerStream) -> list[BodyPose]:
+    def process(self, stream: TrackerStream | Iterable[TrackerFrame]) -> list[BodyPose]:
         """One pose per frame; with a lookahead model each frame also sees the `future`
         frames after it (offline), else as step() does."""
         if not self.model.future:
@@ -216,12 +254,15 @@ class DtpEstimator(Estimator):
         # runs of usable frames without a gap longer than max_gap: a window stays within one
         run_of, run = [], 0
         for i, s in enumerate(samples):
-            if s is not None and i and (samples[i - 1] is None
-                                        or not 0 < frames[i].stamp - frames[i - 1].stamp <= self.max_gap):
+            if (
+                s is not None
+                and i
+                and (samples[i - 1] is None or not 0 < frames[i].stamp - frames[i - 1].stamp <= self.max_gap)
+            ):
                 run += 1
             run_of.append(run if s is not None else -1)
         poses = []
-        for i, (frame, s) in enumerate(zip(frames, samples)):
+        for i, (frame, s) in enumerate(zip(frames, samples, strict=True)):
             if s is None:
                 poses.append(self._checked(frame.stamp, None))
                 continue
@@ -230,6 +271,6 @@ class DtpEstimator(Estimator):
                 lo -= 1
             while hi < i + self.model.future and hi + 1 < len(frames) and run_of[hi + 1] == run_of[i]:
                 hi += 1
-            x = self._features(samples[lo:hi + 1], i - lo)
+            x = self._features(cast(list[Sample], samples[lo : hi + 1]), i - lo)  # one run: no gaps
             poses.append(self._checked(frame.stamp, self._pose(s, self.model.run(x, i - lo))))
         return poses

@@ -16,6 +16,7 @@ Positions are scaled to the canonical body (leg length) first, as LoBSTr's are.
 Output: the local rotations of joints 1..21 (6D, 126 values); the pelvis's rotation and
 position are the pelvis tracker's (paper, eq. 3).
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -27,31 +28,33 @@ from ..core.skeleton import JOINT_INDEX, NUM_JOINTS
 PELVIS_SITE = "pelvis"
 LEAF_SITES = ("head", "left_hand", "right_hand", "left_foot", "right_foot")
 INPUT_SITES = (PELVIS_SITE,) + LEAF_SITES
-INPUT_JOINTS = tuple(JOINT_INDEX[SITE_JOINTS[s]] for s in INPUT_SITES)   # the feet trackers follow the ankles
-FOOT_LEAVES = (3, 4)           # left and right foot among LEAF_SITES
+INPUT_JOINTS = tuple(JOINT_INDEX[SITE_JOINTS[s]] for s in INPUT_SITES)  # the feet trackers follow the ankles
+FOOT_LEAVES = (3, 4)  # left and right foot among LEAF_SITES
 FEATURES = 3 + 9 + len(LEAF_SITES) * 12
 OUTPUTS = (NUM_JOINTS - 1) * 6
 LEAF_FEATURES = len(LEAF_SITES) * 12
 
 
-def leaf_features(pelvis_pos: np.ndarray, pelvis_rot: np.ndarray, positions: np.ndarray,
-                  rotations: np.ndarray) -> np.ndarray:
+def leaf_features(
+    pelvis_pos: np.ndarray, pelvis_rot: np.ndarray, positions: np.ndarray, rotations: np.ndarray
+) -> np.ndarray:
     """(..., 60): the leaves (..., 5, 3) / (..., 5, 3, 3) in the pelvis frame (..., 3) / (..., 3, 3)."""
     rt = np.swapaxes(pelvis_rot, -1, -2)
     pos = np.einsum("...ij,...kj->...ki", rt, positions - pelvis_pos[..., None, :])
     rot = rt[..., None, :, :] @ rotations
-    parts = np.concatenate([pos, rot.reshape(rot.shape[:-2] + (9,))], axis=-1)   # (..., 5, 12)
+    parts = np.concatenate([pos, rot.reshape(rot.shape[:-2] + (9,))], axis=-1)  # (..., 5, 12)
     return parts.reshape(parts.shape[:-2] + (LEAF_FEATURES,))
 
 
-def window_features(pelvis_pos: np.ndarray, pelvis_rot: np.ndarray, leaves: np.ndarray,
-                    current: int | np.ndarray = -1) -> np.ndarray:
+def window_features(
+    pelvis_pos: np.ndarray, pelvis_rot: np.ndarray, leaves: np.ndarray, current: int | np.ndarray = -1
+) -> np.ndarray:
     """(..., W, 72) network input for a window of frames: pelvis (..., W, 3) / (..., W, 3, 3)
     in world coordinates (floor at z = 0, canonical scale), leaves (..., W, 60) from
     leaf_features; current: the window index (or one per window) whose heading and floor
     position are the reference."""
     ref_pos, ref_rot = _at(pelvis_pos, current, 1), _at(pelvis_rot, current, 2)
-    yaw_t = np.swapaxes(yaw_matrix(heading(ref_rot)), -1, -2)[..., None, :, :]      # (..., 1, 3, 3)
+    yaw_t = np.swapaxes(yaw_matrix(heading(ref_rot)), -1, -2)[..., None, :, :]  # (..., 1, 3, 3)
     rel = np.einsum("...ij,...j->...i", yaw_t, pelvis_pos - ref_pos[..., None, :])
     rel[..., 2] = pelvis_pos[..., 2]
     rot = (yaw_t @ pelvis_rot).reshape(pelvis_rot.shape[:-2] + (9,))

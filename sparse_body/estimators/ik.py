@@ -7,6 +7,7 @@ closed form, the swivel carried from the previous frame); then the end joint tak
 tracker's orientation. Untracked legs keep a standing pose. Orientation-only trackers
 (IMUs) only turn their end joint.
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -50,7 +51,9 @@ class IKEstimator(Estimator):
             return None
         local, root, glob, pos = solved
         # the toes under the ankles' final rotations (what contacts are judged on)
-        toes = np.stack([pos[a] + glob[a] @ self.skeleton.offsets[f] for a, f in zip(_ANKLES, FOOT_JOINTS)])
+        toes = np.stack(
+            [pos[a] + glob[a] @ self.skeleton.offsets[f] for a, f in zip(_ANKLES, FOOT_JOINTS, strict=True)]
+        )
         contact = toe_contacts(toes, self._last_toes, self.fps, self.floor)
         self._last_toes = toes
         return BodyPose(frame.stamp, rotations_to_quat(local), np.asarray(root, float), contact.astype(float), contact)
@@ -78,12 +81,13 @@ class IKEstimator(Estimator):
         else:
             return None
         goals = {J[SITE_JOINTS[site]]: t[0] for site, t in targets.items() if t is not None and t[0] is not None}
-        if not pelvis_pose:   # the root already hangs from the head: leave the spine alone
+        if not pelvis_pose:  # the root already hangs from the head: leave the spine alone
             goals.pop(J["head"], None)
-        local, glob, pos = solve_body(local, root, self.skeleton.offsets, goals, keep_shape=start is not None,
-                                      spine_tolerance=spine_tolerance)
+        local, glob, pos = solve_body(
+            local, root, self.skeleton.offsets, goals, keep_shape=start is not None, spine_tolerance=spine_tolerance
+        )
         for site, target in targets.items():
-            if target is not None and target[1] is not None:   # the end joint takes the tracker's orientation
+            if target is not None and target[1] is not None:  # the end joint takes the tracker's orientation
                 end = J[SITE_JOINTS[site]]
                 local[end] = glob[PARENTS[end]].T @ target[1]
                 glob[end] = target[1]

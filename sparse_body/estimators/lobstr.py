@@ -11,6 +11,7 @@ re-running a one-second window each frame (the model is trained on 1.5 s chunks 
 test_lobstr shows streaming equals running the recurrent net over the window). A gap in the
 input longer than max_gap, or time going back, starts the state over.
 """
+
 from __future__ import annotations
 
 from pathlib import Path
@@ -22,15 +23,14 @@ from ..core.sensors import SITE_JOINTS
 from ..core.skeleton import JOINT_INDEX as J
 from ..core.types import BodyPose, TrackerFrame
 from .base import Estimator
-from .options import FLOOR, MAX_GAP, THREADS, Range
 from .contact_ik import ContactHold
 from .ik import IKEstimator
 from .lobstr_features import INPUT_SITES, OUTPUTS, apply_legs, apply_upper, body_scale, feature_count, features
 from .onnx_model import load_model
+from .options import FLOOR, MAX_GAP, THREADS, Range
 from .reference import standing_pose
 
-
-_ENDS = [J[SITE_JOINTS[site]] for site in INPUT_SITES[1:]]   # head and hands, in input order
+_ENDS = [J[SITE_JOINTS[site]] for site in INPUT_SITES[1:]]  # head and hands, in input order
 # metres: the IK's soft reach leaves an end at most 0.63 cm short; beyond this the predicted
 # torso put a tracker out of the arm's or the spine's reach (0.4 % of the validation frames)
 REACHED = 0.02
@@ -42,6 +42,7 @@ SPINE_TOLERANCE = 0.015
 
 def default_model_path() -> Path:
     from ..resources import models_dir
+
     return models_dir() / "lobstr.onnx"
 
 
@@ -50,8 +51,13 @@ class LobstrModel:
 
     def __init__(self, path: str | Path | None = None, threads: int = 1) -> None:
         self.path = Path(path) if path else default_model_path()
-        self.session, meta = load_model(self.path, ("method", "lobstr"), {"features": None, "state": None},
-                                        "train one with `sparse-body train lobstr`", threads)
+        self.session, meta = load_model(
+            self.path,
+            ("method", "lobstr"),
+            {"features": None, "state": None},
+            "train one with `sparse-body train lobstr`",
+            threads,
+        )
         try:
             self.config = meta["config"]
             self.hidden, self.fps = int(self.config["hidden"]), float(self.config["fps"])
@@ -61,15 +67,18 @@ class LobstrModel:
         self.features = feature_count(self.learned_upper)
         width = {i.name: i.shape for i in self.session.get_inputs()}["features"][-1]
         if isinstance(width, int) and width != self.features:
-            raise ValueError(f"{self.path}: input 'features' has last dimension {width}, "
-                             f"this LoBSTr model's configuration needs {self.features}")
+            raise ValueError(
+                f"{self.path}: input 'features' has last dimension {width}, "
+                f"this LoBSTr model's configuration needs {self.features}"
+            )
 
     def initial_state(self) -> np.ndarray:
         return np.zeros((1, 1, self.hidden), dtype=np.float32)
 
     def step(self, x: np.ndarray, state: np.ndarray):
-        pose, prob, state = self.session.run(None, {"features": x.reshape(1, self.features).astype(np.float32),
-                                                    "state": state})
+        pose, prob, state = self.session.run(
+            None, {"features": x.reshape(1, self.features).astype(np.float32), "state": state}
+        )
         return pose[0], prob[0], state
 
 
@@ -77,9 +86,9 @@ def _retime(x: np.ndarray, ratio: float) -> np.ndarray:
     """Velocities measured over dt, expressed per model frame (ratio = model dt / dt)."""
     x = x.copy()
     for b in range(4):
-        x[b * 9:b * 9 + 3] *= ratio
-        rotvec = matrix_to_axis_angle(sixd_to_matrix(x[b * 9 + 3:b * 9 + 9]))
-        x[b * 9 + 3:b * 9 + 9] = matrix_to_6d(axis_angle_to_matrix(rotvec * ratio))
+        x[b * 9 : b * 9 + 3] *= ratio
+        rotvec = matrix_to_axis_angle(sixd_to_matrix(x[b * 9 + 3 : b * 9 + 9]))
+        x[b * 9 + 3 : b * 9 + 9] = matrix_to_6d(axis_angle_to_matrix(rotvec * ratio))
     return x
 
 
@@ -89,21 +98,34 @@ class LobstrEstimator(Estimator):
     option_ranges = {
         "contact_threshold": Range(0.0, 1.0, "a contact probability"),
         "release_frames": Range(0, 600, "frames to let a contact go over"),
-        "floor_height": FLOOR, "max_gap": MAX_GAP, "threads": THREADS,
+        "floor_height": FLOOR,
+        "max_gap": MAX_GAP,
+        "threads": THREADS,
         "spine_tolerance": Range(0.0, 0.0199, "metres the predicted spine may leave the head off"),
     }
 
-    def __init__(self, sensors, skeleton, fps: float = 60.0, model_path: str | None = None,
-                 contact_ik: bool = True, contact_threshold: float = 0.5, release_frames: int = 10,
-                 floor_height: float = 0.0, max_gap: float = 0.5, learned_upper: bool = True,
-                 spine_tolerance: float = SPINE_TOLERANCE, threads: int = 1) -> None:
+    def __init__(
+        self,
+        sensors,
+        skeleton,
+        fps: float = 60.0,
+        model_path: str | None = None,
+        contact_ik: bool = True,
+        contact_threshold: float = 0.5,
+        release_frames: int = 10,
+        floor_height: float = 0.0,
+        max_gap: float = 0.5,
+        learned_upper: bool = True,
+        spine_tolerance: float = SPINE_TOLERANCE,
+        threads: int = 1,
+    ) -> None:
         super().__init__(sensors, skeleton, fps)
         self.model = LobstrModel(model_path, threads)
         self.learned_upper = learned_upper and self.model.learned_upper
         if not (np.isfinite(spine_tolerance) and 0.0 <= spine_tolerance < REACHED):
             raise ValueError(f"spine_tolerance must be between 0 and {REACHED} m, got {spine_tolerance}")
         self.spine_tolerance = spine_tolerance
-        self._start = standing_pose()   # the network replaces all but the pelvis, and the legs after
+        self._start = standing_pose()  # the network replaces all but the pelvis, and the legs after
         self.scale = body_scale(skeleton)
         self.floor, self.max_gap, self.threshold = floor_height, max_gap, contact_threshold
         # Feet trackers, if configured, are not LoBSTr's input: the upper body sees only its four.
@@ -122,13 +144,15 @@ class LobstrEstimator(Estimator):
     def _reached(targets, positions: np.ndarray) -> bool:
         """Whether the solved head and hands are within REACHED of their targets (the
         INPUT_SITES targets of this frame)."""
-        return all(np.linalg.norm(positions[joint] - target[0]) <= REACHED
-                   for joint, target in zip(_ENDS, targets[1:]))
+        return all(
+            np.linalg.norm(positions[joint] - target[0]) <= REACHED
+            for joint, target in zip(_ENDS, targets[1:], strict=True)
+        )
 
     def _estimate(self, frame: TrackerFrame) -> BodyPose | None:
         targets = [self.joint_target(frame, s) for s in INPUT_SITES]
         if any(t is None or t[0] is None or t[1] is None for t in targets):
-            return None   # keep the previous sample: the next velocity spans the gap
+            return None  # keep the previous sample: the next velocity spans the gap
         pos = (np.stack([t[0] for t in targets]) - [0.0, 0.0, self.floor]) * self.scale
         rot = np.stack([t[1] for t in targets])
         if self._prev is None or not 0 < frame.stamp - self._prev[0] <= self.max_gap:
@@ -146,7 +170,7 @@ class LobstrEstimator(Estimator):
         if self.learned_upper:
             upper = self.upper.solve(frame, apply_upper(self._start, out[OUTPUTS:]), self.spine_tolerance)
             if upper is not None and not self._reached(targets, upper[3]):
-                upper = None    # a predicted torso that leaves a tracker out of reach: the IK's frame
+                upper = None  # a predicted torso that leaves a tracker out of reach: the IK's frame
         upper = upper or self.upper.solve(frame)
         if upper is None:
             return None

@@ -20,6 +20,7 @@ the model never saw (`sparse-body eval --per-joint`). With it the network also p
 is, it also sees the current pose: head and hands relative to the reference (position and
 6D rotation) and the pelvis's tilt in the reference frame, 3 x 9 + 6 = 33 more inputs.
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -30,8 +31,16 @@ from ..core.skeleton import JOINT_INDEX, UPPER_BODY, Skeleton
 # The tracked joints, in input order: the reference comes from the pelvis.
 INPUT_SITES = ("pelvis", "head", "left_hand", "right_hand")
 INPUT_JOINTS = tuple(JOINT_INDEX[j] for j in ("pelvis", "head", "left_wrist", "right_wrist"))
-LEG_JOINT_NAMES = ("left_hip", "right_hip", "left_knee", "right_knee",
-                   "left_ankle", "right_ankle", "left_foot", "right_foot")
+LEG_JOINT_NAMES = (
+    "left_hip",
+    "right_hip",
+    "left_knee",
+    "right_knee",
+    "left_ankle",
+    "right_ankle",
+    "left_foot",
+    "right_foot",
+)
 LEG_JOINTS = tuple(JOINT_INDEX[j] for j in LEG_JOINT_NAMES)
 HIPS = LEG_JOINTS[:2]
 UPPER_JOINTS = tuple(JOINT_INDEX[j] for j in UPPER_BODY)
@@ -59,8 +68,14 @@ def reference_frames(pelvis_rot: np.ndarray) -> np.ndarray:
     return yaw_matrix(heading(pelvis_rot))
 
 
-def features(positions: np.ndarray, rotations: np.ndarray, previous_positions: np.ndarray,
-             previous_rotations: np.ndarray, floor: float = 0.0, pose: bool = False) -> np.ndarray:
+def features(
+    positions: np.ndarray,
+    rotations: np.ndarray,
+    previous_positions: np.ndarray,
+    previous_rotations: np.ndarray,
+    floor: float = 0.0,
+    pose: bool = False,
+) -> np.ndarray:
     """Input vectors (..., 37) from the 4 tracked joints now and one frame earlier; with
     pose, (..., 70): the current pose's 33 after them.
 
@@ -90,8 +105,9 @@ def features(positions: np.ndarray, rotations: np.ndarray, previous_positions: n
     return np.concatenate(parts, axis=-1)
 
 
-def sequence_features(positions: np.ndarray, rotations: np.ndarray, floor: float = 0.0,
-                      pose: bool = False) -> np.ndarray:
+def sequence_features(
+    positions: np.ndarray, rotations: np.ndarray, floor: float = 0.0, pose: bool = False
+) -> np.ndarray:
     """(T, 37) or with pose (T, 70) for a sequence of tracked joints (T, 4, 3) / (T, 4, 3, 3);
     the first frame has zero velocity."""
     prev_p = np.concatenate([positions[:1], positions[:-1]])

@@ -4,19 +4,22 @@ A model is refused with its path and the reason when the file is missing (with h
 one), when ONNX Runtime cannot load it, when its metadata says it is some other model, or
 when its inputs are not the ones the estimator feeds (names and last dimensions): a wrong
 file fails at configure, not at every step."""
+
 from __future__ import annotations
 
 import json
 from pathlib import Path
 
 
-def load_model(path: str | Path, kind: tuple[str, str], inputs: dict[str, int | None], missing_hint: str,
-               threads: int = 1):
+def load_model(
+    path: str | Path, kind: tuple[str, str], inputs: dict[str, int | None], missing_hint: str, threads: int = 1
+):
     """(InferenceSession, metadata with JSON values decoded) of the model at path.
 
     kind: (metadata key, value) that names the model, e.g. ("method", "lobstr"); inputs:
     input name -> its last dimension (None: any)."""
     import onnxruntime as ort
+
     path = Path(path)
     if not path.is_file():
         raise FileNotFoundError(f"{path}: no model there; {missing_hint}")
@@ -39,7 +42,12 @@ def load_model(path: str | Path, kind: tuple[str, str], inputs: dict[str, int | 
     for name, last in inputs.items():
         if name not in have:
             raise ValueError(f"{path}: a {value} model needs an input {name!r}; this one has {', '.join(have)}")
-        if last is not None and have[name] and have[name][-1] not in (last, None) and not isinstance(have[name][-1], str):
+        if (
+            last is not None
+            and have[name]
+            and have[name][-1] not in (last, None)
+            and not isinstance(have[name][-1], str)
+        ):
             raise ValueError(f"{path}: input {name!r} has last dimension {have[name][-1]}, a {value} model's is {last}")
     return session, meta
 
@@ -48,7 +56,10 @@ def shipped_model_path(method: str, models: dict[str, str], name: str, others: s
     """The package's model file for `model:=name` of a method's shipped models (name -> file);
     others: further names the estimator accepts, for the error."""
     from ..resources import models_dir
+
     if name not in models:
-        raise ValueError(f"unknown {method} model {name!r}; shipped: {', '.join([*models, *filter(None, [others])])} "
-                         "(or model_path:=FILE)")
+        raise ValueError(
+            f"unknown {method} model {name!r}; shipped: {', '.join([*models, *filter(None, [others])])} "
+            "(or model_path:=FILE)"
+        )
     return models_dir() / models[name]

@@ -4,12 +4,13 @@ types and ranges, checked before an estimator (and its model) is made.
 An option is a keyword of the estimator's constructor; its annotation gives the type, and the
 class's `option_ranges` the closed interval a number must lie in. A test holds every numeric
 option of every registered estimator to having a range."""
+
 from __future__ import annotations
 
 import inspect
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Callable
 
 # the constructor's leading arguments, which are not options
 NOT_OPTIONS = ("self", "sensors", "skeleton", "fps")
@@ -29,7 +30,7 @@ class Range:
 @dataclass(frozen=True)
 class Option:
     name: str
-    annotation: str           # as written in the signature: "float", "str | None", ...
+    annotation: str  # as written in the signature: "float", "str | None", ...
     default: object
 
     @property
@@ -46,8 +47,11 @@ def options_of(*functions: Callable) -> dict[str, Option]:
     found: dict[str, Option] = {}
     for function in functions:
         for p in inspect.signature(function).parameters.values():
-            if p.kind is inspect.Parameter.POSITIONAL_OR_KEYWORD and p.name not in NOT_OPTIONS \
-                    and p.default is not inspect.Parameter.empty:
+            if (
+                p.kind is inspect.Parameter.POSITIONAL_OR_KEYWORD
+                and p.name not in NOT_OPTIONS
+                and p.default is not inspect.Parameter.empty
+            ):
                 found[p.name] = Option(p.name, str(p.annotation), p.default)
     return found
 
@@ -57,11 +61,21 @@ def check_value(estimator: str, option: Option, value: object, ranges: dict[str,
     prefix = f"estimator {estimator!r}: {option.name}"
     is_bool = isinstance(value, bool)
     if not isinstance(value, option.types) or (is_bool and bool not in option.types):
-        kinds = " or ".join(dict.fromkeys({"float": "a number", "int": "an integer", "bool": "true or false",
-                                           "str": "a text", "Path": "a path", "None": "null"}
-                                          .get(p.strip(), p.strip()) for p in option.annotation.split("|")))
+        kinds = " or ".join(
+            dict.fromkeys(
+                {
+                    "float": "a number",
+                    "int": "an integer",
+                    "bool": "true or false",
+                    "str": "a text",
+                    "Path": "a path",
+                    "None": "null",
+                }.get(p.strip(), p.strip())
+                for p in option.annotation.split("|")
+            )
+        )
         raise ValueError(f"{prefix} takes {kinds}, got {value!r}")
-    if option.numeric and not is_bool and value is not None:
+    if option.numeric and not is_bool and isinstance(value, (int, float)):
         bounds = ranges.get(option.name)
         if not math.isfinite(value) or (bounds is not None and not bounds.low <= value <= bounds.high):
             raise ValueError(f"{prefix} must be {bounds or 'finite'}, got {value!r}")

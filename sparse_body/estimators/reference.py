@@ -4,6 +4,7 @@ It needs no training and sets the floor every learned estimator must beat: the b
 with arms down, its pelvis taken from a pelvis tracker when there is one, otherwise hung
 below the headset and turned to the headset's heading.
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -20,8 +21,8 @@ def standing_pose() -> np.ndarray:
     """(22, 3, 3) local rotations: the rest pose with the arms lowered to the sides."""
     local = np.tile(np.eye(3), (NUM_JOINTS, 1, 1))
     # Rest arms point along +-y; a roll of -+80 degrees about x brings them down.
-    local[JOINT_INDEX["left_shoulder"]] = euler_to_matrix([np.deg2rad(-80.0), 0, 0], "xyz")
-    local[JOINT_INDEX["right_shoulder"]] = euler_to_matrix([np.deg2rad(80.0), 0, 0], "xyz")
+    local[JOINT_INDEX["left_shoulder"]] = euler_to_matrix(np.array([np.deg2rad(-80.0), 0, 0]), "xyz")
+    local[JOINT_INDEX["right_shoulder"]] = euler_to_matrix(np.array([np.deg2rad(80.0), 0, 0]), "xyz")
     return local
 
 
@@ -40,7 +41,7 @@ class ReferenceEstimator(Estimator):
         pelvis = self.joint_target(frame, "pelvis")
         head = self.joint_target(frame, "head")
         full = lambda t: t is not None and t[0] is not None and t[1] is not None  # noqa: E731
-        pelvis = pelvis if full(pelvis) else None   # needs a full pose
+        pelvis = pelvis if full(pelvis) else None  # needs a full pose
         head = head if full(head) else None
         if pelvis is not None:
             root_pos, root_rot = pelvis[0], yaw_matrix(heading(pelvis[1]))
@@ -51,5 +52,6 @@ class ReferenceEstimator(Estimator):
             return None
         local = self._local.copy()
         local[0] = root_rot
-        return BodyPose(frame.stamp, matrix_to_quat(local), root_pos.astype(float), np.full(2, 0.5),
-                        np.ones(2, dtype=bool))
+        return BodyPose(
+            frame.stamp, matrix_to_quat(local), root_pos.astype(float), np.full(2, 0.5), np.ones(2, dtype=bool)
+        )

@@ -8,9 +8,12 @@ trackers on TF. Output: `refined/joint_states`, `refined/foot_contacts`,
 `~/set_constraint` (sparse_body/srv/SetConstraint). The lifecycle, parameters, diagnostics
 and output handling are the estimator node's.
 """
+
 from __future__ import annotations
 
 import numpy as np
+from rclpy.service import Service
+from rclpy.subscription import Subscription
 from sensor_msgs.msg import JointState
 
 from ..core.types import BodyPose
@@ -18,17 +21,22 @@ from ..estimators.base import Estimator
 from ..estimators.constraints import AboveFloor, AngleLimit, LookAt, Orientation, Position
 from ..output import pose_from_joint_state
 from .estimator_node import PARAMETERS as ESTIMATOR_PARAMETERS
-from .estimator_node import EstimatorNode, main as estimator_main
+from .estimator_node import RANGES as ESTIMATOR_RANGES
+from .estimator_node import EstimatorNode
+from .estimator_node import main as estimator_main
 from .messages import to_seconds
 
 PARAMETERS = {k: v for k, v in ESTIMATOR_PARAMETERS.items() if k != "estimator"}
-PARAMETERS.update({
-    "model_path": ("", "folder holding dragposer_encoder.onnx and dragposer_decoder.onnx; empty: the shipped"),
-    "frame_prefix": ("refined/", "prefix of the refined body's TF frames"),
-    "input_prefix": ("", "prefix of the input estimate's TF frames (its root is <input_prefix>pelvis)"),
-    "input_timeout": (0.2, "seconds after which the newest input estimate no longer counts"),
-    "iterations": (3, "latent optimisation steps per frame"),
-})
+PARAMETERS.update(
+    {
+        "model_path": ("", "folder holding dragposer_encoder.onnx and dragposer_decoder.onnx; empty: the shipped"),
+        "frame_prefix": ("refined/", "prefix of the refined body's TF frames"),
+        "input_prefix": ("", "prefix of the input estimate's TF frames (its root is <input_prefix>pelvis)"),
+        "input_timeout": (0.2, "seconds after which the newest input estimate no longer counts"),
+        "iterations": (3, "latent optimisation steps per frame"),
+    }
+)
+RANGES = {**ESTIMATOR_RANGES, "input_timeout": (0.01, 60.0), "iterations": (1, 100)}
 
 
 class InputRefiner(Estimator):
@@ -38,9 +46,17 @@ class InputRefiner(Estimator):
 
     def __init__(self, sensors, skeleton, fps: float, model_path: str, iterations: int, timeout: float) -> None:
         from ..estimators.dragposer import DragPoserEstimator
+
         super().__init__(sensors, skeleton, fps)
-        self.refiner = DragPoserEstimator(sensors, skeleton, fps, model_path=model_path or None, iterations=iterations,
-                                          temporal_weight=0.0, tracker_prior=0.0)   # the input pose is the prior
+        self.refiner = DragPoserEstimator(
+            sensors,
+            skeleton,
+            fps,
+            model_path=model_path or None,
+            iterations=iterations,
+            temporal_weight=0.0,
+            tracker_prior=0.0,
+        )  # the input pose is the prior
         self.timeout = timeout
         self.latest: BodyPose | None = None
         self.reset()
@@ -69,6 +85,7 @@ def constraint_from_request(request):
         return Position(**common, target=tuple(v[:3]))
     if request.type == "orientation":
         from scipy.spatial.transform import Rotation
+
         if not 0.9 < np.linalg.norm(v[:4]) < 1.1:
             raise ValueError("an orientation constraint needs a unit quaternion x y z w")
         return Orientation(**common, target=Rotation.from_quat(v[:4]).as_matrix())
@@ -82,33 +99,43 @@ def constraint_from_request(request):
 class ConstraintNode(EstimatorNode):
     NAME = "sparse_body_constraint"
     PARAMETERS = PARAMETERS
+    RANGES = RANGES
     OUTPUTS = "refined/"
 
+    estimator: InputRefiner | None = None  # type: ignore[assignment]  # the refiner is this node's estimator
+    sub_input: Subscription | None = None
+    srv_constraint: Service | None = None
+
     def _make_estimator(self, p: dict, sensors):
-        return InputRefiner(sensors, self.skeleton, p["output_rate"], p["model_path"], int(p["iterations"]),
-                            p["input_timeout"])
+        return InputRefiner(
+            sensors, self.skeleton, p["output_rate"], p["model_path"], int(p["iterations"]), p["input_timeout"]
+        )
 
     def _configure_inputs(self) -> None:
         from sparse_body.srv import SetConstraint
+
         self.sub_input = self.create_subscription(JointState, "input/joint_states", self._on_input, 10)
         self.srv_constraint = self.create_service(SetConstraint, "~/set_constraint", self._on_set_constraint)
+
+    def _method(self) -> str:
+        return "dragposer refinement"
 
     def _on_tracker(self) -> None:
         """The input estimate drives this node, not the trackers (they come first)."""
 
     def _on_input(self, msg: JointState) -> None:
-        if self.estimator is None:
+        if self.estimator is None or self.tf_in is None:
             return
         found = self.tf_in.lookup(self.sensors.fixed_frame, self.params["input_prefix"] + "pelvis")
         if found is None:
             return
         _, translation, rotation = found
         try:
-            self.estimator.latest = pose_from_joint_state(msg.name, msg.position, translation, rotation,
-                                                          to_seconds(msg.header.stamp))
+            self.estimator.latest = pose_from_joint_state(
+                msg.name, msg.position, translation, rotation, to_seconds(msg.header.stamp)
+            )
         except ValueError as err:
-            self._stats["errors"] += 1
-            self._stats["last_error"] = f"input: {err}"
+            self._stats.error(f"input: {err}")
             return
         if self.timer is not None:
             self._estimate(fallback=False)
@@ -128,15 +155,15 @@ class ConstraintNode(EstimatorNode):
                 response.success, response.message = True, f"set {constraint.name}"
         except ValueError as err:
             response.success, response.message = False, str(err)
-        response.active = constraints.user_names()     # as the service says: the user's, not the floor's
+        response.active = constraints.user_names()  # as the service says: the user's, not the floor's
         return response
 
     def _release(self) -> None:
-        for name in ("sub_input", "srv_constraint"):
-            handle = getattr(self, name, None)
-            if handle is not None:
-                (self.destroy_subscription if name == "sub_input" else self.destroy_service)(handle)
-            setattr(self, name, None)
+        if self.sub_input is not None:
+            self.destroy_subscription(self.sub_input)
+        if self.srv_constraint is not None:
+            self.destroy_service(self.srv_constraint)
+        self.sub_input = self.srv_constraint = None
         super()._release()
 
 

@@ -12,20 +12,22 @@ partial, and holds the pose (invalid) when no tracker sample has come for tracke
 Staleness is judged in the trackers' own time, so a starved CPU shows up as latency on
 /diagnostics, not as invalid estimates.
 """
+
 from __future__ import annotations
 
 import sys
 import time
-from collections import deque
 from dataclasses import replace
 
 import numpy as np
 import rclpy
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rcl_interfaces.msg import ParameterDescriptor, SetParametersResult
-from rclpy.lifecycle import LifecycleNode, LifecycleState, TransitionCallbackReturn
+from rclpy.lifecycle import LifecycleNode, LifecyclePublisher, LifecycleState, TransitionCallbackReturn
+from rclpy.publisher import Publisher
 from rclpy.qos import DurabilityPolicy, QoSProfile
 from rclpy.qos_overriding_options import QoSOverridingOptions
+from rclpy.timer import Timer
 from sensor_msgs.msg import JointState
 from std_msgs.msg import String
 
@@ -34,54 +36,103 @@ from sparse_body.msg import EstimateStatus, FootContacts
 from ..adapters.calibration import CalibrationError, person_body
 from ..core.rotations import matrix_to_quat
 from ..core.sensors import SensorConfigError, load_sensor_config
-from ..core.skeleton import JOINT_NAMES, Skeleton
+from ..core.skeleton import JOINT_NAMES
 from ..core.tracker_filter import PREFIX as FILTER
 from ..core.tracker_filter import FilterConfig
 from ..core.types import BodyPose
 from ..estimators import create_estimator
-from ..estimators.base import parse_estimator_spec
+from ..estimators.base import Estimator, parse_estimator_spec
 from ..estimators.reference import standing_pose
 from ..urdf import body_urdf
 from . import messages
+from .estimate_stats import EstimateStats
 from .spin import init, spin_until_shutdown
 from .tf_input import TfReader
 
-FILTER_DEFAULTS = FilterConfig()      # the filter's defaults are the estimators' (core/tracker_filter.py)
+FILTER_DEFAULTS = FilterConfig()  # the filter's defaults are the estimators' (core/tracker_filter.py)
 
 PARAMETERS = {
     # name: (default, description)
     "sensors": ("six_point", "sensor configuration: a name under config/sensors or a YAML path"),
-    "estimator": ("ik", "estimation method: ik, reference, lobstr, dragposer, dtp, avatarjlm, refined:base=NAME (options as NAME:key=value,...)"),
+    "estimator": (
+        "ik",
+        "estimation method: ik, reference, lobstr, dragposer, dtp, avatarjlm, refined:base=NAME "
+        "(options as NAME:key=value,...)",
+    ),
     "model_path": ("", "model file for learned estimators; empty: the shipped model"),
     "fixed_frame": ("", "frame the trackers are looked up in; empty: the sensor configuration's"),
     "height": (1.75, "the tracked person's height in metres (scales the canonical body; unused with a calibration)"),
-    "calibration": ("", "T-pose calibration YAML (the tracker bridge's ~/calibrate writes one): the body it fitted "
-                        "is the one estimated and published; empty: the canonical body at height"),
-    "filter_position_noise": (FILTER_DEFAULTS.position_noise, "tracker position noise (m, std per axis) the input filter is set for; "
-                                     "0 with filter_rotation_noise 0: no filtering"),
-    "filter_rotation_noise": (FILTER_DEFAULTS.rotation_noise, "tracker orientation noise (degrees, std per axis) the input filter is set for"),
-    "filter_acceleration": (FILTER_DEFAULTS.acceleration, "how hard a tracked body part accelerates (m/s^2/sqrt(Hz)): higher follows faster "
-                                 "motion with less lag and smooths less"),
+    "calibration": (
+        "",
+        "T-pose calibration YAML (the tracker bridge's ~/calibrate writes one): the body it fitted "
+        "is the one estimated and published; empty: the canonical body at height",
+    ),
+    "filter_position_noise": (
+        FILTER_DEFAULTS.position_noise,
+        "tracker position noise (m, std per axis) the input filter is set for; "
+        "0 with filter_rotation_noise 0: no filtering",
+    ),
+    "filter_rotation_noise": (
+        FILTER_DEFAULTS.rotation_noise,
+        "tracker orientation noise (degrees, std per axis) the input filter is set for",
+    ),
+    "filter_acceleration": (
+        FILTER_DEFAULTS.acceleration,
+        "how hard a tracked body part accelerates (m/s^2/sqrt(Hz)): higher follows faster "
+        "motion with less lag and smooths less",
+    ),
     "filter_spin_acceleration": (FILTER_DEFAULTS.spin_acceleration, "the same for turning (rad/s^2/sqrt(Hz))"),
-    "output_rate": (60.0, "estimates per second when the trackers do not drive them (input slow, partial or "
-                          "absent); estimates driven by tracker input are limited to twice this"),
-    "stale_timeout": (0.1, "a tracker's newest sample no longer counts when it is this many seconds (or three of "
-                           "the tracker's own sample intervals, if longer) behind the newest tracker sample"),
-    "tracker_timeout": (1.0, "seconds in which no new tracker sample arrived after which the estimate is held, "
-                             "invalid: the trackers stopped (a node running late on a busy CPU stays valid)"),
+    "output_rate": (
+        60.0,
+        "estimates per second when the trackers do not drive them (input slow, partial or "
+        "absent); estimates driven by tracker input are limited to twice this",
+    ),
+    "stale_timeout": (
+        0.1,
+        "a tracker's newest sample no longer counts when it is this many seconds (or three of "
+        "the tracker's own sample intervals, if longer) behind the newest tracker sample",
+    ),
+    "tracker_timeout": (
+        1.0,
+        "seconds in which no new tracker sample arrived after which the estimate is held, "
+        "invalid: the trackers stopped (a node running late on a busy CPU stays valid)",
+    ),
     "frame_prefix": ("", "prefix of the body's TF frames"),
     "publish_link_tf": (True, "publish every body link on /tf (off when robot_state_publisher does)"),
     "autostart": (False, "configure and activate on start-up (without a lifecycle manager)"),
 }
 # Numbers outside these bounds are refused with the reason (at configure and on a live set).
-RANGES = {"height": (0.5, 2.5), "filter_position_noise": (0.0, 0.1), "filter_rotation_noise": (0.0, 10.0),
-          "filter_acceleration": (0.01, 1000.0), "filter_spin_acceleration": (0.01, 1000.0), "output_rate": (0.1, 1000.0), "stale_timeout": (0.001, 10.0),
-          "tracker_timeout": (0.01, 60.0), "input_timeout": (0.01, 60.0), "iterations": (1, 100)}
+RANGES = {
+    "height": (0.5, 2.5),
+    "filter_position_noise": (0.0, 0.1),
+    "filter_rotation_noise": (0.0, 10.0),
+    "filter_acceleration": (0.01, 1000.0),
+    "filter_spin_acceleration": (0.01, 1000.0),
+    "output_rate": (0.1, 1000.0),
+    "stale_timeout": (0.001, 10.0),
+    "tracker_timeout": (0.01, 60.0),
+}
 # What a configured node applies at once; the rest is refused until it is cleaned up.
 LIVE = {"stale_timeout", "tracker_timeout", "publish_link_tf", "autostart"}
 
 
-def check_parameter(name: str, value, default) -> str | None:
+def _check_estimator_spec(value: str) -> str | None:
+    from ..estimators.base import estimator_names
+
+    try:
+        method, _ = parse_estimator_spec(value)
+    except ValueError as err:
+        return str(err)
+    if method not in estimator_names():
+        return f"unknown estimator {method!r}; available: {', '.join(estimator_names())}"
+    return None
+
+
+# Text parameters with a form to check (the rest are checked where they are used, at configure).
+TEXT_CHECKS = {"estimator": _check_estimator_spec}
+
+
+def check_parameter(name: str, value, default, ranges: dict[str, tuple[float, float]] = RANGES) -> str | None:
     """Why value is not acceptable for parameter name (whose default shows its type), or None."""
     if isinstance(default, bool):
         return None if isinstance(value, bool) else f"{name} must be true or false, got {value!r}"
@@ -90,26 +141,33 @@ def check_parameter(name: str, value, default) -> str | None:
             return f"{name} must be a finite number, got {value!r}"
         if isinstance(default, int) and not float(value).is_integer():
             return f"{name} must be a whole number, got {value!r}"
-        low, high = RANGES.get(name, (-np.inf, np.inf))
+        low, high = ranges.get(name, (-np.inf, np.inf))
         return None if low <= value <= high else f"{name} must be between {low:g} and {high:g}, got {value!r}"
     if isinstance(default, str):
         if not isinstance(value, str):
             return f"{name} must be a string, got {value!r}"
-        if name == "estimator":
-            from ..estimators.base import ESTIMATORS
-            try:
-                method, _ = parse_estimator_spec(value)
-            except ValueError as err:
-                return str(err)
-            if method not in ESTIMATORS:
-                return f"unknown estimator {method!r}; available: {', '.join(sorted(ESTIMATORS))}"
+        if name in TEXT_CHECKS:
+            return TEXT_CHECKS[name](value)
     return None
 
 
 class EstimatorNode(LifecycleNode):
     NAME = "sparse_body_estimator"
     PARAMETERS = PARAMETERS
-    OUTPUTS = ""          # namespace of the output topics
+    RANGES = RANGES
+    OUTPUTS = ""  # namespace of the output topics
+
+    # Made in on_configure (timers in on_activate), destroyed in _release / _stop_timers.
+    estimator: Estimator | None = None
+    tf_in: TfReader | None = None
+    pub_joints: LifecyclePublisher | None = None
+    pub_contacts: LifecyclePublisher | None = None
+    pub_status: LifecyclePublisher | None = None
+    pub_tf: LifecyclePublisher | None = None
+    pub_diag: LifecyclePublisher | None = None
+    pub_description: Publisher | None = None
+    timer: Timer | None = None
+    diag_timer: Timer | None = None
 
     def __init__(self, **kwargs) -> None:
         super().__init__(self.NAME, **kwargs)
@@ -124,12 +182,12 @@ class EstimatorNode(LifecycleNode):
         for prm in parameters:
             if prm.name not in self.PARAMETERS:
                 continue
-            reason = check_parameter(prm.name, prm.value, self.PARAMETERS[prm.name][0])
+            reason = check_parameter(prm.name, prm.value, self.PARAMETERS[prm.name][0], self.RANGES)
             if reason is None and self.estimator is not None and prm.name not in LIVE:
                 reason = f"{prm.name} takes effect at configure: deactivate and clean up the node first"
             if reason is not None:
                 return SetParametersResult(successful=False, reason=reason)
-        if self.estimator is not None:       # configured: the live ones apply from the next estimate
+        if self.estimator is not None:  # configured: the live ones apply from the next estimate
             for prm in parameters:
                 if prm.name in LIVE and prm.name in self.params:
                     self.params[prm.name] = prm.value
@@ -138,7 +196,11 @@ class EstimatorNode(LifecycleNode):
     # -- lifecycle -------------------------------------------------------------------------
     def on_configure(self, state: LifecycleState) -> TransitionCallbackReturn:
         p = {name: self.get_parameter(name).value for name in self.PARAMETERS}
-        problems = [r for name, (default, _) in self.PARAMETERS.items() if (r := check_parameter(name, p[name], default))]
+        problems = [
+            r
+            for name, (default, _) in self.PARAMETERS.items()
+            if (r := check_parameter(name, p[name], default, self.RANGES))
+        ]
         if problems:
             self.get_logger().error(f"configure failed: {'; '.join(problems)}")
             return TransitionCallbackReturn.FAILURE
@@ -161,27 +223,33 @@ class EstimatorNode(LifecycleNode):
             return TransitionCallbackReturn.FAILURE
         self.sensors, self.params = sensors, p
         self._frames = [s.frame_id for s in sensors.sites]
-        own = {p["frame_prefix"] + name for name in JOINT_NAMES}     # the body's links, as messages.transforms names them
+        own = {p["frame_prefix"] + name for name in JOINT_NAMES}  # the body's links, as messages.transforms names them
         self.tf_in = TfReader(self, set(self._frames), ignore_frames=own, on_tracker=self._tracker_arrived)
         self._configure_inputs()
         overrides = QoSOverridingOptions.with_default_policies()
-        from tf2_msgs.msg import TFMessage   # here, not at import: the stand-in exists only after setup
+        from tf2_msgs.msg import TFMessage  # here, not at import: the stand-in exists only after setup
+
         self._tf_message = TFMessage
         ns = self.OUTPUTS
         # one profile object per publisher: rclpy's QoS overrides change the object they are given
-        self.pub_joints = self.create_lifecycle_publisher(JointState, ns + "joint_states", QoSProfile(depth=10),
-                                                          qos_overriding_options=overrides)
-        self.pub_contacts = self.create_lifecycle_publisher(FootContacts, ns + "foot_contacts", QoSProfile(depth=10),
-                                                            qos_overriding_options=overrides)
-        self.pub_status = self.create_lifecycle_publisher(EstimateStatus, ns + "estimate_status", QoSProfile(depth=10),
-                                                          qos_overriding_options=overrides)
+        self.pub_joints = self.create_lifecycle_publisher(
+            JointState, ns + "joint_states", QoSProfile(depth=10), qos_overriding_options=overrides
+        )
+        self.pub_contacts = self.create_lifecycle_publisher(
+            FootContacts, ns + "foot_contacts", QoSProfile(depth=10), qos_overriding_options=overrides
+        )
+        self.pub_status = self.create_lifecycle_publisher(
+            EstimateStatus, ns + "estimate_status", QoSProfile(depth=10), qos_overriding_options=overrides
+        )
         self.pub_tf = self.create_lifecycle_publisher(TFMessage, "/tf", QoSProfile(depth=100))
         self.pub_diag = self.create_lifecycle_publisher(DiagnosticArray, "/diagnostics", QoSProfile(depth=10))
         latched = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL)
         self.pub_description = self.create_publisher(String, ns + "robot_description", latched)
         self.pub_description.publish(String(data=body_urdf(self.skeleton)))
-        self.get_logger().info(f"configured: {p.get('estimator', 'refinement')} on {sensors.name} ({', '.join(sensors.site_names)}) "
-                               f"in frame {sensors.fixed_frame!r}")
+        self.get_logger().info(
+            f"configured: {self._method()} on {sensors.name} ({', '.join(sensors.site_names)}) "
+            f"in frame {sensors.fixed_frame!r}"
+        )
         return TransitionCallbackReturn.SUCCESS
 
     def _make_estimator(self, p: dict, sensors):
@@ -191,22 +259,27 @@ class EstimatorNode(LifecycleNode):
         name, options = parse_estimator_spec(p["estimator"])
         if p["model_path"]:
             options["model_path"] = p["model_path"]
-        options.update({k: p[k] for k, (default, _) in self.PARAMETERS.items()
-                        if k.startswith(FILTER) and p[k] != default})
+        options.update(
+            {k: p[k] for k, (default, _) in self.PARAMETERS.items() if k.startswith(FILTER) and p[k] != default}
+        )
         return create_estimator(name, sensors, self.skeleton, fps=p["output_rate"], **options)
 
     def _configure_inputs(self) -> None:
         """More inputs than the trackers' TF (the constraint node's estimate)."""
 
+    def _method(self) -> str:
+        """What estimates, as diagnostics and the log name it."""
+        return self.params["estimator"]
+
     def on_activate(self, state: LifecycleState) -> TransitionCallbackReturn:
+        assert self.estimator is not None  # activate follows a successful configure
         self.estimator.reset()
-        self._stats = {"steps": deque(maxlen=600), "latency": deque(maxlen=600), "invalid": 0, "errors": 0,
-                       "resets": 0, "last_error": "", "input driven": 0, "fallback": 0}
-        self._last_now = None
-        self._last_input = -np.inf      # the newest tracker stamp the last estimate used
-        self._last_step = -np.inf       # when it was made (monotonic)
-        self._last_arrival = -np.inf    # when a new tracker sample last arrived (monotonic)
-        self._silence_seen = False      # the last call found the trackers silent (see _estimate)
+        self._stats = EstimateStats()
+        self._last_now: float | None = None
+        self._last_input = -np.inf  # the newest tracker stamp the last estimate used
+        self._last_step = -np.inf  # when it was made (monotonic)
+        self._last_arrival = -np.inf  # when a new tracker sample last arrived (monotonic)
+        self._silence_seen = False  # the last call found the trackers silent (see _estimate)
         self.timer = self.create_timer(1.0 / self.params["output_rate"], self._tick)
         self.diag_timer = self.create_timer(1.0, self._publish_diagnostics)
         return super().on_activate(state)
@@ -226,24 +299,26 @@ class EstimatorNode(LifecycleNode):
         return TransitionCallbackReturn.SUCCESS
 
     def _stop_timers(self) -> None:
-        for name in ("timer", "diag_timer"):
-            timer = getattr(self, name, None)
-            if timer is not None:
-                self.destroy_timer(timer)
-                setattr(self, name, None)
+        if self.timer is not None:
+            self.destroy_timer(self.timer)
+        if self.diag_timer is not None:
+            self.destroy_timer(self.diag_timer)
+        self.timer = self.diag_timer = None
 
     def _release(self) -> None:
-        for name in ("pub_joints", "pub_contacts", "pub_status", "pub_tf", "pub_diag", "pub_description"):
-            pub = getattr(self, name, None)
+        for pub in (self.pub_joints, self.pub_contacts, self.pub_status, self.pub_tf, self.pub_diag):
             if pub is not None:
-                self.destroy_publisher(pub)
-        if getattr(self, "tf_in", None) is not None:
+                self.destroy_lifecycle_publisher(pub)
+        if self.pub_description is not None:
+            self.destroy_publisher(self.pub_description)
+        if self.tf_in is not None:
             self.tf_in.destroy()
         self.tf_in = self.estimator = None
         self.pub_joints = self.pub_contacts = self.pub_status = self.pub_tf = self.pub_diag = None
-        self.pub_description = self.timer = self.diag_timer = None
+        self.pub_description = None
         self._last_good: BodyPose | None = None
-        self._ages = self._site_valid = None
+        self._ages: np.ndarray | None = None
+        self._site_valid: np.ndarray | None = None
 
     # -- work --------------------------------------------------------------------------------
     def _tracker_arrived(self) -> None:
@@ -257,6 +332,7 @@ class EstimatorNode(LifecycleNode):
         newest samples waiting in the cache (the fallback timer picks up what is left)."""
         if self.timer is None or time.monotonic() - self._last_step < 0.5 / self.params["output_rate"]:
             return
+        assert self.tf_in is not None  # the timer exists only while the node is active
         stamps = np.array(self.tf_in.stamps(self._frames))
         dynamic = stamps[np.isfinite(stamps)]
         if not len(dynamic):
@@ -273,14 +349,39 @@ class EstimatorNode(LifecycleNode):
             self._estimate(fallback=True)
 
     def _estimate(self, fallback: bool) -> None:
+        """One estimate from the trackers' newest samples: gathered, stepped, published."""
         now = self.get_clock().now().nanoseconds * 1e-9
+        self._restart_on_jump_back(now)
+        gathered = self._gather(now, fallback)
+        if gathered is None:
+            return
+        frame, stamps, newest, no_input, silent = gathered
+        pose, reason = self._step(frame)
+        # Stamp the outputs with the newest tracker stamp used, so latency can be measured.
+        source_time = float(stamps[frame.valid].max()) if frame.valid.any() else now
+        if not pose.valid:
+            self._stats.invalid += 1
+            reason = reason or self._held_reason(frame, no_input, silent)
+        self._publish(pose, messages.to_time(source_time), reason)
+        self._last_step = time.monotonic()
+        if not no_input:
+            self._last_input = newest
+        self._stats.estimated(fallback, None if no_input else now - source_time)
+
+    def _restart_on_jump_back(self, now: float) -> None:
+        """A clock jump back (a looping bag, a restarted simulation): start afresh."""
+        assert self.tf_in is not None and self.estimator is not None  # estimates come only while active
         if (self._last_now is not None and now < self._last_now - 1.0) or self.tf_in.jumped_back:
-            # A clock jump back (a looping bag, a restarted simulation): start afresh.
             self.tf_in.jumped_back = False
             self.estimator.reset()
             self._last_input = -np.inf
-            self._stats["resets"] += 1
+            self._stats.resets += 1
         self._last_now = now
+
+    def _gather(self, now: float, fallback: bool):
+        """(frame, each tracker's sample stamp, the newest tracker stamp, no input, seconds
+        silent) to estimate from, or None when there is nothing to do yet."""
+        assert self.tf_in is not None
         # a tracker whose whole chain is static is current
         stamps = np.array([now if s == np.inf else s for s in self.tf_in.stamps(self._frames)])
         newest = stamps.max() if len(stamps) else -np.inf
@@ -294,51 +395,50 @@ class EstimatorNode(LifecycleNode):
             # (rclpy takes timers first); those are taken before the next call, so trackers
             # that are alive are seen alive by then.
             self._silence_seen = True
-            return
+            return None
         self._silence_seen = no_input
         if fallback and not no_input and newest <= self._last_input:
-            return                                       # nothing new yet: wait for the trackers
+            return None  # nothing new yet: wait for the trackers
         frame, stamps = self.tf_in.sample(self.sensors, now if no_input else newest, self.params["stale_timeout"])
         if no_input:
             frame.valid[:] = False
         self._ages, self._site_valid = now - stamps, frame.valid.copy()
-        reason = ""
+        return frame, stamps, newest, no_input, silent if np.isfinite(newest) else np.inf
+
+    def _step(self, frame) -> tuple[BodyPose, str]:
+        """The estimator's pose for frame (finite: a failure holds the last good pose) and
+        the reason when it is held."""
+        assert self.estimator is not None
         try:
             pose = self.estimator.step(frame)
             if not pose.is_finite():
                 raise FloatingPointError("estimator returned non-finite values")
         except Exception as err:  # noqa: BLE001 - a failing step must not take the node down
-            self._stats["errors"] += 1
-            self._stats["last_error"] = f"{type(err).__name__}: {err}"
+            self._stats.error(f"{type(err).__name__}: {err}")
             self.estimator.reset()
-            pose, reason = self._held(frame.stamp), "estimator error; held"
+            return self._held(frame.stamp), "estimator error; held"
         if pose.valid:
             self._last_good = pose
-        elif not pose.is_finite():
-            pose = self._held(frame.stamp)
-        # Stamp the outputs with the newest tracker stamp used, so latency can be measured.
-        source_time = float(stamps[frame.valid].max()) if frame.valid.any() else now
-        stamp = messages.to_time(source_time)
-        if not pose.valid:
-            self._stats["invalid"] += 1
-            if not reason and no_input:
-                reason = ("held: no tracker input yet" if not (np.isfinite(newest) and np.isfinite(silent))
-                          else f"held: no tracker input for {silent:.1f} s")
-            elif not reason:
-                missing = [s for s, ok in zip(self.sensors.site_names, frame.valid) if not ok]
-                reason = f"held: no usable pose from {', '.join(missing)}" if missing else "held"
-        frame_id = self.sensors.fixed_frame
+        return pose, ""
+
+    def _held_reason(self, frame, no_input: bool, silent: float) -> str:
+        if no_input:
+            return (
+                "held: no tracker input yet"
+                if not np.isfinite(silent)
+                else f"held: no tracker input for {silent:.1f} s"
+            )
+        missing = [s for s, ok in zip(self.sensors.site_names, frame.valid, strict=True) if not ok]
+        return f"held: no usable pose from {', '.join(missing)}" if missing else "held"
+
+    def _publish(self, pose: BodyPose, stamp, reason: str) -> None:
+        assert self.pub_joints and self.pub_contacts and self.pub_status and self.pub_tf
+        frame_id, p = self.sensors.fixed_frame, self.params
         self.pub_joints.publish(messages.joint_state(pose, stamp))
         self.pub_contacts.publish(messages.foot_contacts(pose, self.skeleton, stamp, frame_id))
         self.pub_status.publish(messages.estimate_status(pose, stamp, frame_id, reason))
-        self.pub_tf.publish(self._tf_message(transforms=messages.transforms(
-            pose, self.skeleton, stamp, frame_id, self.params["frame_prefix"], self.params["publish_link_tf"])))
-        self._last_step = time.monotonic()
-        if not no_input:
-            self._last_input = newest
-            self._stats["latency"].append(now - source_time)
-        self._stats["steps"].append(self._last_step)
-        self._stats["fallback" if fallback else "input driven"] += 1
+        links = messages.transforms(pose, self.skeleton, stamp, frame_id, p["frame_prefix"], p["publish_link_tf"])
+        self.pub_tf.publish(self._tf_message(transforms=links))
 
     def _held(self, stamp: float) -> BodyPose:
         if self._last_good is None:
@@ -346,40 +446,23 @@ class EstimatorNode(LifecycleNode):
         return self._last_good.held(stamp)
 
     def _publish_diagnostics(self) -> None:
-        st = self._stats
-        steps = [t for t in st["steps"] if t > time.monotonic() - 2.0]
-        rate = (len(steps) - 1) / (steps[-1] - steps[0]) if len(steps) > 2 else 0.0
-        lat = np.array(st["latency"]) * 1000 if st["latency"] else np.zeros(1)
-        values = {"output rate [Hz]": f"{rate:.1f}", "latency p50 [ms]": f"{np.percentile(lat, 50):.1f}",
-                  "latency p99 [ms]": f"{np.percentile(lat, 99):.1f}", "invalid estimates": str(st["invalid"]),
-                  "estimator errors": str(st["errors"]), "clock jumps back": str(st["resets"])}
-        values["estimates driven by input"] = str(st["input driven"])
-        values["estimates by the fallback timer"] = str(st["fallback"])
-        stale = []
-        for k, site in enumerate(self.sensors.site_names if self._ages is not None else []):
-            age = self._ages[k]
-            values[f"{site} age [s]"] = "never seen" if not np.isfinite(age) else f"{age:.3f}"
-            if not self._site_valid[k]:
-                stale.append(site)
-        for reason, count in self.tf_in.rejected.items():
-            values[f"rejected samples: {reason.value}"] = str(count)
-        if st["errors"]:
-            values["last error"] = st["last_error"]
-        level, message = DiagnosticStatus.OK, "estimating"
-        if stale:
-            level, message = DiagnosticStatus.WARN, f"stale or missing trackers: {', '.join(stale)}"
-        if st["errors"] and st["last_error"]:
-            level, message = DiagnosticStatus.ERROR, f"estimator errors ({st['errors']}): {st['last_error']}"
-        status = DiagnosticStatus(level=level, name=f"{self.get_name()}: estimator", message=message,
-                                  hardware_id=self.params.get("estimator", "dragposer refinement"),
-                                  values=[KeyValue(key=k, value=v) for k, v in values.items()])
+        assert self.tf_in is not None and self.pub_diag is not None  # the timer exists only while active
+        rejected = {reason.value: count for reason, count in self.tf_in.rejected.items()}
+        level, message, values = self._stats.status(self.sensors.site_names, self._ages, self._site_valid, rejected)
+        status = DiagnosticStatus(
+            level=level,
+            name=f"{self.get_name()}: estimator",
+            message=message,
+            hardware_id=self._method(),
+            values=[KeyValue(key=k, value=v) for k, v in values.items()],
+        )
         msg = DiagnosticArray(status=[status])
         msg.header.stamp = self.get_clock().now().to_msg()
         self.pub_diag.publish(msg)
 
 
 def main(args=None, node_class=None) -> None:
-    init(args)      # a signal while the model loads ends the node as soon as spinning starts
+    init(args)  # a signal while the model loads ends the node as soon as spinning starts
     node = (node_class or EstimatorNode)()
     if node.get_parameter("autostart").value:
         if node.trigger_configure() != TransitionCallbackReturn.SUCCESS:

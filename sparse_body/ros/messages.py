@@ -1,7 +1,7 @@
 """Core types <-> rclpy messages."""
+
 from __future__ import annotations
 
-import numpy as np
 from builtin_interfaces.msg import Time
 from geometry_msgs.msg import Point, TransformStamped
 from sensor_msgs.msg import JointState
@@ -38,19 +38,28 @@ def foot_contacts(pose: BodyPose, skeleton: Skeleton, stamp: Time, frame_id: str
     points = contact_points(pose, skeleton)
     for k, name in enumerate(FOOT_NAMES):
         x, y, z = map(float, points[k])
-        msg.contacts.append(FootContact(name=name, in_contact=bool(pose.contact[k]),
-                                        probability=float(pose.contact_probability[k]), contact_point=Point(x=x, y=y, z=z)))
+        msg.contacts.append(
+            FootContact(
+                name=name,
+                in_contact=bool(pose.contact[k]),
+                probability=float(pose.contact_probability[k]),
+                contact_point=Point(x=x, y=y, z=z),
+            )
+        )
     return msg
 
 
 def estimate_status(pose: BodyPose, stamp: Time, frame_id: str, reason: str = "") -> EstimateStatus:
-    msg = EstimateStatus(valid=bool(pose.valid), message="" if pose.valid else (reason or "held: too little tracker input"))
+    msg = EstimateStatus(
+        valid=bool(pose.valid), message="" if pose.valid else (reason or "held: too little tracker input")
+    )
     msg.header.stamp, msg.header.frame_id = stamp, frame_id
     return msg
 
 
-def transforms(pose: BodyPose, skeleton: Skeleton, stamp: Time, fixed_frame: str, prefix: str,
-               links: bool) -> list[TransformStamped]:
+def transforms(
+    pose: BodyPose, skeleton: Skeleton, stamp: Time, fixed_frame: str, prefix: str, links: bool
+) -> list[TransformStamped]:
     out = []
     for t in body_transforms(pose, skeleton, fixed_frame, prefix, links):
         msg = TransformStamped()

@@ -5,6 +5,7 @@ taking a message: that race ended nodes with `RuntimeError: Unable to convert ca
 and exit status 1. Here the signals only set a flag; the spin loop sees it within a tenth of
 a second and the node is destroyed and the context shut down in order, from the main thread.
 """
+
 from __future__ import annotations
 
 import signal
@@ -38,6 +39,7 @@ def spin_until_shutdown(node, threads: int = 1) -> None:
     threads > 1: a multi-threaded executor, so a callback in its own group can wait without
     stopping the others. An error raised while stopping is part of stopping, not a failure."""
     from rclpy.executors import MultiThreadedExecutor, SingleThreadedExecutor
+
     executor = MultiThreadedExecutor(num_threads=threads) if threads > 1 else SingleThreadedExecutor()
     executor.add_node(node)
     try:

@@ -7,6 +7,7 @@ clock jumps back (the estimator must start over) and the arrival of a tracker sa
 drives the estimate). The reader refuses non-finite, out-of-order and jumped-back samples,
 ignores the frames the node publishes itself, and tells the node when a tracker moved.
 """
+
 from __future__ import annotations
 
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
@@ -21,11 +22,20 @@ TF_QUEUE_PER_TRACKER, TF_QUEUE_MIN = 1, 4
 
 
 def tf_qos(tracker_count: int) -> QoSProfile:
-    return QoSProfile(depth=TF_QUEUE_MIN + TF_QUEUE_PER_TRACKER * tracker_count,
-                      reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.VOLATILE,
-                      history=HistoryPolicy.KEEP_LAST)
-TF_STATIC_QOS = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE,
-                           durability=DurabilityPolicy.TRANSIENT_LOCAL, history=HistoryPolicy.KEEP_LAST)
+    return QoSProfile(
+        depth=TF_QUEUE_MIN + TF_QUEUE_PER_TRACKER * tracker_count,
+        reliability=ReliabilityPolicy.RELIABLE,
+        durability=DurabilityPolicy.VOLATILE,
+        history=HistoryPolicy.KEEP_LAST,
+    )
+
+
+TF_STATIC_QOS = QoSProfile(
+    depth=100,
+    reliability=ReliabilityPolicy.RELIABLE,
+    durability=DurabilityPolicy.TRANSIENT_LOCAL,
+    history=HistoryPolicy.KEEP_LAST,
+)
 
 
 class TfReader:
@@ -33,9 +43,16 @@ class TfReader:
 
     on_tracker() is called after a message that brought a new sample of a tracker frame."""
 
-    def __init__(self, node, tracker_frames: set[str], ignore_frames: set[str] = frozenset(),
-                 on_tracker=None, jump_back: float = 1.0) -> None:
+    def __init__(
+        self,
+        node,
+        tracker_frames: set[str],
+        ignore_frames: set[str] | frozenset[str] = frozenset(),
+        on_tracker=None,
+        jump_back: float = 1.0,
+    ) -> None:
         from tf2_msgs.msg import TFMessage
+
         self.cache = TfCache(jump_back)
         self.tracker_frames = set(tracker_frames)
         self.ignore_frames = set(ignore_frames) - self.tracker_frames
@@ -43,9 +60,12 @@ class TfReader:
         self.rejected = {a: 0 for a in Accepted if a is not Accepted.OK}
         self.jumped_back = False
         self._node = node
-        self._subs = [node.create_subscription(TFMessage, "/tf", lambda m: self._on_tf(m, False),
-                                               tf_qos(len(self.tracker_frames))),
-                      node.create_subscription(TFMessage, "/tf_static", lambda m: self._on_tf(m, True), TF_STATIC_QOS)]
+        self._subs = [
+            node.create_subscription(
+                TFMessage, "/tf", lambda m: self._on_tf(m, False), tf_qos(len(self.tracker_frames))
+            ),
+            node.create_subscription(TFMessage, "/tf_static", lambda m: self._on_tf(m, True), TF_STATIC_QOS),
+        ]
 
     def _on_tf(self, msg, static: bool) -> None:
         moved = False
@@ -54,8 +74,9 @@ class TfReader:
             if child in self.ignore_frames:
                 continue
             tr, q = tf.transform.translation, tf.transform.rotation
-            result = self.cache.set(tf.header.frame_id, child, to_seconds(tf.header.stamp),
-                                    (tr.x, tr.y, tr.z), (q.x, q.y, q.z, q.w), static)
+            result = self.cache.set(
+                tf.header.frame_id, child, to_seconds(tf.header.stamp), (tr.x, tr.y, tr.z), (q.x, q.y, q.z, q.w), static
+            )
             if result is Accepted.JUMPED_BACK:
                 self.jumped_back = True
             if child in self.tracker_frames:
@@ -75,8 +96,9 @@ class TfReader:
         return [self.cache.stamp(f) for f in frame_ids]
 
     def sample(self, config, stamp: float, stale_after: float):
-        return sample_trackers(self.cache.lookup, config, stamp, stale_after,
-                               lambda frame_id: self.cache.budget(frame_id, stale_after))
+        return sample_trackers(
+            self.cache.lookup, config, stamp, stale_after, lambda frame_id: self.cache.budget(frame_id, stale_after)
+        )
 
     def destroy(self) -> None:
         for sub in self._subs:

@@ -14,11 +14,13 @@ A T-pose calibration (service ~/calibrate) measures each tracker's rotation offs
 person's height; from then on (and at start, from the `calibration` file) the bridge
 publishes joint-aligned orientations.
 """
+
 from __future__ import annotations
 
 import threading
 import time
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 import rclpy
@@ -36,6 +38,10 @@ from ..core.sensors import SensorConfigError, load_sensor_config
 from .messages import to_time
 from .spin import init, spin_until_shutdown
 
+if TYPE_CHECKING:  # imported where used: each source loads only its own transport
+    from ..adapters.serial_reader import SerialTrackerReader
+    from ..adapters.vmc import VmcReceiver
+
 SOURCES = ("bag", "vmc", "serial")
 PARAMETERS = {
     "source": ("bag", "where tracker poses come from: bag, vmc or serial"),
@@ -46,17 +52,23 @@ PARAMETERS = {
     "restamp": (True, "source bag: stamp transforms with the current time instead of the recorded one"),
     "min_subscribers": (1, "wait until this many /tf subscribers are matched before publishing"),
     "start_delay": (0.5, "seconds to wait after that, so late subscribers can connect too"),
-    "devices": ([""], "vmc / serial: PATTERN=SITE entries mapping device names (hmd:NAME, con:NAME, "
-                      "tra:NAME, serial:ID) to body sites; empty: hmd:*=head for vmc, serial:N = "
-                      "the N-th site of the sensor configuration for serial"),
+    "devices": (
+        [""],
+        "vmc / serial: PATTERN=SITE entries mapping device names (hmd:NAME, con:NAME, "
+        "tra:NAME, serial:ID) to body sites; empty: hmd:*=head for vmc, serial:N = "
+        "the N-th site of the sensor configuration for serial",
+    ),
     "vmc_host": ("127.0.0.1", "vmc: address to listen on"),
     "vmc_port": (DEFAULT_PORT, "vmc: UDP port to listen on"),
     "serial_port": ("", "serial: device or pyserial URL (/dev/ttyUSB0, loop://, socket://host:port)"),
     "serial_baudrate": (921600, "serial: baud rate"),
     "stale_after": (0.25, "vmc / serial: samples older than this (s) when they arrive are dropped and counted"),
     "calibration": ("", "T-pose calibration YAML: applied at start when it exists; where ~/calibrate saves by default"),
-    "calibration_dir": ("", "folder under which a ~/calibrate request's save_path may write (it must exist); "
-                            "empty: requests cannot name a file, only the calibration parameter's is written"),
+    "calibration_dir": (
+        "",
+        "folder under which a ~/calibrate request's save_path may write (it must exist); "
+        "empty: requests cannot name a file, only the calibration parameter's is written",
+    ),
 }
 MAX_CALIBRATION_SECONDS = 30.0
 
@@ -64,6 +76,7 @@ MAX_CALIBRATION_SECONDS = 30.0
 def load_tf_frames(path: str) -> list[tuple[float, list]]:
     """(seconds from the first message, [(parent, child, stamp, translation, rotation)]) per /tf message."""
     from rosbags.rosbag2 import Reader
+
     store = typestore()
     out, first = [], None
     try:
@@ -74,17 +87,31 @@ def load_tf_frames(path: str) -> list[tuple[float, list]]:
             for conn, t_ns, raw in reader.messages(connections=conns):
                 msg = store.deserialize_cdr(raw, conn.msgtype)
                 first = t_ns if first is None else first
-                out.append(((t_ns - first) * 1e-9, [
-                    (tf.header.frame_id, tf.child_frame_id,
-                     tf.header.stamp.sec + tf.header.stamp.nanosec * 1e-9,
-                     (tf.transform.translation.x, tf.transform.translation.y, tf.transform.translation.z),
-                     (tf.transform.rotation.x, tf.transform.rotation.y, tf.transform.rotation.z, tf.transform.rotation.w))
-                    for tf in msg.transforms]))
+                out.append(
+                    (
+                        (t_ns - first) * 1e-9,
+                        [
+                            (
+                                tf.header.frame_id,
+                                tf.child_frame_id,
+                                tf.header.stamp.sec + tf.header.stamp.nanosec * 1e-9,
+                                (tf.transform.translation.x, tf.transform.translation.y, tf.transform.translation.z),
+                                (
+                                    tf.transform.rotation.x,
+                                    tf.transform.rotation.y,
+                                    tf.transform.rotation.z,
+                                    tf.transform.rotation.w,
+                                ),
+                            )
+                            for tf in msg.transforms
+                        ],
+                    )
+                )
     except BagError:
         raise
     except Exception as err:  # noqa: BLE001
         raise BagError(f"{path}: cannot be read as a rosbag2 ({err})") from None
-    if not out:      # a loop over nothing would spin a core
+    if not out:  # a loop over nothing would spin a core
         raise BagError(f"{path}: no {TF_TOPIC} messages to play")
     return out
 
@@ -93,7 +120,7 @@ class TrackerBridge(Node):
     def __init__(self, **kwargs) -> None:
         super().__init__("sparse_body_tracker_bridge", **kwargs)
         self._stop = threading.Event()
-        self.adapter = None
+        self.adapter: VmcReceiver | SerialTrackerReader | None = None
         self._thread = None
         for name, (default, text) in PARAMETERS.items():
             self.declare_parameter(name, default, ParameterDescriptor(description=text))
@@ -110,13 +137,15 @@ class TrackerBridge(Node):
         from tf2_msgs.msg import TFMessage
 
         from ..srv import Calibrate
+
         self._msg_type = TFMessage
         self.pub = self.create_publisher(TFMessage, "/tf", QoSProfile(depth=100))
         self.pub_diag = self.create_publisher(DiagnosticArray, "/diagnostics", QoSProfile(depth=10))
         # its own callback group: the service waits while samples arrive, the rest (diagnostics)
         # goes on in the executor's other thread
-        self.create_service(Calibrate, "~/calibrate", self._on_calibrate,
-                            callback_group=MutuallyExclusiveCallbackGroup())
+        self.create_service(
+            Calibrate, "~/calibrate", self._on_calibrate, callback_group=MutuallyExclusiveCallbackGroup()
+        )
         self.counts = {"published": 0, "stale": 0, "unmapped": 0}
         self.unmapped: set[str] = set()
         self._collect: dict[str, list] | None = None
@@ -140,19 +169,26 @@ class TrackerBridge(Node):
     def _start_device_source(self, p) -> None:
         entries = [e for e in p["devices"] if e]
         if not entries:
-            entries = (["hmd:*=head"] if p["source"] == "vmc"
-                       else [f"serial:{i + 1}={s.site}" for i, s in enumerate(self.sensors.sites)])
+            entries = (
+                ["hmd:*=head"]
+                if p["source"] == "vmc"
+                else [f"serial:{i + 1}={s.site}" for i, s in enumerate(self.sensors.sites)]
+            )
         self.device_map = parse_device_map(entries)
         unknown = {site for _, site in self.device_map} - set(self.sensors.site_names)
         if unknown:
-            raise ValueError(f"devices map to {', '.join(sorted(unknown))}, which sensor configuration "
-                             f"{self.sensors.name!r} does not have")
+            raise ValueError(
+                f"devices map to {', '.join(sorted(unknown))}, which sensor configuration "
+                f"{self.sensors.name!r} does not have"
+            )
         if p["source"] == "vmc":
             from ..adapters.vmc import VmcReceiver
-            self.adapter = VmcReceiver(self._on_samples, p["vmc_host"], p["vmc_port"])
-            self.get_logger().info(f"listening for VMC on {self.adapter.address[0]}:{self.adapter.address[1]}")
+
+            receiver = self.adapter = VmcReceiver(self._on_samples, p["vmc_host"], p["vmc_port"])
+            self.get_logger().info(f"listening for VMC on {receiver.address[0]}:{receiver.address[1]}")
         else:
             from ..adapters.serial_reader import SerialTrackerReader
+
             self.adapter = SerialTrackerReader(p["serial_port"], self._on_samples, p["serial_baudrate"])
             self.get_logger().info(f"reading serial trackers from {p['serial_port']}")
 
@@ -197,9 +233,19 @@ class TrackerBridge(Node):
                 if delay > 0 and self._stop.wait(delay):
                     return
                 now = self.get_clock().now().nanoseconds * 1e-9
-                self._send([self._transform(self.site_of_frame.get(child), child,
-                                            now if self.params["restamp"] else stamp, tr, q, parent)
-                            for parent, child, stamp, tr, q in transforms])
+                self._send(
+                    [
+                        self._transform(
+                            self.site_of_frame.get(child),
+                            child,
+                            now if self.params["restamp"] else stamp,
+                            tr,
+                            q,
+                            parent,
+                        )
+                        for parent, child, stamp, tr, q in transforms
+                    ]
+                )
             if not self.params["loop"]:
                 self.finished.set()
                 self.get_logger().info("finished playing")
@@ -212,15 +258,19 @@ class TrackerBridge(Node):
             with self._lock:
                 if self._collect is not None:
                     self._collect.setdefault(site, []).append(
-                        (None if position is None else np.asarray(position, float), quat))
+                        (None if position is None else np.asarray(position, float), quat)
+                    )
                 if self.calibration is not None and np.all(np.isfinite(quat)) and np.linalg.norm(quat) > 0.5:
                     quat = self.calibration.apply(site, quat)
         m = TransformStamped()
         m.header.frame_id, m.child_frame_id = parent or self.sensors.fixed_frame, frame_id
         m.header.stamp = to_time(stamp)
-        (m.transform.translation.x, m.transform.translation.y,
-         m.transform.translation.z) = (0.0, 0.0, 0.0) if position is None else map(float, position)
-        (m.transform.rotation.x, m.transform.rotation.y, m.transform.rotation.z, m.transform.rotation.w) = map(float, quat)
+        (m.transform.translation.x, m.transform.translation.y, m.transform.translation.z) = (
+            (0.0, 0.0, 0.0) if position is None else map(float, position)
+        )
+        (m.transform.rotation.x, m.transform.rotation.y, m.transform.rotation.z, m.transform.rotation.w) = map(
+            float, quat
+        )
         return m
 
     def _send(self, transforms) -> None:
@@ -245,8 +295,8 @@ class TrackerBridge(Node):
             raise CalibrationError("save_path refused: the bridge has no calibration_dir to write requests under")
         # no expanduser: '~' is a peer's text, and expanding it raises for an unknown user
         try:
-            path = (Path(folder) / requested).resolve()     # an absolute request stays absolute
-        except (ValueError, OSError, RuntimeError) as err:    # a NUL byte, a symlink loop
+            path = (Path(folder) / requested).resolve()  # an absolute request stays absolute
+        except (ValueError, OSError, RuntimeError) as err:  # a NUL byte, a symlink loop
             raise CalibrationError(f"save_path refused: {requested!r} ({err})") from None
         if not path.is_relative_to(Path(folder).resolve()) or path.suffix not in (".yaml", ".yml"):
             raise CalibrationError(f"save_path refused: {requested!r} is not a .yaml file under {folder}")
@@ -257,8 +307,10 @@ class TrackerBridge(Node):
     def _on_calibrate(self, request, response):
         seconds = float(request.seconds) if request.seconds != 0 else 1.0
         try:
-            if not 0 < seconds <= MAX_CALIBRATION_SECONDS:   # also NaN and inf
-                raise CalibrationError(f"seconds must be between 0 and {MAX_CALIBRATION_SECONDS:g}, got {request.seconds}")
+            if not 0 < seconds <= MAX_CALIBRATION_SECONDS:  # also NaN and inf
+                raise CalibrationError(
+                    f"seconds must be between 0 and {MAX_CALIBRATION_SECONDS:g}, got {request.seconds}"
+                )
             path = self._save_path(request.save_path)
         except CalibrationError as err:
             response.success, response.message = False, str(err)
@@ -266,12 +318,13 @@ class TrackerBridge(Node):
             return response
         with self._lock:
             self._collect = {}
-        time.sleep(seconds)      # samples arrive on the source's thread meanwhile
+        time.sleep(seconds)  # samples arrive on the source's thread meanwhile
         with self._lock:
             collected, self._collect = self._collect, None
         try:
-            calibration = calibrate_tpose(collected, translations={s.site: np.array(s.offset_translation)
-                                                                   for s in self.sensors.sites})
+            calibration = calibrate_tpose(
+                collected, translations={s.site: np.array(s.offset_translation) for s in self.sensors.sites}
+            )
         except CalibrationError as err:
             response.success, response.message = False, str(err)
             self.get_logger().warn(f"calibration failed: {err}")
@@ -286,8 +339,9 @@ class TrackerBridge(Node):
         with self._lock:
             self.calibration = calibration
         response.success, response.height, response.sites = True, float(calibration.height), sorted(calibration.offsets)
-        response.message = (f"calibrated {', '.join(sorted(calibration.offsets))}; height {calibration.height:.2f} m"
-                            + (f"; saved to {path}" if path else ""))
+        response.message = f"calibrated {', '.join(sorted(calibration.offsets))}; height {calibration.height:.2f} m" + (
+            f"; saved to {path}" if path else ""
+        )
         self.get_logger().info(response.message)
         return response
 
@@ -295,20 +349,17 @@ class TrackerBridge(Node):
         status = DiagnosticStatus(name="sparse_body: tracker bridge", hardware_id=self.params["source"])
         with self._counts_lock:
             counts, unmapped = dict(self.counts), sorted(self.unmapped)
-        values = {**{k: str(v) for k, v in counts.items()},
-                  "unmapped devices": ", ".join(unmapped) or "none",
-                  "calibrated": "yes" if self.calibration else "no"}
+        values = {
+            **{k: str(v) for k, v in counts.items()},
+            "unmapped devices": ", ".join(unmapped) or "none",
+            "calibrated": "yes" if self.calibration else "no",
+        }
         level, message = DiagnosticStatus.OK, "ok"
-        if self.params["source"] == "serial" and self.adapter is not None:
-            st = self.adapter.decoder.stats
-            values.update({"frames": str(st.frames), "garbage bytes": str(st.garbage_bytes),
-                           "bad checksums": str(st.bad_checksums), "bad values": str(st.bad_values),
-                           "connects": str(self.adapter.connects), "disconnects": str(self.adapter.disconnects)})
-            if not self.adapter.connected.is_set():
-                level, message = DiagnosticStatus.ERROR, f"{self.params['serial_port']} not open: {self.adapter.last_error}"
-        elif self.params["source"] == "vmc" and self.adapter is not None:
-            values.update({f"errors: {k}": str(v) for k, v in self.adapter.decoder.errors.items()})
-            values["devices seen"] = ", ".join(sorted(self.adapter.decoder.devices)) or "none"
+        if self.adapter is not None:  # a live transport: its own figures and problem
+            problem, figures = self.adapter.diagnostics()
+            values.update(figures)
+            if problem:
+                level, message = DiagnosticStatus.ERROR, problem
         if counts["stale"] and level == DiagnosticStatus.OK:
             level, message = DiagnosticStatus.WARN, f"{counts['stale']} stale samples dropped"
         status.level, status.message = level, message
@@ -333,7 +384,7 @@ def main(args=None) -> None:
     except (ValueError, BagError, SensorConfigError, CalibrationError) as err:
         print(f"sparse_body_tracker_bridge: {err}", flush=True)
         rclpy.try_shutdown()
-        raise SystemExit(1)
+        raise SystemExit(1) from None
     spin_until_shutdown(node, threads=2)
 
 

@@ -14,6 +14,7 @@ No random heading: every model here sees the body in a heading-free frame (LoBST
 pelvis-yaw reference, DragPoser's heading-split pose), so turning the clip changes nothing
 they see. Tracker noise and limb noise stay with the trainers that already add them.
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -28,14 +29,17 @@ SPEED_RANGE = (0.8, 1.25)
 PROPORTION_STD = 0.05
 
 # the mirror image of each joint: left <-> right
-MIRROR = np.array([JOINT_INDEX[n.replace("left_", "@").replace("right_", "left_").replace("@", "right_")]
-                   for n in JOINT_NAMES])
+MIRROR = np.array(
+    [JOINT_INDEX[n.replace("left_", "@").replace("right_", "left_").replace("@", "right_")] for n in JOINT_NAMES]
+)
 # segments scaled together (their offsets: the joint at the segment's far end), both sides alike
 SEGMENTS = {
-    "thigh": ("left_knee", "right_knee"), "shin": ("left_ankle", "right_ankle"),
-    "upper_arm": ("left_elbow", "right_elbow"), "forearm": ("left_wrist", "right_wrist"),
-    "clavicle": ("left_shoulder", "right_shoulder"), "torso": ("spine2", "spine3", "neck", "left_collar",
-                                                               "right_collar", "head"),
+    "thigh": ("left_knee", "right_knee"),
+    "shin": ("left_ankle", "right_ankle"),
+    "upper_arm": ("left_elbow", "right_elbow"),
+    "forearm": ("left_wrist", "right_wrist"),
+    "clavicle": ("left_shoulder", "right_shoulder"),
+    "torso": ("spine2", "spine3", "neck", "left_collar", "right_collar", "head"),
     "hips": ("left_hip", "right_hip"),
 }
 
@@ -43,11 +47,12 @@ SEGMENTS = {
 @dataclass(frozen=True)
 class Augmentation:
     """Which augmentations a trainer applies, and how many variants of each clip it adds."""
+
     kinds: tuple[str, ...] = KINDS
-    variants: int = 3             # augmented copies per train clip, besides the clip itself
+    variants: int = 3  # augmented copies per train clip, besides the clip itself
 
     @classmethod
-    def parse(cls, spec: str, variants: int = 3) -> "Augmentation":
+    def parse(cls, spec: str, variants: int = 3) -> Augmentation:
         """'mirror,speed,proportions' (any subset), 'all' or 'none'."""
         spec = spec.strip()
         kinds = KINDS if spec == "all" else () if spec in ("none", "") else tuple(s.strip() for s in spec.split(","))
@@ -77,8 +82,7 @@ def mirrored(motion: Motion) -> Motion:
 def played_at(motion: Motion, speed: float) -> Motion:
     """The motion `speed` times as fast, at its own frame rate."""
     faster = motion.resampled(motion.fps / speed)
-    return Motion(f"{motion.name}/x{speed:.2f}", motion.fps, motion.skeleton, faster.local_quats,
-                  faster.root_positions)
+    return Motion(f"{motion.name}/x{speed:.2f}", motion.fps, motion.skeleton, faster.local_quats, faster.root_positions)
 
 
 def with_proportions(motion: Motion, factors: dict[str, float]) -> Motion:
@@ -99,7 +103,7 @@ def random_variant(motion: Motion, augmentation: Augmentation, rng: np.random.Ge
         motion = mirrored(motion)
     if "proportions" in kinds:
         draws = np.clip(rng.normal(0.0, PROPORTION_STD, len(SEGMENTS)), -2 * PROPORTION_STD, 2 * PROPORTION_STD)
-        motion = with_proportions(motion, {s: 1.0 + d for s, d in zip(SEGMENTS, draws)})
+        motion = with_proportions(motion, {s: 1.0 + d for s, d in zip(SEGMENTS, draws, strict=True)})
     if "speed" in kinds and len(motion) > 2:
         lo, hi = np.log(SPEED_RANGE)
         motion = played_at(motion, float(np.exp(rng.uniform(lo, hi))))

@@ -1,5 +1,6 @@
 """AvatarJLM's model card: its evaluations on the test split written to measured JSON
 (models/avatarjlm.eval.json), then rendered with the training reports into models/avatarjlm.md."""
+
 from __future__ import annotations
 
 import json
@@ -8,19 +9,40 @@ from pathlib import Path
 from ..data.catalog import load_split
 from .model_card import augmentation_table, evaluate_jobs, measured_results, results_table, runtime_choices_table
 
-COLUMNS = ("MPJPE [cm]", "MPJRE [deg]", "MPJVE [cm/s]", "Jitter [100m/s3]", "Hand PE [cm]", "Lower PE [cm]",
-           "Toe PE [cm]")
-VALIDATION = {"mpjpe_cm": "val MPJPE [cm]", "lower_pe_cm": "val lower PE [cm]", "hand_pe_cm": "val hands [cm]",
-              "mpjre_deg": "val MPJRE [deg]"}
+COLUMNS = (
+    "MPJPE [cm]",
+    "MPJRE [deg]",
+    "MPJVE [cm/s]",
+    "Jitter [100m/s3]",
+    "Hand PE [cm]",
+    "Lower PE [cm]",
+    "Toe PE [cm]",
+)
+VALIDATION = {
+    "mpjpe_cm": "val MPJPE [cm]",
+    "lower_pe_cm": "val lower PE [cm]",
+    "hand_pe_cm": "val hands [cm]",
+    "mpjre_deg": "val MPJRE [deg]",
+}
 RUNTIME_METRICS = ("MPJPE [cm]", "MPJRE [deg]", "Lower PE [cm]", "MPJVE [cm/s]", "Jitter [100m/s3]", "Toe PE [cm]")
-RUNTIME_COMMAND = ("sparse-body eval --sensors three_point --split validation --no-compare "
-                   "--output models/avatarjlm.runtime.json --estimator avatarjlm:OPTIONS ...")
+RUNTIME_COMMAND = (
+    "sparse-body eval --sensors three_point --split validation --no-compare "
+    "--output models/avatarjlm.runtime.json --estimator avatarjlm:OPTIONS ..."
+)
 # (sensors, protocol) -> the estimator specs measured there
-SETUPS = {("three_point", "field"): ("avatarjlm", "avatarjlm:polish=false", "dragposer", "ik"),
-          ("three_point", "lab"): ("avatarjlm", "avatarjlm:polish=false", "dragposer", "ik"),
-          ("four_point", "field"): ("avatarjlm", "avatarjlm:polish=false", "avatarjlm:model=three_point", "dragposer",
-                                    "lobstr", "ik"),
-          ("four_point", "lab"): ("avatarjlm", "avatarjlm:polish=false", "dragposer", "ik")}
+SETUPS = {
+    ("three_point", "field"): ("avatarjlm", "avatarjlm:polish=false", "dragposer", "ik"),
+    ("three_point", "lab"): ("avatarjlm", "avatarjlm:polish=false", "dragposer", "ik"),
+    ("four_point", "field"): (
+        "avatarjlm",
+        "avatarjlm:polish=false",
+        "avatarjlm:model=three_point",
+        "dragposer",
+        "lobstr",
+        "ik",
+    ),
+    ("four_point", "lab"): ("avatarjlm", "avatarjlm:polish=false", "dragposer", "ik"),
+}
 
 
 def four_point_path(onnx_path: Path) -> Path:
@@ -39,14 +61,25 @@ def evaluate_avatarjlm(onnx_path: Path, mocap_root: Path, limit: int | None = No
     """Run the card's evaluations two processes at a time and write <model>.eval.json:
     {"sensors/protocol": [sparse-body eval JSON of each run]}."""
     from ..data.field_protocol import LAB, Protocol
+
     onnx_path = Path(onnx_path)
     protocols = {"field": Protocol.named(), "lab": LAB}
-    jobs = [(f"{sensors}/{protocol}", spec, sensors, protocols[protocol], mocap_root, limit,
-             _model_options(spec, sensors, onnx_path))
-            for (sensors, protocol), specs in SETUPS.items() for spec in specs]
+    jobs = [
+        (
+            f"{sensors}/{protocol}",
+            spec,
+            sensors,
+            protocols[protocol],
+            mocap_root,
+            limit,
+            _model_options(spec, sensors, onnx_path),
+        )
+        for (sensors, protocol), specs in SETUPS.items()
+        for spec in specs
+    ]
     results = evaluate_jobs(jobs, workers)
     measured = {}
-    for job, result in zip(jobs, results):
+    for job, result in zip(jobs, results, strict=True):
         measured.setdefault(job[0], []).append(result.to_json())
     path = onnx_path.with_suffix(".eval.json")
     path.write_text(json.dumps(measured, indent=1))
@@ -61,11 +94,13 @@ def _training(report: dict | None, name: str) -> str:
     runs = "".join(f"`{r['command']}` ({r['steps']} steps, {r['minutes']:.1f} minutes), then " for r in earlier)
     minutes = report["minutes"] + sum(r["minutes"] for r in earlier)
     resumed = f" (resumed from its last checkpoint: {report['minutes']:.1f} minutes more)" if earlier else ""
-    return (f"- `{name}` ({c['sensors']}): {runs}`{report.get('command', 'sparse-body train avatarjlm')}`{resumed}; "
-            f"{report['steps']} steps in {minutes:.1f} minutes on {report['hardware']} "
-            f"(torch {report['torch']}); validation (last frame of fixed sequences, clean trackers, canonical "
-            f"body, before the polish): MPJPE {v['mpjpe_cm']:.2f} cm, hands {v['hand_pe_cm']:.2f} cm, lower body "
-            f"{v['lower_pe_cm']:.2f} cm, rotation {v['mpjre_deg']:.2f} deg")
+    return (
+        f"- `{name}` ({c['sensors']}): {runs}`{report.get('command', 'sparse-body train avatarjlm')}`{resumed}; "
+        f"{report['steps']} steps in {minutes:.1f} minutes on {report['hardware']} "
+        f"(torch {report['torch']}); validation (last frame of fixed sequences, clean trackers, canonical "
+        f"body, before the polish): MPJPE {v['mpjpe_cm']:.2f} cm, hands {v['hand_pe_cm']:.2f} cm, lower body "
+        f"{v['lower_pe_cm']:.2f} cm, rotation {v['mpjre_deg']:.2f} deg"
+    )
 
 
 def _curve(report: dict) -> str:
@@ -78,8 +113,10 @@ def _curve(report: dict) -> str:
         h.append({**r, "minutes": r["minutes"] + sum(earlier[:restarts])})
     rows = h[:: max(1, len(h) // 8)]
     rows += [] if rows[-1] is h[-1] else h[-1:]
-    return "\n".join(f"| {r['step']} | {r['minutes']:.1f} | {r['total']:.3f} | {r['mpjpe_cm']:.2f} | {r['hand_pe_cm']:.2f} |"
-                     for r in rows)
+    return "\n".join(
+        f"| {r['step']} | {r['minutes']:.1f} | {r['total']:.3f} | {r['mpjpe_cm']:.2f} | {r['hand_pe_cm']:.2f} |"
+        for r in rows
+    )
 
 
 def write_avatarjlm_card(onnx_path: Path, mocap_root: Path, limit: int | None = None, evaluate: bool = True) -> Path:
@@ -117,22 +154,22 @@ network output as it is).
 
 ## Data
 - CMU motion capture from `../shared/mocap` (its README has the licence), retargeted onto the
-  22-joint body at {c['fps']:.0f} fps, positions scaled to the canonical leg length, floor at z = 0.
+  22-joint body at {c["fps"]:.0f} fps, positions scaled to the canonical leg length, floor at z = 0.
 - Split `config/splits/cmu.yaml` (by subject: no validation or test person in training):
-  {len(split['train'])} train / {len(split['validation'])} validation / {len(split['test'])} test clips. Trained on
-  {report['train_clips']} train clips with augmented variants ({c['augment']}: {c['variants']} of each clip besides
-  itself; {report['train_frames']} frames), each clean and with LoBSTr's tracker noise; validated on
-  {report['validation_frames']} frames of the validation people.
+  {len(split["train"])} train / {len(split["validation"])} validation / {len(split["test"])} test clips. Trained on
+  {report["train_clips"]} train clips with augmented variants ({c["augment"]}: {c["variants"]} of each clip besides
+  itself; {report["train_frames"]} frames), each clean and with LoBSTr's tracker noise; validated on
+  {report["validation_frames"]} frames of the validation people.
 
 ## Training
 - One command per model: `sparse-body train avatarjlm` (three-point) and `--config four_point`;
   `make train-avatarjlm` runs both side by side, one core each. `--config paper` is the paper's size
   (d1 1024, d2 512, 8 heads, 6 loops, batch 64) for a machine with a GPU.
-- Shipped size: d1 {c['d_embed']}, d2 {c['d_model']}, {c['heads']} heads, {c['loops']} loops, feed-forward
-  {c['feedforward']}, dropout {c['dropout']}; each block attends {c['window'] - 1} frames back; sequences of
-  {c['sequence']} frames, batch {c['batch']}, Adam lr {c['lr']} dropped to a tenth at {c['lr_drop_at']:.0%} of the
-  budget; {c['masked_tokens']} non-tracker tokens masked per sequence; the paper's loss weights but beta
-  {c['beta']:g}, and the leg term weighed {c.get('leg_weight', 0.0):g}.
+- Shipped size: d1 {c["d_embed"]}, d2 {c["d_model"]}, {c["heads"]} heads, {c["loops"]} loops, feed-forward
+  {c["feedforward"]}, dropout {c["dropout"]}; each block attends {c["window"] - 1} frames back; sequences of
+  {c["sequence"]} frames, batch {c["batch"]}, Adam lr {c["lr"]} dropped to a tenth at {c["lr_drop_at"]:.0%} of the
+  budget; {c["masked_tokens"]} non-tracker tokens masked per sequence; the paper's loss weights but beta
+  {c["beta"]:g}, and the leg term weighed {c.get("leg_weight", 0.0):g}.
 {_training(report, onnx_path.name)}
 {_training(four, four_point_path(onnx_path).name)}
 
@@ -142,9 +179,9 @@ network output as it is).
 
 ## Augmentation (three-point, the network alone, clean trackers)
 
-{augmentation_table(onnx_path.with_suffix('.train.json'), VALIDATION)}
+{augmentation_table(onnx_path.with_suffix(".train.json"), VALIDATION)}
 
-These runs are short (the steps column; the shipped model trained {report['steps']} steps), so they show
+These runs are short (the steps column; the shipped model trained {report["steps"]} steps), so they show
 the early effect only; read small differences with care. They were run with the configuration
 before the leg term.
 
@@ -153,25 +190,25 @@ before the leg term.
 Field protocol (the default: the body from a T-pose calibration, trackers mounted as a user
 wears them, a VR system's noise):
 
-{table('three_point/field')}
+{table("three_point/field")}
 
 Lab protocol (`--skeleton oracle --noise none`, the papers' setting; the AvatarJLM paper reports
 3.35 cm MPJPE, 2.90 deg MPJRE, 20.79 cm/s MPJVE on AMASS Protocol 1, trained on 90 % of CMU,
 BMLrub and HDM05, and 7.75 cm on CMU when trained on the other datasets, Protocol 2: a guide,
 not a like-for-like comparison):
 
-{table('three_point/lab')}
+{table("three_point/lab")}
 
 ## Test split, four-point (`--sensors four_point`: the pelvis tracker too)
 
 Field protocol (`avatarjlm:model=three_point` is the three-point model given the same
 trackers: what the pelvis input adds):
 
-{table('four_point/field')}
+{table("four_point/field")}
 
 Lab protocol (the paper's four-input row: 2.09 cm MPJPE, 2.40 deg, 17.82 cm/s):
 
-{table('four_point/lab')}
+{table("four_point/lab")}
 
 ## The leg term and the identity start, chosen on the validation people
 
@@ -209,12 +246,12 @@ feet held where they land (the contact IK of LoBSTr with contacts from toe heigh
 
 ## The polish and the legs, chosen on the validation people
 
-{runtime_choices_table(onnx_path.with_name('avatarjlm.runtime.json'), RUNTIME_COMMAND, RUNTIME_METRICS)}
+{runtime_choices_table(onnx_path.with_name("avatarjlm.runtime.json"), RUNTIME_COMMAND, RUNTIME_METRICS)}
 
 ## Limits
 - Trained on 42 minutes of CMU only; the lower body is a guess from head and hands, best for
   walking and standing, worst for motions the train people did not do (dance, acrobatics).
-- The network runs at its training rate ({c['fps']:.0f} fps); other rates have their velocities scaled and
+- The network runs at its training rate ({c["fps"]:.0f} fps); other rates have their velocities scaled and
   their past looked up by age, which it was not trained on.
 """
     path = onnx_path.with_suffix(".md")

@@ -26,18 +26,21 @@ Because of the stacked blocks a frame's output reaches further back than one win
 (window - 1) frames); training sequences are longer than a window (`sequence`) so that
 training sees what a stream sees.
 """
+
 from __future__ import annotations
 
 from dataclasses import asdict, dataclass
+from typing import ClassVar
 
 import torch
 from torch import nn
 
 from ..core.skeleton import JOINT_INDEX, LOWER_BODY, NUM_JOINTS, Skeleton, joint_indices
 from ..estimators.avatarjlm_features import PER_SITE, SITES, input_joints
+from .presets import Presets
 from .torch_body import forward_kinematics, matrix_to_6d, sixd_to_matrix
 
-TOKENS = 2 * NUM_JOINTS           # rotation tokens, then position tokens
+TOKENS = 2 * NUM_JOINTS  # rotation tokens, then position tokens
 HEAD = JOINT_INDEX["head"]
 HANDS = (JOINT_INDEX["left_wrist"], JOINT_INDEX["right_wrist"])
 FEET = tuple(JOINT_INDEX[j] for j in ("left_ankle", "right_ankle", "left_foot", "right_foot"))
@@ -45,27 +48,28 @@ LEGS = list(joint_indices(LOWER_BODY))
 
 
 @dataclass
-class AvatarJlmConfig:
+class AvatarJlmConfig(Presets):
     sensors: str = "three_point"  # three_point (head, hands) or four_point (and the pelvis)
-    d_embed: int = 1024           # paper: d1
-    d_model: int = 512            # paper: d2
+    d_embed: int = 1024  # paper: d1
+    d_model: int = 512  # paper: d2
     heads: int = 8
-    loops: int = 6                # paper: n
+    loops: int = 6  # paper: n
     feedforward: int = 1024
     dropout: float = 0.1
-    window: int = 41              # paper: 41 frames, the current one predicted (here: what a block attends to)
-    sequence: int = 61            # frames per training sequence (>= window: the blocks reach further back together)
+    window: int = 41  # paper: 41 frames, the current one predicted (here: what a block attends to)
+    sequence: int = 61  # frames per training sequence (>= window: the blocks reach further back together)
     fps: float = 60.0
-    batch: int = 64               # paper
-    lr: float = 1e-4              # paper: 1e-4, 1e-5 after 60 % of the steps
+    batch: int = 64  # paper
+    lr: float = 1e-4  # paper: 1e-4, 1e-5 after 60 % of the steps
     lr_drop_at: float = 0.6
-    masked_tokens: int = 2        # paper: 2 tokens other than the trackers' masked in training
+    masked_tokens: int = 2  # paper: 2 tokens other than the trackers' masked in training
     # both pose heads start near the identity (the root facing the head's heading). From random
     # rotations and at the paper's beta, training settled with the root half a turn about its own
     # axis and its children turned back: right positions from wrong local rotations, which a
     # tracked pelvis (four_point: the root is the tracker's) cannot live with
     identity_start: bool = False
-    # the paper's loss weights: L_first + beta L_ori + gamma L_rot + delta L_pos + eps L_h + zeta L_mot + L_p + alpha L_fh
+    # the paper's loss weights:
+    # L_first + beta L_ori + gamma L_rot + delta L_pos + eps L_h + zeta L_mot + L_p + alpha L_fh
     alpha: float = 0.5
     beta: float = 0.02
     gamma: float = 2.0
@@ -79,11 +83,11 @@ class AvatarJlmConfig:
     # tracker noise on the noisy copy of each clip: lobstr (1 cm, 1.5 degrees, LoBSTr's
     # training noise) or vr (the field protocol's: 1 mm, 1 degree)
     train_noise: str = "lobstr"
-    augment: str = "all"          # train/augment.py: mirror, speed, proportions (all), or none
+    augment: str = "all"  # train/augment.py: mirror, speed, proportions (all), or none
     variants: int = 2
     steps_per_check: int = 200
-    minutes: float = 0.0          # time budget (0: only steps counts)
-    steps: int = 100_000          # paper
+    minutes: float = 0.0  # time budget (0: only steps counts)
+    steps: int = 100_000  # paper
 
     @property
     def sites(self) -> tuple[str, ...]:
@@ -93,23 +97,47 @@ class AvatarJlmConfig:
     def features(self) -> int:
         return PER_SITE * len(self.sites)
 
-    @classmethod
-    def named(cls, name: str) -> "AvatarJlmConfig":
-        if name == "paper":
-            return cls()
-        if name == "small":        # 88 minutes on one CPU core (beside four_point on the other); from the
-            # identity with the root's own rotation weighed in, as four_point: its legs do not turn
-            return cls(d_embed=256, d_model=64, heads=4, loops=3, feedforward=128, dropout=0.0, batch=6, lr=5e-4,
-                       identity_start=True, beta=1.0, leg_weight=5.0, minutes=88.0, steps=1_000_000)
-        if name == "four_point":   # the same size with the pelvis
-            config = cls.named("small")
-            config.sensors, config.minutes = "four_point", 42.0
-            config.leg_weight = 0.0     # trained before the leg term
-            return config
-        if name == "tiny":    # tests
-            return cls(d_embed=16, d_model=8, heads=2, loops=1, feedforward=16, window=6, sequence=8, batch=3, steps=3,
-                       steps_per_check=2, augment="mirror", variants=1)
-        raise ValueError(f"unknown AvatarJLM configuration {name!r} (paper, small, four_point, tiny)")
+    KIND = "AvatarJLM"
+    PRESETS: ClassVar[dict[str, dict]] = {
+        "paper": {},
+        # 88 minutes on one CPU core (beside four_point on the other); from the identity with
+        # the root's own rotation weighed in, as four_point: its legs do not turn
+        "small": {
+            "d_embed": 256,
+            "d_model": 64,
+            "heads": 4,
+            "loops": 3,
+            "feedforward": 128,
+            "dropout": 0.0,
+            "batch": 6,
+            "lr": 5e-4,
+            "identity_start": True,
+            "beta": 1.0,
+            "leg_weight": 5.0,
+            "minutes": 88.0,
+            "steps": 1_000_000,
+        },
+        "four_point": {  # the same size with the pelvis
+            "base": "small",
+            "sensors": "four_point",
+            "minutes": 42.0,
+            "leg_weight": 0.0,  # trained before the leg term
+        },
+        "tiny": {  # tests
+            "d_embed": 16,
+            "d_model": 8,
+            "heads": 2,
+            "loops": 1,
+            "feedforward": 16,
+            "window": 6,
+            "sequence": 8,
+            "batch": 3,
+            "steps": 3,
+            "steps_per_check": 2,
+            "augment": "mirror",
+            "variants": 1,
+        },
+    }
 
     def to_dict(self) -> dict:
         return asdict(self)
@@ -170,8 +198,9 @@ class Block(nn.Module):
         super().__init__()
         self.attention = attention
         self.norm1, self.norm2 = nn.LayerNorm(d), nn.LayerNorm(d)
-        self.feedforward = nn.Sequential(nn.Linear(d, feedforward), nn.GELU(), nn.Dropout(dropout),
-                                         nn.Linear(feedforward, d))
+        self.feedforward = nn.Sequential(
+            nn.Linear(d, feedforward), nn.GELU(), nn.Dropout(dropout), nn.Linear(feedforward, d)
+        )
         self.dropout = nn.Dropout(dropout)
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
@@ -194,16 +223,20 @@ class AvatarJlmNet(nn.Module):
         self.register_buffer("std", torch.ones(F))
         self.register_buffer("offsets", torch.tensor(Skeleton.canonical().offsets, dtype=torch.float32))
         self.tracked = input_joints(config.sites)
-        self.embed = nn.Sequential(nn.Linear(F, d1), nn.GELU(), nn.Linear(d1, d1))              # F_embed
+        self.embed = nn.Sequential(nn.Linear(F, d1), nn.GELU(), nn.Linear(d1, d1))  # F_embed
         self.initial = nn.Sequential(nn.GELU(), nn.Linear(d1, d1), nn.GELU(), nn.Linear(d1, NUM_JOINTS * 6))  # F_reg
         self.embed_rotation, self.embed_position = nn.Linear(6, d2), nn.Linear(3, d2)
         self.embed_input = nn.Linear(d1, d2)
         self.spatial_position = nn.Parameter(torch.zeros(TOKENS + 1, d2))
         nn.init.normal_(self.spatial_position, std=0.02)
-        self.spatial = nn.ModuleList(Block(SpatialAttention(d2, config.heads), d2, config.feedforward, config.dropout)
-                                     for _ in range(config.loops))
-        self.temporal = nn.ModuleList(Block(TemporalAttention(d2, config.heads, config.window), d2,
-                                            config.feedforward, config.dropout) for _ in range(config.loops))
+        self.spatial = nn.ModuleList(
+            Block(SpatialAttention(d2, config.heads), d2, config.feedforward, config.dropout)
+            for _ in range(config.loops)
+        )
+        self.temporal = nn.ModuleList(
+            Block(TemporalAttention(d2, config.heads, config.window), d2, config.feedforward, config.dropout)
+            for _ in range(config.loops)
+        )
         self.norm = nn.LayerNorm(d2)
         self.regress = nn.Linear(TOKENS * d2, NUM_JOINTS * 6)
         for head in (self.initial[-1], self.regress) if config.identity_start else ():
@@ -217,10 +250,10 @@ class AvatarJlmNet(nn.Module):
         init = self.initial(h).unflatten(-1, (NUM_JOINTS, 6))
         glob, pos = forward_kinematics(sixd_to_matrix(init), torch.zeros(init.shape[:-2] + (3,)), self.offsets)
         sites = x.unflatten(-1, (-1, PER_SITE))
-        pos = pos - pos[..., HEAD:HEAD + 1, :] + sites[..., 0:1, 6:9]         # head alignment
+        pos = pos - pos[..., HEAD : HEAD + 1, :] + sites[..., 0:1, 6:9]  # head alignment
         rot6 = matrix_to_6d(glob)
         tracked = list(self.tracked)
-        rot6 = rot6.index_copy(-2, torch.tensor(tracked), sites[..., 0:6])   # the trackers' own, for their joints
+        rot6 = rot6.index_copy(-2, torch.tensor(tracked), sites[..., 0:6])  # the trackers' own, for their joints
         pos = pos.index_copy(-2, torch.tensor(tracked), sites[..., 6:9])
         tokens = torch.cat([self.embed_rotation(rot6), self.embed_position(pos)], dim=-2)
         return init, tokens, self.embed_input(h)[..., None, :]
@@ -239,18 +272,24 @@ class AvatarJlmNet(nn.Module):
         B, n = x.shape[:2]
         for k in range(self.config.loops):
             tokens = self._spatial(k, tokens, given)
-            t = tokens.transpose(1, 2).flatten(0, 1)                  # (B * 44, n, d2)
+            t = tokens.transpose(1, 2).flatten(0, 1)  # (B * 44, n, d2)
             tokens = self.temporal[k](t).unflatten(0, (B, TOKENS)).transpose(1, 2)
         pose = self.regress(self.norm(tokens).flatten(-2)).unflatten(-1, (NUM_JOINTS, 6))
         return pose, init
 
-    def step(self, x: torch.Tensor, past_k: torch.Tensor, past_v: torch.Tensor, past_age: torch.Tensor,
-             past_mask: torch.Tensor):
+    def step(
+        self,
+        x: torch.Tensor,
+        past_k: torch.Tensor,
+        past_v: torch.Tensor,
+        past_age: torch.Tensor,
+        past_mask: torch.Tensor,
+    ):
         """One live frame: x (1, F); past_k / past_v (loops, 44, heads, P, d2/heads) the last
         P = window - 1 frames' keys and values in each temporal block, past_age (P,) their
         ages in frames (int64, 1..P), past_mask (P,) 0 where a slot holds a frame, -inf where
         empty. -> (pose (1, 22, 6), new keys, new values (loops, 44, heads, 1, d2/heads))."""
-        _, tokens, given = self.stage1(x)                             # (1, 44, d2), (1, 1, d2)
+        _, tokens, given = self.stage1(x)  # (1, 44, d2), (1, 1, d2)
         new_k, new_v = [], []
         for k in range(self.config.loops):
             tokens = self._spatial(k, tokens, given)
@@ -281,7 +320,7 @@ def world_positions(pose6: torch.Tensor, yaw: torch.Tensor, head: torch.Tensor, 
     local = sixd_to_matrix(pose6)
     local = torch.cat([yaw[..., None, :, :] @ local[..., :1, :, :], local[..., 1:, :, :]], dim=-3)
     _, pos = forward_kinematics(local, torch.zeros(local.shape[:-3] + (3,)), offsets)
-    return pos - pos[..., HEAD:HEAD + 1, :] + head[..., None, :]
+    return pos - pos[..., HEAD : HEAD + 1, :] + head[..., None, :]
 
 
 def losses(net: AvatarJlmNet, batch: dict[str, torch.Tensor], token_mask: torch.Tensor | None = None):
@@ -290,27 +329,46 @@ def losses(net: AvatarJlmNet, batch: dict[str, torch.Tensor], token_mask: torch.
     (our toe joints sit a few centimetres above the floor), not to the floor itself."""
     c = net.config
     pose, init = net(batch["x"], token_mask)
-    target = batch["pose"]                                   # (B, W, 22, 6), root in the heading frame
+    target = batch["pose"]  # (B, W, 22, 6), root in the heading frame
     l_first = (init - target).abs().mean()
     l_ori = (pose[..., 0, :] - target[..., 0, :]).abs().mean()
     l_rot = (pose[..., 1:, :] - target[..., 1:, :]).abs().mean()
     p = world_positions(pose, batch["yaw"], batch["head"], net.offsets)
-    g = world_positions(target, batch["yaw"], batch["head"], net.offsets)   # the same head: noise is not the network's
+    g = world_positions(target, batch["yaw"], batch["head"], net.offsets)  # the same head: noise is not the network's
     l_pos = (p - g).abs().mean()
     l_hand = (p[..., HANDS, :] - g[..., HANDS, :]).abs().mean()
     l_vel = sum(((p[:, s:] - p[:, :-s]) - (g[:, s:] - g[:, :-s])).abs().mean() for s in (1, 3, 5))
-    contact = batch["contact"][:, 1:]                        # (B, W - 1, 4): each foot joint still and low
+    contact = batch["contact"][:, 1:]  # (B, W - 1, 4): each foot joint still and low
     l_contact = ((p[:, 1:, FEET] - p[:, :-1, FEET]).abs() * contact[..., None]).mean()
     l_ground = torch.relu(-p[..., 2]).mean()
     l_height = ((p[..., FEET, 2] - g[..., FEET, 2]).abs() * batch["contact"]).mean()
-    total = (l_first + c.beta * l_ori + c.gamma * l_rot + c.delta * l_pos + c.epsilon * l_hand
-             + c.zeta * (l_vel + l_contact) + l_ground + c.alpha * l_height)
+    total = (
+        l_first
+        + c.beta * l_ori
+        + c.gamma * l_rot
+        + c.delta * l_pos
+        + c.epsilon * l_hand
+        + c.zeta * (l_vel + l_contact)
+        + l_ground
+        + c.alpha * l_height
+    )
     terms = {}
     if c.leg_weight:
         terms["leg"] = (leg_positions(pose, net.offsets) - leg_positions(target, net.offsets)).abs().mean()
         total = total + c.leg_weight * terms["leg"]
-    return {"total": total, "first": l_first, "orientation": l_ori, "rotation": l_rot, "position": l_pos,
-            "hand": l_hand, "velocity": l_vel, "contact": l_contact, "ground": l_ground, "foot_height": l_height, **terms}
+    return {
+        "total": total,
+        "first": l_first,
+        "orientation": l_ori,
+        "rotation": l_rot,
+        "position": l_pos,
+        "hand": l_hand,
+        "velocity": l_vel,
+        "contact": l_contact,
+        "ground": l_ground,
+        "foot_height": l_height,
+        **terms,
+    }
 
 
 def leg_positions(pose6: torch.Tensor, offsets: torch.Tensor) -> torch.Tensor:

@@ -6,6 +6,7 @@ gradients through the decoder and an optimiser step (the paper uses a fixed-size
 step), instead of a damped Gauss-Newton step with a finite-difference Jacobian. Run long
 enough, both must land on the same pose: test_dragposer checks it.
 """
+
 from __future__ import annotations
 
 from pathlib import Path
@@ -23,6 +24,7 @@ from .torch_body import forward_kinematics, sixd_to_matrix
 def load_vae(model_dir: Path) -> PoseVae:
     """The decoder's weights back from its ONNX file (no pickle anywhere)."""
     import json
+
     model = onnx.load(str(Path(model_dir) / "dragposer_decoder.onnx"))
     meta = {p.key: json.loads(p.value) for p in model.metadata_props}
     vae = PoseVae(VaeConfig(**meta["config"])).double()
@@ -36,10 +38,23 @@ def load_vae(model_dir: Path) -> PoseVae:
     return vae.eval()
 
 
-def optimise(vae: PoseVae, constraints: ConstraintSet, offsets: np.ndarray, z, root, yaw, z_prior,
-             prior_weight: float = 0.001, latent_weight: float = 0.0002, iterations: int = 2000, lr: float = 0.01,
-             tolerance: float = 0.0, rotation_tolerance: float = 0.087, stats: dict | None = None,
-             skip_orientation: frozenset = frozenset()):
+def optimise(
+    vae: PoseVae,
+    constraints: ConstraintSet,
+    offsets: np.ndarray,
+    z,
+    root,
+    yaw,
+    z_prior,
+    prior_weight: float = 0.001,
+    latent_weight: float = 0.0002,
+    iterations: int = 2000,
+    lr: float = 0.01,
+    tolerance: float = 0.0,
+    rotation_tolerance: float = 0.087,
+    stats: dict | None = None,
+    skip_orientation: frozenset = frozenset(),
+):
     """Minimise the same objective as estimators.dragposer.LatentOptimizer with Adam; stop early
     once the trackers are met as in ConstraintSet.converged (stats["iterations"] says when)."""
     offsets_t = torch.as_tensor(offsets, dtype=torch.float64)
@@ -51,7 +66,7 @@ def optimise(vae: PoseVae, constraints: ConstraintSet, offsets: np.ndarray, z, r
     # annealed so the last steps settle instead of circling the minimum
     schedule = torch.optim.lr_scheduler.CosineAnnealingLR(opt, iterations)
     used = 0
-    for used in range(1, iterations + 1):
+    for used in range(1, iterations + 1):  # noqa: B007 - the count after the loop is the point
         free = sixd_to_matrix(vae.decode(z[None]).unflatten(-1, (22, 6)))[0]
         c, s = torch.cos(yaw), torch.sin(yaw)
         zero, one = torch.zeros_like(c), torch.ones_like(c)
@@ -61,7 +76,7 @@ def optimise(vae: PoseVae, constraints: ConstraintSet, offsets: np.ndarray, z, r
         r = constraints.residual(glob, pos, local, xp=torch)
         if tolerance and constraints.converged(r.detach().numpy(), tolerance, rotation_tolerance, skip_orientation):
             break
-        loss = (r ** 2).sum() + prior_weight * ((z - z_prior) ** 2).sum() + latent_weight * (z ** 2).sum()
+        loss = (r**2).sum() + prior_weight * ((z - z_prior) ** 2).sum() + latent_weight * (z**2).sum()
         opt.zero_grad()
         loss.backward()
         opt.step()
@@ -69,4 +84,3 @@ def optimise(vae: PoseVae, constraints: ConstraintSet, offsets: np.ndarray, z, r
     if stats is not None:
         stats["iterations"] = used
     return z.detach().numpy(), root.detach().numpy(), float(yaw)
-

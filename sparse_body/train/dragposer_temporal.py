@@ -11,29 +11,32 @@ Deviations: the feed-forward width is 256 in the `small` configuration (the pape
 `paper`); the decoder adds its output to its input latent (a residual), since the next latent
 is mostly the current one.
 """
+
 from __future__ import annotations
 
 from dataclasses import asdict, dataclass
+from typing import ClassVar
 
 import torch
 from torch import nn
 
 from ..estimators.dragposer_pose import LATENT, TEMPORAL_CONTEXT
+from .presets import Presets
 
 
 @dataclass
-class TemporalConfig:
+class TemporalConfig(Presets):
     latent: int = LATENT
     context: int = TEMPORAL_CONTEXT
-    width: int = 48               # the paper's feature dimension
+    width: int = 48  # the paper's feature dimension
     heads: int = 4
-    layers: int = 3               # each for encoder and decoder
-    feedforward: int = 256        # paper: 2048
+    layers: int = 3  # each for encoder and decoder
+    feedforward: int = 256  # paper: 2048
     dropout: float = 0.1
-    past: int = 16                # W_p
-    future: int = 16              # W_f (training; the runtime may use fewer)
-    every: int = 4                # n: frames between predictor steps
-    limb_noise: float = 0.1       # probability per limb and step
+    past: int = 16  # W_p
+    future: int = 16  # W_f (training; the runtime may use fewer)
+    every: int = 4  # n: frames between predictor steps
+    limb_noise: float = 0.1  # probability per limb and step
     limb_noise_deg: float = 10.0  # per joint and axis
     noisy_copies: int = 4
     augment: str = "mirror,speed"  # train/augment.py (proportions: the canonical body hides them)
@@ -45,16 +48,24 @@ class TemporalConfig:
     steps: int = 20_000
     steps_per_check: int = 250
 
-    @classmethod
-    def named(cls, name: str) -> "TemporalConfig":
-        if name == "paper":
-            return cls(feedforward=2048, minutes=30.0, steps=1_000_000)
-        if name == "small":   # without limb noise: on 245 clips it made validation worse (model card)
-            return cls(limb_noise=0.0, noisy_copies=1, minutes=30.0, steps=1_000_000)
-        if name == "tiny":
-            return cls(width=8, heads=2, layers=1, feedforward=16, past=4, future=3, noisy_copies=1,
-                       batch=8, steps=3, steps_per_check=1)
-        raise ValueError(f"unknown temporal predictor configuration {name!r} (paper, small, tiny)")
+    KIND = "temporal predictor"
+    PRESETS: ClassVar[dict[str, dict]] = {
+        "paper": {"feedforward": 2048, "minutes": 30.0, "steps": 1_000_000},
+        # without limb noise: on 245 clips it made validation worse (model card)
+        "small": {"limb_noise": 0.0, "noisy_copies": 1, "minutes": 30.0, "steps": 1_000_000},
+        "tiny": {
+            "width": 8,
+            "heads": 2,
+            "layers": 1,
+            "feedforward": 16,
+            "past": 4,
+            "future": 3,
+            "noisy_copies": 1,
+            "batch": 8,
+            "steps": 3,
+            "steps_per_check": 1,
+        },
+    }
 
     def to_dict(self) -> dict:
         return asdict(self)
@@ -70,10 +81,11 @@ class TemporalPredictor(nn.Module):
         self.future_position = nn.Parameter(torch.zeros(c.future, c.width))
         nn.init.normal_(self.past_position, std=0.02)
         nn.init.normal_(self.future_position, std=0.02)
-        self.transformer = nn.Transformer(c.width, c.heads, c.layers, c.layers, c.feedforward, c.dropout,
-                                          batch_first=True)
+        self.transformer = nn.Transformer(
+            c.width, c.heads, c.layers, c.layers, c.feedforward, c.dropout, batch_first=True
+        )
         self.out = nn.Linear(c.width, c.latent)
-        nn.init.zeros_(self.out.weight)     # starts as "the next latent is this one"
+        nn.init.zeros_(self.out.weight)  # starts as "the next latent is this one"
         nn.init.zeros_(self.out.bias)
         self.register_buffer("causal", nn.Transformer.generate_square_subsequent_mask(c.future), persistent=False)
         # context normalisation, set from the training data
@@ -85,8 +97,8 @@ class TemporalPredictor(nn.Module):
         being the newest latent -> (B, W_f, 24): output k predicts the latent after input k."""
         ctx = (context - self.context_mean) / self.context_std
         src = self.past_in(torch.cat([past, ctx], -1)) + self.past_position
-        tgt = self.future_in(future) + self.future_position[:future.shape[1]]
-        mask = self.causal[:future.shape[1], :future.shape[1]]
+        tgt = self.future_in(future) + self.future_position[: future.shape[1]]
+        mask = self.causal[: future.shape[1], : future.shape[1]]
         h = self.transformer(src, tgt, tgt_mask=mask, tgt_is_causal=True)
         return future + self.out(h)
 

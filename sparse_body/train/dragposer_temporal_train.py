@@ -10,6 +10,7 @@ space. Targets are the clean latents. The `small` configuration trains without t
 (it made validation worse on our 245 clips; see the model card). The best validation MSE is exported as
 `dragposer_temporal.onnx`.
 """
+
 from __future__ import annotations
 
 import time
@@ -36,8 +37,7 @@ def clip_arrays(motion) -> dict[str, np.ndarray]:
     scale = body_scale(motion.skeleton)
     floor = estimate_floor(motion.positions)
     heights = (motion.positions[:, [JOINT_INDEX[j] for j in HEIGHT_JOINTS], 2] - floor) * scale
-    return {"local": free.astype(np.float32), "yaw": yaw, "root": motion.root_positions * scale,
-            "heights": heights}
+    return {"local": free.astype(np.float32), "yaw": yaw, "root": motion.root_positions * scale, "heights": heights}
 
 
 def limb_noise(local: np.ndarray, probability: float, degrees: float, rng) -> np.ndarray:
@@ -60,9 +60,15 @@ def sequences(clips, vae, config: TemporalConfig, rng, noisy=True, phases=None):
     for c in clips:
         height = c["root"][:, 2]
         z = vae.encode_free(c["local"], height, offsets)
-        zn = [vae.encode_free(limb_noise(c["local"], config.limb_noise, config.limb_noise_deg, rng), height, offsets)
-              for _ in range(config.noisy_copies)] if noisy and config.limb_noise > 0 else [z]
-        for phase in (phases if phases is not None else range(config.every)):
+        zn = (
+            [
+                vae.encode_free(limb_noise(c["local"], config.limb_noise, config.limb_noise_deg, rng), height, offsets)
+                for _ in range(config.noisy_copies)
+            ]
+            if noisy and config.limb_noise > 0
+            else [z]
+        )
+        for phase in phases if phases is not None else range(config.every):
             idx = np.arange(phase, len(z), config.every)
             if len(idx) < length:
                 continue
@@ -71,20 +77,25 @@ def sequences(clips, vae, config: TemporalConfig, rng, noisy=True, phases=None):
             context.append(temporal_context(c["root"][idx], c["yaw"][idx], c["heights"][idx]))
             starts.append(offset + np.arange(len(idx) - length + 1))
             offset += len(idx)
-    return {"clean": np.concatenate(clean).astype(np.float32),
-            "noisy": np.concatenate(copies, axis=1).astype(np.float32),
-            "context": np.concatenate(context).astype(np.float32), "starts": np.concatenate(starts)}
+    return {
+        "clean": np.concatenate(clean).astype(np.float32),
+        "noisy": np.concatenate(copies, axis=1).astype(np.float32),
+        "context": np.concatenate(context).astype(np.float32),
+        "starts": np.concatenate(starts),
+    }
 
 
 def batch(data, starts: np.ndarray, config: TemporalConfig, rng=None) -> dict[str, torch.Tensor]:
     p, f = config.past, config.future
     idx = starts[:, None] + np.arange(p + f + 1)
-    if rng is None:
-        inputs = data["clean"][idx]
-    else:   # each step from a random noisy copy
-        inputs = data["noisy"][rng.integers(len(data["noisy"]), size=idx.shape), idx]
-    return {"past": torch.from_numpy(inputs[:, :p]), "context": torch.from_numpy(data["context"][idx[:, :p]]),
-            "future": torch.from_numpy(inputs[:, p:p + f]), "target": torch.from_numpy(data["clean"][idx[:, p + 1:]])}
+    # without rng the clean frames; with it, each step from a random noisy copy
+    inputs = data["clean"][idx] if rng is None else data["noisy"][rng.integers(len(data["noisy"]), size=idx.shape), idx]
+    return {
+        "past": torch.from_numpy(inputs[:, :p]),
+        "context": torch.from_numpy(data["context"][idx[:, :p]]),
+        "future": torch.from_numpy(inputs[:, p : p + f]),
+        "target": torch.from_numpy(data["clean"][idx[:, p + 1 :]]),
+    }
 
 
 @torch.no_grad()
@@ -96,33 +107,54 @@ def validate(model: TemporalPredictor, data, config: TemporalConfig) -> dict[str
     starts = data["starts"][:: max(1, config.future // 2)]
     errors, hold, extrapolate = [], [], []
     for i in range(0, len(starts), 1024):
-        b = batch(data, starts[i:i + 1024], config)
+        b = batch(data, starts[i : i + 1024], config)
         errors.append(((model(b["past"], b["context"], b["future"]) - b["target"]) ** 2).mean(-1))
         hold.append(((b["future"] - b["target"]) ** 2).mean(-1))
         newest = b["future"][:, 0]
         extrapolate.append(((newest + 0.5 * (newest - b["past"][:, -1]) - b["target"][:, 0]) ** 2).mean(-1))
     errors, hold = torch.cat(errors), torch.cat(hold)
-    return {"mse": errors.mean().item(), "mse_next": errors[:, 0].mean().item(),
-            "hold_mse": hold.mean().item(), "hold_mse_next": hold[:, 0].mean().item(),
-            "extrapolate_mse_next": torch.cat(extrapolate).mean().item()}
+    return {
+        "mse": errors.mean().item(),
+        "mse_next": errors[:, 0].mean().item(),
+        "hold_mse": hold.mean().item(),
+        "hold_mse_next": hold[:, 0].mean().item(),
+        "extrapolate_mse_next": torch.cat(extrapolate).mean().item(),
+    }
 
 
 def export(model: TemporalPredictor, path: Path, metadata: dict) -> None:
     c = model.config
     example = (torch.zeros(1, c.past, c.latent), torch.zeros(1, c.past, c.context), torch.zeros(1, c.future, c.latent))
-    export_onnx(model, example, path, ["past_latents", "past_context", "future_latents"], ["predicted_latents"],
-                metadata)
+    export_onnx(
+        model, example, path, ["past_latents", "past_context", "future_latents"], ["predicted_latents"], metadata
+    )
 
 
-def load_clips(mocap_root: Path, split: str, limit: int | None, fps: float = 60.0,
-               augmentation: Augmentation = NO_AUGMENTATION, rng=None):
-    return [clip_arrays(m) for c in split_clips(mocap_root, split, limit)
-            for m in variants(load_clip(c, fps), augmentation, rng)]
+def load_clips(
+    mocap_root: Path,
+    split: str,
+    limit: int | None,
+    fps: float = 60.0,
+    augmentation: Augmentation = NO_AUGMENTATION,
+    rng=None,
+):
+    return [
+        clip_arrays(m)
+        for c in split_clips(mocap_root, split, limit)
+        for m in variants(load_clip(c, fps), augmentation, rng)
+    ]
 
 
-def train_temporal(config: TemporalConfig, mocap_root: Path, out_dir: Path, seed: int = 0,
-                   limit: int | None = None, log=print, checkpoint: Path | None = None,
-                   resume: bool = False) -> dict:
+def train_temporal(
+    config: TemporalConfig,
+    mocap_root: Path,
+    out_dir: Path,
+    seed: int = 0,
+    limit: int | None = None,
+    log=print,
+    checkpoint: Path | None = None,
+    resume: bool = False,
+) -> dict:
     """Needs the pose VAE in out_dir (dragposer_encoder.onnx): the predictor lives in its space."""
     torch.manual_seed(seed)
     rng = np.random.default_rng(seed)
@@ -133,8 +165,10 @@ def train_temporal(config: TemporalConfig, mocap_root: Path, out_dir: Path, seed
     val_clips = load_clips(mocap_root, "validation", limit)
     train = sequences(train_clips, vae, config, rng)
     val = sequences(val_clips, vae, config, rng, noisy=False, phases=[0])
-    log(f"data: {len(train_clips)} train clips, {len(train['starts'])} windows; {len(val['starts'])} validation "
-        f"windows; {time.perf_counter() - t0:.0f} s")
+    log(
+        f"data: {len(train_clips)} train clips, {len(train['starts'])} windows; {len(val['starts'])} validation "
+        f"windows; {time.perf_counter() - t0:.0f} s"
+    )
     model = TemporalPredictor(config)
     model.context_mean.copy_(torch.from_numpy(train["context"].mean(0)))
     model.context_std.copy_(torch.from_numpy(train["context"].std(0)).clamp_min(1e-3))
@@ -144,14 +178,40 @@ def train_temporal(config: TemporalConfig, mocap_root: Path, out_dir: Path, seed
         terms = loss(model, batch(train, rng.choice(train["starts"], size=config.batch), config, rng))
         return terms, {"loss": terms.item()}
 
-    fitted = fit(model, opt, step, lambda: validate(model, val, config), lambda v: v["mse"],
-                 steps=config.steps, minutes=config.minutes, check_every=config.steps_per_check,
-                 checkpoint=checkpoint, resume=resume, log=log)
-    export(model, Path(out_dir) / "dragposer_temporal.onnx",
-           {"method": "dragposer", "part": "temporal_predictor", "config": config.to_dict(),
-            "validation": fitted.validation})
-    return {"config": config.to_dict(), "steps": fitted.steps, "minutes": fitted.minutes,
-            "validation": fitted.validation, "history": fitted.history,
-            "train_clips": len(split_clips(mocap_root, "train", limit)), "train_sequences": len(train_clips),
-            "augment": config.augment, "train_windows": int(len(train["starts"])), "validation_clips": len(val_clips),
-            "parameters": sum(p.numel() for p in model.parameters()), **machine()}
+    fitted = fit(
+        model,
+        opt,
+        step,
+        lambda: validate(model, val, config),
+        lambda v: v["mse"],
+        steps=config.steps,
+        minutes=config.minutes,
+        check_every=config.steps_per_check,
+        checkpoint=checkpoint,
+        resume=resume,
+        log=log,
+    )
+    export(
+        model,
+        Path(out_dir) / "dragposer_temporal.onnx",
+        {
+            "method": "dragposer",
+            "part": "temporal_predictor",
+            "config": config.to_dict(),
+            "validation": fitted.validation,
+        },
+    )
+    return {
+        "config": config.to_dict(),
+        "steps": fitted.steps,
+        "minutes": fitted.minutes,
+        "validation": fitted.validation,
+        "history": fitted.history,
+        "train_clips": len(split_clips(mocap_root, "train", limit)),
+        "train_sequences": len(train_clips),
+        "augment": config.augment,
+        "train_windows": int(len(train["starts"])),
+        "validation_clips": len(val_clips),
+        "parameters": sum(p.numel() for p in model.parameters()),
+        **machine(),
+    }

@@ -12,11 +12,13 @@ The checkpoint with the lowest validation latent error, averaged over the three 
 exported; the decoded guess's joint errors are reported beside it. Inputs are scaled, not
 centred, so that an absent site stays zero.
 """
+
 from __future__ import annotations
 
 import time
 from dataclasses import asdict, dataclass
 from pathlib import Path
+from typing import ClassVar
 
 import numpy as np
 import torch
@@ -24,9 +26,8 @@ from torch import nn
 
 from ..core.contacts import estimate_floor
 from ..core.kinematics import forward_kinematics
-from ..core.skeleton import LOWER_BODY, joint_indices
 from ..core.sensors import SITE_JOINTS
-from ..core.skeleton import JOINT_INDEX, Skeleton
+from ..core.skeleton import JOINT_INDEX, LOWER_BODY, Skeleton, joint_indices
 from ..data.catalog import load_clip, split_clips
 from ..data.virtual_trackers import _random_rotations
 from ..estimators.dragposer import PoseVaeRuntime
@@ -36,6 +37,7 @@ from ..estimators.lobstr_features import body_scale
 from .augment import NO_AUGMENTATION, Augmentation, variants
 from .dragposer_vae import Decoder, PoseVae, VaeConfig
 from .harness import export_onnx, fit, machine
+from .presets import Presets
 from .torch_body import forward_kinematics as torch_fk
 
 JOINTS = [JOINT_INDEX[SITE_JOINTS[s]] for s in SITES]
@@ -43,35 +45,43 @@ SENSOR_SETS = {"three_point": SITES[:3], "four_point": SITES[:4], "six_point": S
 
 
 @dataclass
-class TrackerPriorConfig:
+class TrackerPriorConfig(Presets):
     hidden: int = 256
     layers: int = 1
-    dropout: float = 0.1          # on the GRU's output, in training only
+    dropout: float = 0.1  # on the GRU's output, in training only
     fps: float = 60.0
     chunk: int = 90
-    burn_in: int = 30             # leading frames of a chunk without loss (the GRU warms up)
+    burn_in: int = 30  # leading frames of a chunk without loss (the GRU warms up)
     batch: int = 64
     lr: float = 1e-3
     weight_decay: float = 1e-4
     w_latent: float = 1.0
-    w_positions: float = 0.0      # on squared metres (100: as the VAE's FK term); off, see above
+    w_positions: float = 0.0  # on squared metres (100: as the VAE's FK term); off, see above
     noise_copies: int = 2
-    position_noise: float = 0.01      # metres per axis: LoBSTr's tracker noise
-    rotation_noise_deg: float = 5.0   # up to: tracker noise and what the calibration leaves
+    position_noise: float = 0.01  # metres per axis: LoBSTr's tracker noise
+    rotation_noise_deg: float = 5.0  # up to: tracker noise and what the calibration leaves
     augment: str = "all"
     variants: int = 2
     minutes: float = 0.0
     steps: int = 1_000_000
     steps_per_check: int = 200
 
-    @classmethod
-    def named(cls, name: str) -> "TrackerPriorConfig":
-        if name in ("small", "paper"):   # the paper has no such part; "paper" trains it as small
-            return cls(minutes=25.0)
-        if name == "tiny":
-            return cls(hidden=8, chunk=20, burn_in=5, batch=4, steps=3, steps_per_check=1, noise_copies=1,
-                       augment="mirror", variants=1)
-        raise ValueError(f"unknown tracker prior configuration {name!r} (small, tiny)")
+    KIND = "tracker prior"
+    PRESETS: ClassVar[dict[str, dict]] = {
+        "small": {"minutes": 25.0},
+        "paper": {"minutes": 25.0},  # the paper has no such part: trained as small
+        "tiny": {
+            "hidden": 8,
+            "chunk": 20,
+            "burn_in": 5,
+            "batch": 4,
+            "steps": 3,
+            "steps_per_check": 1,
+            "noise_copies": 1,
+            "augment": "mirror",
+            "variants": 1,
+        },
+    }
 
     def to_dict(self) -> dict:
         return asdict(self)
@@ -81,7 +91,7 @@ class TrackerPriorNet(nn.Module):
     def __init__(self, config: TrackerPriorConfig) -> None:
         super().__init__()
         self.config = c = config
-        self.register_buffer("scale", torch.ones(FEATURES))     # set from the training data
+        self.register_buffer("scale", torch.ones(FEATURES))  # set from the training data
         self.gru = nn.GRU(FEATURES, c.hidden, c.layers, batch_first=True)
         self.dropout = nn.Dropout(c.dropout)
         self.out = nn.Linear(c.hidden, LATENT)
@@ -108,9 +118,13 @@ def frozen_decoder(model_dir: Path) -> Decoder:
     """The shipped pose VAE's decoder in torch, from its ONNX file's weights, frozen."""
     import onnx
     from onnx import numpy_helper
+
     graph = onnx.load(str(Path(model_dir) / "dragposer_decoder.onnx")).graph
-    weights = {i.name.removeprefix("vae."): torch.from_numpy(numpy_helper.to_array(i).copy())
-               for i in graph.initializer if i.name.startswith("vae.decoder.")}
+    weights = {
+        i.name.removeprefix("vae."): torch.from_numpy(numpy_helper.to_array(i).copy())
+        for i in graph.initializer
+        if i.name.startswith("vae.decoder.")
+    }
     vae = PoseVae(VaeConfig(hidden=weights["decoder.0.weight"].shape[0]))
     missing = [k for k in vae.state_dict() if k.startswith("decoder.") and k not in weights]
     if missing:
@@ -153,7 +167,7 @@ def site_mask(sites) -> np.ndarray:
     mask = np.zeros(FEATURES, np.float32)
     for site in sites:
         s = SITES.index(site)
-        mask[s * SITE_FEATURES:(s + 1) * SITE_FEATURES] = 1.0
+        mask[s * SITE_FEATURES : (s + 1) * SITE_FEATURES] = 1.0
     mask[-1] = 1.0
     return mask
 
@@ -164,9 +178,11 @@ MASKS = np.stack([site_mask(s) for s in SENSOR_SETS.values()])
 def load_clips(mocap_root: Path, split: str, config: TrackerPriorConfig, vae, rng, limit: int | None = None):
     train = split == "train"
     augmentation = Augmentation.parse(config.augment, config.variants) if train else NO_AUGMENTATION
-    return [clip_tensors(m, vae, config, rng, config.noise_copies if train else 0)
-            for c in split_clips(mocap_root, split, limit)
-            for m in variants(load_clip(c, config.fps), augmentation, rng)]
+    return [
+        clip_tensors(m, vae, config, rng, config.noise_copies if train else 0)
+        for c in split_clips(mocap_root, split, limit)
+        for m in variants(load_clip(c, config.fps), augmentation, rng)
+    ]
 
 
 LOWER = joint_indices(LOWER_BODY)
@@ -178,7 +194,7 @@ def validate(net: TrackerPriorNet, clips, decoder: Decoder, offsets: torch.Tenso
     the joint and lower-body position errors (cm, relative to the root, without heading) of
     the decoded guess. zero_mse: the latents' mean square, for scale."""
     out = {}
-    for name, mask in zip(SENSOR_SETS, MASKS):
+    for name, mask in zip(SENSOR_SETS, MASKS, strict=True):
         err, pe, lower, n = 0.0, 0.0, 0.0, 0
         for x, z, body in clips:
             pred, _ = net(torch.from_numpy(x[:1] * mask))
@@ -188,21 +204,34 @@ def validate(net: TrackerPriorNet, clips, decoder: Decoder, offsets: torch.Tenso
         out[f"mse_{name}"], out[f"pe_{name}"], out[f"lower_pe_{name}"] = err / n, pe / n, lower / n
     for key in ("mse", "pe", "lower_pe"):
         out[key] = float(np.mean([out[f"{key}_{n}"] for n in SENSOR_SETS]))
-    out["zero_mse"] = float(np.mean(np.concatenate([(z ** 2).mean(-1) for _, z, _ in clips])))
+    out["zero_mse"] = float(np.mean(np.concatenate([(z**2).mean(-1) for _, z, _ in clips])))
     return out
 
 
 def export(net: TrackerPriorNet, path: Path, metadata: dict) -> None:
     c = net.config
     state = torch.zeros(c.layers, 1, c.hidden)
-    export_onnx(TrackerPriorStep(net), (torch.zeros(1, FEATURES), state), path, ["features", "state"],
-                ["latent", "next_state"], {**metadata, "state_shape": list(state.shape)},
-                {"features": {0: "batch"}, "state": {1: "batch"}, "latent": {0: "batch"}, "next_state": {1: "batch"}})
+    export_onnx(
+        TrackerPriorStep(net),
+        (torch.zeros(1, FEATURES), state),
+        path,
+        ["features", "state"],
+        ["latent", "next_state"],
+        {**metadata, "state_shape": list(state.shape)},
+        {"features": {0: "batch"}, "state": {1: "batch"}, "latent": {0: "batch"}, "next_state": {1: "batch"}},
+    )
 
 
-def train_tracker_prior(config: TrackerPriorConfig, mocap_root: Path, out_dir: Path, seed: int = 0,
-                        limit: int | None = None, log=print, checkpoint: Path | None = None,
-                        resume: bool = False) -> dict:
+def train_tracker_prior(
+    config: TrackerPriorConfig,
+    mocap_root: Path,
+    out_dir: Path,
+    seed: int = 0,
+    limit: int | None = None,
+    log=print,
+    checkpoint: Path | None = None,
+    resume: bool = False,
+) -> dict:
     """Needs the pose VAE in out_dir (dragposer_encoder.onnx): the prior guesses its latents."""
     torch.manual_seed(seed)
     rng = np.random.default_rng(seed)
@@ -221,8 +250,10 @@ def train_tracker_prior(config: TrackerPriorConfig, mocap_root: Path, out_dir: P
             starts.append(offset + np.arange(len(target) - config.chunk + 1))
         offset += len(target)
     starts = np.concatenate(starts)
-    log(f"data: {len(train_clips)} train clips ({len(z)} frames x {len(x)} copies), {len(val_clips)} validation "
-        f"clips, {time.perf_counter() - t0:.0f} s")
+    log(
+        f"data: {len(train_clips)} train clips ({len(z)} frames x {len(x)} copies), {len(val_clips)} validation "
+        f"clips, {time.perf_counter() - t0:.0f} s"
+    )
     net = TrackerPriorNet(config)
     net.scale.copy_(torch.from_numpy(np.sqrt((x[0] ** 2).mean(0)) + 1e-3))
     opt = torch.optim.AdamW(net.parameters(), lr=config.lr, weight_decay=config.weight_decay)
@@ -232,20 +263,45 @@ def train_tracker_prior(config: TrackerPriorConfig, mocap_root: Path, out_dir: P
         copy = rng.integers(0, len(x), size=config.batch)[:, None]
         mask = MASKS[rng.integers(0, len(MASKS), size=config.batch)][:, None]
         pred, _ = net(torch.from_numpy(x[copy, idx] * mask))
-        pred, kept = pred[:, config.burn_in:], idx[:, config.burn_in:]
+        pred, kept = pred[:, config.burn_in :], idx[:, config.burn_in :]
         latent = ((pred - torch.from_numpy(z[kept])) ** 2).mean()
-        positions = (((decoded_positions(decoder, pred, offsets) - torch.from_numpy(body[kept])) ** 2).mean()
-                     if config.w_positions else pred.new_zeros(()))
+        positions = (
+            ((decoded_positions(decoder, pred, offsets) - torch.from_numpy(body[kept])) ** 2).mean()
+            if config.w_positions
+            else pred.new_zeros(())
+        )
         loss = config.w_latent * latent + config.w_positions * positions
         return loss, {"loss": loss.item(), "latent": latent.item(), "positions": positions.item()}
 
-    fitted = fit(net, opt, step, lambda: validate(net, val_clips, decoder, offsets), lambda v: v["mse"],
-                 steps=config.steps, minutes=config.minutes, check_every=config.steps_per_check,
-                 checkpoint=checkpoint, resume=resume, log=log)
-    export(net, Path(out_dir) / FILE, {"method": "dragposer", "part": "tracker_prior", "config": config.to_dict(),
-                                      "validation": fitted.validation})
-    return {"config": config.to_dict(), "steps": fitted.steps, "minutes": fitted.minutes,
-            "validation": fitted.validation, "history": fitted.history,
-            "train_clips": len(split_clips(mocap_root, "train", limit)), "train_sequences": len(train_clips),
-            "augment": config.augment, "train_frames": int(len(z)), "validation_clips": len(val_clips),
-            "parameters": sum(p.numel() for p in net.parameters()), **machine()}
+    fitted = fit(
+        net,
+        opt,
+        step,
+        lambda: validate(net, val_clips, decoder, offsets),
+        lambda v: v["mse"],
+        steps=config.steps,
+        minutes=config.minutes,
+        check_every=config.steps_per_check,
+        checkpoint=checkpoint,
+        resume=resume,
+        log=log,
+    )
+    export(
+        net,
+        Path(out_dir) / FILE,
+        {"method": "dragposer", "part": "tracker_prior", "config": config.to_dict(), "validation": fitted.validation},
+    )
+    return {
+        "config": config.to_dict(),
+        "steps": fitted.steps,
+        "minutes": fitted.minutes,
+        "validation": fitted.validation,
+        "history": fitted.history,
+        "train_clips": len(split_clips(mocap_root, "train", limit)),
+        "train_sequences": len(train_clips),
+        "augment": config.augment,
+        "train_frames": int(len(z)),
+        "validation_clips": len(val_clips),
+        "parameters": sum(p.numel() for p in net.parameters()),
+        **machine(),
+    }

@@ -5,6 +5,7 @@ matter to the VAE; the root keeps its height above the floor, scaled by leg leng
 paired with its successor for the continuity loss. The best validation reconstruction is
 exported.
 """
+
 from __future__ import annotations
 
 import time
@@ -34,11 +35,20 @@ def clip_arrays(motion, offsets: np.ndarray):
     return dq.astype(np.float32), matrix_to_6d(local).reshape(len(motion), -1).astype(np.float32)
 
 
-def load_frames(mocap_root: Path, split: str, fps: float = 60.0, limit: int | None = None,
-                augmentation: Augmentation = NO_AUGMENTATION, rng=None):
+def load_frames(
+    mocap_root: Path,
+    split: str,
+    fps: float = 60.0,
+    limit: int | None = None,
+    augmentation: Augmentation = NO_AUGMENTATION,
+    rng=None,
+):
     offsets = Skeleton.canonical().offsets
-    return [clip_arrays(m, offsets) for c in split_clips(mocap_root, split, limit)
-            for m in variants(load_clip(c, fps), augmentation, rng)]
+    return [
+        clip_arrays(m, offsets)
+        for c in split_clips(mocap_root, split, limit)
+        for m in variants(load_clip(c, fps), augmentation, rng)
+    ]
 
 
 @torch.no_grad()
@@ -50,25 +60,38 @@ def validate(vae: PoseVae, clips, offsets: torch.Tensor) -> dict[str, float]:
     r_hat, r = sixd_to_matrix(rec.unflatten(-1, (22, 6))), sixd_to_matrix(pose.unflatten(-1, (22, 6)))
     _, p_hat = forward_kinematics(r_hat.numpy(), np.zeros((len(dq), 3)), offsets.numpy())
     _, p = forward_kinematics(r.numpy(), np.zeros((len(dq), 3)), offsets.numpy())
-    return {"position_error_cm": float(np.linalg.norm(p_hat - p, axis=-1).mean() * 100),
-            "rotation_error_deg": float(np.degrees(angle_between(r_hat.numpy(), r.numpy())).mean())}
+    return {
+        "position_error_cm": float(np.linalg.norm(p_hat - p, axis=-1).mean() * 100),
+        "rotation_error_deg": float(np.degrees(angle_between(r_hat.numpy(), r.numpy())).mean()),
+    }
 
 
 def export(vae: PoseVae, out_dir: Path, metadata: dict) -> None:
     for name, module, example, inp, outp in [
-            ("dragposer_decoder.onnx", Decoder(vae), torch.zeros(1, vae.config.latent), "latent", "local_rotations"),
-            ("dragposer_encoder.onnx", Encoder(vae), torch.zeros(1, 176), "dual_quaternions", "latent")]:
-        export_onnx(module, (example,), out_dir / name, [inp], [outp], metadata,
-                    {inp: {0: "batch"}, outp: {0: "batch"}})
+        ("dragposer_decoder.onnx", Decoder(vae), torch.zeros(1, vae.config.latent), "latent", "local_rotations"),
+        ("dragposer_encoder.onnx", Encoder(vae), torch.zeros(1, 176), "dual_quaternions", "latent"),
+    ]:
+        export_onnx(
+            module, (example,), out_dir / name, [inp], [outp], metadata, {inp: {0: "batch"}, outp: {0: "batch"}}
+        )
 
 
-def train_vae(config: VaeConfig, mocap_root: Path, out_dir: Path, seed: int = 0, limit: int | None = None,
-              log=print, checkpoint: Path | None = None, resume: bool = False) -> dict:
+def train_vae(
+    config: VaeConfig,
+    mocap_root: Path,
+    out_dir: Path,
+    seed: int = 0,
+    limit: int | None = None,
+    log=print,
+    checkpoint: Path | None = None,
+    resume: bool = False,
+) -> dict:
     torch.manual_seed(seed)
     rng = np.random.default_rng(seed)
     t0 = time.perf_counter()
-    train_clips = load_frames(mocap_root, "train", limit=limit,
-                              augmentation=Augmentation.parse(config.augment, config.variants), rng=rng)
+    train_clips = load_frames(
+        mocap_root, "train", limit=limit, augmentation=Augmentation.parse(config.augment, config.variants), rng=rng
+    )
     val_clips = load_frames(mocap_root, "validation", limit=limit)
     dq = np.concatenate([c[0] for c in train_clips])
     pose = np.concatenate([c[1] for c in train_clips])
@@ -78,8 +101,10 @@ def train_vae(config: VaeConfig, mocap_root: Path, out_dir: Path, seed: int = 0,
         starts.append(offset + np.arange(len(c[0]) - 1))
         offset += len(c[0])
     starts = np.concatenate(starts)
-    log(f"data: {len(train_clips)} train clips ({len(dq)} frames), {len(val_clips)} validation clips, "
-        f"{time.perf_counter() - t0:.0f} s")
+    log(
+        f"data: {len(train_clips)} train clips ({len(dq)} frames), {len(val_clips)} validation clips, "
+        f"{time.perf_counter() - t0:.0f} s"
+    )
     offsets = torch.tensor(Skeleton.canonical().offsets, dtype=torch.float32)
     vae = PoseVae(config)
     opt = torch.optim.AdamW(vae.parameters(), lr=config.lr, weight_decay=config.weight_decay)
@@ -89,12 +114,34 @@ def train_vae(config: VaeConfig, mocap_root: Path, out_dir: Path, seed: int = 0,
         terms = losses(vae, {"dq": torch.from_numpy(dq[idx]), "pose": torch.from_numpy(pose[idx])}, offsets)
         return terms["total"], {k: v.item() for k, v in terms.items()}
 
-    fitted = fit(vae, opt, step, lambda: validate(vae, val_clips, offsets), lambda val: val["position_error_cm"],
-                 steps=config.steps, minutes=config.minutes, check_every=config.steps_per_check,
-                 checkpoint=checkpoint, resume=resume, log=log)
-    export(vae, out_dir, {"method": "dragposer", "part": "pose_vae", "config": config.to_dict(),
-                          "validation": fitted.validation})
-    return {"config": config.to_dict(), "steps": fitted.steps, "minutes": fitted.minutes,
-            "validation": fitted.validation, "history": fitted.history,
-            "train_clips": len(split_clips(mocap_root, "train", limit)), "train_sequences": len(train_clips),
-            "augment": config.augment, "train_frames": int(len(dq)), "validation_clips": len(val_clips), **machine()}
+    fitted = fit(
+        vae,
+        opt,
+        step,
+        lambda: validate(vae, val_clips, offsets),
+        lambda val: val["position_error_cm"],
+        steps=config.steps,
+        minutes=config.minutes,
+        check_every=config.steps_per_check,
+        checkpoint=checkpoint,
+        resume=resume,
+        log=log,
+    )
+    export(
+        vae,
+        out_dir,
+        {"method": "dragposer", "part": "pose_vae", "config": config.to_dict(), "validation": fitted.validation},
+    )
+    return {
+        "config": config.to_dict(),
+        "steps": fitted.steps,
+        "minutes": fitted.minutes,
+        "validation": fitted.validation,
+        "history": fitted.history,
+        "train_clips": len(split_clips(mocap_root, "train", limit)),
+        "train_sequences": len(train_clips),
+        "augment": config.augment,
+        "train_frames": int(len(dq)),
+        "validation_clips": len(val_clips),
+        **machine(),
+    }

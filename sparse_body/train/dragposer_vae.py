@@ -6,41 +6,42 @@ hour can fit. Losses and weights are the paper's: reconstruction (MSE), forward 
 (MSE, x100), KL divergence (x0.001) and continuity (x1): one gradient step in the latent
 from pose i must reach pose i+1.
 """
+
 from __future__ import annotations
 
 from dataclasses import asdict, dataclass
+from typing import ClassVar
 
 import torch
 from torch import nn
 
 from ..estimators.dragposer_pose import DECODER_OUTPUT, ENCODER_INPUT, LATENT
+from .presets import Presets
 from .torch_body import forward_kinematics, sixd_to_matrix
 
 
 @dataclass
-class VaeConfig:
+class VaeConfig(Presets):
     latent: int = LATENT
     hidden: int = 256
-    batch: int = 256              # paper: 64 (a day on a GPU); larger batches suit CPU training
-    lr: float = 1e-3              # paper: 1e-4 with AdamW
+    batch: int = 256  # paper: 64 (a day on a GPU); larger batches suit CPU training
+    lr: float = 1e-3  # paper: 1e-4 with AdamW
     weight_decay: float = 1e-4
     w_reconstruction: float = 1.0
     w_fk: float = 100.0
     w_kld: float = 0.001
     w_continuity: float = 1.0
-    augment: str = "mirror"       # train/augment.py; the pose VAE sees single heading-free poses
-    variants: int = 1             # on the canonical body, so only mirroring changes what it sees
+    augment: str = "mirror"  # train/augment.py; the pose VAE sees single heading-free poses
+    variants: int = 1  # on the canonical body, so only mirroring changes what it sees
     minutes: float = 0.0
     steps: int = 20_000
     steps_per_check: int = 250
 
-    @classmethod
-    def named(cls, name: str) -> "VaeConfig":
-        if name == "small":
-            return cls(minutes=30.0, steps=1_000_000)
-        if name == "tiny":
-            return cls(hidden=16, batch=8, steps=3, steps_per_check=1)
-        raise ValueError(f"unknown VAE configuration {name!r} (small, tiny)")
+    KIND = "VAE"
+    PRESETS: ClassVar[dict[str, dict]] = {
+        "small": {"minutes": 30.0, "steps": 1_000_000},
+        "tiny": {"hidden": 16, "batch": 8, "steps": 3, "steps_per_check": 1},
+    }
 
     def to_dict(self) -> dict:
         return asdict(self)
@@ -54,8 +55,9 @@ class PoseVae(nn.Module):
         self.encoder = nn.Sequential(nn.Linear(ENCODER_INPUT, h), nn.ELU(), nn.Linear(h, h), nn.ELU())
         self.mu = nn.Linear(h, config.latent)
         self.log_var = nn.Linear(h, config.latent)
-        self.decoder = nn.Sequential(nn.Linear(config.latent, h), nn.ELU(), nn.Linear(h, h), nn.ELU(),
-                                     nn.Linear(h, DECODER_OUTPUT))
+        self.decoder = nn.Sequential(
+            nn.Linear(config.latent, h), nn.ELU(), nn.Linear(h, h), nn.ELU(), nn.Linear(h, DECODER_OUTPUT)
+        )
 
     def encode(self, dq: torch.Tensor):
         e = self.encoder(dq)
@@ -102,7 +104,7 @@ def losses(vae: PoseVae, batch: dict[str, torch.Tensor], offsets: torch.Tensor) 
     x_hat = vae.decode(z)
     l_rec = ((x_hat - pose[:, 0]) ** 2).mean()
     l_fk = ((_positions(x_hat, offsets) - _positions(pose[:, 0], offsets)) ** 2).mean()
-    l_kld = (-0.5 * (1 + log_var - mu ** 2 - log_var.exp()).sum(-1)).mean()
+    l_kld = (-0.5 * (1 + log_var - mu**2 - log_var.exp()).sum(-1)).mean()
     # continuity: one plain gradient step in the latent, from pose i towards pose i+1
     x0 = vae.decode(mu)
     step = torch.autograd.grad(((x0 - pose[:, 1]) ** 2).mean(dim=-1).sum(), mu, create_graph=True)[0]

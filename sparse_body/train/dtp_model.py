@@ -10,38 +10,41 @@ ahead, the later ones only back, or the layers would add up their lookahead): th
 estimate for its frame, training learns from all of them at once, and a stream's first
 frames (fewer than a window) are run as a shorter window instead of being padded.
 """
+
 from __future__ import annotations
 
 from dataclasses import asdict, dataclass
+from typing import ClassVar
 
 import torch
 from torch import nn
 
 from ..core.skeleton import JOINT_INDEX
 from ..estimators.dtp_features import FEATURES, OUTPUTS
+from .presets import Presets
 from .torch_body import forward_kinematics, sixd_to_matrix
 
 
 @dataclass
-class DtpConfig:
-    d_model: int = 256            # paper: 256-D embedding
-    heads: int = 8                # paper
-    layers: int = 3               # paper
-    feedforward: int = 1024       # the encoder layer's inner width (Vaswani et al.'s 4x)
+class DtpConfig(Presets):
+    d_model: int = 256  # paper: 256-D embedding
+    heads: int = 8  # paper
+    layers: int = 3  # paper
+    feedforward: int = 1024  # the encoder layer's inner width (Vaswani et al.'s 4x)
     dropout: float = 0.1
-    past: int = 20                # paper: 20 past frames, the current one
-    future: int = 0               # and 5 future frames (0: the online variant a live node runs)
-    fps: float = 60.0             # paper: resampled to 60 fps
+    past: int = 20  # paper: 20 past frames, the current one
+    future: int = 0  # and 5 future frames (0: the online variant a live node runs)
+    fps: float = 60.0  # paper: resampled to 60 fps
     batch: int = 64
-    lr: float = 1e-4              # paper: Adam 1e-4, halved every 10,000 steps
+    lr: float = 1e-4  # paper: Adam 1e-4, halved every 10,000 steps
     lr_half_every: int = 10_000
-    w_rotation: float = 1.0       # paper's loss weights
+    w_rotation: float = 1.0  # paper's loss weights
     w_end_effector: float = 0.5
     w_foot_velocity: float = 0.01
-    augment: str = "all"          # train/augment.py: mirror, speed, proportions (all), or none
+    augment: str = "all"  # train/augment.py: mirror, speed, proportions (all), or none
     variants: int = 2
     steps_per_check: int = 200
-    minutes: float = 0.0          # pre-training budget (0: only steps counts)
+    minutes: float = 0.0  # pre-training budget (0: only steps counts)
     steps: int = 200_000
     # occlusion fine-tuning (the paper's AMASS-OCC): in this share of windows one or both feet
     # are occluded for a stretch, reported as origin + identity or as bounded noise
@@ -54,21 +57,35 @@ class DtpConfig:
     def window(self) -> int:
         return self.past + 1 + self.future
 
-    @classmethod
-    def named(cls, name: str) -> "DtpConfig":
-        if name == "paper":
-            return cls()
-        if name == "small":   # pre-training and fine-tuning in under an hour on 2 CPU cores
-            return cls(d_model=128, feedforward=512, lr=5e-4, lr_half_every=4_000, minutes=30.0, finetune_minutes=14.0,
-                       finetune_lr=2e-4, steps=1_000_000, finetune_steps=1_000_000)
-        if name == "lookahead":   # small with the paper's 5 future frames (offline processing)
-            config = cls.named("small")
-            config.future = 5
-            return config
-        if name == "tiny":    # tests
-            return cls(d_model=16, heads=2, layers=1, feedforward=32, past=4, batch=4, steps=3, finetune_steps=2,
-                       steps_per_check=2, augment="mirror", variants=1)
-        raise ValueError(f"unknown DTP configuration {name!r} (paper, small, lookahead, tiny)")
+    KIND = "DTP"
+    PRESETS: ClassVar[dict[str, dict]] = {
+        "paper": {},
+        "small": {  # pre-training and fine-tuning in under an hour on 2 CPU cores
+            "d_model": 128,
+            "feedforward": 512,
+            "lr": 5e-4,
+            "lr_half_every": 4_000,
+            "minutes": 30.0,
+            "finetune_minutes": 14.0,
+            "finetune_lr": 2e-4,
+            "steps": 1_000_000,
+            "finetune_steps": 1_000_000,
+        },
+        "lookahead": {"base": "small", "future": 5},  # the paper's 5 future frames (offline processing)
+        "tiny": {  # tests
+            "d_model": 16,
+            "heads": 2,
+            "layers": 1,
+            "feedforward": 32,
+            "past": 4,
+            "batch": 4,
+            "steps": 3,
+            "finetune_steps": 2,
+            "steps_per_check": 2,
+            "augment": "mirror",
+            "variants": 1,
+        },
+    }
 
     def to_dict(self) -> dict:
         return {**asdict(self), "window": self.window}
@@ -97,8 +114,9 @@ class EncoderLayer(nn.Module):
     def __init__(self, d: int, heads: int, feedforward: int, dropout: float) -> None:
         super().__init__()
         self.attention = SelfAttention(d, heads)
-        self.feedforward = nn.Sequential(nn.Linear(d, feedforward), nn.ReLU(), nn.Dropout(dropout),
-                                         nn.Linear(feedforward, d))
+        self.feedforward = nn.Sequential(
+            nn.Linear(d, feedforward), nn.ReLU(), nn.Dropout(dropout), nn.Linear(feedforward, d)
+        )
         self.norm1, self.norm2 = nn.LayerNorm(d), nn.LayerNorm(d)
         self.dropout = nn.Dropout(dropout)
 
@@ -115,10 +133,11 @@ class DtpNet(nn.Module):
         self.register_buffer("mean", torch.zeros(FEATURES))
         self.register_buffer("std", torch.ones(FEATURES))
         d = config.d_model
-        self.embed = nn.Sequential(nn.Linear(FEATURES, d), nn.ReLU(), nn.Linear(d, d))   # paper: two layers
+        self.embed = nn.Sequential(nn.Linear(FEATURES, d), nn.ReLU(), nn.Linear(d, d))  # paper: two layers
         self.position = nn.Parameter(torch.zeros(config.window, d))
-        self.layers = nn.ModuleList(EncoderLayer(d, config.heads, config.feedforward, config.dropout)
-                                    for _ in range(config.layers))
+        self.layers = nn.ModuleList(
+            EncoderLayer(d, config.heads, config.feedforward, config.dropout) for _ in range(config.layers)
+        )
         self.decode = nn.Linear(d, OUTPUTS)
         # token i may attend to token j when j <= i + future in the first layer and j <= i after it,
         # so that no token sees more than `future` frames ahead however many layers there are
@@ -137,7 +156,7 @@ class DtpNet(nn.Module):
 
 
 END_EFFECTORS = tuple(JOINT_INDEX[j] for j in ("head", "left_wrist", "right_wrist", "left_foot", "right_foot"))
-FEET = (3, 4)   # among END_EFFECTORS
+FEET = (3, 4)  # among END_EFFECTORS
 
 
 def body_positions(pose6d: torch.Tensor, offsets: torch.Tensor) -> torch.Tensor:
@@ -158,7 +177,7 @@ def losses(net: DtpNet, batch: dict[str, torch.Tensor], offsets: torch.Tensor) -
     ends = body_positions(target, offsets)[..., END_EFFECTORS, :]
     l_end = (ends_hat - ends).norm(dim=-1).mean()
     # foot velocity in the world: the pelvis (a tracker) moves both alike, so only its turn matters
-    rot = batch["pelvis_rot"]                          # (B, W, 3, 3)
+    rot = batch["pelvis_rot"]  # (B, W, 3, 3)
     feet_hat = (rot[:, :, None] @ ends_hat[..., FEET, :, None])[..., 0]
     feet = (rot[:, :, None] @ ends[..., FEET, :, None])[..., 0]
     l_feet = ((feet_hat[:, 1:] - feet_hat[:, :-1]) - (feet[:, 1:] - feet[:, :-1])).norm(dim=-1).mean()

@@ -5,14 +5,15 @@ and the facts a model card reports about the machine.
 A trainer supplies its own step (a batch -> its loss terms), its validation (-> figures) and
 the figure that picks the checkpoint; fit() does the rest in the same order for all of them.
 """
+
 from __future__ import annotations
 
 import json
 import platform
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Callable
 
 import numpy as np
 import torch
@@ -22,15 +23,25 @@ import torch
 class Fitted:
     steps: int
     minutes: float
-    validation: dict[str, float]      # of the weights kept
+    validation: dict[str, float]  # of the weights kept
     history: list[dict] = field(default_factory=list)
 
 
-def fit(model: torch.nn.Module, optimizer: torch.optim.Optimizer,
-        step: Callable[[], tuple[torch.Tensor, dict[str, float]]],
-        validate: Callable[[], dict[str, float]], score: Callable[[dict[str, float]], float], *,
-        steps: int, minutes: float, check_every: int, after_check: Callable[[], None] | None = None,
-        checkpoint: Path | None = None, resume: bool = False, log: Callable[[str], None] = print) -> Fitted:
+def fit(
+    model: torch.nn.Module,
+    optimizer: torch.optim.Optimizer,
+    step: Callable[[], tuple[torch.Tensor, dict[str, float]]],
+    validate: Callable[[], dict[str, float]],
+    score: Callable[[dict[str, float]], float],
+    *,
+    steps: int,
+    minutes: float,
+    check_every: int,
+    after_check: Callable[[], None] | None = None,
+    checkpoint: Path | None = None,
+    resume: bool = False,
+    log: Callable[[str], None] = print,
+) -> Fitted:
     """Train model until `steps` steps or `minutes` minutes (0: no time limit); every
     check_every steps (and at the last) validate, keep the weights with the lowest score, and
     log. step() runs the model on a batch and returns (loss, figures for the history);
@@ -61,9 +72,12 @@ def fit(model: torch.nn.Module, optimizer: torch.optim.Optimizer,
             history.append({"step": done, "minutes": (time.perf_counter() - start) / 60, **figures, **val})
             if score(val) < best:
                 best, best_state = score(val), {k: v.clone() for k, v in model.state_dict().items()}
-            log(f"step {done} ({history[-1]['minutes']:.1f} min) "
-                + " ".join(f"{k} {v:.4g}" for k, v in figures.items()) + " | val "
-                + " ".join(f"{k} {v:.4g}" for k, v in val.items()))
+            log(
+                f"step {done} ({history[-1]['minutes']:.1f} min) "
+                + " ".join(f"{k} {v:.4g}" for k, v in figures.items())
+                + " | val "
+                + " ".join(f"{k} {v:.4g}" for k, v in val.items())
+            )
             if checkpoint is not None:
                 _save_checkpoint(Path(checkpoint), model, best_state, done, best, history)
     model.load_state_dict(best_state or model.state_dict())
@@ -75,7 +89,7 @@ def _save_checkpoint(path: Path, model, best_state, step: int, best: float, hist
     arrays = {f"now.{k}": v.detach().cpu().numpy() for k, v in model.state_dict().items()}
     arrays.update({f"best.{k}": v.cpu().numpy() for k, v in (best_state or {}).items()})
     state = json.dumps({"step": step, "best": best, "history": history})
-    tmp = path.with_name(path.name + ".tmp.npz")          # a crash mid-write keeps the last one
+    tmp = path.with_name(path.name + ".tmp.npz")  # a crash mid-write keeps the last one
     path.parent.mkdir(parents=True, exist_ok=True)
     np.savez(tmp, state=np.array(state), **arrays)
     tmp.replace(path)
@@ -88,9 +102,11 @@ def _restore(model, path: Path):
         best = {k[5:]: torch.from_numpy(saved[k]) for k in saved.files if k.startswith("best.")} or None
     try:
         model.load_state_dict(now)
-    except RuntimeError as err:      # another configuration's weights (sizes, names)
-        raise ValueError(f"{path}: the checkpoint does not fit this configuration "
-                         f"(train it afresh without --resume): {str(err).splitlines()[0]}") from None
+    except RuntimeError as err:  # another configuration's weights (sizes, names)
+        raise ValueError(
+            f"{path}: the checkpoint does not fit this configuration "
+            f"(train it afresh without --resume): {str(err).splitlines()[0]}"
+        ) from None
     return state["step"], state["best"], best, state["history"]
 
 
@@ -112,29 +128,47 @@ def with_earlier_runs(report: dict, earlier: dict | None) -> dict:
     minutes, so that a model card can say how the model was trained from the start."""
     if earlier is not None:
         report["earlier_runs"] = earlier.get("earlier_runs", []) + [
-            {k: earlier[k] for k in ("command", "steps", "minutes") if k in earlier}]
+            {k: earlier[k] for k in ("command", "steps", "minutes") if k in earlier}
+        ]
     return report
 
 
-def export_onnx(module: torch.nn.Module, example: tuple, path: Path, inputs: list[str], outputs: list[str],
-                metadata: dict, dynamic_axes: dict | None = None) -> None:
+def export_onnx(
+    module: torch.nn.Module,
+    example: tuple,
+    path: Path,
+    inputs: list[str],
+    outputs: list[str],
+    metadata: dict,
+    dynamic_axes: dict | None = None,
+) -> None:
     """module (in eval mode) traced on the example inputs into an ONNX file (opset 17) with the
     metadata a runtime reads its configuration from: the one way every trainer exports."""
     import warnings
+
     module.eval()
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    with warnings.catch_warnings():   # the tracer's notes on shape checks, the legacy exporter's notice
+    with warnings.catch_warnings():  # the tracer's notes on shape checks, the legacy exporter's notice
         warnings.simplefilter("ignore", torch.jit.TracerWarning)
         warnings.simplefilter("ignore", DeprecationWarning)
-        torch.onnx.export(module, example, str(path), input_names=inputs, output_names=outputs,
-                          dynamic_axes=dynamic_axes, opset_version=17, dynamo=False)
+        torch.onnx.export(
+            module,
+            example,
+            str(path),
+            input_names=inputs,
+            output_names=outputs,
+            dynamic_axes=dynamic_axes,
+            opset_version=17,
+            dynamo=False,
+        )
     add_metadata(path, metadata)
 
 
 def add_metadata(onnx_path: Path, metadata: dict) -> None:
     """Each value JSON-encoded into the ONNX file's metadata (the runtime's configuration)."""
     import onnx
+
     graph = onnx.load(str(onnx_path))
     for key, value in metadata.items():
         graph.metadata_props.add(key=key, value=json.dumps(value))
@@ -143,5 +177,7 @@ def add_metadata(onnx_path: Path, metadata: dict) -> None:
 
 def machine() -> dict[str, str]:
     """What a model card says the model was trained on."""
-    return {"hardware": f"{platform.processor() or platform.machine()}, {torch.get_num_threads()} torch threads",
-            "torch": torch.__version__}
+    return {
+        "hardware": f"{platform.processor() or platform.machine()}, {torch.get_num_threads()} torch threads",
+        "torch": torch.__version__,
+    }

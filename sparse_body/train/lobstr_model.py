@@ -3,53 +3,69 @@
 Torch is for training and export only; the runtime (estimators/lobstr.py) runs the ONNX
 export of LobstrStep with ONNX Runtime.
 """
+
 from __future__ import annotations
 
 from dataclasses import asdict, dataclass
+from typing import ClassVar
 
 import torch
 from torch import nn
 
 from ..core.skeleton import JOINT_INDEX, PARENTS
 from ..estimators.lobstr_features import LEG_JOINTS, OUTPUTS, feature_count, output_count
+from .presets import Presets
 from .torch_body import sixd_to_matrix
 
 
 @dataclass
-class LobstrConfig:
-    hidden: int = 1024            # GRU width (paper)
-    latent: int = 128             # paper
-    fps: float = 60.0             # the paper trains at 45 fps; our clips and nodes run at 60
-    chunk: int = 90               # frames per training sequence
-    burn_in: int = 30             # leading frames of a chunk without loss (the GRU warms up)
-    batch: int = 256              # paper
-    lr: float = 1e-3              # paper: Adam, 1e-3, x0.999 per epoch
+class LobstrConfig(Presets):
+    hidden: int = 1024  # GRU width (paper)
+    latent: int = 128  # paper
+    fps: float = 60.0  # the paper trains at 45 fps; our clips and nodes run at 60
+    chunk: int = 90  # frames per training sequence
+    burn_in: int = 30  # leading frames of a chunk without loss (the GRU warms up)
+    batch: int = 256  # paper
+    lr: float = 1e-3  # paper: Adam, 1e-3, x0.999 per epoch
     lr_decay: float = 0.999
-    weight_decay: float = 0.0     # AdamW's decoupled decay (the paper: none)
-    dropout: float = 0.0          # on the GRU's output, in training only (the paper: none)
-    learned_upper: bool = False   # predict the upper body too (lobstr_features; the paper: IK)
+    weight_decay: float = 0.0  # AdamW's decoupled decay (the paper: none)
+    dropout: float = 0.0  # on the GRU's output, in training only (the paper: none)
+    learned_upper: bool = False  # predict the upper body too (lobstr_features; the paper: IK)
     steps_per_epoch: int = 50
-    w_pose: float = 1.0           # paper's loss weights
+    w_pose: float = 1.0  # paper's loss weights
     w_fk: float = 0.1
     w_velocity: float = 0.1
     w_contact: float = 1e-6
-    noise_copies: int = 3         # tracker-noise realisations per clip, besides the clean one
-    augment: str = "all"          # train/augment.py: mirror, speed, proportions (all), or none
-    variants: int = 3             # augmented copies per train clip, besides the clip
-    minutes: float = 0.0          # stop after this long (0: only steps counts)
-    steps: int = 75_000           # paper: 1,500 epochs
+    noise_copies: int = 3  # tracker-noise realisations per clip, besides the clean one
+    augment: str = "all"  # train/augment.py: mirror, speed, proportions (all), or none
+    variants: int = 3  # augmented copies per train clip, besides the clip
+    minutes: float = 0.0  # stop after this long (0: only steps counts)
+    steps: int = 75_000  # paper: 1,500 epochs
 
-    @classmethod
-    def named(cls, name: str) -> "LobstrConfig":
-        if name == "paper":
-            return cls()
-        if name == "small":   # trains in under an hour on 2 CPU cores
-            return cls(hidden=256, batch=64, steps_per_epoch=100, minutes=50.0, steps=1_000_000,
-                       learned_upper=True)
-        if name == "tiny":    # tests
-            return cls(hidden=16, latent=8, chunk=20, burn_in=5, batch=4, steps=3, noise_copies=1,
-                       augment="mirror", variants=1, learned_upper=True)
-        raise ValueError(f"unknown LoBSTr configuration {name!r} (paper, small, tiny)")
+    KIND = "LoBSTr"
+    PRESETS: ClassVar[dict[str, dict]] = {
+        "paper": {},
+        "small": {  # trains in under an hour on 2 CPU cores
+            "hidden": 256,
+            "batch": 64,
+            "steps_per_epoch": 100,
+            "minutes": 50.0,
+            "steps": 1_000_000,
+            "learned_upper": True,
+        },
+        "tiny": {  # tests
+            "hidden": 16,
+            "latent": 8,
+            "chunk": 20,
+            "burn_in": 5,
+            "batch": 4,
+            "steps": 3,
+            "noise_copies": 1,
+            "augment": "mirror",
+            "variants": 1,
+            "learned_upper": True,
+        },
+    }
 
     def to_dict(self) -> dict:
         return asdict(self)
@@ -67,7 +83,7 @@ class LobstrNet(nn.Module):
         self.dropout = nn.Dropout(config.dropout)
         self.to_latent = nn.Sequential(nn.Linear(config.hidden, config.latent), nn.ReLU())
         self.pose_head = nn.Linear(config.latent, output_count(config.learned_upper))
-        self.contact_head = nn.Linear(config.latent, 2 * 2)   # per foot: (no contact, contact) logits
+        self.contact_head = nn.Linear(config.latent, 2 * 2)  # per foot: (no contact, contact) logits
 
     def forward(self, x: torch.Tensor, h: torch.Tensor | None = None):
         """x (B, T, 37 or 70) -> pose (B, T, 48 or 126) in 6D (legs, then the upper body),
@@ -134,15 +150,24 @@ def losses(net: LobstrNet, batch: dict[str, torch.Tensor], offsets: torch.Tensor
     # pose, which reduces to a toe position error; we match frame-to-frame velocities,
     # which is what the text says the term is for.
     c, sn = torch.cos(yaw), torch.sin(yaw)
-    def world(v):   # rotate (B, T, 2, 3) about z by yaw (B, T)
+
+    def world(v):  # rotate (B, T, 2, 3) about z by yaw (B, T)
         x, y = v[..., 0], v[..., 1]
         return torch.stack([c[..., None] * x - sn[..., None] * y, sn[..., None] * x + c[..., None] * y, v[..., 2]], -1)
+
     toes_hat, toes = world(p_hat[..., _TOES, :]), world(p[..., _TOES, :])
     l_vel = ((toes_hat[:, 1:] - toes_hat[:, :-1]) - (toes[:, 1:] - toes[:, :-1])).norm(dim=-1).mean()
     ce = nn.functional.cross_entropy(logits.reshape(-1, 2), contact.reshape(-1).long(), reduction="none")
-    ce = ce.view(*contact.shape).mean(dim=(0, 1))   # (2,) left, right
+    ce = ce.view(*contact.shape).mean(dim=(0, 1))  # (2,) left, right
     l_contact = ce.sum() / 2
     total = cfg.w_pose * (l_pose + l_upper) + cfg.w_fk * l_fk + cfg.w_velocity * l_vel + cfg.w_contact * l_contact
-    accuracy = ((logits.argmax(-1) == contact.long()).float().mean())
-    return {"total": total, "pose": l_pose, "upper": l_upper, "fk": l_fk, "velocity": l_vel, "contact": l_contact,
-            "contact_accuracy": accuracy}
+    accuracy = (logits.argmax(-1) == contact.long()).float().mean()
+    return {
+        "total": total,
+        "pose": l_pose,
+        "upper": l_upper,
+        "fk": l_fk,
+        "velocity": l_vel,
+        "contact": l_contact,
+        "contact_accuracy": accuracy,
+    }

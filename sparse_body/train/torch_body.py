@@ -1,5 +1,6 @@
 """The body model in torch, for losses that need forward kinematics (the numpy twin is
 core/kinematics.py; test_kinematics checks they agree to 1e-6)."""
+
 from __future__ import annotations
 
 import roma
@@ -28,9 +29,14 @@ def sixd_to_matrix(d6: torch.Tensor) -> torch.Tensor:
     a = d6[..., 0:3] / d6[..., 0:3].norm(dim=-1, keepdim=True)
     b = d6[..., 3:6] - (a * d6[..., 3:6]).sum(-1, keepdim=True) * a
     b = b / b.norm(dim=-1, keepdim=True)
-    c = torch.stack([a[..., 1] * b[..., 2] - a[..., 2] * b[..., 1],
-                     a[..., 2] * b[..., 0] - a[..., 0] * b[..., 2],
-                     a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0]], dim=-1)
+    c = torch.stack(
+        [
+            a[..., 1] * b[..., 2] - a[..., 2] * b[..., 1],
+            a[..., 2] * b[..., 0] - a[..., 0] * b[..., 2],
+            a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0],
+        ],
+        dim=-1,
+    )
     return torch.stack([a, b, c], dim=-1)
 
 

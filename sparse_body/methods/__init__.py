@@ -1,0 +1,34 @@
+"""The methods, one record each (record.Method): estimator, training parts and presets, model
+card, paper figures and what `eval` compares it with. The commands, the nodes and the
+evaluation look methods up here and hold no per-method branches; adding a method is its
+code, its record module here and one line in METHODS."""
+
+from __future__ import annotations
+
+from . import avatarjlm, dragposer, dtp, ik, lobstr, reference, refined
+from .record import Method, Training, TrainPart, load
+
+METHODS: dict[str, Method] = {
+    m.name: m
+    for m in (
+        reference.METHOD,
+        ik.METHOD,
+        lobstr.METHOD,
+        dragposer.METHOD,
+        refined.METHOD,
+        dtp.METHOD,
+        avatarjlm.METHOD,
+    )
+}
+TRAINABLE = [name for name, m in METHODS.items() if m.training is not None]
+
+
+def paper_figures(method: str, sensors: str, faulty_percent: float = 0.0, occluded_percent: float = 0.0) -> dict:
+    """The published figures for a method on a sensor set (and share of faulty sensors)."""
+    if occluded_percent or method not in METHODS:  # DTP's occluded test set states no share: nothing alike
+        return {}
+    key = (sensors, faulty_percent) if faulty_percent else sensors
+    return METHODS[method].paper_figures.get(key, {})
+
+
+__all__ = ["METHODS", "TRAINABLE", "Method", "TrainPart", "Training", "load", "paper_figures"]

@@ -1,0 +1,50 @@
+"""The record a method registers: everything the commands need to know about it, by name
+and import path only, so reading the registry imports no method's code (and no torch)."""
+
+from __future__ import annotations
+
+import importlib
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+
+def load(target: str) -> Any:
+    """The object a "module:name" path names, imported now."""
+    module, name = target.split(":")
+    return getattr(importlib.import_module(module), name)
+
+
+@dataclass(frozen=True)
+class TrainPart:
+    """One trained network: its configuration class (with presets), its train function, and
+    where its training report goes given the method's output path."""
+
+    name: str
+    config: str  # "module:Class", a train.presets.Presets dataclass
+    train: str  # "module:function": train(config, mocap, out, seed, limit, checkpoint, resume) -> report
+    report: Callable[[Path], Path]
+
+
+@dataclass(frozen=True)
+class Training:
+    parts: tuple[TrainPart, ...]  # in training order (later parts may use earlier ones' output)
+    # the default output under the package's models/, given a function making the (first
+    # trained part's) configuration: a .onnx file, or "" (the folder) for several files
+    output: Callable[[Callable[[], Any]], str]
+    card: Callable[[Path, Any, int | None], Path]  # card(out, mocap, limit) -> the card's path
+    config_help: str  # the presets, for `train --config`
+    out_help: str  # what --out names
+
+
+@dataclass(frozen=True)
+class Method:
+    name: str
+    estimator: str  # "module:Class" of its estimators.base.Estimator
+    # what `sparse-body eval` runs beside it unless told not to (ablations, baselines)
+    compare_with: tuple[str, ...] = ()
+    # published figures printed beside its results, by sensors or (sensors, faulty %): the
+    # papers' own data and protocols, a guide rather than a like-for-like comparison
+    paper_figures: dict[Any, dict[str, dict[str, float]]] = field(default_factory=dict)
+    training: Training | None = None

@@ -1,0 +1,21 @@
+"""Named training configurations as data (as nanoGPT's config files): each configuration class
+lists its presets in PRESETS, a name -> the fields it changes, one commented knob a line;
+"base" starts a preset from another one instead of the defaults."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+from typing import Any, ClassVar
+
+
+class Presets:
+    KIND: ClassVar[str] = "training"  # what the configuration configures, for the error
+    PRESETS: ClassVar[dict[str, dict[str, Any]]] = {}
+
+    @classmethod
+    def named(cls, name: str):
+        if name not in cls.PRESETS:
+            raise ValueError(f"unknown {cls.KIND} configuration {name!r} ({', '.join(cls.PRESETS)})")
+        fields = dict(cls.PRESETS[name])
+        base = fields.pop("base", None)
+        return replace(cls.named(base) if base else cls(), **fields)

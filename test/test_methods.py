@@ -1,0 +1,54 @@
+"""The method registry (sparse_body/methods): every record's import paths load, its presets
+and figures are well formed, and the commands hold no per-method branches."""
+
+import re
+from pathlib import Path
+
+import pytest
+
+from sparse_body.core.sensors import load_sensor_config
+from sparse_body.estimators.base import Estimator, parse_estimator_spec
+from sparse_body.methods import METHODS, TRAINABLE, load, paper_figures
+
+ROOT = Path(__file__).resolve().parents[1] / "sparse_body"
+
+
+@pytest.mark.parametrize("name", sorted(METHODS))
+def test_each_record_names_an_estimator_and_baselines_that_exist(name):
+    method = METHODS[name]
+    assert issubclass(load(method.estimator), Estimator) and load(method.estimator).name == name
+    for spec in method.compare_with:
+        assert parse_estimator_spec(spec)[0] in METHODS
+    for key, figures in method.paper_figures.items():
+        sensors = key if isinstance(key, str) else key[0]
+        load_sensor_config(sensors)  # a shipped sensor set
+        assert all(isinstance(v, float) for table in figures.values() for v in table.values())
+
+
+@pytest.mark.parametrize("name", TRAINABLE)
+def test_each_trainable_method_has_presets_for_tests_and_for_a_small_machine(name):
+    training = METHODS[name].training
+    for part in training.parts:
+        config_class = load(part.config)
+        assert {"tiny", "small"} <= set(config_class.PRESETS), part.config
+        for preset in config_class.PRESETS:
+            config_class.named(preset)  # every preset makes a configuration (fields exist)
+        assert callable(load(part.train))
+        with pytest.raises(ValueError, match="unknown .* configuration 'nope'"):
+            config_class.named("nope")
+    assert training.output(lambda: load(training.parts[0].config).named("small")) in ("", *[f"{name}.onnx"])
+
+
+def test_paper_figures_are_looked_up_by_sensors_and_faulty_share():
+    assert "DragPoser paper" in paper_figures("dragposer", "six_point")
+    assert paper_figures("dragposer", "six_point", 1.0)["DragPoser paper"]["End-effector PE [cm]"] == 10.2
+    assert paper_figures("ik", "six_point") == {} and paper_figures("dtp", "six_point", occluded_percent=10) == {}
+
+
+def test_the_commands_and_the_evaluation_hold_no_per_method_branches():
+    names = "|".join(TRAINABLE)
+    branch = re.compile(rf"(==|!=|\bin\b)\s*\(?\s*\"({names})\"|\"({names})\"\s*(==|!=)")
+    for path in [ROOT / "cli.py", ROOT / "evaluation.py", ROOT / "train" / "harness.py", ROOT / "ros"]:
+        for file in [path] if path.is_file() else sorted(path.glob("*.py")):
+            found = [line for line in file.read_text().splitlines() if branch.search(line)]
+            assert not found, (file.name, found)

@@ -36,7 +36,7 @@ bench: setup-dev
 # A million generated inputs into each parser of outside input: the serial stream, VMC
 # datagrams, BVH and ASF/AMC motion files, sensor configuration and calibration YAML.
 fuzz: setup-dev
-	for target in serial vmc bvh asf_amc yaml; do $(VENV)/bin/python -m sparse_body.fuzz $$target 1000000 || exit 1; done
+	for target in serial vmc bvh asf_amc yaml; do $(VENV)/bin/python -m sparse_body.apps.fuzz $$target 1000000 || exit 1; done
 
 # Retrain the shipped LoBSTr model (about 50 minutes on 2 CPU cores) and rewrite its model card.
 train-lobstr: setup-dev

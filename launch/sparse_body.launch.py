@@ -29,8 +29,8 @@ def _installed(package: str) -> bool:
 
 
 def _nodes(context):
-    from sparse_body.adapters.calibration import person_body
-    from sparse_body.urdf import body_urdf
+    from sparse_body.core.calibration import person_body
+    from sparse_body.io.urdf import body_urdf
 
     share = get_package_share_directory("sparse_body")
     arg = lambda name: LaunchConfiguration(name).perform(context)  # noqa: E731

@@ -1,6 +1,8 @@
 """sparse_body: whole-body pose from sparse trackers.
 
-The ROS-free core lives in core/, data/ and estimators/; ROS nodes live in ros/.
+The ROS-free core lives in core/, data/, estimators/ and methods/; transports without ROS in
+adapters/, files in io/, the nodes in ros/, training in train/, and what the command runs in
+apps/ (cli.py is the entry point).
 """
 
 from pkgutil import extend_path

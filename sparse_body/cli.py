@@ -1,4 +1,7 @@
-"""The `sparse-body` command."""
+"""The `sparse-body` command: argument parsing and dispatch to apps/.
+
+Kept at the package's top level as the entry point that users and tests name
+(`sparse-body`, `python -m sparse_body.cli`); the work it dispatches lives in apps/."""
 
 from __future__ import annotations
 
@@ -26,9 +29,7 @@ RESULTS_DIR = "sparse_body_results"  # where eval writes when --output is not gi
 
 
 def cmd_eval(args) -> int:
-    from .core.sensors import load_sensor_config
-    from .data.field_protocol import Protocol
-    from .evaluation import (
+    from .apps.evaluation import (
         check_results_path,
         file_items,
         format_groups,
@@ -36,6 +37,8 @@ def cmd_eval(args) -> int:
         run_evaluation,
         split_items,
     )
+    from .core.sensors import load_sensor_config
+    from .data.field_protocol import Protocol
     from .methods import METHODS, paper_figures
 
     sensors = load_sensor_config(args.sensors)
@@ -112,8 +115,8 @@ def cmd_eval(args) -> int:
 
 def _trainers(args) -> list[tuple]:
     """(config class, train function, output, report file) for each part the command trains."""
+    from .core.resources import models_dir
     from .methods import METHODS, load
-    from .resources import models_dir
 
     training = METHODS[args.method].training
     names = [part.name for part in training.parts]
@@ -295,9 +298,9 @@ def _motion(args):
 
 
 def cmd_make_bag(args) -> int:
+    from .apps.offline import make_bag
     from .core.sensors import load_sensor_config
     from .data.virtual_trackers import LOBSTR_NOISE, NO_NOISE
-    from .offline import make_bag
 
     if not (args.clip or args.motion or args.seconds > 0):
         raise ValueError("make-bag needs a motion: --clip ID, --motion FILE, or --seconds S of the synthetic walk")
@@ -317,10 +320,10 @@ def cmd_make_bag(args) -> int:
 
 
 def cmd_process(args) -> int:
-    from .adapters.calibration import person_body
+    from .apps.evaluation import parse_estimator_spec
+    from .apps.offline import process_bag
+    from .core.calibration import person_body
     from .core.sensors import load_sensor_config
-    from .evaluation import parse_estimator_spec
-    from .offline import process_bag
 
     name, options = parse_estimator_spec(args.estimator)
     if args.smooth:
@@ -349,9 +352,9 @@ def cmd_process(args) -> int:
 
 
 def cmd_demo(args) -> int:
+    from .apps.demo import run_demo
     from .core.sensors import load_sensor_config
     from .data.catalog import find_mocap_root
-    from .demo import run_demo
 
     run_demo(
         Path(args.out),
@@ -366,7 +369,7 @@ def cmd_demo(args) -> int:
 
 
 def cmd_bench(args) -> int:
-    from .bench import bench_dragposer, bench_network, run, run_goals
+    from .apps.bench import bench_dragposer, bench_network, run, run_goals
 
     if args.network:
         bench_network()
@@ -431,8 +434,8 @@ _seconds = _between(0.0, 3600.0, "seconds")
 
 
 def _choices_text() -> str:
+    from .core.resources import config_dir
     from .methods import METHODS
-    from .resources import config_dir
 
     sensors = sorted(p.stem for p in (config_dir() / "sensors").glob("*.yaml"))
     return (
@@ -713,8 +716,8 @@ EXIT_INTERRUPTED, EXIT_TERMINATED = 130, 143
 
 def _exit_code(err: BaseException) -> int:
     """The exit code of an error the command ends with (see the constants above)."""
-    from .bagio import OutputError
     from .core.textfile import FileTooLarge
+    from .io.bagio import OutputError
 
     if isinstance(err, OutputError):
         return EXIT_OUTPUT

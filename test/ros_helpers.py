@@ -114,8 +114,8 @@ def replay_bag(rclpy, ros_env, tmp_path: Path, motion, config, estimator_params:
     from std_msgs.msg import String
     from tf2_msgs.msg import TFMessage
 
+    from sparse_body.apps.offline import make_bag
     from sparse_body.msg import EstimateStatus, FootContacts
-    from sparse_body.offline import make_bag
 
     make_bag(motion, config, tmp_path / "trackers")
     est = start_node(

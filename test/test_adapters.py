@@ -10,10 +10,10 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from sparse_body.adapters.calibration import Calibration, CalibrationError, calibrate_tpose
 from sparse_body.adapters.device_clock import WRAP_US, DeviceClock
 from sparse_body.adapters.serial_protocol import FrameDecoder, encode_frame
 from sparse_body.adapters.vmc import VmcDecoder, VmcReceiver, map_device, parse_device_map, unity_to_rep103
+from sparse_body.core.calibration import Calibration, CalibrationError, calibrate_tpose
 from sparse_body.core.kinematics import forward_kinematics
 from sparse_body.core.rotations import yaw_matrix
 from sparse_body.core.skeleton import JOINT_INDEX as J
@@ -99,7 +99,7 @@ def test_serial_reader_reads_a_pseudo_terminal_and_reconnects(tmp_path):
         [
             sys.executable,
             "-m",
-            "sparse_body.adapters.serial_sender",
+            "sparse_body.apps.serial_sender",
             "--pty",
             str(link),
             "--rate",
@@ -273,7 +273,7 @@ def test_a_short_fuzzing_run_finds_nothing(target, runs):
     """The full run (a million inputs each) is `make fuzz`; this keeps the harness working."""
     pytest.importorskip("atheris")
     out = subprocess.run(
-        [sys.executable, "-m", "sparse_body.fuzz", target, str(runs)], capture_output=True, text=True, timeout=600
+        [sys.executable, "-m", "sparse_body.apps.fuzz", target, str(runs)], capture_output=True, text=True, timeout=600
     )
     assert out.returncode == 0, out.stderr[-3000:]
     assert f"Done {runs} runs" in out.stderr

@@ -8,8 +8,7 @@ from sparse_body.core.body_ik import LIMBS, SOFT_REACH, fit_spine, hinge_angle, 
 from sparse_body.core.kinematics import forward_kinematics
 from sparse_body.core.rotations import rotation_about
 from sparse_body.core.skeleton import JOINT_INDEX as J
-from sparse_body.core.skeleton import Skeleton
-from sparse_body.estimators.reference import standing_pose
+from sparse_body.core.skeleton import Skeleton, standing_pose
 
 
 def _limb_length(offsets, limb):

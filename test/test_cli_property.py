@@ -13,10 +13,10 @@ hypothesis = pytest.importorskip("hypothesis", reason="hypothesis is not install
 from hypothesis import HealthCheck, given, settings  # noqa: E402
 from hypothesis import strategies as st  # noqa: E402
 
+from sparse_body.apps.offline import make_bag  # noqa: E402
 from sparse_body.cli import main  # noqa: E402
 from sparse_body.core.sensors import load_sensor_config  # noqa: E402
 from sparse_body.data.synthetic import synthetic_walk  # noqa: E402
-from sparse_body.offline import make_bag  # noqa: E402
 
 WORDS = [
     "0",

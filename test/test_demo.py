@@ -1,7 +1,7 @@
 from PIL import Image
 
+from sparse_body.apps.demo import run_demo
 from sparse_body.core.sensors import load_sensor_config
-from sparse_body.demo import run_demo
 
 
 def test_demo_without_mocap_says_so_and_writes_bags_and_animation(tmp_path, capsys):
@@ -23,7 +23,7 @@ def test_demo_without_mocap_says_so_and_writes_bags_and_animation(tmp_path, caps
 
     import pytest
 
-    from sparse_body.bagio import OutputError
+    from sparse_body.io.bagio import OutputError
 
     shutil.rmtree(tmp_path / "trackers")
     (tmp_path / "trackers").mkdir()

@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 
 from sparse_body.core.kinematics import forward_kinematics
+from sparse_body.core.resources import models_dir
 from sparse_body.core.rotations import yaw_matrix
 from sparse_body.core.sensors import load_sensor_config
 from sparse_body.core.skeleton import JOINT_INDEX as J
@@ -26,7 +27,6 @@ from sparse_body.estimators.constraints import (
     Position,
 )
 from sparse_body.estimators.dragposer_pose import dual_quaternions, split_heading
-from sparse_body.resources import models_dir
 
 torch = pytest.importorskip("torch")
 
@@ -230,8 +230,8 @@ def test_constraint_node_refines_an_estimator_over_dds_and_takes_new_constraints
     from ros_helpers import STARTUP_LIMIT, Listener, start_node, stop
     from sensor_msgs.msg import JointState
 
+    from sparse_body.apps.offline import make_bag
     from sparse_body.msg import EstimateStatus
-    from sparse_body.offline import make_bag
     from sparse_body.srv import SetConstraint
 
     config = load_sensor_config("four_point")

@@ -44,13 +44,13 @@ from sensor_msgs.msg import JointState  # noqa: E402
 from tf2_msgs.msg import TFMessage  # noqa: E402
 
 import launch  # noqa: E402
+from sparse_body.apps.offline import make_bag  # noqa: E402
 from sparse_body.core.sensors import load_sensor_config  # noqa: E402
 from sparse_body.core.skeleton import JOINT_NAMES  # noqa: E402
 from sparse_body.data.synthetic import synthetic_walk  # noqa: E402
+from sparse_body.io.output import joint_state_names  # noqa: E402
+from sparse_body.io.tf_cache import TfCache  # noqa: E402
 from sparse_body.msg import EstimateStatus, FootContacts  # noqa: E402
-from sparse_body.offline import make_bag  # noqa: E402
-from sparse_body.output import joint_state_names  # noqa: E402
-from sparse_body.tf_cache import TfCache  # noqa: E402
 
 os.environ["ROS_DOMAIN_ID"] = isolated_domain()  # the launched processes and this one: a domain of their own
 # seconds a launch may take to estimate on a starved machine (models load, DDS discovers)

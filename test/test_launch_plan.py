@@ -56,9 +56,9 @@ def test_a_missing_robot_state_publisher_is_said_and_nothing_is_started_for_it(m
 
 def test_a_calibration_file_is_the_body_of_the_estimator_and_of_robot_state_publisher(monkeypatch, tmp_path):
     from launch import LaunchContext
-    from sparse_body.adapters.calibration import Calibration
+    from sparse_body.core.calibration import Calibration
     from sparse_body.core.skeleton import Skeleton
-    from sparse_body.urdf import body_urdf
+    from sparse_body.io.urdf import body_urdf
 
     module = _launch_module()
     monkeypatch.setattr(module, "_installed", lambda package: True)

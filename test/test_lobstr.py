@@ -9,10 +9,11 @@ import pytest
 
 from sparse_body.core.contacts import FOOT_JOINTS
 from sparse_body.core.kinematics import forward_kinematics
+from sparse_body.core.resources import models_dir
 from sparse_body.core.rotations import axis_angle_to_matrix, quat_to_matrix, yaw_matrix
 from sparse_body.core.sensors import load_sensor_config
 from sparse_body.core.skeleton import JOINT_INDEX as J
-from sparse_body.core.skeleton import Skeleton
+from sparse_body.core.skeleton import Skeleton, standing_pose
 from sparse_body.data.catalog import load_clip
 from sparse_body.data.virtual_trackers import TrackerNoise, synthesize_trackers
 from sparse_body.estimators import create_estimator
@@ -25,8 +26,6 @@ from sparse_body.estimators.lobstr_features import (
     sequence_features,
     upper_targets,
 )
-from sparse_body.estimators.reference import standing_pose
-from sparse_body.resources import models_dir
 
 torch = pytest.importorskip("torch")
 
@@ -292,8 +291,8 @@ def test_shipped_model_beats_the_ik_baseline_on_a_test_clip(clip_index):
     """The trained model on a held-out person's walk with a 90-degree turn: legs and contacts
     better than the IK baseline's standing legs. (On a boxing clip, 17_10, standing legs get
     as many contacts right as the model, 77 %: a boxer mostly stands.)"""
+    from sparse_body.apps.evaluation import evaluate_motion
     from sparse_body.data.catalog import load_split
-    from sparse_body.evaluation import evaluate_motion
 
     assert "16_17" in load_split()["test"]
     motion = load_clip(clip_index["16_17"])
@@ -313,8 +312,8 @@ def test_estimator_node_runs_lobstr_over_dds(tiny_model, tmp_path, clip, ros_env
     from ros_helpers import STARTUP_LIMIT, Listener, start_node, stop
     from sensor_msgs.msg import JointState
 
+    from sparse_body.apps.offline import make_bag
     from sparse_body.msg import EstimateStatus, FootContacts
-    from sparse_body.offline import make_bag
 
     env = ros_env
     config = load_sensor_config("four_point")

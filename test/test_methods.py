@@ -48,7 +48,7 @@ def test_paper_figures_are_looked_up_by_sensors_and_faulty_share():
 def test_the_commands_and_the_evaluation_hold_no_per_method_branches():
     names = "|".join(TRAINABLE)
     branch = re.compile(rf"(==|!=|\bin\b)\s*\(?\s*\"({names})\"|\"({names})\"\s*(==|!=)")
-    for path in [ROOT / "cli.py", ROOT / "evaluation.py", ROOT / "train" / "harness.py", ROOT / "ros"]:
+    for path in [ROOT / "cli.py", ROOT / "apps" / "evaluation.py", ROOT / "train" / "harness.py", ROOT / "ros"]:
         for file in [path] if path.is_file() else sorted(path.glob("*.py")):
             found = [line for line in file.read_text().splitlines() if branch.search(line)]
             assert not found, (file.name, found)

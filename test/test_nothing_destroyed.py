@@ -11,11 +11,11 @@ from pathlib import Path
 
 import pytest
 
-from sparse_body.bagio import OutputError, check_output, written_by_us
+from sparse_body.apps.offline import make_bag
 from sparse_body.cli import EXIT_INPUT, EXIT_OS, EXIT_OUTPUT, EXIT_TERMINATED, EXIT_USAGE, main
 from sparse_body.core.sensors import load_sensor_config
 from sparse_body.data.synthetic import synthetic_walk
-from sparse_body.offline import make_bag
+from sparse_body.io.bagio import OutputError, check_output, written_by_us
 
 
 @pytest.fixture(scope="module")

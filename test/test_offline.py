@@ -3,7 +3,12 @@
 import numpy as np
 import pytest
 
-from sparse_body.bagio import (
+from sparse_body.apps.offline import make_bag, process_bag
+from sparse_body.core.sensors import load_sensor_config
+from sparse_body.core.skeleton import JOINT_INDEX as J
+from sparse_body.data.synthetic import synthetic_walk
+from sparse_body.data.virtual_trackers import synthesize_trackers
+from sparse_body.io.bagio import (
     CONTACTS_TOPIC,
     JOINT_STATES_TOPIC,
     STATUS_TOPIC,
@@ -13,12 +18,7 @@ from sparse_body.bagio import (
     read_tracker_stream,
     write_tracker_bag,
 )
-from sparse_body.core.sensors import load_sensor_config
-from sparse_body.core.skeleton import JOINT_INDEX as J
-from sparse_body.data.synthetic import synthetic_walk
-from sparse_body.data.virtual_trackers import synthesize_trackers
-from sparse_body.offline import make_bag, process_bag
-from sparse_body.output import joint_state_names
+from sparse_body.io.output import joint_state_names
 
 
 def test_make_bag_round_trips_the_trackers(tmp_path):
@@ -120,7 +120,7 @@ def test_frames_whose_samples_were_all_refused_are_invalid_and_counted(tmp_path)
 
 
 def test_outputs_are_never_half_written_nor_silently_replaced(tmp_path, monkeypatch):
-    import sparse_body.bagio as bagio
+    import sparse_body.io.bagio as bagio
     from sparse_body.cli import main
 
     motion = synthetic_walk(1.0)
@@ -131,7 +131,7 @@ def test_outputs_are_never_half_written_nor_silently_replaced(tmp_path, monkeypa
     make_bag(motion, config, tmp_path / "in", overwrite=True)
     process_bag(tmp_path / "in", tmp_path / "out", "ik", config, motion.skeleton, progress=False)
     # an existing output is refused before the estimation starts
-    monkeypatch.setattr("sparse_body.offline.read_tracker_stream", lambda *a, **k: pytest.fail("estimated first"))
+    monkeypatch.setattr("sparse_body.apps.offline.read_tracker_stream", lambda *a, **k: pytest.fail("estimated first"))
     with pytest.raises(BagError, match=r"out: already exists"):
         process_bag(tmp_path / "in", tmp_path / "out", "ik", config, motion.skeleton, progress=False)
     monkeypatch.undo()
@@ -155,9 +155,9 @@ def test_outputs_are_never_half_written_nor_silently_replaced(tmp_path, monkeypa
 def test_empty_bags_are_refused(tmp_path, capsys):
     from rosbags.rosbag2 import StoragePlugin, Writer
 
-    from sparse_body.bagio import TF_TYPE, typestore
     from sparse_body.cli import main
     from sparse_body.core.types import TrackerStream
+    from sparse_body.io.bagio import TF_TYPE, typestore
 
     config = load_sensor_config("three_point")
     with pytest.raises(SystemExit) as ended:  # wrote a 0-frame bag before
@@ -179,8 +179,8 @@ def test_empty_bags_are_refused(tmp_path, capsys):
 
 
 def test_stamps_that_round_up_carry_into_the_seconds_on_both_paths():
-    from sparse_body.bagio import _time, typestore
-    from sparse_body.output import stamp_parts
+    from sparse_body.io.bagio import _time, typestore
+    from sparse_body.io.output import stamp_parts
 
     assert stamp_parts(5.9999999999) == (6, 0)  # the bag path wrapped to (5, 0)
     assert stamp_parts(1_700_000_000.25) == (1_700_000_000, 250_000_000)
@@ -250,10 +250,9 @@ def test_setup_py_defers_to_pyproject():
 def test_the_demo_draws_the_skull_above_the_head_joint_and_its_output_is_not_committed():
     from pathlib import Path
 
+    from sparse_body.apps.demo import HEAD, head_tops
     from sparse_body.core.kinematics import forward_kinematics
-    from sparse_body.core.skeleton import Skeleton
-    from sparse_body.demo import HEAD, head_tops
-    from sparse_body.estimators.reference import standing_pose
+    from sparse_body.core.skeleton import Skeleton, standing_pose
 
     glob, pos = forward_kinematics(standing_pose()[None], np.zeros((1, 3)), Skeleton.canonical().offsets)
     top = head_tops(pos, glob, 0.1)
@@ -267,8 +266,8 @@ def test_the_demo_draws_the_skull_above_the_head_joint_and_its_output_is_not_com
 def test_process_takes_the_body_of_a_calibration_file(tmp_path, capsys):
     """`process --calibration`: the fitted body puts the wrists on the controllers, where the
     canonical body of the same height misses; a broken file is named."""
-    from sparse_body.adapters.calibration import Calibration
     from sparse_body.cli import main
+    from sparse_body.core.calibration import Calibration
     from sparse_body.core.kinematics import forward_kinematics
     from sparse_body.core.rotations import euler_to_matrix, quat_to_matrix
     from sparse_body.core.skeleton import Skeleton

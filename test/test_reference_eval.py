@@ -6,12 +6,12 @@ import sys
 import numpy as np
 import pytest
 
+from sparse_body.apps.evaluation import evaluate_motion
 from sparse_body.core.sensors import load_sensor_config
 from sparse_body.core.types import TrackerFrame
 from sparse_body.data.synthetic import synthetic_walk
 from sparse_body.data.virtual_trackers import synthesize_trackers
 from sparse_body.estimators import create_estimator
-from sparse_body.evaluation import evaluate_motion
 
 
 def test_reference_estimator_places_the_body_under_the_headset():
@@ -139,7 +139,7 @@ def test_eval_without_mocap_says_where_to_point(tmp_path):
 
 
 def test_wide_eval_tables_fit_a_terminal_with_their_columns_named_below():
-    from sparse_body.evaluation import EvalResult, format_table
+    from sparse_body.apps.evaluation import EvalResult, format_table
 
     metrics = {"MPJPE [cm]": 4.4, "Contact acc [%]": 79.3, "End-effector PE [cm]": 0.1}
     results = [

@@ -144,7 +144,7 @@ def test_serial_trackers_through_a_pty_reach_joint_states_across_a_reconnect(ros
             [
                 sys.executable,
                 "-m",
-                "sparse_body.adapters.serial_sender",
+                "sparse_body.apps.serial_sender",
                 "--pty",
                 str(link),
                 "--sensors",
@@ -195,7 +195,7 @@ def test_calibration_service_measures_offsets_and_height_and_applies_them(ros_en
     from pythonosc.udp_client import SimpleUDPClient
     from scipy.spatial.transform import Rotation
 
-    from sparse_body.adapters.calibration import Calibration
+    from sparse_body.core.calibration import Calibration
     from sparse_body.core.kinematics import forward_kinematics
     from sparse_body.core.rotations import yaw_matrix
     from sparse_body.core.skeleton import JOINT_INDEX as J

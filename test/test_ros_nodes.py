@@ -26,14 +26,14 @@ from ros_helpers import (  # noqa: E402
 from sensor_msgs.msg import JointState  # noqa: E402
 from tf2_msgs.msg import TFMessage  # noqa: E402
 
+from sparse_body.apps.offline import make_bag  # noqa: E402
 from sparse_body.core.kinematics import forward_kinematics  # noqa: E402
 from sparse_body.core.rotations import euler_to_matrix, quat_to_matrix  # noqa: E402
 from sparse_body.core.sensors import load_sensor_config  # noqa: E402
 from sparse_body.core.skeleton import Skeleton  # noqa: E402
 from sparse_body.data.synthetic import synthetic_walk  # noqa: E402
+from sparse_body.io.output import joint_state_names  # noqa: E402
 from sparse_body.msg import EstimateStatus  # noqa: E402
-from sparse_body.offline import make_bag  # noqa: E402
-from sparse_body.output import joint_state_names  # noqa: E402
 
 pytestmark = pytest.mark.ros
 ESTIMATOR = "sparse_body.ros.estimator_node"
@@ -198,7 +198,7 @@ def test_a_calibration_file_gives_the_body_the_node_estimates_and_publishes(ros_
     """The calibration's fitted body (here: from a T-pose of the clip's own subject) replaces
     the height-scaled canonical one: in the URDF, and in the JointState that puts the hands
     and feet on their trackers with that body."""
-    from sparse_body.adapters.calibration import Calibration
+    from sparse_body.core.calibration import Calibration
     from sparse_body.core.skeleton import JOINT_INDEX as J
     from sparse_body.data.field_protocol import FIELD, calibrate_from_tpose, tpose_motion
     from sparse_body.data.motion import Motion
@@ -309,7 +309,7 @@ def test_plain_process_takes_the_shipped_parameter_file(ros_env, tmp_path):
     import subprocess
     import sys
 
-    from sparse_body.resources import config_dir
+    from sparse_body.core.resources import config_dir
 
     with open(tmp_path / "plain.log", "w") as log:  # the child holds its own copy
         proc = subprocess.Popen(

@@ -4,6 +4,7 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
+from sparse_body.apps.evaluation import evaluate_motion
 from sparse_body.core.sensors import load_sensor_config
 from sparse_body.core.tracker_filter import FilterConfig, TrackerFilter
 from sparse_body.core.tracker_smoother import smooth_frames
@@ -12,7 +13,6 @@ from sparse_body.data.catalog import load_clip
 from sparse_body.data.field_protocol import Protocol
 from sparse_body.data.virtual_trackers import LOBSTR_NOISE, NO_NOISE, synthesize_trackers
 from sparse_body.estimators import create_estimator
-from sparse_body.evaluation import evaluate_motion
 
 NOISY = FilterConfig(position_noise=0.01, rotation_noise=0.5)
 
@@ -84,9 +84,9 @@ def test_smooth_option_cuts_shaking_of_ik_under_noise_and_is_checked(clip_index)
 
 def test_process_command_smooths_a_noisy_bag(tmp_path, clip_index):
     """`sparse-body process --smooth`: the same bag, one estimate per frame, a steadier pelvis."""
-    from sparse_body.bagio import TF_TOPIC, read_topic
+    from sparse_body.apps.offline import make_bag
     from sparse_body.cli import main
-    from sparse_body.offline import make_bag
+    from sparse_body.io.bagio import TF_TOPIC, read_topic
 
     motion = load_clip(clip_index["02_01"])
     make_bag(motion, load_sensor_config("six_point"), tmp_path / "in", LOBSTR_NOISE)

@@ -73,7 +73,7 @@ def test_a_checkpoint_of_another_configuration_is_refused_by_name(tmp_path, moca
 
 
 def test_the_dragposer_card_renders_its_runtime_choices_from_the_measured_file(tmp_path):
-    from sparse_body.resources import models_dir
+    from sparse_body.core.resources import models_dir
     from sparse_body.train.model_card import RUNTIME_METRICS, runtime_choices_table
 
     measured = json.loads((models_dir() / "dragposer.runtime.json").read_text())

@@ -66,7 +66,7 @@ def map_device(device: str, device_map: list[tuple[str, str]]) -> str | None:
 
 def _structure_is_sane(data: bytes, depth: int = 0) -> bool:
     """Bundle framing checked before python-osc sees it: python-osc 1.10 loops forever on a
-    bundle element whose size is negative (found by `sparse_body.fuzz vmc`), so a
+    bundle element whose size is negative (found by `sparse_body.apps.fuzz vmc`), so a
     73-byte datagram would hang the receiver. Sizes must be positive multiples of 4 that fit."""
     if not data.startswith(b"#bundle\0"):
         return True

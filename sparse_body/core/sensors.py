@@ -165,7 +165,7 @@ def parse_sensor_config(data: dict, source: str = "<dict>") -> SensorConfig:
 
 def load_sensor_config(name_or_path: str | Path) -> SensorConfig:
     """A configuration by name (config/sensors/NAME.yaml) or by path."""
-    from ..resources import config_dir
+    from .resources import config_dir
 
     path = Path(name_or_path)
     if not path.suffix:

@@ -13,6 +13,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .rotations import euler_to_matrix
+
 JOINT_NAMES: tuple[str, ...] = (
     "pelvis",
     "left_hip",
@@ -144,3 +146,12 @@ def joint_indices(names) -> list[int]:
         return [JOINT_INDEX[n] for n in names]
     except KeyError as err:
         raise ValueError(f"unknown joint {err.args[0]!r}; joints are {', '.join(JOINT_NAMES)}") from None
+
+
+def standing_pose() -> np.ndarray:
+    """(22, 3, 3) local rotations: the rest pose with the arms lowered to the sides."""
+    local = np.tile(np.eye(3), (NUM_JOINTS, 1, 1))
+    # Rest arms point along +-y; a roll of -+80 degrees about x brings them down.
+    local[JOINT_INDEX["left_shoulder"]] = euler_to_matrix(np.array([np.deg2rad(-80.0), 0, 0]), "xyz")
+    local[JOINT_INDEX["right_shoulder"]] = euler_to_matrix(np.array([np.deg2rad(80.0), 0, 0]), "xyz")
+    return local

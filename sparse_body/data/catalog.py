@@ -12,7 +12,7 @@ from pathlib import Path
 import numpy as np
 import yaml
 
-from ..resources import config_dir
+from ..core.resources import config_dir
 from . import MotionFileError
 from .asf_amc import load_amc, load_asf
 from .bvh import load_bvh

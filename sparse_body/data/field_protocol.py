@@ -22,7 +22,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from ..adapters.calibration import Calibration, calibrate_tpose
+from ..core.calibration import Calibration, calibrate_tpose
 from ..core.sensors import SensorConfig
 from ..core.skeleton import NUM_JOINTS, PARENTS, Skeleton
 from ..core.types import TrackerStream

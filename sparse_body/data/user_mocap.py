@@ -46,7 +46,7 @@ def find_motion_files(sources) -> list[Path]:
 def import_motion(sources, out: Path, progress=None) -> tuple[list[Clip], list[tuple[Path, str]]]:
     """Index the motion files under sources into a new folder out; returns the clips and the
     files left out with the reason (unreadable, an unknown skeleton layout)."""
-    from ..bagio import OutputError
+    from ..io.bagio import OutputError
 
     out = Path(out)
     if out.is_symlink() or (out.exists() and (not out.is_dir() or any(out.iterdir()))):

@@ -11,8 +11,9 @@ from typing import ClassVar
 import numpy as np
 import yaml
 
+from ..core.rotations import matrix_to_quat
 from ..core.sensors import SensorConfig
-from ..core.skeleton import Skeleton
+from ..core.skeleton import Skeleton, standing_pose
 from ..core.tracker_filter import FilterConfig, TrackerFilter, filter_config
 from ..core.tracker_smoother import smooth_frames
 from ..core.types import BodyPose, TrackerFrame, TrackerStream
@@ -138,9 +139,6 @@ class Estimator(ABC):
         starting pose (self._local, else standing) at the origin, invalid too."""
         last = getattr(self, "_last", None)
         if last is None:
-            from ..core.rotations import matrix_to_quat
-            from .reference import standing_pose
-
             local = getattr(self, "_local", None)
             return BodyPose(
                 stamp, matrix_to_quat(standing_pose() if local is None else local), np.zeros(3), valid=False

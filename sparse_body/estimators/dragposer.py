@@ -51,7 +51,7 @@ END_JOINTS = frozenset(J[j] for j in ("head", "left_wrist", "right_wrist", "left
 
 
 def default_model_dir() -> Path:
-    from ..resources import models_dir
+    from ..core.resources import models_dir
 
     return models_dir()
 

@@ -17,11 +17,10 @@ from ..core.contacts import FOOT_JOINTS, toe_contacts
 from ..core.rotations import axis_angle_to_matrix, heading, rotations_to_quat, yaw_matrix
 from ..core.sensors import SITE_JOINTS
 from ..core.skeleton import JOINT_INDEX as J
-from ..core.skeleton import PARENTS
+from ..core.skeleton import PARENTS, standing_pose
 from ..core.types import BodyPose, TrackerFrame
 from .base import Estimator
 from .options import FLOOR
-from .reference import standing_pose
 
 END_SITES = ("head", "left_hand", "right_hand", "left_foot", "right_foot")
 _ANKLES = (J["left_ankle"], J["right_ankle"])

@@ -21,6 +21,7 @@ import numpy as np
 from ..core.rotations import axis_angle_to_matrix, matrix_to_6d, matrix_to_axis_angle, rotations_to_quat, sixd_to_matrix
 from ..core.sensors import SITE_JOINTS
 from ..core.skeleton import JOINT_INDEX as J
+from ..core.skeleton import standing_pose
 from ..core.types import BodyPose, TrackerFrame
 from .base import Estimator
 from .contact_ik import ContactHold
@@ -28,7 +29,6 @@ from .ik import IKEstimator
 from .lobstr_features import INPUT_SITES, OUTPUTS, apply_legs, apply_upper, body_scale, feature_count, features
 from .onnx_model import load_model
 from .options import FLOOR, MAX_GAP, THREADS, Range
-from .reference import standing_pose
 
 _ENDS = [J[SITE_JOINTS[site]] for site in INPUT_SITES[1:]]  # head and hands, in input order
 # metres: the IK's soft reach leaves an end at most 0.63 cm short; beyond this the predicted
@@ -41,7 +41,7 @@ SPINE_TOLERANCE = 0.015
 
 
 def default_model_path() -> Path:
-    from ..resources import models_dir
+    from ..core.resources import models_dir
 
     return models_dir() / "lobstr.onnx"
 

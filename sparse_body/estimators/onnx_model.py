@@ -55,7 +55,7 @@ def load_model(
 def shipped_model_path(method: str, models: dict[str, str], name: str, others: str = "") -> Path:
     """The package's model file for `model:=name` of a method's shipped models (name -> file);
     others: further names the estimator accepts, for the error."""
-    from ..resources import models_dir
+    from ..core.resources import models_dir
 
     if name not in models:
         raise ValueError(

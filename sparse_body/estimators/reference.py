@@ -9,21 +9,12 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..core.rotations import euler_to_matrix, heading, matrix_to_quat, yaw_matrix
-from ..core.skeleton import JOINT_INDEX, NUM_JOINTS
+from ..core.rotations import heading, matrix_to_quat, yaw_matrix
+from ..core.skeleton import JOINT_INDEX, standing_pose
 from ..core.types import BodyPose, TrackerFrame
 from .base import Estimator
 
 HEAD = JOINT_INDEX["head"]
-
-
-def standing_pose() -> np.ndarray:
-    """(22, 3, 3) local rotations: the rest pose with the arms lowered to the sides."""
-    local = np.tile(np.eye(3), (NUM_JOINTS, 1, 1))
-    # Rest arms point along +-y; a roll of -+80 degrees about x brings them down.
-    local[JOINT_INDEX["left_shoulder"]] = euler_to_matrix(np.array([np.deg2rad(-80.0), 0, 0]), "xyz")
-    local[JOINT_INDEX["right_shoulder"]] = euler_to_matrix(np.array([np.deg2rad(80.0), 0, 0]), "xyz")
-    return local
 
 
 class ReferenceEstimator(Estimator):

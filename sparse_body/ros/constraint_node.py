@@ -19,7 +19,7 @@ from sensor_msgs.msg import JointState
 from ..core.types import BodyPose
 from ..estimators.base import Estimator
 from ..estimators.constraints import AboveFloor, AngleLimit, LookAt, Orientation, Position
-from ..output import pose_from_joint_state
+from ..io.output import pose_from_joint_state
 from .estimator_node import PARAMETERS as ESTIMATOR_PARAMETERS
 from .estimator_node import RANGES as ESTIMATOR_RANGES
 from .estimator_node import EstimatorNode

@@ -33,17 +33,16 @@ from std_msgs.msg import String
 
 from sparse_body.msg import EstimateStatus, FootContacts
 
-from ..adapters.calibration import CalibrationError, person_body
+from ..core.calibration import CalibrationError, person_body
 from ..core.rotations import matrix_to_quat
 from ..core.sensors import SensorConfigError, load_sensor_config
-from ..core.skeleton import JOINT_NAMES
+from ..core.skeleton import JOINT_NAMES, standing_pose
 from ..core.tracker_filter import PREFIX as FILTER
 from ..core.tracker_filter import FilterConfig
 from ..core.types import BodyPose
 from ..estimators import create_estimator
 from ..estimators.base import Estimator, parse_estimator_spec
-from ..estimators.reference import standing_pose
-from ..urdf import body_urdf
+from ..io.urdf import body_urdf
 from . import messages
 from .estimate_stats import EstimateStats
 from .spin import init, spin_until_shutdown

@@ -10,7 +10,14 @@ from sparse_body.msg import EstimateStatus, FootContact, FootContacts
 
 from ..core.skeleton import Skeleton
 from ..core.types import BodyPose
-from ..output import FOOT_NAMES, body_transforms, contact_points, joint_state_names, joint_state_positions, stamp_parts
+from ..io.output import (
+    FOOT_NAMES,
+    body_transforms,
+    contact_points,
+    joint_state_names,
+    joint_state_positions,
+    stamp_parts,
+)
 
 JOINT_NAMES = joint_state_names()
 

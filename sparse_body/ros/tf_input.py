@@ -12,7 +12,7 @@ from __future__ import annotations
 
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 
-from ..tf_cache import Accepted, TfCache, sample_trackers
+from ..io.tf_cache import Accepted, TfCache, sample_trackers
 from .messages import to_seconds
 
 # /tf's history is kept short: a node that falls behind then skips to the newest messages

@@ -31,10 +31,10 @@ from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
 from rclpy.node import Node
 from rclpy.qos import QoSProfile
 
-from ..adapters.calibration import Calibration, CalibrationError, calibrate_tpose
 from ..adapters.vmc import DEFAULT_PORT, map_device, parse_device_map
-from ..bagio import TF_TOPIC, BagError, typestore
+from ..core.calibration import Calibration, CalibrationError, calibrate_tpose
 from ..core.sensors import SensorConfigError, load_sensor_config
+from ..io.bagio import TF_TOPIC, BagError, typestore
 from .messages import to_time
 from .spin import init, spin_until_shutdown
 
@@ -371,7 +371,14 @@ class TrackerBridge(Node):
     def destroy_node(self) -> None:
         self._stop.set()
         if self._thread is not None:
-            self._thread.join(timeout=2.0)
+            # The player must be out of publish() before the node and the DDS participant go:
+            # a thread left inside it at exit holds the writer's lock, and the participant's
+            # teardown then waits for it forever (a launch test's bridge was killed after
+            # 15 s on a starved machine; its join gave up after 2 s). A reliable publish
+            # blocks for a bounded time; 10 s stays within launch's SIGINT-to-SIGKILL 15 s.
+            self._thread.join(timeout=10.0)
+            if self._thread.is_alive():
+                self.get_logger().warning("the bag player did not stop within 10 s")
         if self.adapter is not None:
             self.adapter.close()
         super().destroy_node()

@@ -139,8 +139,8 @@ def write_lobstr_card(onnx_path: Path, report: dict, mocap_root: Path, limit: in
     contact IK and the paper's figures: field protocol, lab protocol beside it, and LoBSTr's
     tracker noise against none; write <model>.md."""
     augmentation = augmentation_table(Path(onnx_path).with_suffix(".train.json"), LOBSTR_VALIDATION)
+    from ..apps.evaluation import evaluate, format_table
     from ..data.field_protocol import FIELD, LAB
-    from ..evaluation import evaluate, format_table
     from ..methods import paper_figures
 
     sensors = load_sensor_config("four_point")
@@ -258,7 +258,7 @@ REFINED_BASES = ["ik", "lobstr"]  # refined on four-point
 
 
 def _evaluate(job):
-    from ..evaluation import evaluate
+    from ..apps.evaluation import evaluate
 
     _, spec, sensors_name, protocol, mocap_root, limit, options = job
     return evaluate(
@@ -317,8 +317,8 @@ def noise_results_table(runs: list[tuple[str, dict]], sensors, mocap_root: Path,
     """A Markdown table: each estimator on the test split, field protocol, clean trackers
     against LoBSTr's noise (through the live filter, and smoothed offline), and the ratios the
     noise brings."""
+    from ..apps.evaluation import evaluate
     from ..data.field_protocol import Protocol
-    from ..evaluation import evaluate
 
     rows = ["| estimator | trackers | " + " | ".join(NOISE_METRICS) + " |", "|---|---|" + "---|" * len(NOISE_METRICS)]
     for spec, options in runs:
@@ -349,7 +349,7 @@ def write_dragposer_card(out_dir: Path, mocap_root: Path, limit: int | None = No
     estimators; write dragposer.md."""
     import json
 
-    from ..evaluation import format_table
+    from ..apps.evaluation import format_table
     from ..methods import paper_figures
 
     out_dir = Path(out_dir)

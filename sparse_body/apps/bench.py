@@ -19,11 +19,11 @@ from pathlib import Path
 
 import numpy as np
 
-from .core.sensors import load_sensor_config
-from .data.synthetic import synthetic_walk
-from .data.virtual_trackers import synthesize_trackers
-from .estimators import create_estimator
-from .estimators.base import parse_estimator_spec
+from ..core.sensors import load_sensor_config
+from ..data.synthetic import synthetic_walk
+from ..data.virtual_trackers import synthesize_trackers
+from ..estimators import create_estimator
+from ..estimators.base import parse_estimator_spec
 
 # (figure, estimator, goal for its p99 in ms); the latency goal is 3 ms plus the step's p99
 STEP_GOALS = (
@@ -68,7 +68,7 @@ def bench_latency(estimator: str, sensors_name: str, seconds: float = 10.0, rate
     from sensor_msgs.msg import JointState
     from tf2_msgs.msg import TFMessage
 
-    from .ros.messages import to_seconds, to_time
+    from ..ros.messages import to_seconds, to_time
 
     config = load_sensor_config(sensors_name)
     motion = synthetic_walk(seconds + 5)
@@ -167,10 +167,10 @@ def bench_network(frames: int = 3000) -> None:
 
     import torch
 
-    from .estimators.lobstr import LobstrModel, default_model_path
-    from .estimators.lobstr_features import feature_count
-    from .train.lobstr_model import LobstrConfig, LobstrNet, LobstrStep
-    from .train.lobstr_train import export_onnx
+    from ..estimators.lobstr import LobstrModel, default_model_path
+    from ..estimators.lobstr_features import feature_count
+    from ..train.lobstr_model import LobstrConfig, LobstrNet, LobstrStep
+    from ..train.lobstr_train import export_onnx
 
     torch.set_num_threads(1)
     rng = np.random.default_rng(0)
@@ -220,10 +220,10 @@ def bench_dragposer(
     solution."""
     import torch
 
-    from .data.catalog import find_mocap_root, load_clip, read_index
+    from ..data.catalog import find_mocap_root, load_clip, read_index
+    from ..estimators.dragposer import END_JOINTS, DragPoserEstimator
+    from ..train.dragposer_reference import load_vae, optimise
     from .demo import DEMO_CLIP
-    from .estimators.dragposer import END_JOINTS, DragPoserEstimator
-    from .train.dragposer_reference import load_vae, optimise
 
     torch.set_num_threads(1)
     root = find_mocap_root()

@@ -1,4 +1,4 @@
-"""`python -m sparse_body.fuzz TARGET RUNS`: coverage-guided fuzzing (atheris, libFuzzer) of
+"""`python -m sparse_body.apps.fuzz TARGET RUNS`: coverage-guided fuzzing (atheris, libFuzzer) of
 every parser that reads what a user or a device hands us.
 
 Targets: serial (the tracker byte stream), vmc (one UDP datagram), bvh (a motion file),
@@ -27,9 +27,9 @@ with atheris.instrument_imports():
     from pythonosc.osc_bundle_builder import IMMEDIATELY, OscBundleBuilder
     from pythonosc.osc_message_builder import OscMessageBuilder
 
-    from sparse_body.adapters.calibration import Calibration, CalibrationError
     from sparse_body.adapters.serial_protocol import FrameDecoder, encode_frame
     from sparse_body.adapters.vmc import KINDS, VmcDecoder
+    from sparse_body.core.calibration import Calibration, CalibrationError
     from sparse_body.core.sensors import SensorConfigError, load_sensor_config
     from sparse_body.data import MotionFileError
     from sparse_body.data.asf_amc import load_amc, load_asf
@@ -110,7 +110,7 @@ TEXT_TARGETS = {"bvh", "asf_amc", "yaml"}
 
 
 def text_seeds() -> list[bytes]:
-    from sparse_body.resources import config_dir
+    from sparse_body.core.resources import config_dir
 
     return [
         TINY_BVH.encode(),
@@ -125,7 +125,7 @@ _CALIBRATION = b"height: 1.7\nfacing_yaw: 0.1\noffsets:\n  head: [0, 0, 0, 1]\n"
 
 def _calibration_with_body() -> bytes:
     """A calibration file with a fitted body, as the bridge writes it (its skeleton section)."""
-    from sparse_body.adapters.calibration import Calibration
+    from sparse_body.core.calibration import Calibration
     from sparse_body.core.skeleton import Skeleton
 
     with tempfile.TemporaryDirectory() as folder:
@@ -151,7 +151,7 @@ def seeds() -> list[bytes]:
 def main(argv: list[str] | None = None) -> None:
     argv = list(sys.argv if argv is None else argv)
     if len(argv) < 3 or argv[1] not in TARGETS:
-        sys.exit(f"usage: python -m sparse_body.fuzz {{{','.join(TARGETS)}}} RUNS [libFuzzer flags]")
+        sys.exit(f"usage: python -m sparse_body.apps.fuzz {{{','.join(TARGETS)}}} RUNS [libFuzzer flags]")
     target, runs = argv[1], int(argv[2])
     corpus = Path(tempfile.mkdtemp(prefix=f"sparse_body_fuzz_{target}_"))
     for i, seed in enumerate(text_seeds() if target in TEXT_TARGETS else seeds()):

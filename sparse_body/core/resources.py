@@ -12,7 +12,7 @@ def share_dir() -> Path:
     env = os.environ.get("SPARSE_BODY_SHARE")
     if env:
         return Path(env)
-    checkout = Path(__file__).resolve().parent.parent
+    checkout = Path(__file__).resolve().parents[2]  # sparse_body/core/resources.py -> the checkout
     if (checkout / "config" / "sensors").is_dir():
         return checkout
     try:  # a colcon / apt install

@@ -18,13 +18,13 @@ import yaml
 from rosbags.rosbag2 import Reader, StoragePlugin, Writer
 from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 
-from . import __version__
-from .core.sensors import SensorConfig
-from .core.skeleton import Skeleton
-from .core.textfile import read_limited
-from .core.types import BodyPose, TrackerStream
+from .. import __version__
+from ..core.resources import share_dir
+from ..core.sensors import SensorConfig
+from ..core.skeleton import Skeleton
+from ..core.textfile import read_limited
+from ..core.types import BodyPose, TrackerStream
 from .output import FOOT_NAMES, body_transforms, contact_points, joint_state_names, joint_state_positions, stamp_parts
-from .resources import share_dir
 from .tf_cache import Accepted, TfCache, sample_trackers
 
 TF_TOPIC, TF_STATIC_TOPIC = "/tf", "/tf_static"

@@ -4,13 +4,13 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from .bagio import check_output, read_tracker_stream, write_estimate_bag, write_tracker_bag
-from .core.sensors import SensorConfig
-from .core.skeleton import Skeleton
-from .core.types import BodyPose
-from .data.motion import Motion
-from .data.virtual_trackers import NO_NOISE, TrackerNoise, synthesize_trackers
-from .estimators import create_estimator
+from ..core.sensors import SensorConfig
+from ..core.skeleton import Skeleton
+from ..core.types import BodyPose
+from ..data.motion import Motion
+from ..data.virtual_trackers import NO_NOISE, TrackerNoise, synthesize_trackers
+from ..estimators import create_estimator
+from ..io.bagio import check_output, read_tracker_stream, write_estimate_bag, write_tracker_bag
 
 
 def make_bag(

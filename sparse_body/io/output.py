@@ -8,11 +8,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .core.contacts import FOOT_JOINTS
-from .core.kinematics import forward_kinematics
-from .core.rotations import JOINT_EULER_ORDER, matrix_to_euler, quat_to_matrix
-from .core.skeleton import JOINT_NAMES, NUM_JOINTS, PARENTS, Skeleton
-from .core.types import BodyPose
+from ..core.contacts import FOOT_JOINTS
+from ..core.kinematics import forward_kinematics
+from ..core.rotations import JOINT_EULER_ORDER, matrix_to_euler, quat_to_matrix
+from ..core.skeleton import JOINT_NAMES, NUM_JOINTS, PARENTS, Skeleton
+from ..core.types import BodyPose
 
 AXES = ("z", "y", "x")  # JOINT_EULER_ORDER, one revolute joint per axis, outermost first
 assert JOINT_EULER_ORDER == "ZYX"
@@ -34,7 +34,7 @@ def joint_state_positions(pose: BodyPose) -> np.ndarray:
 def pose_from_joint_state(names, positions, root_position, root_quat, stamp: float) -> BodyPose:
     """The inverse of joint_state_positions: a pose from a JointState of our 63 joints (in
     any order) and the root's pose (from TF). Missing joints or non-finite values: ValueError."""
-    from .core.rotations import euler_to_matrix, matrix_to_quat
+    from ..core.rotations import euler_to_matrix, matrix_to_quat
 
     index = {n: i for i, n in enumerate(names)}
     wanted = joint_state_names()

@@ -115,7 +115,7 @@ def sample_trackers(lookup, config, stamp: float, stale_after: float, budget=Non
     tracker's own sample intervals if longer), else stale_after. stamps[s] is that transform's stamp (-inf
     when unknown, `stamp` when the chain is all static).
     Orientation-only sites get NaN positions, position-only sites NaN orientations."""
-    from .core.types import TrackerFrame
+    from ..core.types import TrackerFrame
 
     S = len(config.sites)
     positions = np.full((S, 3), np.nan)

@@ -7,13 +7,13 @@ from pathlib import Path
 
 import numpy as np
 
-from .core.contacts import contact_labels, estimate_floor
-from .core.kinematics import forward_kinematics
-from .core.metrics import sequence_metrics
-from .core.rotations import quat_to_matrix
-from .core.sensors import SensorConfig
-from .core.skeleton import JOINT_INDEX, PARENTS
-from .data.motion import Motion
+from ..core.contacts import contact_labels, estimate_floor
+from ..core.kinematics import forward_kinematics
+from ..core.metrics import sequence_metrics
+from ..core.rotations import quat_to_matrix
+from ..core.sensors import SensorConfig
+from ..core.skeleton import JOINT_INDEX, PARENTS
+from ..data.motion import Motion
 from .offline import make_bag, process_bag
 
 HEAD = JOINT_INDEX["head"]
@@ -22,8 +22,8 @@ DEMO_CLIP = "17_10"  # boxing, from the test split: a person no model trained on
 
 
 def pick_motion(mocap_root: Path | None, motion_file: str | None, seconds: float, fps: float) -> tuple[Motion, str]:
-    from .data.catalog import load_clip, load_motion_file, read_index
-    from .data.synthetic import synthetic_walk
+    from ..data.catalog import load_clip, load_motion_file, read_index
+    from ..data.synthetic import synthetic_walk
 
     if motion_file:
         return load_motion_file(Path(motion_file), fps), f"the motion file {motion_file}"
@@ -143,7 +143,7 @@ def run_demo(
     fps: float = 60.0,
     gif: bool = True,
 ) -> dict:
-    from .bagio import read_tracker_stream
+    from ..io.bagio import read_tracker_stream
 
     out_dir.mkdir(parents=True, exist_ok=True)
     motion, source = pick_motion(mocap_root, motion_file, seconds, fps)

@@ -8,7 +8,7 @@ from xml.sax.saxutils import quoteattr
 
 import numpy as np
 
-from .core.skeleton import JOINT_NAMES, NUM_JOINTS, PARENTS, Skeleton
+from ..core.skeleton import JOINT_NAMES, NUM_JOINTS, PARENTS, Skeleton
 from .output import AXES
 
 _AXIS_VECTORS = {"x": "1 0 0", "y": "0 1 0", "z": "0 0 1"}

@@ -14,16 +14,16 @@ from pathlib import Path
 
 import numpy as np
 
-from .core.contacts import contact_labels, estimate_floor
-from .core.kinematics import forward_kinematics
-from .core.metrics import per_joint_metrics, sequence_metrics, weighted_mean
-from .core.rotations import quat_to_matrix
-from .core.sensors import SensorConfig
-from .data import MotionFileError
-from .data.catalog import DEFAULT_FPS, load_clip, split_clips
-from .data.field_protocol import FIELD, Protocol, user_view
-from .data.motion import Motion
-from .data.motion_inputs import (
+from ..core.contacts import contact_labels, estimate_floor
+from ..core.kinematics import forward_kinematics
+from ..core.metrics import per_joint_metrics, sequence_metrics, weighted_mean
+from ..core.rotations import quat_to_matrix
+from ..core.sensors import SensorConfig
+from ..data import MotionFileError
+from ..data.catalog import DEFAULT_FPS, load_clip, split_clips
+from ..data.field_protocol import FIELD, Protocol, user_view
+from ..data.motion import Motion
+from ..data.motion_inputs import (
     AMC_FPS,
     MotionInput,
     balanced,
@@ -33,9 +33,9 @@ from .data.motion_inputs import (
     implausible,
     load_input,
 )
-from .data.virtual_trackers import TrackerNoise
-from .estimators import create_estimator
-from .estimators.base import parse_estimator_spec
+from ..data.virtual_trackers import TrackerNoise
+from ..estimators import create_estimator
+from ..estimators.base import parse_estimator_spec
 
 
 @dataclass
@@ -450,7 +450,7 @@ def is_results_file(path: Path) -> bool:
 def check_results_path(path: Path) -> Path:
     """Refuse, before any evaluation, a results path that is not ours to write: an existing
     file other than an earlier results file, a folder, a device; its folder must exist."""
-    from .bagio import OutputError
+    from ..io.bagio import OutputError
 
     path = Path(path)
     if (path.exists() or path.is_symlink()) and not is_results_file(path):

@@ -26,9 +26,9 @@ import numpy as np
 import yaml
 from scipy.spatial.transform import Rotation
 
-from ..core.body_shape import arm_span, fit_skeleton, standing_height
-from ..core.rotations import yaw_matrix
-from ..core.skeleton import CANONICAL_HEIGHT, JOINT_NAMES, Skeleton
+from .body_shape import arm_span, fit_skeleton, standing_height
+from .rotations import yaw_matrix
+from .skeleton import CANONICAL_HEIGHT, JOINT_NAMES, Skeleton
 
 
 class CalibrationError(ValueError):
@@ -72,7 +72,7 @@ class Calibration:
 
     @classmethod
     def load(cls, path: str | Path) -> Calibration:
-        from ..core.sensors import SITE_JOINTS, read_yaml
+        from .sensors import SITE_JOINTS, read_yaml
 
         path = Path(path)
         data = read_yaml(path, CalibrationError)
@@ -126,7 +126,7 @@ def _read_skeleton(path: Path, data) -> Skeleton | None:
     return skeleton
 
 
-def _mean_rotation(quats: np.ndarray) -> Rotation:
+def _mean_rotation(quats) -> Rotation:  # (n, 4) quaternions, any sequence of them
     return Rotation.from_quat(np.asarray(quats)).mean()
 
 
@@ -143,7 +143,11 @@ def calibrate_tpose(
     samples = {s: v for s, v in samples.items() if v}
     if not samples:
         raise CalibrationError("no tracker samples arrived during the calibration")
-    mean_pos = {s: np.mean([p for p, _ in v], axis=0) for s, v in samples.items() if all(p is not None for p, _ in v)}
+    mean_pos = {
+        s: np.mean(np.array([p for p, _ in v], dtype=float), axis=0)
+        for s, v in samples.items()
+        if all(p is not None for p, _ in v)
+    }
     if "left_hand" in mean_pos and "right_hand" in mean_pos:
         left = mean_pos["left_hand"] - mean_pos["right_hand"]
         left[2] = 0.0

@@ -1,8 +1,8 @@
 """A reference sender of the serial tracker protocol: what a microcontroller tracker does,
 in Python, for testing a setup without hardware and for the end-to-end tests.
 
-    python -m sparse_body.adapters.serial_sender --pty /tmp/ttyTRACKERS --rate 200
-    python -m sparse_body.adapters.serial_sender --port /dev/ttyUSB0 --sensors four_point
+    python -m sparse_body.apps.serial_sender --pty /tmp/ttyTRACKERS --rate 200
+    python -m sparse_body.apps.serial_sender --port /dev/ttyUSB0 --sensors four_point
 
 It plays a motion's virtual trackers (the synthetic walk, or a motion file) at --rate Hz,
 one device per tracker site (ids 1, 2, ... in the sensor configuration's order; sites the
@@ -22,7 +22,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .serial_protocol import encode_frame
+from ..adapters.serial_protocol import encode_frame
 
 
 class PtyPort:

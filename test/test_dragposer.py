@@ -294,6 +294,27 @@ def test_constraint_node_refines_an_estimator_over_dds_and_takes_new_constraints
     assert not missing.success
 
 
+def test_constraint_node_counts_a_bad_input_that_comes_before_it_is_activated(tiny_vae, ros_env):
+    """Configured but not active: a malformed estimate on its input (any peer can send one)
+    is counted as an error, not a crash of the node."""
+    from rclpy.lifecycle import TransitionCallbackReturn
+    from rclpy.parameter import Parameter
+    from sensor_msgs.msg import JointState
+
+    from sparse_body.ros.constraint_node import ConstraintNode
+
+    node = ConstraintNode(
+        parameter_overrides=[Parameter("sensors", value="four_point"), Parameter("model_path", value=str(tiny_vae))]
+    )
+    try:
+        assert node.trigger_configure() == TransitionCallbackReturn.SUCCESS
+        node.tf_in.cache.set("world", "pelvis", 1.0, (0.0, 0.0, 1.0), (0.0, 0.0, 0.0, 1.0))  # the input's root
+        node._on_input(JointState(name=["not_a_joint"], position=[0.0]))
+        assert node._stats.errors == 1 and "lacks" in node._stats.last_error
+    finally:
+        node.destroy_node()
+
+
 def test_temporal_context_ignores_where_the_person_stands_and_faces(rng):
     from sparse_body.estimators.dragposer_pose import temporal_context
 

@@ -175,6 +175,9 @@ class EstimatorNode(LifecycleNode):
         for name, (default, text) in self.PARAMETERS.items():
             self.declare_parameter(name, default, ParameterDescriptor(description=text, dynamic_typing=True))
         self.add_on_set_parameters_callback(self._on_set_parameters)
+        # counted from the start: inputs can fail before the first activate (the constraint
+        # node's estimate input is subscribed at configure)
+        self._stats = EstimateStats()
         self._release()
 
     def _on_set_parameters(self, parameters) -> SetParametersResult:

@@ -48,6 +48,20 @@ def contact_labels(
     return low & still
 
 
+class ToeContacts:
+    """toe_contacts frame after frame: keeps the last frame's toes (every estimator without
+    a contact model of its own uses one)."""
+
+    def __init__(self, fps: float) -> None:
+        self.fps = fps
+        self._last: np.ndarray | None = None
+
+    def __call__(self, toes: np.ndarray, floor: float = 0.0) -> np.ndarray:
+        contact = toe_contacts(toes, self._last, self.fps, floor)
+        self._last = toes
+        return contact
+
+
 def toe_contacts(
     toes: np.ndarray,
     last_toes: np.ndarray | None,

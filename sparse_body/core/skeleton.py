@@ -155,3 +155,9 @@ def standing_pose() -> np.ndarray:
     local[JOINT_INDEX["left_shoulder"]] = euler_to_matrix(np.array([np.deg2rad(-80.0), 0, 0]), "xyz")
     local[JOINT_INDEX["right_shoulder"]] = euler_to_matrix(np.array([np.deg2rad(80.0), 0, 0]), "xyz")
     return local
+
+
+def body_scale(skeleton: Skeleton) -> float:
+    """Factor that maps this person's positions onto the canonical body (the learned methods
+    see every person at the canonical size)."""
+    return Skeleton.canonical().leg_length() / skeleton.leg_length()

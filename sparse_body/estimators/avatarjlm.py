@@ -39,14 +39,13 @@ import numpy as np
 
 from ..core.body_ik import LIMBS, solve_body
 from ..core.contacts import FOOT_JOINTS as TOE_JOINTS
-from ..core.contacts import toe_contacts
+from ..core.contacts import ToeContacts
 from ..core.kinematics import forward_kinematics
 from ..core.rotations import rotation_between, rotations_to_quat, sixd_to_matrix
-from ..core.skeleton import JOINT_INDEX, PARENTS
+from ..core.skeleton import JOINT_INDEX, PARENTS, body_scale
 from ..core.types import BodyPose, TrackerFrame
 from .avatarjlm_features import SITES, features, reference
-from .base import Estimator
-from .lobstr_features import body_scale
+from .base import Estimator, full_target
 from .onnx_model import load_model, shipped_model_path
 from .options import FLOOR, MAX_GAP, THREADS
 
@@ -173,11 +172,11 @@ class AvatarJlmEstimator(Estimator):
     def _reset(self) -> None:
         self.model.start()
         self._previous: tuple[float, np.ndarray, np.ndarray] | None = None  # stamp, scaled positions, rotations
-        self._last_toes: np.ndarray | None = None
+        self._toes = ToeContacts(self.fps)  # contacts from the toes frame to frame
 
     def _estimate(self, frame: TrackerFrame) -> BodyPose | None:
         targets = [self.joint_target(frame, s) for s in self.model.sites]
-        if any(t is None or t[0] is None or t[1] is None for t in targets):
+        if not all(full_target(t) for t in targets):
             return None
         world = np.stack([np.asarray(t[0], float) for t in targets])
         rot = np.stack([np.asarray(t[1], float) for t in targets])
@@ -220,6 +219,5 @@ class AvatarJlmEstimator(Estimator):
                         local[j] = glob[PARENTS[j]].T @ r
                         glob[j] = r
         toes = np.stack([pos[PARENTS[t]] + glob[PARENTS[t]] @ offsets[t] for t in TOE_JOINTS])
-        contact = toe_contacts(toes, self._last_toes, self.fps, self.floor)
-        self._last_toes = toes
+        contact = self._toes(toes, self.floor)
         return BodyPose(stamp, rotations_to_quat(local), np.asarray(root, float).copy(), contact.astype(float), contact)

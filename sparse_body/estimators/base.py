@@ -6,7 +6,7 @@ import inspect
 import math
 from abc import ABC, abstractmethod
 from collections.abc import Iterable
-from typing import ClassVar
+from typing import ClassVar, TypeGuard
 
 import numpy as np
 import yaml
@@ -27,6 +27,11 @@ def estimator_names() -> list[str]:
     from ..methods import METHODS  # the registry holds import paths only: no cycle at import
 
     return sorted(METHODS)
+
+
+def full_target(target) -> TypeGuard[tuple[np.ndarray, np.ndarray]]:
+    """Whether a joint_target gives both a position and a rotation (a full pose)."""
+    return target is not None and target[0] is not None and target[1] is not None
 
 
 class Estimator(ABC):

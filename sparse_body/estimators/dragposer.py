@@ -24,12 +24,12 @@ from pathlib import Path
 import numpy as np
 
 from ..core.body_ik import solve_body
-from ..core.contacts import FOOT_JOINTS, toe_contacts
+from ..core.contacts import FOOT_JOINTS, ToeContacts
 from ..core.kinematics import forward_kinematics
 from ..core.rotations import heading, matrix_to_quat, yaw_matrix
 from ..core.sensors import SITE_JOINTS
 from ..core.skeleton import JOINT_INDEX as J
-from ..core.skeleton import Skeleton
+from ..core.skeleton import Skeleton, body_scale
 from ..core.types import BodyPose, TrackerFrame
 from .base import Estimator
 from .constraints import AboveFloor, ConstraintSet, Orientation, OverPoint, Position
@@ -37,7 +37,6 @@ from .dragposer_pose import HEIGHT_JOINTS, LATENT, dual_quaternions, split_headi
 from .dragposer_temporal import TemporalPrior
 from .dragposer_tracker_prior import FILE as TRACKER_PRIOR_FILE
 from .dragposer_tracker_prior import TrackerPrior
-from .lobstr_features import body_scale
 from .onnx_model import load_model
 from .options import FLOOR, THREADS, Option, Range, options_of
 
@@ -246,7 +245,7 @@ class DragPoserEstimator(Estimator):
 
     def _reset(self) -> None:
         self._state: tuple[np.ndarray, np.ndarray, float] | None = None  # (z, root, yaw)
-        self._last_toes = None
+        self._toes = ToeContacts(self.fps)  # contacts from the toes frame to frame
         if self.temporal is not None:
             self.temporal.reset()
         if self.guesser is not None:
@@ -433,6 +432,5 @@ class DragPoserEstimator(Estimator):
                 local[c.joint] = glob[self.skeleton.parents[c.joint]].T @ c.target
         _, pos = forward_kinematics(local, root, self.skeleton.offsets)
         toes = pos[list(FOOT_JOINTS)]
-        contact = toe_contacts(toes, self._last_toes, self.fps, self.floor or 0.0)
-        self._last_toes = toes
+        contact = self._toes(toes, self.floor or 0.0)
         return BodyPose(frame.stamp, matrix_to_quat(local), np.asarray(root, float), contact.astype(float), contact)

@@ -27,6 +27,7 @@ from pathlib import Path
 import numpy as np
 
 from ..core.rotations import heading, matrix_to_6d, yaw_matrix
+from .base import full_target
 from .onnx_model import load_model
 
 FILE = "dragposer_tracker_prior.onnx"
@@ -99,7 +100,7 @@ class TrackerPrior:
         present = np.zeros((1, len(SITES)), bool)
         for s, site in enumerate(SITES):
             target = targets.get(site)
-            if target is not None and target[0] is not None and target[1] is not None:
+            if full_target(target):
                 positions[0, s], rotations[0, s], present[0, s] = target[0], target[1], True
         last = self._last or (None, None, None)
         x = sequence_features(positions, rotations, present, self.fps, *last)

@@ -36,15 +36,14 @@ import numpy as np
 
 from ..core.body_ik import solve_body
 from ..core.contacts import FOOT_JOINTS as TOE_JOINTS
-from ..core.contacts import toe_contacts
+from ..core.contacts import ToeContacts
 from ..core.kinematics import forward_kinematics
 from ..core.rotations import rotations_to_quat, sixd_to_matrix
 from ..core.sensors import SITE_JOINTS
-from ..core.skeleton import JOINT_INDEX, PARENTS
+from ..core.skeleton import JOINT_INDEX, PARENTS, body_scale
 from ..core.types import BodyPose, TrackerFrame, TrackerStream
-from .base import Estimator
+from .base import Estimator, full_target
 from .dtp_features import FEATURES, FOOT_LEAVES, INPUT_SITES, LEAF_SITES, leaf_features, window_features
-from .lobstr_features import body_scale
 from .onnx_model import load_model, shipped_model_path
 from .options import FLOOR, MAX_GAP, THREADS, Range
 
@@ -128,23 +127,19 @@ class DtpEstimator(Estimator):
     def _reset(self) -> None:
         self._history: deque[tuple[float, Sample]] = deque()
         self._previous: Sample | None = None  # the last frame the polish saw
-        self._last_toes: np.ndarray | None = None
+        self._toes = ToeContacts(self.fps)  # contacts from the toes frame to frame
 
     def sample(self, frame: TrackerFrame) -> Sample | None:
         """One frame's input, or None without pelvis, head and hands."""
         targets = [self.joint_target(frame, s) for s in INPUT_SITES]
-        if any(t is None or t[0] is None or t[1] is None for t in targets[:4]):
+        if not all(full_target(t) for t in targets[:4]):
             return None
-        usable = [
-            (j, t)
-            for j, t in zip(self._joints[1:], targets[1:], strict=True)
-            if t is not None and t[0] is not None and t[1] is not None
-        ]
+        usable = [(j, t) for j, t in zip(self._joints[1:], targets[1:], strict=True) if full_target(t)]
         goals = {j: np.asarray(t[0], float) for j, t in usable}
         turns = {j: np.asarray(t[1], float) for j, t in usable}
         for k in FOOT_LEAVES:  # a foot without a usable sample reads as an occluded tracker
             t = targets[1 + k]
-            if t is None or t[0] is None or t[1] is None:
+            if not full_target(t):
                 targets[1 + k] = self.sensors.site(LEAF_SITES[k]).joint_pose(np.zeros(3), IDENTITY)
         pos = (np.stack([t[0] for t in targets]) - [0.0, 0.0, self.floor]) * self.scale
         rot = np.stack([t[1] for t in targets])
@@ -203,8 +198,7 @@ class DtpEstimator(Estimator):
             local, glob, pos = self._polished(local, glob, pos, sample)
         # no contact model: toes low and still, as the IK judges them (toes under the ankles' final turn)
         toes = np.stack([pos[PARENTS[t]] + glob[PARENTS[t]] @ self.skeleton.offsets[t] for t in TOE_JOINTS])
-        contact = toe_contacts(toes, self._last_toes, self.fps, self.floor)
-        self._last_toes = toes
+        contact = self._toes(toes, self.floor)
         return BodyPose(sample.stamp, rotations_to_quat(local), sample.root.copy(), contact.astype(float), contact)
 
     def _polished(self, local: np.ndarray, glob: np.ndarray, pos: np.ndarray, sample: Sample):

@@ -13,7 +13,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..core.body_ik import KEEP_BEND_TOLERANCE, solve_body
-from ..core.contacts import FOOT_JOINTS, toe_contacts
+from ..core.contacts import FOOT_JOINTS, ToeContacts
 from ..core.rotations import axis_angle_to_matrix, heading, rotations_to_quat, yaw_matrix
 from ..core.sensors import SITE_JOINTS
 from ..core.skeleton import JOINT_INDEX as J
@@ -42,7 +42,7 @@ class IKEstimator(Estimator):
     def _reset(self) -> None:
         self._local = standing_pose()
         self._local[J["left_knee"]] = self._local[J["right_knee"]] = axis_angle_to_matrix(np.array([0.0, 0.1, 0.0]))
-        self._last_toes: np.ndarray | None = None
+        self._toes = ToeContacts(self.fps)  # contacts from the toes frame to frame
 
     def _estimate(self, frame: TrackerFrame) -> BodyPose | None:
         solved = self.solve(frame)
@@ -53,8 +53,7 @@ class IKEstimator(Estimator):
         toes = np.stack(
             [pos[a] + glob[a] @ self.skeleton.offsets[f] for a, f in zip(_ANKLES, FOOT_JOINTS, strict=True)]
         )
-        contact = toe_contacts(toes, self._last_toes, self.fps, self.floor)
-        self._last_toes = toes
+        contact = self._toes(toes, self.floor)
         return BodyPose(frame.stamp, rotations_to_quat(local), np.asarray(root, float), contact.astype(float), contact)
 
     def solve(self, frame: TrackerFrame, start: np.ndarray | None = None, spine_tolerance: float = KEEP_BEND_TOLERANCE):

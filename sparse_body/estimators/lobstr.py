@@ -21,12 +21,12 @@ import numpy as np
 from ..core.rotations import axis_angle_to_matrix, matrix_to_6d, matrix_to_axis_angle, rotations_to_quat, sixd_to_matrix
 from ..core.sensors import SITE_JOINTS
 from ..core.skeleton import JOINT_INDEX as J
-from ..core.skeleton import standing_pose
+from ..core.skeleton import body_scale, standing_pose
 from ..core.types import BodyPose, TrackerFrame
-from .base import Estimator
+from .base import Estimator, full_target
 from .contact_ik import ContactHold
 from .ik import IKEstimator
-from .lobstr_features import INPUT_SITES, OUTPUTS, apply_legs, apply_upper, body_scale, feature_count, features
+from .lobstr_features import INPUT_SITES, OUTPUTS, apply_legs, apply_upper, feature_count, features
 from .onnx_model import load_model
 from .options import FLOOR, MAX_GAP, THREADS, Range
 
@@ -151,7 +151,7 @@ class LobstrEstimator(Estimator):
 
     def _estimate(self, frame: TrackerFrame) -> BodyPose | None:
         targets = [self.joint_target(frame, s) for s in INPUT_SITES]
-        if any(t is None or t[0] is None or t[1] is None for t in targets):
+        if not all(full_target(t) for t in targets):
             return None  # keep the previous sample: the next velocity spans the gap
         pos = (np.stack([t[0] for t in targets]) - [0.0, 0.0, self.floor]) * self.scale
         rot = np.stack([t[1] for t in targets])

@@ -26,7 +26,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..core.rotations import heading, matrix_to_6d, sixd_to_matrix, yaw_matrix
-from ..core.skeleton import JOINT_INDEX, UPPER_BODY, Skeleton
+from ..core.skeleton import JOINT_INDEX, UPPER_BODY
 
 # The tracked joints, in input order: the reference comes from the pelvis.
 INPUT_SITES = ("pelvis", "head", "left_hand", "right_hand")
@@ -56,11 +56,6 @@ def feature_count(learned_upper: bool) -> int:
 
 def output_count(learned_upper: bool) -> int:
     return OUTPUTS + UPPER_OUTPUTS * learned_upper
-
-
-def body_scale(skeleton: Skeleton) -> float:
-    """Factor that maps this person's positions onto the canonical body."""
-    return Skeleton.canonical().leg_length() / skeleton.leg_length()
 
 
 def reference_frames(pelvis_rot: np.ndarray) -> np.ndarray:

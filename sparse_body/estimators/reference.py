@@ -12,7 +12,7 @@ import numpy as np
 from ..core.rotations import heading, matrix_to_quat, yaw_matrix
 from ..core.skeleton import JOINT_INDEX, standing_pose
 from ..core.types import BodyPose, TrackerFrame
-from .base import Estimator
+from .base import Estimator, full_target
 
 HEAD = JOINT_INDEX["head"]
 
@@ -31,9 +31,8 @@ class ReferenceEstimator(Estimator):
     def _estimate(self, frame: TrackerFrame) -> BodyPose | None:
         pelvis = self.joint_target(frame, "pelvis")
         head = self.joint_target(frame, "head")
-        full = lambda t: t is not None and t[0] is not None and t[1] is not None  # noqa: E731
-        pelvis = pelvis if full(pelvis) else None  # needs a full pose
-        head = head if full(head) else None
+        pelvis = pelvis if full_target(pelvis) else None  # needs a full pose
+        head = head if full_target(head) else None
         if pelvis is not None:
             root_pos, root_rot = pelvis[0], yaw_matrix(heading(pelvis[1]))
         elif head is not None:

@@ -19,11 +19,10 @@ import torch
 
 from ..core.contacts import contact_labels, estimate_floor
 from ..core.rotations import matrix_to_6d
-from ..core.skeleton import Skeleton
+from ..core.skeleton import Skeleton, body_scale
 from ..data.catalog import load_clip, split_clips
 from ..data.virtual_trackers import LOBSTR_NOISE, NOISE_MODELS, TrackerNoise, _random_rotations
 from ..estimators.avatarjlm_features import input_joints, reference, sequence_features
-from ..estimators.lobstr_features import body_scale
 from .augment import NO_AUGMENTATION, Augmentation, variants
 from .avatarjlm_model import HANDS, TOKENS, AvatarJlmConfig, AvatarJlmNet, StreamingStep, losses, world_positions
 from .harness import export_onnx as export

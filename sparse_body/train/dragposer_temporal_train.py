@@ -21,11 +21,10 @@ import torch
 from scipy.spatial.transform import Rotation
 
 from ..core.contacts import estimate_floor
-from ..core.skeleton import JOINT_INDEX, Skeleton
+from ..core.skeleton import JOINT_INDEX, Skeleton, body_scale
 from ..data.catalog import load_clip, split_clips
 from ..estimators.dragposer import PoseVaeRuntime
 from ..estimators.dragposer_pose import HEIGHT_JOINTS, LIMBS, split_heading, temporal_context
-from ..estimators.lobstr_features import body_scale
 from .augment import NO_AUGMENTATION, Augmentation, variants
 from .dragposer_temporal import TemporalConfig, TemporalPredictor, loss
 from .harness import export_onnx, fit, machine

@@ -27,13 +27,12 @@ from torch import nn
 from ..core.contacts import estimate_floor
 from ..core.kinematics import forward_kinematics
 from ..core.sensors import SITE_JOINTS
-from ..core.skeleton import JOINT_INDEX, LOWER_BODY, Skeleton, joint_indices
+from ..core.skeleton import JOINT_INDEX, LOWER_BODY, Skeleton, body_scale, joint_indices
 from ..data.catalog import load_clip, split_clips
 from ..data.virtual_trackers import _random_rotations
 from ..estimators.dragposer import PoseVaeRuntime
 from ..estimators.dragposer_pose import LATENT, split_heading
 from ..estimators.dragposer_tracker_prior import FEATURES, FILE, SITE_FEATURES, SITES, sequence_features
-from ..estimators.lobstr_features import body_scale
 from .augment import NO_AUGMENTATION, Augmentation, variants
 from .dragposer_vae import Decoder, PoseVae, VaeConfig
 from .harness import export_onnx, fit, machine

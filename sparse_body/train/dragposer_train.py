@@ -17,10 +17,9 @@ import torch
 from ..core.contacts import estimate_floor
 from ..core.kinematics import forward_kinematics
 from ..core.rotations import angle_between, matrix_to_6d
-from ..core.skeleton import Skeleton
+from ..core.skeleton import Skeleton, body_scale
 from ..data.catalog import load_clip, split_clips
 from ..estimators.dragposer_pose import dual_quaternions, split_heading
-from ..estimators.lobstr_features import body_scale
 from .augment import NO_AUGMENTATION, Augmentation, variants
 from .dragposer_vae import Decoder, Encoder, PoseVae, VaeConfig, losses
 from .harness import export_onnx, fit, machine

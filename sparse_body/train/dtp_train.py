@@ -23,11 +23,10 @@ from scipy.spatial.transform import Rotation
 
 from ..core.contacts import estimate_floor
 from ..core.rotations import matrix_to_6d
-from ..core.skeleton import Skeleton
+from ..core.skeleton import Skeleton, body_scale
 from ..data.catalog import load_clip, split_clips
 from ..data.virtual_trackers import LOBSTR_NOISE, _random_rotations
 from ..estimators.dtp_features import FOOT_LEAVES, INPUT_JOINTS, leaf_features, window_features
-from ..estimators.lobstr_features import body_scale
 from .augment import NO_AUGMENTATION, Augmentation, variants
 from .dtp_model import DtpConfig, DtpNet, body_positions, losses
 from .harness import export_onnx as export

@@ -18,7 +18,7 @@ import torch
 
 from ..core.contacts import contact_labels, estimate_floor
 from ..core.rotations import angle_between, heading
-from ..core.skeleton import Skeleton
+from ..core.skeleton import Skeleton, body_scale
 from ..data.catalog import load_clip, split_clips
 from ..data.virtual_trackers import LOBSTR_NOISE, _random_rotations
 from ..estimators.lobstr_features import (
@@ -26,7 +26,6 @@ from ..estimators.lobstr_features import (
     LEG_JOINTS,
     OUTPUTS,
     UPPER_JOINTS,
-    body_scale,
     leg_targets,
     reference_frames,
     sequence_features,

@@ -1,5 +1,7 @@
 """The estimator node's /diagnostics status, made from its counts without a node."""
 
+import time
+
 import numpy as np
 
 from sparse_body.ros.estimate_stats import ERROR, OK, WARN, EstimateStats
@@ -8,7 +10,7 @@ from sparse_body.ros.estimate_stats import ERROR, OK, WARN, EstimateStats
 def test_status_names_stale_trackers_and_errors_and_counts_each_estimate():
     stats = EstimateStats()
     for k in range(5):
-        stats.estimated(fallback=k == 4, latency=0.002 * (k + 1))
+        stats.estimated(time.monotonic(), fallback=k == 4, latency=0.002 * (k + 1))
     sites = ["head", "left_hand"]
     level, message, values = stats.status(sites, np.array([0.01, np.inf]), np.array([True, False]), {"nan": 3})
     assert level == WARN and message == "stale or missing trackers: left_hand"

@@ -28,8 +28,9 @@ class EstimateStats:
         self.errors += 1
         self.last_error = text
 
-    def estimated(self, fallback: bool, latency: float | None) -> None:
-        self.steps.append(time.monotonic())
+    def estimated(self, at: float, fallback: bool, latency: float | None) -> None:
+        """An estimate was made at monotonic time `at` (the node has just read the clock)."""
+        self.steps.append(at)
         if latency is not None:
             self.latency.append(latency)
         if fallback:

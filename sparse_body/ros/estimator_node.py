@@ -122,8 +122,9 @@ def _check_estimator_spec(value: str) -> str | None:
         method, _ = parse_estimator_spec(value)
     except ValueError as err:
         return str(err)
-    if method not in estimator_names():
-        return f"unknown estimator {method!r}; available: {', '.join(estimator_names())}"
+    names = estimator_names()
+    if method not in names:
+        return f"unknown estimator {method!r}; available: {', '.join(names)}"
     return None
 
 
@@ -368,7 +369,7 @@ class EstimatorNode(LifecycleNode):
         self._last_step = time.monotonic()
         if not no_input:
             self._last_input = newest
-        self._stats.estimated(fallback, None if no_input else now - source_time)
+        self._stats.estimated(self._last_step, fallback, None if no_input else now - source_time)
 
     def _restart_on_jump_back(self, now: float) -> None:
         """A clock jump back (a looping bag, a restarted simulation): start afresh."""

@@ -167,9 +167,10 @@ if [ -d "$ROS_TOOLS/wheels" ] && ls "$ROS_TOOLS"/wheels/*.whl >/dev/null 2>&1; t
     mkdir -p "$VENV/share/ament_index/resource_index/packages"
     touch "$VENV/share/ament_index/resource_index/packages/sparse_body"
     # Every interpreter of the venv (the ros2 command, launch, the tests) finds the prefix
-    # without a sourced setup file: AMENT_PREFIX_PATH gets the venv in front.
+    # without a sourced setup file: the venv joins AMENT_PREFIX_PATH last, as the underlay,
+    # so a workspace overlay sourced over it (install/setup.bash) still comes first.
     SITE=$("$VPY" -c 'import sysconfig; print(sysconfig.get_paths()["purelib"])')
-    echo 'import os, sys; os.environ["AMENT_PREFIX_PATH"] = os.pathsep.join(dict.fromkeys([sys.prefix] + [p for p in os.environ.get("AMENT_PREFIX_PATH", "").split(os.pathsep) if p]))' \
+    echo 'import os, sys; os.environ["AMENT_PREFIX_PATH"] = os.pathsep.join(dict.fromkeys([p for p in os.environ.get("AMENT_PREFIX_PATH", "").split(os.pathsep) if p] + [sys.prefix]))' \
       > "$SITE/sparse_body_ament_prefix.pth"
     mark_done ros_tools "$ros_hash"
   else

@@ -18,7 +18,7 @@ from sparse_body.core.skeleton import JOINT_INDEX as J
 from sparse_body.data.catalog import load_clip
 from sparse_body.data.virtual_trackers import VR_NOISE, synthesize_trackers
 from sparse_body.estimators import create_estimator
-from sparse_body.estimators.avatarjlm_features import SITES, input_joints, sequence_features
+from sparse_body.methods.avatarjlm.features import SITES, input_joints, sequence_features
 
 torch = pytest.importorskip("torch")
 THREE, FOUR = load_sensor_config("three_point"), load_sensor_config("four_point")
@@ -33,8 +33,8 @@ def clip(clip_index):
 @pytest.fixture(scope="module")
 def tiny_models(tmp_path_factory, mocap_root):
     """Tiny three- and four-point models trained for a few steps by the real training code."""
-    from sparse_body.train.avatarjlm_model import AvatarJlmConfig
-    from sparse_body.train.avatarjlm_train import train
+    from sparse_body.methods.avatarjlm.model import AvatarJlmConfig
+    from sparse_body.methods.avatarjlm.train import train
 
     folder = tmp_path_factory.mktemp("avatarjlm")
     for sensors in ("three_point", "four_point"):
@@ -73,9 +73,9 @@ def test_streaming_onnx_step_gives_the_torch_models_output_over_the_window(tmp_p
     """Frame by frame through the runtime's kept past (AvatarJlmModel) against the torch
     network on the whole stream so far: at a stream's start and long after the past is full
     (each block sees window - 1 frames back, the stacked blocks further)."""
-    from sparse_body.estimators.avatarjlm import AvatarJlmModel
-    from sparse_body.train.avatarjlm_model import AvatarJlmConfig, AvatarJlmNet
-    from sparse_body.train.avatarjlm_train import export_onnx
+    from sparse_body.methods.avatarjlm.estimator import AvatarJlmModel
+    from sparse_body.methods.avatarjlm.model import AvatarJlmConfig, AvatarJlmNet
+    from sparse_body.methods.avatarjlm.train import export_onnx
 
     config = AvatarJlmConfig(d_embed=32, d_model=16, heads=4, loops=2, feedforward=32, window=9, dropout=0.0)
     torch.manual_seed(0)
@@ -200,7 +200,7 @@ def test_train_avatarjlm_is_one_command(tmp_path, mocap_root):
 def test_a_finished_training_trains_further_from_its_kept_checkpoint(tmp_path, mocap_root):
     """--keep-checkpoint then --resume: the second run starts where the first stopped and its
     report keeps the first run, which the model card shows."""
-    from sparse_body.train.avatarjlm_card import _curve, _training
+    from sparse_body.methods.avatarjlm.card import _curve, _training
 
     out = tmp_path / "avatarjlm.onnx"
     run = [
@@ -262,7 +262,7 @@ def test_shipped_three_point_legs_are_not_turned_and_rebuilding_them_moves_no_jo
     05_02): its legs are not turned, so by default they are not rebuilt, only the knees made
     hinges; legs_from_positions=true on it moves no knee or ankle, keeps the knees hinges and
     turns no hip by as much as a quarter turn."""
-    from sparse_body.estimators.avatarjlm import AvatarJlmModel
+    from sparse_body.methods.avatarjlm.estimator import AvatarJlmModel
 
     assert not AvatarJlmModel(models_dir() / "avatarjlm.onnx").turned_legs
     motion = load_clip(clip_index["05_02"]).slice(0, 120)
@@ -293,7 +293,7 @@ def test_legs_rebuilt_from_positions_undo_a_leg_turned_about_its_thigh(clip_inde
     """A true walk's legs come back unchanged; turned half a turn about the thigh (the knee
     turning back, positions the same) they come back to the truth wherever the knee is bent."""
     from sparse_body.core.rotations import axis_angle_to_matrix
-    from sparse_body.estimators.avatarjlm import legs_from_positions
+    from sparse_body.methods.avatarjlm.estimator import legs_from_positions
 
     motion = load_clip(clip_index["08_01"])
     offsets, true = motion.skeleton.offsets, motion.local_rotations[::4]
@@ -344,8 +344,8 @@ def test_estimator_node_runs_avatarjlm_over_dds(tiny_models, tmp_path, clip, ros
 
 def test_leg_term_judges_the_legs_own_swing_not_the_root(clip):
     from sparse_body.core.rotations import matrix_to_6d
-    from sparse_body.train.avatarjlm_model import AvatarJlmConfig, AvatarJlmNet, leg_positions
-    from sparse_body.train.avatarjlm_train import train
+    from sparse_body.methods.avatarjlm.model import AvatarJlmConfig, AvatarJlmNet, leg_positions
+    from sparse_body.methods.avatarjlm.train import train
 
     net = AvatarJlmNet(AvatarJlmConfig.named("tiny"))
     local = clip.local_rotations[:10].copy()

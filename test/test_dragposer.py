@@ -17,7 +17,7 @@ from sparse_body.core.skeleton import Skeleton
 from sparse_body.data.synthetic import synthetic_walk
 from sparse_body.data.virtual_trackers import TrackerNoise, synthesize_trackers
 from sparse_body.estimators import create_estimator
-from sparse_body.estimators.constraints import (
+from sparse_body.methods.dragposer.constraints import (
     AboveFloor,
     AngleLimit,
     ConstraintSet,
@@ -26,25 +26,25 @@ from sparse_body.estimators.constraints import (
     OverPoint,
     Position,
 )
-from sparse_body.estimators.dragposer_pose import dual_quaternions, split_heading
+from sparse_body.methods.dragposer.pose import dual_quaternions, split_heading
 
 torch = pytest.importorskip("torch")
 
 
 @pytest.fixture(scope="module")
 def tiny_vae(tmp_path_factory, mocap_root):
-    from sparse_body.train.dragposer_train import train_vae
-    from sparse_body.train.dragposer_vae import VaeConfig
+    from sparse_body.methods.dragposer.vae_model import VaeConfig
+    from sparse_body.methods.dragposer.vae_train import train_vae
 
     out = tmp_path_factory.mktemp("dragposer")
     config = VaeConfig.named("tiny")
     config.hidden, config.steps = 64, 20
     train_vae(config, mocap_root, out, limit=2, log=lambda *_: None)
-    from sparse_body.train.dragposer_temporal import TemporalConfig
-    from sparse_body.train.dragposer_temporal_train import train_temporal
+    from sparse_body.methods.dragposer.temporal_model import TemporalConfig
+    from sparse_body.methods.dragposer.temporal_train import train_temporal
 
     train_temporal(TemporalConfig.named("tiny"), mocap_root, out, limit=2, log=lambda *_: None)
-    from sparse_body.train.dragposer_tracker_prior import TrackerPriorConfig, train_tracker_prior
+    from sparse_body.methods.dragposer.tracker_prior_train import TrackerPriorConfig, train_tracker_prior
 
     train_tracker_prior(TrackerPriorConfig.named("tiny"), mocap_root, out, limit=2, log=lambda *_: None)
     return out
@@ -104,8 +104,8 @@ def test_constraints_give_the_same_residuals_in_numpy_and_torch(rng):
 
 
 def test_gauss_newton_reaches_a_decodable_pose_like_the_autograd_reference(tiny_vae, rng):
-    from sparse_body.estimators.dragposer import LatentOptimizer, PoseVaeRuntime
-    from sparse_body.train.dragposer_reference import load_vae, optimise
+    from sparse_body.methods.dragposer.estimator import LatentOptimizer, PoseVaeRuntime
+    from sparse_body.methods.dragposer.torch_reference import load_vae, optimise
 
     skeleton = Skeleton.canonical()
     vae = PoseVaeRuntime(tiny_vae)
@@ -316,7 +316,7 @@ def test_constraint_node_counts_a_bad_input_that_comes_before_it_is_activated(ti
 
 
 def test_temporal_context_ignores_where_the_person_stands_and_faces(rng):
-    from sparse_body.estimators.dragposer_pose import temporal_context
+    from sparse_body.methods.dragposer.pose import temporal_context
 
     root = np.cumsum(rng.normal(0, 0.05, (10, 3)), axis=0)
     yaw = np.cumsum(rng.normal(0, 0.1, 10))
@@ -331,8 +331,8 @@ def test_temporal_context_ignores_where_the_person_stands_and_faces(rng):
 
 
 def test_limb_noise_turns_whole_limbs_and_nothing_else(rng):
-    from sparse_body.estimators.dragposer_pose import LIMBS
-    from sparse_body.train.dragposer_temporal_train import limb_noise
+    from sparse_body.methods.dragposer.pose import LIMBS
+    from sparse_body.methods.dragposer.temporal_train import limb_noise
 
     motion = synthetic_walk(seconds=4.0)
     local = motion.local_rotations.astype(np.float32)
@@ -354,13 +354,13 @@ def test_limb_noise_turns_whole_limbs_and_nothing_else(rng):
 def test_temporal_predictor_onnx_matches_torch_and_is_causal(tiny_vae, rng):
     import onnxruntime as ort
 
-    from sparse_body.train.dragposer_temporal import TemporalConfig, TemporalPredictor
+    from sparse_body.methods.dragposer.temporal_model import TemporalConfig, TemporalPredictor
 
     session = ort.InferenceSession(str(tiny_vae / "dragposer_temporal.onnx"))
     config = TemporalConfig(**json.loads(session.get_modelmeta().custom_metadata_map["config"]))
     model = TemporalPredictor(config).eval()  # random weights: the graph, not the training, is under test
     path = tiny_vae / "check_temporal.onnx"
-    from sparse_body.train.dragposer_temporal_train import export
+    from sparse_body.methods.dragposer.temporal_train import export
 
     export(model, path, {"method": "dragposer"})
     past = rng.normal(size=(1, config.past, 24)).astype(np.float32)
@@ -380,7 +380,7 @@ def test_temporal_predictor_onnx_matches_torch_and_is_causal(tiny_vae, rng):
 
 
 def test_temporal_prior_waits_for_history_then_feeds_its_own_predictions(tiny_vae, rng):
-    from sparse_body.estimators.dragposer_temporal import TemporalPrior
+    from sparse_body.methods.dragposer.temporal import TemporalPrior
 
     def run(ahead, last_z):
         prior = TemporalPrior(tiny_vae, ahead=ahead)
@@ -413,7 +413,7 @@ def test_temporal_prior_waits_for_history_then_feeds_its_own_predictions(tiny_va
 
 
 def test_temporal_target_ramps_from_the_solved_latent_to_the_prediction(tiny_vae, rng):
-    from sparse_body.estimators.dragposer_temporal import TemporalPrior
+    from sparse_body.methods.dragposer.temporal import TemporalPrior
 
     ramped, held = TemporalPrior(tiny_vae), TemporalPrior(tiny_vae, ramp=False)
     n, tick = ramped.every, ramped.past * ramped.every  # the first tick with W_p steps of history
@@ -577,7 +577,7 @@ def test_root_prior_pulls_an_untracked_root_below_the_headset_and_only_then(clip
 def test_tracker_prior_features_ignore_where_the_person_stands_and_faces_and_stream_as_a_batch(rng):
     from scipy.spatial.transform import Rotation
 
-    from sparse_body.estimators.dragposer_tracker_prior import SITE_FEATURES, SITES, sequence_features
+    from sparse_body.methods.dragposer.tracker_prior import SITE_FEATURES, SITES, sequence_features
 
     T, S = 6, len(SITES)
     pos = rng.normal(0, 0.5, (T, S, 3)) + [0, 0, 1]
@@ -615,8 +615,8 @@ def test_tracker_prior_features_ignore_where_the_person_stands_and_faces_and_str
 def test_tracker_prior_onnx_matches_torch_step_by_step(tiny_vae, rng):
     import onnxruntime as ort
 
-    from sparse_body.estimators.dragposer_tracker_prior import FEATURES
-    from sparse_body.train.dragposer_tracker_prior import TrackerPriorConfig, TrackerPriorNet, export
+    from sparse_body.methods.dragposer.tracker_prior import FEATURES
+    from sparse_body.methods.dragposer.tracker_prior_train import TrackerPriorConfig, TrackerPriorNet, export
 
     net = TrackerPriorNet(TrackerPriorConfig.named("tiny")).eval()  # random weights: the graph is under test
     path = tiny_vae / "check_tracker_prior.onnx"
@@ -664,8 +664,8 @@ def test_tracker_prior_pulls_the_latent_towards_its_guess_and_leaves_the_tracker
 
 
 def test_tracker_prior_trains_through_the_shipped_decoder_as_onnx_runs_it(tiny_vae, rng):
-    from sparse_body.estimators.dragposer import PoseVaeRuntime
-    from sparse_body.train.dragposer_tracker_prior import frozen_decoder
+    from sparse_body.methods.dragposer.estimator import PoseVaeRuntime
+    from sparse_body.methods.dragposer.tracker_prior_train import frozen_decoder
 
     z = rng.normal(size=(5, 24)).astype(np.float32)
     decoder = frozen_decoder(tiny_vae)

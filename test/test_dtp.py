@@ -17,7 +17,7 @@ from sparse_body.data.catalog import load_clip
 from sparse_body.data.field_protocol import FIELD, Protocol, user_view
 from sparse_body.data.virtual_trackers import NO_NOISE, VR_NOISE, synthesize_trackers
 from sparse_body.estimators import create_estimator
-from sparse_body.estimators.dtp_features import INPUT_JOINTS, leaf_features, window_features
+from sparse_body.methods.dtp.features import INPUT_JOINTS, leaf_features, window_features
 
 torch = pytest.importorskip("torch")
 SIX = load_sensor_config("six_point")
@@ -31,8 +31,8 @@ def clip(clip_index):
 @pytest.fixture(scope="module")
 def tiny_models(tmp_path_factory, mocap_root):
     """Tiny online and lookahead models trained for a few steps by the real training code."""
-    from sparse_body.train.dtp_model import DtpConfig
-    from sparse_body.train.dtp_train import train
+    from sparse_body.methods.dtp.model import DtpConfig
+    from sparse_body.methods.dtp.train import train
 
     folder = tmp_path_factory.mktemp("dtp")
     online = DtpConfig.named("tiny")
@@ -69,8 +69,8 @@ def test_onnx_gives_the_torch_models_output_on_the_same_window(tmp_path, clip):
     sees further ahead than `future` frames."""
     import onnxruntime as ort
 
-    from sparse_body.train.dtp_model import DtpConfig, DtpNet
-    from sparse_body.train.dtp_train import export_onnx
+    from sparse_body.methods.dtp.model import DtpConfig, DtpNet
+    from sparse_body.methods.dtp.train import export_onnx
 
     x = _features(clip.slice(0, 26), current=20).astype(np.float32)
     for future in (0, 5):
@@ -237,8 +237,8 @@ def test_train_dtp_is_one_command(tmp_path, mocap_root):
 
 
 def test_resume_after_the_pre_training_goes_on_with_the_fine_tuning(tmp_path, mocap_root, monkeypatch):
-    import sparse_body.train.dtp_train as dtp_train
-    from sparse_body.train.dtp_model import DtpConfig
+    import sparse_body.methods.dtp.train as dtp_train
+    from sparse_body.methods.dtp.model import DtpConfig
 
     config = replace(DtpConfig.named("tiny"), finetune_steps=4)
     checkpoint, out, fit = tmp_path / "dtp.checkpoint.npz", tmp_path / "dtp.onnx", dtp_train.fit

@@ -17,8 +17,8 @@ from sparse_body.core.skeleton import Skeleton, standing_pose
 from sparse_body.data.catalog import load_clip
 from sparse_body.data.virtual_trackers import TrackerNoise, synthesize_trackers
 from sparse_body.estimators import create_estimator
-from sparse_body.estimators.contact_ik import ContactHold, release_weight
-from sparse_body.estimators.lobstr_features import (
+from sparse_body.methods.lobstr.contact_ik import ContactHold, release_weight
+from sparse_body.methods.lobstr.features import (
     INPUT_JOINTS,
     apply_legs,
     apply_upper,
@@ -38,8 +38,8 @@ def clip(clip_index):
 @pytest.fixture(scope="module")
 def tiny_model(tmp_path_factory, mocap_root):
     """A tiny model trained for a few steps by the real training code on two clips."""
-    from sparse_body.train.lobstr_model import LobstrConfig
-    from sparse_body.train.lobstr_train import train
+    from sparse_body.methods.lobstr.model import LobstrConfig
+    from sparse_body.methods.lobstr.train import train
 
     out = tmp_path_factory.mktemp("lobstr") / "tiny.onnx"
     report = train(LobstrConfig.named("tiny"), mocap_root, out, limit=2, log=lambda *_: None)
@@ -92,8 +92,8 @@ def test_streaming_onnx_equals_the_recurrent_net_over_the_window(tmp_path, clip,
     what the training graph gives for the whole window at once."""
     import onnxruntime as ort
 
-    from sparse_body.train.lobstr_model import LobstrConfig, LobstrNet
-    from sparse_body.train.lobstr_train import export_onnx
+    from sparse_body.methods.lobstr.model import LobstrConfig, LobstrNet
+    from sparse_body.methods.lobstr.train import export_onnx
 
     torch.manual_seed(0)
     config = LobstrConfig(hidden=32, latent=16, learned_upper=learned_upper)

@@ -48,7 +48,31 @@ def test_paper_figures_are_looked_up_by_sensors_and_faulty_share():
 def test_the_commands_and_the_evaluation_hold_no_per_method_branches():
     names = "|".join(TRAINABLE)
     branch = re.compile(rf"(==|!=|\bin\b)\s*\(?\s*\"({names})\"|\"({names})\"\s*(==|!=)")
-    for path in [ROOT / "cli.py", ROOT / "apps" / "evaluation.py", ROOT / "train" / "harness.py", ROOT / "ros"]:
+    for path in [ROOT / "cli.py", ROOT / "apps" / "evaluation.py", ROOT / "train", ROOT / "ros"]:
         for file in [path] if path.is_file() else sorted(path.glob("*.py")):
             found = [line for line in file.read_text().splitlines() if branch.search(line)]
             assert not found, (file.name, found)
+
+
+@pytest.mark.parametrize("name", sorted(METHODS))
+def test_a_methods_code_lives_in_its_own_folder(name):
+    method = METHODS[name]
+    parts = method.training.parts if method.training else ()
+    paths = [method.estimator] + [path for part in parts for path in (part.config, part.train)]
+    assert all(path.startswith(f"sparse_body.methods.{name}.") for path in paths), paths
+    # nothing outside the folder is named after the method (the layout before the folders)
+    for folder in ("estimators", "train"):
+        assert not sorted((ROOT / folder).glob(f"{name}*.py"))
+
+
+def test_listing_the_methods_imports_no_methods_code():
+    import subprocess
+    import sys
+
+    code = (
+        "import sys, sparse_body.methods as m; assert len(m.METHODS) == 7; "
+        "print(sorted(k for k in sys.modules if k.startswith('sparse_body.methods.') and '.' in k[20:]) "
+        "+ [k for k in ('torch', 'onnxruntime') if k in sys.modules])"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
+    assert out.strip() == "[]", out

@@ -8,8 +8,8 @@ import numpy as np
 import onnxruntime as ort
 import pytest
 
-from sparse_body.train.lobstr_model import LobstrConfig
-from sparse_body.train.lobstr_train import train
+from sparse_body.methods.lobstr.model import LobstrConfig
+from sparse_body.methods.lobstr.train import train
 
 
 def quiet(*_):

@@ -167,10 +167,10 @@ def bench_network(frames: int = 3000) -> None:
 
     import torch
 
-    from ..estimators.lobstr import LobstrModel, default_model_path
-    from ..estimators.lobstr_features import feature_count
-    from ..train.lobstr_model import LobstrConfig, LobstrNet, LobstrStep
-    from ..train.lobstr_train import export_onnx
+    from ..methods.lobstr.estimator import LobstrModel, default_model_path
+    from ..methods.lobstr.features import feature_count
+    from ..methods.lobstr.model import LobstrConfig, LobstrNet, LobstrStep
+    from ..methods.lobstr.train import export_onnx
 
     torch.set_num_threads(1)
     rng = np.random.default_rng(0)
@@ -221,8 +221,8 @@ def bench_dragposer(
     import torch
 
     from ..data.catalog import find_mocap_root, load_clip, read_index
-    from ..estimators.dragposer import END_JOINTS, DragPoserEstimator
-    from ..train.dragposer_reference import load_vae, optimise
+    from ..methods.dragposer.estimator import END_JOINTS, DragPoserEstimator
+    from ..methods.dragposer.torch_reference import load_vae, optimise
     from .demo import DEMO_CLIP
 
     torch.set_num_threads(1)

@@ -1,7 +1,9 @@
 """The methods, one record each (record.Method): estimator, training parts and presets, model
 card, paper figures and what `eval` compares it with. The commands, the nodes and the
-evaluation look methods up here and hold no per-method branches; adding a method is its
-code, its record module here and one line in METHODS."""
+evaluation look methods up here and hold no per-method branches. Each method is a folder,
+methods/NAME/, whose __init__ holds its record and nothing that imports its code (so listing
+the methods imports neither torch nor ONNX Runtime); adding a method is its folder and one
+line in METHODS."""
 
 from __future__ import annotations
 

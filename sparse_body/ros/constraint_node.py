@@ -18,8 +18,8 @@ from sensor_msgs.msg import JointState
 
 from ..core.types import BodyPose
 from ..estimators.base import Estimator
-from ..estimators.constraints import AboveFloor, AngleLimit, LookAt, Orientation, Position
 from ..io.output import pose_from_joint_state
+from ..methods.dragposer.constraints import AboveFloor, AngleLimit, LookAt, Orientation, Position
 from .estimator_node import PARAMETERS as ESTIMATOR_PARAMETERS
 from .estimator_node import RANGES as ESTIMATOR_RANGES
 from .estimator_node import EstimatorNode
@@ -45,7 +45,7 @@ class InputRefiner(Estimator):
     name = "refine"
 
     def __init__(self, sensors, skeleton, fps: float, model_path: str, iterations: int, timeout: float) -> None:
-        from ..estimators.dragposer import DragPoserEstimator
+        from ..methods.dragposer.estimator import DragPoserEstimator
 
         super().__init__(sensors, skeleton, fps)
         self.refiner = DragPoserEstimator(

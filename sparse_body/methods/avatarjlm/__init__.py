@@ -1,0 +1,46 @@
+"""AvatarJLM (Zheng et al. 2023): joint tokens from the headset and controllers (three-point)
+or with the pelvis (four-point), polished by IK onto the trackers."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from ..record import Method, Training, TrainPart
+
+
+def _card(out: Path, mocap, limit: int | None) -> Path:
+    from .card import write_avatarjlm_card
+
+    return write_avatarjlm_card(out.with_name("avatarjlm.onnx"), mocap, limit=limit)  # one card: both models
+
+
+def _output(config) -> str:
+    sensors = config().sensors
+    return "avatarjlm.onnx" if sensors == "three_point" else f"avatarjlm_{sensors}.onnx"
+
+
+METHOD = Method(
+    "avatarjlm",
+    "sparse_body.methods.avatarjlm.estimator:AvatarJlmEstimator",
+    compare_with=("avatarjlm:polish=false", "dragposer", "ik"),
+    # Table 1 (AMASS Protocol 1: 90 % of CMU, BMLrub, HDM05 for training)
+    paper_figures={
+        "three_point": {"AvatarJLM paper": {"MPJPE [cm]": 3.35, "MPJRE [deg]": 2.90, "MPJVE [cm/s]": 20.79}},
+        "four_point": {"AvatarJLM paper": {"MPJPE [cm]": 2.09, "MPJRE [deg]": 2.40, "MPJVE [cm/s]": 17.82}},
+    },
+    training=Training(
+        parts=(
+            TrainPart(
+                "avatarjlm",
+                "sparse_body.methods.avatarjlm.model:AvatarJlmConfig",
+                "sparse_body.methods.avatarjlm.train:train",
+                lambda out: out.with_suffix(".train.json"),
+            ),
+        ),
+        output=_output,
+        card=_card,
+        config_help="small (three-point, 88 minutes on one core), four_point (the same with the pelvis: "
+        "models/avatarjlm_four_point.onnx), paper (d1 1024, d2 512, 6 loops: for a GPU) or tiny",
+        out_help="the .onnx file",
+    ),
+)

@@ -1,5 +1,0 @@
-"""The closed-form body IK (no learning): the baseline every learned method is compared with."""
-
-from .record import Method
-
-METHOD = Method("ik", "sparse_body.estimators.ik:IKEstimator")

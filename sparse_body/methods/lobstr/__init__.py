@@ -1,0 +1,39 @@
+"""LoBSTr (Yang et al. 2021): a GRU predicts the legs and foot contacts from four trackers;
+the upper body by IK; contact IK holds the feet."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+from ..record import Method, Training, TrainPart
+
+
+def _card(out: Path, mocap, limit: int | None) -> Path:
+    from .card import write_lobstr_card
+
+    return write_lobstr_card(out, json.loads(out.with_suffix(".train.json").read_text()), mocap, limit=limit)
+
+
+METHOD = Method(
+    "lobstr",
+    "sparse_body.methods.lobstr.estimator:LobstrEstimator",
+    compare_with=("lobstr:contact_ik=false", "ik"),
+    paper_figures={
+        "four_point": {"LoBSTr paper": {"Contact acc [%]": 85.77, "Lower RE [deg]": 8.53, "Toe PE [cm]": 6.63}}
+    },
+    training=Training(
+        parts=(
+            TrainPart(
+                "lobstr",
+                "sparse_body.methods.lobstr.model:LobstrConfig",
+                "sparse_body.methods.lobstr.train:train",
+                lambda out: out.with_suffix(".train.json"),
+            ),
+        ),
+        output=lambda config: "lobstr.onnx",
+        card=_card,
+        config_help="paper, small (under an hour on 2 CPU cores) or tiny",
+        out_help="the .onnx file",
+    ),
+)

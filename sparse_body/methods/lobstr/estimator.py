@@ -1,0 +1,192 @@
+"""LoBSTr (Yang et al. 2021) at runtime: ONNX Runtime, one GRU step per frame.
+
+The legs come from the network, driven by the velocities of pelvis, head and hands; contacts
+are held by IK (contact_ik.py). The paper solves the upper body by IK from the same trackers
+(Final IK); a model trained with the learned upper body (features.py) predicts it,
+and the same IK then only turns its spine and arms onto the headset and hands, keeping the
+predicted spine curve, elbow bends and swivels (learned_upper=false: the paper's IK).
+
+The GRU state is carried from frame to frame: the network sees the whole past instead of
+re-running a one-second window each frame (the model is trained on 1.5 s chunks and
+test_lobstr shows streaming equals running the recurrent net over the window). A gap in the
+input longer than max_gap, or time going back, starts the state over.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from ...core.rotations import (
+    axis_angle_to_matrix,
+    matrix_to_6d,
+    matrix_to_axis_angle,
+    rotations_to_quat,
+    sixd_to_matrix,
+)
+from ...core.sensors import SITE_JOINTS
+from ...core.skeleton import JOINT_INDEX as J
+from ...core.skeleton import body_scale, standing_pose
+from ...core.types import BodyPose, TrackerFrame
+from ...estimators.base import Estimator, full_target
+from ...estimators.onnx_model import load_model
+from ...estimators.options import FLOOR, MAX_GAP, THREADS, Range
+from ..ik.estimator import IKEstimator
+from .contact_ik import ContactHold
+from .features import INPUT_SITES, OUTPUTS, apply_legs, apply_upper, feature_count, features
+
+_ENDS = [J[SITE_JOINTS[site]] for site in INPUT_SITES[1:]]  # head and hands, in input order
+# metres: the IK's soft reach leaves an end at most 0.63 cm short; beyond this the predicted
+# torso put a tracker out of the arm's or the spine's reach (0.4 % of the validation frames)
+REACHED = 0.02
+# metres: the predicted spine curve is kept while it leaves the head this close to the
+# headset (body_ik.fit_spine); at the IK's 5 mm the spine flipped between the network's curve
+# and a uniform bend, and validation jitter was 22.8 against 16.6 here (models/lobstr.runtime.json)
+SPINE_TOLERANCE = 0.015
+
+
+def default_model_path() -> Path:
+    from ...core.resources import models_dir
+
+    return models_dir() / "lobstr.onnx"
+
+
+class LobstrModel:
+    """The exported step graph and what it was trained with."""
+
+    def __init__(self, path: str | Path | None = None, threads: int = 1) -> None:
+        self.path = Path(path) if path else default_model_path()
+        self.session, meta = load_model(
+            self.path,
+            ("method", "lobstr"),
+            {"features": None, "state": None},
+            "train one with `sparse-body train lobstr`",
+            threads,
+        )
+        try:
+            self.config = meta["config"]
+            self.hidden, self.fps = int(self.config["hidden"]), float(self.config["fps"])
+            self.learned_upper = bool(self.config.get("learned_upper", False))
+        except (KeyError, ValueError, TypeError, AttributeError):
+            raise ValueError(f"{self.path}: not a LoBSTr model (its metadata lacks config)") from None
+        self.features = feature_count(self.learned_upper)
+        width = {i.name: i.shape for i in self.session.get_inputs()}["features"][-1]
+        if isinstance(width, int) and width != self.features:
+            raise ValueError(
+                f"{self.path}: input 'features' has last dimension {width}, "
+                f"this LoBSTr model's configuration needs {self.features}"
+            )
+
+    def initial_state(self) -> np.ndarray:
+        return np.zeros((1, 1, self.hidden), dtype=np.float32)
+
+    def step(self, x: np.ndarray, state: np.ndarray):
+        pose, prob, state = self.session.run(
+            None, {"features": x.reshape(1, self.features).astype(np.float32), "state": state}
+        )
+        return pose[0], prob[0], state
+
+
+def _retime(x: np.ndarray, ratio: float) -> np.ndarray:
+    """Velocities measured over dt, expressed per model frame (ratio = model dt / dt)."""
+    x = x.copy()
+    for b in range(4):
+        x[b * 9 : b * 9 + 3] *= ratio
+        rotvec = matrix_to_axis_angle(sixd_to_matrix(x[b * 9 + 3 : b * 9 + 9]))
+        x[b * 9 + 3 : b * 9 + 9] = matrix_to_6d(axis_angle_to_matrix(rotvec * ratio))
+    return x
+
+
+class LobstrEstimator(Estimator):
+    name = "lobstr"
+    required_sites = frozenset(INPUT_SITES)
+    option_ranges = {
+        "contact_threshold": Range(0.0, 1.0, "a contact probability"),
+        "release_frames": Range(0, 600, "frames to let a contact go over"),
+        "floor_height": FLOOR,
+        "max_gap": MAX_GAP,
+        "threads": THREADS,
+        "spine_tolerance": Range(0.0, 0.0199, "metres the predicted spine may leave the head off"),
+    }
+
+    def __init__(
+        self,
+        sensors,
+        skeleton,
+        fps: float = 60.0,
+        model_path: str | None = None,
+        contact_ik: bool = True,
+        contact_threshold: float = 0.5,
+        release_frames: int = 10,
+        floor_height: float = 0.0,
+        max_gap: float = 0.5,
+        learned_upper: bool = True,
+        spine_tolerance: float = SPINE_TOLERANCE,
+        threads: int = 1,
+    ) -> None:
+        super().__init__(sensors, skeleton, fps)
+        self.model = LobstrModel(model_path, threads)
+        self.learned_upper = learned_upper and self.model.learned_upper
+        if not (np.isfinite(spine_tolerance) and 0.0 <= spine_tolerance < REACHED):
+            raise ValueError(f"spine_tolerance must be between 0 and {REACHED} m, got {spine_tolerance}")
+        self.spine_tolerance = spine_tolerance
+        self._start = standing_pose()  # the network replaces all but the pelvis, and the legs after
+        self.scale = body_scale(skeleton)
+        self.floor, self.max_gap, self.threshold = floor_height, max_gap, contact_threshold
+        # Feet trackers, if configured, are not LoBSTr's input: the upper body sees only its four.
+        self.upper = IKEstimator(sensors.subset(INPUT_SITES), skeleton, fps)
+        self.contacts = ContactHold(skeleton, release_frames) if contact_ik else None
+        self.reset()
+
+    def _reset(self) -> None:
+        self.upper.reset()
+        if self.contacts:
+            self.contacts.reset()
+        self._state = self.model.initial_state()
+        self._prev: tuple[float, np.ndarray, np.ndarray] | None = None
+
+    @staticmethod
+    def _reached(targets, positions: np.ndarray) -> bool:
+        """Whether the solved head and hands are within REACHED of their targets (the
+        INPUT_SITES targets of this frame)."""
+        return all(
+            np.linalg.norm(positions[joint] - target[0]) <= REACHED
+            for joint, target in zip(_ENDS, targets[1:], strict=True)
+        )
+
+    def _estimate(self, frame: TrackerFrame) -> BodyPose | None:
+        targets = [self.joint_target(frame, s) for s in INPUT_SITES]
+        if not all(full_target(t) for t in targets):
+            return None  # keep the previous sample: the next velocity spans the gap
+        pos = (np.stack([t[0] for t in targets]) - [0.0, 0.0, self.floor]) * self.scale
+        rot = np.stack([t[1] for t in targets])
+        if self._prev is None or not 0 < frame.stamp - self._prev[0] <= self.max_gap:
+            self._state = self.model.initial_state()
+            if self.contacts:
+                self.contacts.reset()
+            self._prev = (frame.stamp - 1.0 / self.model.fps, pos, rot)
+        dt = frame.stamp - self._prev[0]
+        x = features(pos, rot, self._prev[1], self._prev[2], pose=self.model.learned_upper)
+        ratio = 1.0 / (self.model.fps * dt)
+        if abs(ratio - 1.0) > 0.02:
+            x = _retime(x, ratio)
+        out, prob, state = self.model.step(x, self._state)
+        upper = None
+        if self.learned_upper:
+            upper = self.upper.solve(frame, apply_upper(self._start, out[OUTPUTS:]), self.spine_tolerance)
+            if upper is not None and not self._reached(targets, upper[3]):
+                upper = None  # a predicted torso that leaves a tracker out of reach: the IK's frame
+        upper = upper or self.upper.solve(frame)
+        if upper is None:
+            return None
+        upper_local, root = upper[0], np.asarray(upper[1], float)
+        local = apply_legs(upper_local, out[:OUTPUTS])
+        contact = prob > self.threshold
+        if self.contacts:
+            local = self.contacts.apply(local, root, contact)
+        if not np.all(np.isfinite(prob)):
+            self.reset()
+            return None
+        self._state, self._prev = state, (frame.stamp, pos, rot)
+        return BodyPose(frame.stamp, rotations_to_quat(local), root.copy(), prob.astype(float), contact)

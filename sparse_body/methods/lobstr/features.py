@@ -1,0 +1,142 @@
+"""LoBSTr's input and output representations (numpy; training and runtime share them).
+
+Input per frame (paper, Appendix 1): the velocities of the reference joint and of the head
+and hands, all in the current reference frame, plus the reference height: 4 x 9 + 1 = 37.
+The reference frame sits at the pelvis, z up, x along the pelvis's forward direction
+projected on the floor. Each velocity is a linear part (3) and a frame-to-frame rotation
+in 6D (6).
+
+Output: the 8 leg joints (hips, knees, ankles, feet) in 6D. The hips are expressed in the
+reference frame rather than relative to the pelvis: the input carries no pelvis tilt, so
+a pelvis-relative hip would have to guess it; the other joints are local as in the paper.
+
+Positions are scaled to the canonical body (leg length) before anything else, which plays
+the part of the paper's height scale from the T-pose calibration.
+
+The learned upper body (ours, `LobstrConfig.learned_upper`): the paper solves the upper body
+by IK, which leaves the shoulders, elbows and wrists 60 degrees off in rotation on people
+the model never saw (`sparse-body eval --per-joint`). With it the network also predicts the
+13 upper-body joints' local rotations, and since velocities alone cannot say where an arm
+is, it also sees the current pose: head and hands relative to the reference (position and
+6D rotation) and the pelvis's tilt in the reference frame, 3 x 9 + 6 = 33 more inputs.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ...core.rotations import heading, matrix_to_6d, sixd_to_matrix, yaw_matrix
+from ...core.skeleton import JOINT_INDEX, UPPER_BODY
+
+# The tracked joints, in input order: the reference comes from the pelvis.
+INPUT_SITES = ("pelvis", "head", "left_hand", "right_hand")
+INPUT_JOINTS = tuple(JOINT_INDEX[j] for j in ("pelvis", "head", "left_wrist", "right_wrist"))
+LEG_JOINT_NAMES = (
+    "left_hip",
+    "right_hip",
+    "left_knee",
+    "right_knee",
+    "left_ankle",
+    "right_ankle",
+    "left_foot",
+    "right_foot",
+)
+LEG_JOINTS = tuple(JOINT_INDEX[j] for j in LEG_JOINT_NAMES)
+HIPS = LEG_JOINTS[:2]
+UPPER_JOINTS = tuple(JOINT_INDEX[j] for j in UPPER_BODY)
+FEATURES = 4 * 9 + 1
+POSE_FEATURES = 3 * 9 + 6
+OUTPUTS = len(LEG_JOINTS) * 6
+UPPER_OUTPUTS = len(UPPER_JOINTS) * 6
+
+
+def feature_count(learned_upper: bool) -> int:
+    return FEATURES + POSE_FEATURES * learned_upper
+
+
+def output_count(learned_upper: bool) -> int:
+    return OUTPUTS + UPPER_OUTPUTS * learned_upper
+
+
+def reference_frames(pelvis_rot: np.ndarray) -> np.ndarray:
+    """(..., 3, 3) yaw-only frames from pelvis rotations."""
+    return yaw_matrix(heading(pelvis_rot))
+
+
+def features(
+    positions: np.ndarray,
+    rotations: np.ndarray,
+    previous_positions: np.ndarray,
+    previous_rotations: np.ndarray,
+    floor: float = 0.0,
+    pose: bool = False,
+) -> np.ndarray:
+    """Input vectors (..., 37) from the 4 tracked joints now and one frame earlier; with
+    pose, (..., 70): the current pose's 33 after them.
+
+    positions (..., 4, 3) already scaled to the canonical body (the floor too), rotations
+    (..., 4, 3, 3); joint order INPUT_SITES.
+    """
+    ref = reference_frames(rotations[..., 0, :, :])
+    ref_prev = reference_frames(previous_rotations[..., 0, :, :])
+    refT, ref_prevT = np.swapaxes(ref, -1, -2), np.swapaxes(ref_prev, -1, -2)
+    root, root_prev = positions[..., 0, :], previous_positions[..., 0, :]
+    v_ref = np.einsum("...ij,...j->...i", refT, root - root_prev)
+    w_ref = ref_prevT @ ref
+    # The three joints relative to the reference, each frame in its own reference frame.
+    rel = np.einsum("...ij,...kj->...ki", refT, positions[..., 1:, :] - root[..., None, :])
+    rel_prev = np.einsum("...ij,...kj->...ki", ref_prevT, previous_positions[..., 1:, :] - root_prev[..., None, :])
+    q = refT[..., None, :, :] @ rotations[..., 1:, :, :]
+    q_prev = ref_prevT[..., None, :, :] @ previous_rotations[..., 1:, :, :]
+    w = np.swapaxes(q_prev, -1, -2) @ q
+    parts = [v_ref, matrix_to_6d(w_ref)]
+    for k in range(3):
+        parts += [rel[..., k, :] - rel_prev[..., k, :], matrix_to_6d(w[..., k, :, :])]
+    parts.append(root[..., 2:3] - floor)
+    if pose:
+        for k in range(3):
+            parts += [rel[..., k, :], matrix_to_6d(q[..., k, :, :])]
+        parts.append(matrix_to_6d(refT @ rotations[..., 0, :, :]))
+    return np.concatenate(parts, axis=-1)
+
+
+def sequence_features(
+    positions: np.ndarray, rotations: np.ndarray, floor: float = 0.0, pose: bool = False
+) -> np.ndarray:
+    """(T, 37) or with pose (T, 70) for a sequence of tracked joints (T, 4, 3) / (T, 4, 3, 3);
+    the first frame has zero velocity."""
+    prev_p = np.concatenate([positions[:1], positions[:-1]])
+    prev_r = np.concatenate([rotations[:1], rotations[:-1]])
+    return features(positions, rotations, prev_p, prev_r, floor, pose)
+
+
+def leg_targets(global_rot: np.ndarray, local_rot: np.ndarray) -> np.ndarray:
+    """Training targets (..., 48) from a body's global and local rotations (..., 22, 3, 3)."""
+    ref = reference_frames(global_rot[..., 0, :, :])
+    out = local_rot[..., LEG_JOINTS, :, :].copy()
+    out[..., :2, :, :] = np.swapaxes(ref, -1, -2)[..., None, :, :] @ global_rot[..., HIPS, :, :]
+    return matrix_to_6d(out).reshape(out.shape[:-3] + (OUTPUTS,))
+
+
+def upper_targets(local_rot: np.ndarray) -> np.ndarray:
+    """Training targets (..., 78) of the learned upper body: its joints' local rotations."""
+    out = local_rot[..., UPPER_JOINTS, :, :]
+    return matrix_to_6d(out).reshape(out.shape[:-3] + (UPPER_OUTPUTS,))
+
+
+def apply_upper(local_rot: np.ndarray, output: np.ndarray) -> np.ndarray:
+    """A body's local rotations (22, 3, 3) with the upper body replaced by a network output (78,)."""
+    local = local_rot.copy()
+    local[list(UPPER_JOINTS)] = sixd_to_matrix(np.asarray(output, dtype=np.float64).reshape(len(UPPER_JOINTS), 6))
+    return local
+
+
+def apply_legs(local_rot: np.ndarray, output: np.ndarray) -> np.ndarray:
+    """A body's local rotations (22, 3, 3) with the legs replaced by a network output (48,)."""
+    legs = sixd_to_matrix(np.asarray(output, dtype=np.float64).reshape(len(LEG_JOINTS), 6))
+    local = local_rot.copy()
+    pelvis = local[0]
+    ref = reference_frames(pelvis)
+    local[list(LEG_JOINTS)] = legs
+    local[list(HIPS)] = pelvis.T @ ref @ legs[:2]
+    return local

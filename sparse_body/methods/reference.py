@@ -1,5 +1,0 @@
-"""The reference: the rest pose carried by the head (a floor for every comparison)."""
-
-from .record import Method
-
-METHOD = Method("reference", "sparse_body.estimators.reference:ReferenceEstimator")

@@ -1,0 +1,5 @@
+"""The reference: the rest pose carried by the head (a floor for every comparison)."""
+
+from ..record import Method
+
+METHOD = Method("reference", "sparse_body.methods.reference.estimator:ReferenceEstimator")

@@ -1,5 +1,0 @@
-"""Any estimator's output refined in DragPoser's latent space (refined:base=NAME)."""
-
-from .record import Method
-
-METHOD = Method("refined", "sparse_body.estimators.refined:RefinedEstimator")

@@ -1,0 +1,51 @@
+"""Any estimator followed by DragPoser's latent-space refinement: `refined:base=ik`.
+
+The base estimator gives the pose; the refinement encodes it, then moves it in the pose
+VAE's latent space until the end effectors sit on their trackers. This is what the
+constraint node does live, packaged as an estimator for `sparse-body eval` and `process`.
+"""
+
+from __future__ import annotations
+
+from ...core.tracker_filter import NO_FILTER
+from ...estimators.base import Estimator, create_estimator
+from ...estimators.options import Range
+from ..dragposer.estimator import DragPoserEstimator
+
+
+class RefinedEstimator(Estimator):
+    name = "refined"
+    option_ranges = {"iterations": Range(1, 100, "search steps a frame")}
+
+    def __init__(
+        self,
+        sensors,
+        skeleton,
+        fps: float = 60.0,
+        base: str = "ik",
+        model_dir: str | None = None,
+        iterations: int = 3,
+        **base_options,
+    ) -> None:
+        super().__init__(sensors, skeleton, fps)
+        if base == "refined":
+            raise ValueError("a refined estimator's base cannot be 'refined'")
+        self.base = create_estimator(base, sensors, skeleton, fps, **base_options)
+        self.base.use_filter(NO_FILTER)  # this estimator's filter has done it
+        self.refiner = DragPoserEstimator(
+            sensors, skeleton, fps, model_dir=model_dir, iterations=iterations, temporal_weight=0.0, tracker_prior=0.0
+        )  # the base pose is the prior
+
+    def _reset(self) -> None:
+        self.base.reset()
+        self.refiner.reset()
+
+    def _estimate(self, frame):
+        pose = self.base.step(frame)
+        if not pose.valid:
+            return pose
+        refined = self.refiner.refine(pose, frame)
+        if not refined.valid:
+            return pose.held(frame.stamp)  # the base's pose, marked invalid
+        refined.contact, refined.contact_probability = pose.contact, pose.contact_probability
+        return refined

@@ -105,10 +105,12 @@ STARTUP_LIMIT = 300.0
 PLAYBACK_LIMIT = 600.0
 
 
-def replay_bag(rclpy, ros_env, tmp_path: Path, motion, config, estimator_params: dict):
+def replay_bag(rclpy, ros_env, tmp_path: Path, motion, config, estimator_params: dict, until_valid: int = 0):
     """A tracker bag of `motion` played by the real tracker bridge into the real estimator
     node (default parameters but those given); returns the Listener after the whole bag has
-    played (deadlines generous enough for a starved CPU)."""
+    played (deadlines generous enough for a starved CPU). until_valid=N: the bridge loops the
+    bag until N valid estimates have arrived instead, for a test that needs N whatever
+    rate a starved machine leaves the estimator."""
     from rclpy.qos import DurabilityPolicy, QoSProfile
     from sensor_msgs.msg import JointState
     from std_msgs.msg import String
@@ -152,7 +154,7 @@ def replay_bag(rclpy, ros_env, tmp_path: Path, motion, config, estimator_params:
         )
         bridge = start_node(
             "sparse_body.ros.tracker_bridge_node",
-            {"bag": str(tmp_path / "trackers"), "min_subscribers": 2, "start_delay": 0.5},
+            {"bag": str(tmp_path / "trackers"), "min_subscribers": 2, "start_delay": 0.5, "loop": until_valid > 0},
             "sparse_body_tracker_bridge",
             tmp_path,
             ros_env,
@@ -164,17 +166,22 @@ def replay_bag(rclpy, ros_env, tmp_path: Path, motion, config, estimator_params:
         # Until the whole bag has played and arrived, however long a loaded machine takes to start
         # the bridge and play it (within a generous limit: a bag is seconds long), then a little more.
         bridge_log = tmp_path / "sparse_body_tracker_bridge.log"
-        finished = lambda: "finished playing" in bridge_log.read_text()  # noqa: E731
-        listener.spin_until(finished, PLAYBACK_LIMIT)
-        # what is still in flight; a listener starved by other work may have lost some /tf
-        # messages (the bridge keeps 100), which the tests that need every frame check themselves
-        listener.spin_until(lambda: tracker_messages() >= len(motion), 10.0)
-        listener.spin_for(1.0)
+        if until_valid:
+            finished = lambda: sum(s.valid for s in listener.received["estimate_status"]) >= until_valid  # noqa: E731
+            listener.spin_until(finished, PLAYBACK_LIMIT)
+        else:
+            finished = lambda: "finished playing" in bridge_log.read_text()  # noqa: E731
+            listener.spin_until(finished, PLAYBACK_LIMIT)
+            # what is still in flight; a listener starved by other work may have lost some /tf
+            # messages (the bridge keeps 100), which the tests that need every frame check themselves
+            listener.spin_until(lambda: tracker_messages() >= len(motion), 10.0)
+            listener.spin_for(1.0)
         played = finished()
     finally:
         listener.destroy()
         stop(est, *([bridge] if bridge else []))
-    assert played, "the bridge did not play the whole bag: " + bridge_log.read_text()[-2000:]
+    what = f"{until_valid} valid estimates did not arrive" if until_valid else "the bridge did not play the whole bag"
+    assert played, f"{what} within {PLAYBACK_LIMIT} s: " + bridge_log.read_text()[-2000:]
     listener.tracker_stamps = sorted(
         {
             stamp_key(tf.header.stamp)
@@ -200,6 +207,13 @@ def stamp_key(stamp) -> int:
     """A header stamp to the nearest 10 us (stamps travel as float seconds inside the node:
     0.5 us resolution at today's epoch)."""
     return round((stamp.sec + stamp.nanosec * 1e-9) * 1e5)
+
+
+def after_first_valid(listener) -> list:
+    """The estimate statuses from the first valid one on (before it the node waits for input)."""
+    statuses = listener.received["estimate_status"]
+    first = next((i for i, s in enumerate(statuses) if s.valid), len(statuses))
+    return statuses[first:]
 
 
 def during_playback(listener, topic: str) -> list:

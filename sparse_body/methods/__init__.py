@@ -3,25 +3,26 @@ card, paper figures and what `eval` compares it with. The commands, the nodes an
 evaluation look methods up here and hold no per-method branches. Each method is a folder,
 methods/NAME/, whose __init__ holds its record and nothing that imports its code (so listing
 the methods imports neither torch nor ONNX Runtime); adding a method is its folder and one
-line in METHODS."""
+line in NAMES."""
 
 from __future__ import annotations
 
-from . import avatarjlm, dragposer, dtp, ik, lobstr, reference, refined
+import importlib
+
 from .record import Method, Training, TrainPart, load
 
-METHODS: dict[str, Method] = {
-    m.name: m
-    for m in (
-        reference.METHOD,
-        ik.METHOD,
-        lobstr.METHOD,
-        dragposer.METHOD,
-        refined.METHOD,
-        dtp.METHOD,
-        avatarjlm.METHOD,
-    )
-}
+# The registry: one name a line, in the order `--help` and `eval` list them. Each names its
+# folder, methods/NAME/, whose METHOD record is read here (import paths only, no code).
+NAMES = (
+    "reference",
+    "ik",
+    "lobstr",
+    "dragposer",
+    "refined",
+    "dtp",
+    "avatarjlm",
+)
+METHODS: dict[str, Method] = {name: importlib.import_module(f"{__name__}.{name}").METHOD for name in NAMES}
 TRAINABLE = [name for name, m in METHODS.items() if m.training is not None]
 
 

@@ -12,6 +12,8 @@ from collections import Counter
 from dataclasses import replace
 from pathlib import Path
 
+from .io.tf_guards import TfGuards
+
 
 def _mocap(args) -> Path:
     from .data.catalog import find_mocap_root
@@ -340,6 +342,7 @@ def cmd_process(args) -> int:
         progress=not args.quiet,
         overwrite=args.overwrite,
         refused=refused,
+        guards=TfGuards(clock_window=args.clock_window, play_radius=args.play_radius),
         **options,
     )
     invalid = sum(not p.valid for p in poses)
@@ -603,6 +606,19 @@ def build_parser() -> argparse.ArgumentParser:
         action="store_true",
         help="smooth the tracker input over the whole recording, forwards and backwards (the "
         "estimator option smooth=true): far less shaking under noise than the live filter",
+    )
+    p.add_argument(
+        "--clock-window",
+        type=_between(0.0, 1e9, "s"),
+        default=TfGuards.clock_window,
+        help="refuse /tf stamps further than this from the bag's receive times (a frame stamped 0); "
+        "0: no check, for a bag recorded with simulated time",
+    )
+    p.add_argument(
+        "--play-radius",
+        type=_between(0.1, 1e6, "m"),
+        default=TfGuards.play_radius,
+        help="refuse trackers further than this from the fixed frame's origin",
     )
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.add_argument("--overwrite", action="store_true", help="replace BAG_OUT if it exists")

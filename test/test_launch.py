@@ -119,7 +119,7 @@ class TestWhatALaunchGives(unittest.TestCase):
                 _until(lambda: valid("refined/estimate_status"), "valid refined estimate")
                 self.assertEqual(list(wait.received_messages("refined/joint_states")[-1].name), joint_state_names())
             # without robot_state_publisher the estimator's link TF brings every joint into the fixed frame
-            cache = TfCache()
+            cache = TfCache(JOINT_NAMES)
             for msg in wait.received_messages("/tf"):
                 for tf in msg.transforms:
                     tr, q = tf.transform.translation, tf.transform.rotation

@@ -387,13 +387,16 @@ def test_the_tf_reader_ignores_the_frames_its_node_publishes(ros_env):
         for child in ("pelvis", "head", "hmd"):
             tf = TransformStamped()
             tf.header.frame_id, tf.child_frame_id = "world", child
-            tf.header.stamp.sec = 5
+            tf.header.stamp = node.get_clock().now().to_msg()
             tf.transform.rotation.w = 1.0
             msg.transforms.append(tf)
         reader._on_tf(msg, False)
         assert reader.lookup("world", "hmd") is not None  # a tracker frame is never ignored
         assert reader.lookup("world", "pelvis") is None and reader.lookup("world", "head") is None
         assert moved == [1]
+        msg.transforms[2].header.stamp.sec = 5  # judged by the node's clock: refused, counted
+        reader._on_tf(msg, False)
+        assert moved == [1] and reader.rejected["stamp far from the clock"] == 1
         reader.destroy()
     finally:
         node.destroy_node()

@@ -11,6 +11,7 @@ from ..data.motion import Motion
 from ..data.virtual_trackers import NO_NOISE, TrackerNoise, synthesize_trackers
 from ..estimators import create_estimator
 from ..io.bagio import check_output, read_tracker_stream, write_estimate_bag, write_tracker_bag
+from ..io.tf_guards import TfGuards
 
 
 def make_bag(
@@ -42,12 +43,13 @@ def process_bag(
     progress: bool = True,
     overwrite: bool = False,
     refused: dict | None = None,
+    guards: TfGuards | None = None,
     **options,
 ) -> list[BodyPose]:
     """Run an estimator over a tracker bag and write one estimate per input frame (refused
     tracker samples are counted in `refused`, reason -> count, when a dict is given)."""
     check_output(bag_out, overwrite, (Path(bag_in),))  # before the estimation, not after it
-    stream = read_tracker_stream(bag_in, sensors, stale_after, refused)
+    stream = read_tracker_stream(bag_in, sensors, stale_after, refused, guards)
     never = [site for s, site in enumerate(sensors.site_names) if not stream.valid[:, s].any()]
     if never:
         import warnings

@@ -25,7 +25,7 @@ from ..core.skeleton import Skeleton
 from ..core.textfile import read_limited
 from ..core.types import BodyPose, TrackerStream
 from .output import FOOT_NAMES, body_transforms, contact_points, joint_state_names, joint_state_positions, stamp_parts
-from .tf_cache import Accepted, TfCache, sample_trackers
+from .tf_cache import TfCache, TfGuards
 
 TF_TOPIC, TF_STATIC_TOPIC = "/tf", "/tf_static"
 JOINT_STATES_TOPIC, CONTACTS_TOPIC, STATUS_TOPIC = "/joint_states", "/foot_contacts", "/estimate_status"
@@ -195,18 +195,22 @@ def write_tracker_bag(
 
 
 def read_tracker_stream(
-    path: Path, config: SensorConfig, stale_after: float = 0.1, refused: dict | None = None
+    path: Path,
+    config: SensorConfig,
+    stale_after: float = 0.1,
+    refused: dict | None = None,
+    guards: TfGuards | None = None,
 ) -> TrackerStream:
     """The trackers at each input frame of a bag: every /tf message that moves a tracker
-    frame is one frame, sampled at the newest stamp it carries. A tracker whose sample in
-    that message was refused (non-finite, degenerate quaternion, out of order) is invalid in
-    that frame, and counted in `refused` (reason -> count) when a dict is given."""
+    frame is one frame, sampled at the newest tracker stamp held. The messages go through the
+    same TfCache.ingest as the live node's, with the bag's receive time as the clock: a
+    tracker whose sample in that message was refused is invalid in that frame, and every
+    refusal is counted in `refused` (reason -> count) when a dict is given."""
     path = Path(path)
     if not path.exists():
         raise BagError(f"{path}: no such bag")
     store = typestore()
-    cache = TfCache()
-    tracker_frames = {s.frame_id for s in config.sites}
+    cache = TfCache({s.frame_id for s in config.sites}, guards)
     times, frames = [], []
     try:
         with Reader(path) as reader:
@@ -215,41 +219,32 @@ def read_tracker_stream(
                 raise BagError(
                     f"{path}: no {TF_TOPIC} topic (topics: {', '.join(sorted({c.topic for c in reader.connections}))})"
                 )
-            for conn, _, raw in reader.messages(connections=conns):
+            for conn, log_ns, raw in reader.messages(connections=conns):
                 msg = store.deserialize_cdr(raw, conn.msgtype)
-                static = conn.topic == TF_STATIC_TOPIC
-                newest, moved, refused_frames, refused_stamp = -np.inf, False, set(), -np.inf
-                for tf in msg.transforms:
-                    stamp = tf.header.stamp.sec + tf.header.stamp.nanosec * 1e-9
-                    tr, q = tf.transform.translation, tf.transform.rotation
-                    result = cache.set(
-                        tf.header.frame_id, tf.child_frame_id, stamp, (tr.x, tr.y, tr.z), (q.x, q.y, q.z, q.w), static
-                    )
-                    if tf.child_frame_id in tracker_frames and not static:
-                        moved = True  # even a refused sample is an input frame: it gets an output
-                        if result in (Accepted.OK, Accepted.JUMPED_BACK):
-                            newest = max(newest, stamp)
-                        else:
-                            refused_frames.add(tf.child_frame_id)
-                            refused_stamp = max(refused_stamp, stamp) if np.isfinite(stamp) else refused_stamp
-                            if refused is not None:
-                                refused[result.value] = refused.get(result.value, 0) + 1
-                if moved:
-                    if not np.isfinite(newest):  # every sample refused: the frame keeps its own stamp if it has one
-                        newest = refused_stamp if np.isfinite(refused_stamp) else (times[-1] if times else 0.0)
-                    stamp = newest
-                    frame, _ = sample_trackers(cache.lookup, config, stamp, stale_after)
-                    for s, site in enumerate(config.sites):
-                        if site.frame_id in refused_frames:
-                            frame.valid[s] = False
-                    times.append(stamp)
-                    frames.append(frame)
+                got = cache.ingest(msg.transforms, conn.topic == TF_STATIC_TOPIC, log_ns * 1e-9)
+                cache.jumped_back = False  # the estimator starts over where the stamps go back (process)
+                if not got.moved:
+                    continue
+                if np.isfinite(got.newest):  # the newest held (a tracker in another message may be newer)
+                    stamp = cache.newest_tracker_stamp()
+                else:  # every sample refused: the frame keeps its own stamp if it has one
+                    stamp = got.refused_stamp if np.isfinite(got.refused_stamp) else (times[-1] if times else 0.0)
+                frame, _ = cache.sample(config, stamp, stale_after)
+                for s, site in enumerate(config.sites):
+                    if site.frame_id in got.refused:
+                        frame.valid[s] = False
+                times.append(stamp)
+                frames.append(frame)
     except BagError:
         raise
     except Exception as err:  # noqa: BLE001 - rosbags raises many kinds for a broken file
         raise BagError(f"{path}: cannot be read as a rosbag2 ({err})") from None
+    if refused is not None:
+        for reason, count in cache.refused.items():
+            if count:
+                refused[reason.value] = refused.get(reason.value, 0) + count
     if not frames:
-        raise BagError(f"{path}: no transforms of the tracker frames {', '.join(sorted(tracker_frames))}")
+        raise BagError(f"{path}: no transforms of the tracker frames {', '.join(sorted(cache.trackers))}")
     return TrackerStream(
         config.site_names,
         np.array(times),

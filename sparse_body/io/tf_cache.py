@@ -1,21 +1,40 @@
-"""The latest tracker transforms, for the nodes' /tf input and for bags.
+"""The latest tracker transforms, for the nodes' /tf input and for bags: one store, one ingest.
 
-Keeps the newest transform of every child frame (and how often it comes), and looks a frame
-up in a fixed frame by walking parents. Unlike tf2 it does not interpolate: estimators want
-the newest sample, and a newer one replaces it (a burst is coalesced, never queued).
-Samples are checked on the way in: non-finite values and degenerate quaternions are refused;
-an older stamp than the one held is refused as out of order, unless it is older by more than
-`jump_back` seconds, which is taken for a clock jump back (a looping bag): then everything
-is forgotten and the caller is told, so it can reset its estimator.
+Keeps the newest transform of each tracker frame and of the frames between it and the fixed
+frame (and how often each comes), and looks a tracker up in the fixed frame by walking
+parents. Unlike tf2 it does not interpolate: estimators want the newest sample, and a newer
+one replaces it (a burst is coalesced, never queued). Both the live node (ros/tf_input.py)
+and the bag reader (io/bagio.py) hand every /tf message to `ingest`, as tf2_ros's listener
+hands each message to its buffer, so live and offline judge samples alike.
+
+/tf is open to every process on the ROS domain, so what arrives is checked (TfGuards) and
+what is refused is counted by reason (`refused`):
+- non-finite values and degenerate quaternions;
+- a stamp older than the one held: out of order within `jump_back`; further back, that
+  frame alone starts again (one wrong frame cannot clear the others). The input as a whole
+  starts again (a looping bag, a restarted simulation) when most trackers have jumped back;
+  the consumer is told (`jumped_back`) so it can reset its estimator;
+- dynamic stamps further than `clock_window` from the clock (the node's, or a bag's receive
+  time): a head stamped 0, a replay with its recorded stamps on a live clock;
+- a tracker further than `play_radius` from the fixed frame's origin, and a parent chain
+  longer than `max_depth` (looked up each sample: a 2000-frame chain costs 16 steps);
+- memory stays bounded whatever arrives: only tracker frames and their ancestors are kept
+  for good; other frames (which may become ancestors later) are kept in a small
+  least-recently-set store of `other_frames`.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+import math
+from collections import OrderedDict
+from collections.abc import Iterable
+from dataclasses import dataclass, field
 from enum import Enum
 
 import numpy as np
 from scipy.spatial.transform import Rotation
+
+from .tf_guards import TfGuards
 
 
 class Accepted(Enum):
@@ -23,49 +42,153 @@ class Accepted(Enum):
     NON_FINITE = "non-finite"
     BAD_QUATERNION = "degenerate quaternion"
     OUT_OF_ORDER = "out of order"
-    JUMPED_BACK = "clock jumped back"
+    JUMPED_BACK = "clock jumped back"  # accepted: the frame starts again
+    FAR_FROM_CLOCK = "stamp far from the clock"
+    OUT_OF_PLAY_SPACE = "outside the play space"
+    TOO_DEEP = "parent chain too deep"
 
 
-@dataclass
+@dataclass(slots=True)
 class Edge:
     parent: str
     stamp: float
-    translation: np.ndarray
-    rotation: np.ndarray  # x y z w, unit
+    translation: tuple[float, float, float]
+    rotation: tuple[float, float, float, float]  # x y z w, unit
     static: bool
     interval: float = 0.0  # running mean of the time between samples (s); 0 until the second
 
 
+@dataclass
+class Ingested:
+    """What one /tf message did to the trackers."""
+
+    moved: bool = False  # a tracker frame came in it (accepted or not)
+    newest: float = -math.inf  # the newest accepted tracker stamp in it
+    refused: set[str] = field(default_factory=set)  # tracker frames whose sample in it was refused
+    refused_stamp: float = -math.inf  # the newest finite stamp among those
+
+
 class TfCache:
-    def __init__(self, jump_back: float = 1.0) -> None:
-        self.jump_back = jump_back
-        self._edges: dict[str, Edge] = {}
+    def __init__(self, trackers: Iterable[str], guards: TfGuards | None = None, also: Iterable[str] = ()) -> None:
+        """trackers: the frames whose samples are the input; also: other frames to look up
+        (kept with their ancestors like trackers, but no input of their own)."""
+        self.guards = guards or TfGuards()
+        self.trackers = frozenset(trackers)
+        self.refused: dict[Accepted, int] = {a: 0 for a in Accepted if a not in (Accepted.OK, Accepted.JUMPED_BACK)}
+        self.jumped_back = False  # the input started again; the consumer clears it
+        self._edges: dict[str, Edge] = {}  # tracker frames and their ancestors
+        self._others: OrderedDict[str, Edge] = OrderedDict()  # the rest, bounded
+        self._roots = self.trackers | frozenset(also)
+        self._depth: dict[str, int] = dict.fromkeys(self._roots, 0)  # kept frames: steps below a tracker
 
-    def clear(self, keep_static: bool = True) -> None:
-        self._edges = {c: e for c, e in self._edges.items() if keep_static and e.static}
+    # -- in -----------------------------------------------------------------------------------
+    def ingest(self, transforms, static: bool = False, now: float | None = None) -> Ingested:
+        """Take one /tf (or /tf_static) message's transforms, rclpy's or rosbags' (the same
+        fields). `now`: the clock to judge stamps by (None: not judged)."""
+        out = Ingested()
+        for tf in transforms:
+            stamp = tf.header.stamp.sec + tf.header.stamp.nanosec * 1e-9
+            tr, q = tf.transform.translation, tf.transform.rotation
+            child = tf.child_frame_id
+            result = self.set(tf.header.frame_id, child, stamp, (tr.x, tr.y, tr.z), (q.x, q.y, q.z, q.w), static, now)
+            if child in self.trackers and not static:
+                out.moved = True  # even a refused sample is an input frame: it gets an output
+                if result in (Accepted.OK, Accepted.JUMPED_BACK):
+                    out.newest = max(out.newest, stamp)
+                else:
+                    out.refused.add(child)
+                    if math.isfinite(stamp):
+                        out.refused_stamp = max(out.refused_stamp, stamp)
+        return out
 
-    def set(self, parent: str, child: str, stamp: float, translation, rotation, static: bool = False) -> Accepted:
-        t = np.asarray(translation, dtype=float)
-        q = np.asarray(rotation, dtype=float)
-        if not (np.all(np.isfinite(t)) and np.all(np.isfinite(q)) and np.isfinite(stamp)):
-            return Accepted.NON_FINITE
-        norm = np.linalg.norm(q)
-        if not 0.9 < norm < 1.1:
-            return Accepted.BAD_QUATERNION
-        held = self._edges.get(child)
-        result = Accepted.OK
-        if held is not None and not static and stamp < held.stamp:
-            if held.stamp - stamp <= self.jump_back:
-                return Accepted.OUT_OF_ORDER
-            self.clear()
-            result = Accepted.JUMPED_BACK
+    def set(
+        self,
+        parent: str,
+        child: str,
+        stamp: float,
+        translation,
+        rotation,
+        static: bool = False,
+        now: float | None = None,
+    ) -> Accepted:
+        # plain floats, not numpy: a transform costs a few microseconds, also in a flood
+        x, y, z = (float(v) for v in translation)
+        qx, qy, qz, qw = (float(v) for v in rotation)
+        stamp = float(stamp)
+        held = self._edges.get(child) or self._others.get(child)
+        result = self._check(held, stamp, (x, y, z, qx, qy, qz, qw), static, now)
+        if result not in (Accepted.OK, Accepted.JUMPED_BACK):
+            self.refused[result] += 1
+            return result
         interval = 0.0
         if held is not None and result is Accepted.OK and not static:
-            gap = float(stamp) - held.stamp
+            gap = stamp - held.stamp
             interval = gap if held.interval == 0.0 else 0.9 * held.interval + 0.1 * gap
-        self._edges[child] = Edge(parent, float(stamp), t, q / norm, static, interval)
+        n = math.sqrt(qx * qx + qy * qy + qz * qz + qw * qw)
+        edge = Edge(parent, stamp, (x, y, z), (qx / n, qy / n, qz / n, qw / n), static, interval)
+        if child in self._depth:
+            self._edges[child] = edge
+            self._want(parent, self._depth[child] + 1)
+        else:
+            self._others[child] = edge
+            self._others.move_to_end(child)
+            while len(self._others) > self.guards.other_frames:
+                self._others.popitem(last=False)
+        if result is Accepted.JUMPED_BACK and child in self.trackers:
+            self._restart_if_most_jumped(stamp)
         return result
 
+    def _check(self, held: Edge | None, stamp: float, values: tuple, static: bool, now: float | None) -> Accepted:
+        """values: x y z qx qy qz qw."""
+        # a sum is finite when every term is (and values near 1e308 are absurd anyway)
+        if not math.isfinite(stamp + sum(values)):
+            return Accepted.NON_FINITE
+        if not 0.81 < values[3] ** 2 + values[4] ** 2 + values[5] ** 2 + values[6] ** 2 < 1.21:
+            return Accepted.BAD_QUATERNION
+        window = self.guards.clock_window
+        if not static and now is not None and window > 0 and abs(stamp - now) > window:
+            return Accepted.FAR_FROM_CLOCK
+        if held is not None and not static and stamp < held.stamp:
+            return Accepted.OUT_OF_ORDER if held.stamp - stamp <= self.guards.jump_back else Accepted.JUMPED_BACK
+        return Accepted.OK
+
+    def _want(self, frame: str, depth: int) -> None:
+        """Keep `frame` (an ancestor of a tracker) for good, and its own known ancestors."""
+        while depth <= self.guards.max_depth and self._depth.get(frame, depth + 1) > depth:
+            self._depth[frame] = depth
+            edge = self._others.pop(frame, None)
+            if edge is not None:
+                self._edges[frame] = edge
+            edge = self._edges.get(frame)
+            if edge is None:
+                break
+            frame, depth = edge.parent, depth + 1
+        if len(self._depth) > len(self._roots) * (self.guards.max_depth + 1):
+            self._forget_former_ancestors()
+
+    def _forget_former_ancestors(self) -> None:
+        """Trackers re-parented again and again: keep only today's ancestors."""
+        kept = dict.fromkeys(self._roots, 0)
+        for tracker in self._roots:
+            frame, depth = tracker, 0
+            while (edge := self._edges.get(frame)) is not None and depth < self.guards.max_depth:
+                frame, depth = edge.parent, depth + 1
+                kept[frame] = min(kept.get(frame, depth), depth)
+        self._depth = kept
+        self._edges = {c: e for c, e in self._edges.items() if c in kept}
+
+    def _restart_if_most_jumped(self, stamp: float) -> None:
+        """A tracker jumped back to `stamp`: when the trackers still ahead of it are fewer than
+        those that are not, the input started again (they are dropped, the consumer told);
+        otherwise only that tracker did (a wrong or oscillating frame), and it alone restarted."""
+        held = {t: self._edges[t] for t in self.trackers if t in self._edges and not self._edges[t].static}
+        ahead = [t for t, e in held.items() if e.stamp > stamp + self.guards.jump_back]
+        if len(ahead) < len(held) - len(ahead):
+            for t in ahead:
+                del self._edges[t]
+            self.jumped_back = True
+
+    # -- out ----------------------------------------------------------------------------------
     def stamp(self, child: str) -> float:
         """The newest stamp of a child frame's own transform (-inf unknown, inf static)."""
         edge = self._edges.get(child)
@@ -77,19 +200,23 @@ class TfCache:
         edge = self._edges.get(child)
         return max(stale_after, 3.0 * (0.0 if edge is None else edge.interval))
 
+    def newest_tracker_stamp(self) -> float:
+        dynamic = [e.stamp for t, e in self._edges.items() if t in self.trackers and not e.static]
+        return max(dynamic) if dynamic else -np.inf
+
     def lookup(self, target: str, source: str):
-        """(stamp, translation, rotation xyzw) of source in target, or None when unknown.
-        The stamp is the oldest of the dynamic transforms on the way (inf if all static)."""
+        """(stamp, translation, rotation xyzw) of source in target, or None when unknown or
+        further than max_depth transforms. The stamp is the oldest of the dynamic transforms on
+        the way (inf if all static)."""
         edge = self._edges.get(source)
         if edge is not None and edge.parent == target:  # the usual tracker: one edge, nothing to compose
-            return (np.inf if edge.static else edge.stamp), edge.translation.copy(), edge.rotation.copy()
+            return (np.inf if edge.static else edge.stamp), np.array(edge.translation), np.array(edge.rotation)
         rot, trans, stamp = Rotation.identity(), np.zeros(3), np.inf
-        frame, seen = source, set()
-        while frame != target:
+        frame = source
+        for _ in range(self.guards.max_depth):
             edge = self._edges.get(frame)
-            if edge is None or frame in seen:
+            if edge is None:
                 return None
-            seen.add(frame)
             # parent_T_child applied after what is accumulated so far: x_parent = R x_child + t
             edge_rot = Rotation.from_quat(edge.rotation)
             trans = edge_rot.apply(trans) + edge.translation
@@ -97,44 +224,43 @@ class TfCache:
             if not edge.static:
                 stamp = min(stamp, edge.stamp)
             frame = edge.parent
-        return stamp, trans, rot.as_quat()
+            if frame == target:
+                return stamp, trans, rot.as_quat()
+        if frame in self._edges:  # a chain goes on (or loops) past max_depth
+            self.refused[Accepted.TOO_DEEP] += 1
+        return None
 
-    def newest_stamp(self) -> float:
-        dynamic = [e.stamp for e in self._edges.values() if not e.static]
-        return max(dynamic) if dynamic else -np.inf
+    def sample(self, config, stamp: float, stale_after: float):
+        """The trackers of a sensor configuration at `stamp` (the newest tracker sample's stamp:
+        staleness is judged in the input's own time, so a late delivery is latency, not loss).
 
+        Returns (TrackerFrame, stamps): a site is invalid when its frame is unknown, its pose is
+        not finite or outside the play space, or its newest transform is older than `stamp` by
+        more than its budget (stale_after, or three of the tracker's own sample intervals if
+        longer). stamps[s] is that transform's stamp (-inf when unknown, `stamp` when the chain
+        is all static). Orientation-only sites get NaN positions, position-only sites NaN
+        orientations."""
+        from ..core.types import TrackerFrame
 
-def sample_trackers(lookup, config, stamp: float, stale_after: float, budget=None):
-    """The trackers of a sensor configuration at `stamp` (the newest tracker sample's stamp:
-    staleness is judged in the input's own time, so a late delivery is latency, not loss).
-
-    lookup(fixed_frame, frame_id) gives (stamp, translation, rotation xyzw) or None (a
-    TfCache's lookup). Returns (TrackerFrame, stamps): a site is invalid when its frame is
-    unknown, its pose is not finite, or its newest transform is older than `stamp` by more
-    than its budget: budget(frame_id) (TfCache.budget: stale_after, or three of the
-    tracker's own sample intervals if longer), else stale_after. stamps[s] is that transform's stamp (-inf
-    when unknown, `stamp` when the chain is all static).
-    Orientation-only sites get NaN positions, position-only sites NaN orientations."""
-    from ..core.types import TrackerFrame
-
-    S = len(config.sites)
-    positions = np.full((S, 3), np.nan)
-    orientations = np.full((S, 4), np.nan)
-    valid = np.zeros(S, dtype=bool)
-    stamps = np.full(S, -np.inf)
-    for s, site in enumerate(config.sites):
-        found = lookup(config.fixed_frame, site.frame_id)
-        if found is None:
-            continue
-        t_stamp, t, q = found
-        stamps[s] = t_stamp if np.isfinite(t_stamp) else stamp
-        norm = np.linalg.norm(q)
-        allowed = budget(site.frame_id) if budget is not None else stale_after
-        if stamp - stamps[s] > allowed or not (np.all(np.isfinite(t)) and np.isfinite(norm) and norm > 0.5):
-            continue
-        valid[s] = True
-        if site.has_position:
-            positions[s] = t
-        if site.has_orientation:
-            orientations[s] = np.asarray(q) / norm
-    return TrackerFrame(stamp, config.site_names, positions, orientations, valid), stamps
+        S = len(config.sites)
+        positions = np.full((S, 3), np.nan)
+        orientations = np.full((S, 4), np.nan)
+        valid = np.zeros(S, dtype=bool)
+        stamps = np.full(S, -np.inf)
+        for s, site in enumerate(config.sites):
+            found = self.lookup(config.fixed_frame, site.frame_id)
+            if found is None:
+                continue
+            t_stamp, t, q = found
+            stamps[s] = t_stamp if np.isfinite(t_stamp) else stamp
+            if not np.sqrt(t @ t) <= self.guards.play_radius:
+                self.refused[Accepted.OUT_OF_PLAY_SPACE] += 1
+                continue
+            if stamp - stamps[s] > self.budget(site.frame_id, stale_after):
+                continue
+            valid[s] = True
+            if site.has_position:
+                positions[s] = t
+            if site.has_orientation:
+                orientations[s] = q
+        return TrackerFrame(stamp, config.site_names, positions, orientations, valid), stamps

@@ -117,6 +117,9 @@ class ConstraintNode(EstimatorNode):
         self.sub_input = self.create_subscription(JointState, "input/joint_states", self._on_input, 10)
         self.srv_constraint = self.create_service(SetConstraint, "~/set_constraint", self._on_set_constraint)
 
+    def _looked_up_frames(self, p: dict) -> set[str]:
+        return {p["input_prefix"] + "pelvis"}  # where the input estimate's body is
+
     def _method(self) -> str:
         return "dragposer refinement"
 

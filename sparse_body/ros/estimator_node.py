@@ -42,7 +42,9 @@ from ..core.tracker_filter import FilterConfig
 from ..core.types import BodyPose
 from ..estimators import create_estimator
 from ..estimators.base import Estimator, parse_estimator_spec
+from ..io.tf_cache import TfGuards
 from ..io.urdf import body_urdf
+from ..methods import NAMES
 from . import messages
 from .estimate_stats import EstimateStats
 from .spin import init, spin_until_shutdown
@@ -55,8 +57,8 @@ PARAMETERS = {
     "sensors": ("six_point", "sensor configuration: a name under config/sensors or a YAML path"),
     "estimator": (
         "ik",
-        "estimation method: ik, reference, lobstr, dragposer, dtp, avatarjlm, refined:base=NAME "
-        "(options as NAME:key=value,...)",
+        f"estimation method: {', '.join(NAMES)} (refined:base=NAME: DragPoser's refinement after "
+        "another; options as NAME:key=value,...)",
     ),
     "model_path": ("", "model file for learned estimators; empty: the shipped model"),
     "fixed_frame": ("", "frame the trackers are looked up in; empty: the sensor configuration's"),
@@ -96,6 +98,15 @@ PARAMETERS = {
         "seconds in which no new tracker sample arrived after which the estimate is held, "
         "invalid: the trackers stopped (a node running late on a busy CPU stays valid)",
     ),
+    "clock_window": (
+        TfGuards.clock_window,
+        "a /tf stamp further than this many seconds from this node's clock is refused and counted "
+        "(a frame stamped 0; a bag replayed with its recorded stamps without use_sim_time); 0: no check",
+    ),
+    "play_radius": (
+        TfGuards.play_radius,
+        "a tracker further than this many metres from the fixed frame's origin is refused",
+    ),
     "frame_prefix": ("", "prefix of the body's TF frames"),
     "publish_link_tf": (True, "publish every body link on /tf (off when robot_state_publisher does)"),
     "autostart": (False, "configure and activate on start-up (without a lifecycle manager)"),
@@ -110,6 +121,8 @@ RANGES = {
     "output_rate": (0.1, 1000.0),
     "stale_timeout": (0.001, 10.0),
     "tracker_timeout": (0.01, 60.0),
+    "clock_window": (0.0, 1e9),
+    "play_radius": (0.1, 1e6),
 }
 # What a configured node applies at once; the rest is refused until it is cleaned up.
 LIVE = {"stale_timeout", "tracker_timeout", "publish_link_tf", "autostart"}
@@ -227,7 +240,10 @@ class EstimatorNode(LifecycleNode):
         self.sensors, self.params = sensors, p
         self._frames = [s.frame_id for s in sensors.sites]
         own = {p["frame_prefix"] + name for name in JOINT_NAMES}  # the body's links, as messages.transforms names them
-        self.tf_in = TfReader(self, set(self._frames), ignore_frames=own, on_tracker=self._tracker_arrived)
+        guards = TfGuards(clock_window=p["clock_window"], play_radius=p["play_radius"])
+        self.tf_in = TfReader(
+            self, set(self._frames), own, self._tracker_arrived, guards, also=self._looked_up_frames(p)
+        )
         self._configure_inputs()
         overrides = QoSOverridingOptions.with_default_policies()
         from tf2_msgs.msg import TFMessage  # here, not at import: the stand-in exists only after setup
@@ -269,6 +285,10 @@ class EstimatorNode(LifecycleNode):
 
     def _configure_inputs(self) -> None:
         """More inputs than the trackers' TF (the constraint node's estimate)."""
+
+    def _looked_up_frames(self, p: dict) -> set[str]:
+        """Frames besides the trackers this node looks up on /tf (kept, never drive estimates)."""
+        return set()
 
     def _method(self) -> str:
         """What estimates, as diagnostics and the log name it."""
@@ -374,8 +394,7 @@ class EstimatorNode(LifecycleNode):
     def _restart_on_jump_back(self, now: float) -> None:
         """A clock jump back (a looping bag, a restarted simulation): start afresh."""
         assert self.tf_in is not None and self.estimator is not None  # estimates come only while active
-        if (self._last_now is not None and now < self._last_now - 1.0) or self.tf_in.jumped_back:
-            self.tf_in.jumped_back = False
+        if (self._last_now is not None and now < self._last_now - 1.0) | self.tf_in.take_jump_back():
             self.estimator.reset()
             self._last_input = -np.inf
             self._stats.resets += 1
@@ -450,7 +469,7 @@ class EstimatorNode(LifecycleNode):
 
     def _publish_diagnostics(self) -> None:
         assert self.tf_in is not None and self.pub_diag is not None  # the timer exists only while active
-        rejected = {reason.value: count for reason, count in self.tf_in.rejected.items()}
+        rejected = self.tf_in.rejected
         level, message, values = self._stats.status(self.sensors.site_names, self._ages, self._site_valid, rejected)
         status = DiagnosticStatus(
             level=level,

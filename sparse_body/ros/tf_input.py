@@ -10,10 +10,11 @@ ignores the frames the node publishes itself, and tells the node when a tracker 
 
 from __future__ import annotations
 
+import math
+
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 
-from ..io.tf_cache import Accepted, TfCache, sample_trackers
-from .messages import to_seconds
+from ..io.tf_cache import TfCache, TfGuards
 
 # /tf's history is kept short: a node that falls behind then skips to the newest messages
 # instead of working through a backlog (100 messages were 1.3 s of lag at 60 Hz plus the
@@ -39,7 +40,8 @@ TF_STATIC_QOS = QoSProfile(
 
 
 class TfReader:
-    """Subscribes to /tf and /tf_static and keeps the newest transforms in a TfCache.
+    """Subscribes to /tf and /tf_static and hands each message to one TfCache (its guards
+    judge stamps by the node's clock).
 
     on_tracker() is called after a message that brought a new sample of a tracker frame."""
 
@@ -49,46 +51,39 @@ class TfReader:
         tracker_frames: set[str],
         ignore_frames: set[str] | frozenset[str] = frozenset(),
         on_tracker=None,
-        jump_back: float = 1.0,
+        guards: TfGuards | None = None,
+        also: set[str] | frozenset[str] = frozenset(),
     ) -> None:
         from tf2_msgs.msg import TFMessage
 
-        self.cache = TfCache(jump_back)
-        self.tracker_frames = set(tracker_frames)
-        self.ignore_frames = set(ignore_frames) - self.tracker_frames
+        self.cache = TfCache(tracker_frames, guards, also)
+        self.ignore_frames = set(ignore_frames) - set(tracker_frames)
         self.on_tracker = on_tracker
-        self.rejected = {a: 0 for a in Accepted if a is not Accepted.OK}
-        self.jumped_back = False
         self._node = node
         self._subs = [
-            node.create_subscription(
-                TFMessage, "/tf", lambda m: self._on_tf(m, False), tf_qos(len(self.tracker_frames))
-            ),
+            node.create_subscription(TFMessage, "/tf", lambda m: self._on_tf(m, False), tf_qos(len(tracker_frames))),
             node.create_subscription(TFMessage, "/tf_static", lambda m: self._on_tf(m, True), TF_STATIC_QOS),
         ]
 
+    @property
+    def rejected(self) -> dict[str, int]:
+        return {reason.value: count for reason, count in self.cache.refused.items()}
+
     def _on_tf(self, msg, static: bool) -> None:
-        moved = False
-        for tf in msg.transforms:
-            child = tf.child_frame_id
-            if child in self.ignore_frames:
-                continue
-            tr, q = tf.transform.translation, tf.transform.rotation
-            result = self.cache.set(
-                tf.header.frame_id, child, to_seconds(tf.header.stamp), (tr.x, tr.y, tr.z), (q.x, q.y, q.z, q.w), static
-            )
-            if result is Accepted.JUMPED_BACK:
-                self.jumped_back = True
-            if child in self.tracker_frames:
-                if result in (Accepted.OK, Accepted.JUMPED_BACK):
-                    moved = True
-                else:
-                    self.rejected[result] += 1
-        if moved and self.on_tracker is not None:
+        transforms = msg.transforms
+        if self.ignore_frames:  # the node's own link TF comes back on /tf
+            transforms = [tf for tf in transforms if tf.child_frame_id not in self.ignore_frames]
+        now = self._node.get_clock().now().nanoseconds * 1e-9
+        if self.cache.ingest(transforms, static, now).newest > -math.inf and self.on_tracker is not None:
             self.on_tracker()
 
+    def take_jump_back(self) -> bool:
+        """Whether the input started again (a looping bag) since the last call."""
+        jumped, self.cache.jumped_back = self.cache.jumped_back, False
+        return jumped
+
     def lookup(self, fixed_frame: str, frame_id: str):
-        """(stamp, translation, rotation) of frame_id in fixed_frame, or None."""
+        """(stamp, translation, rotation) of a tracker or `also` frame in fixed_frame, or None."""
         return self.cache.lookup(fixed_frame, frame_id)
 
     def stamps(self, frame_ids) -> list[float]:
@@ -96,9 +91,7 @@ class TfReader:
         return [self.cache.stamp(f) for f in frame_ids]
 
     def sample(self, config, stamp: float, stale_after: float):
-        return sample_trackers(
-            self.cache.lookup, config, stamp, stale_after, lambda frame_id: self.cache.budget(frame_id, stale_after)
-        )
+        return self.cache.sample(config, stamp, stale_after)
 
     def destroy(self) -> None:
         for sub in self._subs:

@@ -25,15 +25,21 @@ from ..data.virtual_trackers import synthesize_trackers
 from ..estimators import create_estimator
 from ..estimators.base import parse_estimator_spec
 
-# (figure, estimator, goal for its p99 in ms); the latency goal is 3 ms plus the step's p99
+# (figure, estimator, goal for its p99 in ms on one thread of an idle machine of the kind CI
+# runs on: issue 28); the latency goal is 1 ms plus the step's p99
 STEP_GOALS = (
-    ("ik step", "ik", 0.3),
-    ("lobstr step (network, upper-body IK, contact IK)", "lobstr", 0.5),
-    ("dragposer step (search, predictor, polish)", "dragposer", 3.0),
-    ("dtp step (21-frame window, transformer, polish)", "dtp", 2.0),
-    ("avatarjlm step (streaming joint tokens, polish)", "avatarjlm", 5.0),
+    ("ik step", "ik", 0.1),
+    ("lobstr step (network, upper-body IK, contact IK)", "lobstr", 0.25),
+    ("dragposer step (search, predictor, polish)", "dragposer", 1.5),
+    ("dtp step (21-frame window, transformer, polish)", "dtp", 1.0),
+    ("avatarjlm step (streaming joint tokens, polish)", "avatarjlm", 2.0),
 )
-LATENCY_GOAL_MS = 3.0
+LATENCY_GOAL_MS = 1.0
+# Absolute times differ several-fold between machines and with load; a step as a multiple of
+# the reference estimator's step (a standing pose turned to the headset: the cost of a step's
+# bookkeeping, filter and sampling alone) in the same run holds on any machine.
+REFERENCE = "reference"
+RATIO_GOALS = {"ik": 1.5, "lobstr": 2.0}
 
 
 def bench_offline(estimators, sensors_name: str, seconds: float = 20.0) -> dict[str, tuple[float, float]]:
@@ -312,10 +318,36 @@ def run(estimators, sensors_name: str, latency: bool = True) -> None:
             bench_latency(name, sensors_name)
 
 
+def bench_ratio(name: str, reference: str, sensors_name: str, seconds: float = 20.0) -> tuple[float, float]:
+    """(p50, p99) of an estimator's step over the reference estimator's, the two stepped in
+    turn on each frame so that both see the same load (a machine's load changes between two
+    runs one after the other, and the ratio with it)."""
+    motion = synthetic_walk(seconds)
+    config = load_sensor_config(sensors_name)
+    stream = list(synthesize_trackers(motion, config))
+    pair = []
+    for spec in (name, reference):
+        method, options = parse_estimator_spec(spec)
+        pair.append(create_estimator(method, config, motion.skeleton, **options))
+    for est in pair:
+        est.reset()
+    times = np.zeros((len(stream), 2))
+    for i, frame in enumerate(stream):
+        for k, est in enumerate(pair):
+            t0 = time.perf_counter()
+            est.step(frame)
+            times[i, k] = time.perf_counter() - t0
+    times = times[10:]
+    return tuple(float(np.percentile(times[:, 0], q) / np.percentile(times[:, 1], q)) for q in (50, 99))  # type: ignore[return-value]
+
+
 def run_goals(latency: bool = True) -> None:
     """The real-time goals, each figure beside its goal (six-point synthetic walk, one thread)."""
     steps = bench_offline([name for _, name, _ in STEP_GOALS], "six_point")
     rows = [(figure, f"p99 <= {goal:g} ms", steps[name], steps[name][1] <= goal) for figure, name, goal in STEP_GOALS]
+    for name, goal in RATIO_GOALS.items():
+        ratio = bench_ratio(name, REFERENCE, "six_point")
+        rows.append((f"{name} step / {REFERENCE} step, in turn", f"p50 <= {goal:g}x", ratio, ratio[0] <= goal, "x"))
     if latency:
         measured = bench_latency("ik", "six_point")
         goal = LATENCY_GOAL_MS + steps["ik"][1]
@@ -329,7 +361,8 @@ def run_goals(latency: bool = True) -> None:
         )
     load = os.getloadavg()[0]
     print(f"\ngoals (load average {load:.1f} on {os.cpu_count()} cores while measured)")
-    print(f"  {'figure':<50} {'goal':<34} {'p50 / p99 [ms]':<18} met")
-    for figure, goal, measured, met in rows:
-        figures = "-" if measured is None else f"{measured[0]:.3f} / {measured[1]:.3f}"
-        print(f"  {figure:<50} {goal:<34} {figures:<18} {'yes' if met else 'NO'}")
+    print(f"  {'figure':<50} {'goal':<34} {'p50 / p99':<22} met")
+    for figure, goal, measured, met, *unit in rows:
+        u = unit[0] if unit else " ms"
+        figures = "-" if measured is None else f"{measured[0]:.3f} / {measured[1]:.3f}{u}"
+        print(f"  {figure:<50} {goal:<34} {figures:<22} {'yes' if met else 'NO'}")

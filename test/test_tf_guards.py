@@ -7,6 +7,7 @@ flood of frames cost seconds and memory that was never freed, and absurd positio
 from __future__ import annotations
 
 import gc
+import os
 import time
 from pathlib import Path
 from types import SimpleNamespace
@@ -117,7 +118,7 @@ def test_a_2000_frame_parent_chain_is_cut_at_max_depth_and_costs_little():
 
 def _rss() -> int:
     with open("/proc/self/statm") as f:
-        return int(f.read().split()[1]) * 4096
+        return int(f.read().split()[1]) * os.sysconf("SC_PAGE_SIZE")
 
 
 @pytest.mark.skipif(not Path("/proc/self/statm").exists(), reason="needs /proc (Linux) to read the resident memory")

@@ -394,6 +394,7 @@ class EstimatorNode(LifecycleNode):
     def _restart_on_jump_back(self, now: float) -> None:
         """A clock jump back (a looping bag, a restarted simulation): start afresh."""
         assert self.tf_in is not None and self.estimator is not None  # estimates come only while active
+        # `|`, not `or`: the reader's flag is taken (and cleared) whatever the clock did
         if (self._last_now is not None and now < self._last_now - 1.0) | self.tf_in.take_jump_back():
             self.estimator.reset()
             self._last_input = -np.inf

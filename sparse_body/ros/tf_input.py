@@ -4,8 +4,9 @@ One path on every install. tf2_ros's buffer was the other path once; it was drop
 the estimators want each tracker's newest sample, not an interpolated lookup, and the buffer
 hides what the node must count and act on: refused non-finite samples (tf2 only logs them),
 clock jumps back (the estimator must start over) and the arrival of a tracker sample (which
-drives the estimate). The reader refuses non-finite, out-of-order and jumped-back samples,
-ignores the frames the node publishes itself, and tells the node when a tracker moved.
+drives the estimate). The reader drops the frames the node publishes itself, hands the rest
+to the TfCache's one ingest (the bag reader's too: its guards and counts are in
+io/tf_cache.py), judged by the node's clock, and tells the node when a tracker moved.
 """
 
 from __future__ import annotations

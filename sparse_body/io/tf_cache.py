@@ -62,7 +62,8 @@ class Edge:
 class Ingested:
     """What one /tf message did to the trackers."""
 
-    moved: bool = False  # a tracker frame came in it (accepted or not)
+    moved: bool = False  # a tracker frame came in it on /tf (accepted or not): a bag's input frame
+    arrived: bool = False  # a tracker sample in it was taken, /tf_static too: the trackers are alive
     newest: float = -math.inf  # the newest accepted tracker stamp in it
     refused: set[str] = field(default_factory=set)  # tracker frames whose sample in it was refused
     refused_stamp: float = -math.inf  # the newest finite stamp among those
@@ -91,6 +92,8 @@ class TfCache:
             tr, q = tf.transform.translation, tf.transform.rotation
             child = tf.child_frame_id
             result = self.set(tf.header.frame_id, child, stamp, (tr.x, tr.y, tr.z), (q.x, q.y, q.z, q.w), static, now)
+            if child in self.trackers and result in (Accepted.OK, Accepted.JUMPED_BACK):
+                out.arrived = True
             if child in self.trackers and not static:
                 out.moved = True  # even a refused sample is an input frame: it gets an output
                 if result in (Accepted.OK, Accepted.JUMPED_BACK):

@@ -11,8 +11,6 @@ io/tf_cache.py), judged by the node's clock, and tells the node when a tracker m
 
 from __future__ import annotations
 
-import math
-
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 
 from ..io.tf_cache import TfCache, TfGuards
@@ -75,7 +73,7 @@ class TfReader:
         if self.ignore_frames:  # the node's own link TF comes back on /tf
             transforms = [tf for tf in transforms if tf.child_frame_id not in self.ignore_frames]
         now = self._node.get_clock().now().nanoseconds * 1e-9
-        if self.cache.ingest(transforms, static, now).newest > -math.inf and self.on_tracker is not None:
+        if self.cache.ingest(transforms, static, now).arrived and self.on_tracker is not None:
             self.on_tracker()
 
     def take_jump_back(self) -> bool:

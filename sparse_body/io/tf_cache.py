@@ -92,11 +92,13 @@ class TfCache:
             tr, q = tf.transform.translation, tf.transform.rotation
             child = tf.child_frame_id
             result = self.set(tf.header.frame_id, child, stamp, (tr.x, tr.y, tr.z), (q.x, q.y, q.z, q.w), static, now)
-            if child in self.trackers and result in (Accepted.OK, Accepted.JUMPED_BACK):
-                out.arrived = True
-            if child in self.trackers and not static:
+            if child not in self.trackers:
+                continue
+            taken = result in (Accepted.OK, Accepted.JUMPED_BACK)
+            out.arrived |= taken
+            if not static:
                 out.moved = True  # even a refused sample is an input frame: it gets an output
-                if result in (Accepted.OK, Accepted.JUMPED_BACK):
+                if taken:
                     out.newest = max(out.newest, stamp)
                 else:
                     out.refused.add(child)

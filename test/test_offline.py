@@ -45,7 +45,9 @@ def test_process_writes_one_estimate_per_frame(tmp_path):
     assert len(read_topic(tmp_path / "out", CONTACTS_TOPIC)) == len(motion)
     assert all(s.valid for s in read_topic(tmp_path / "out", STATUS_TOPIC))
     tfs = read_topic(tmp_path / "out", TF_TOPIC)
-    assert len(tfs) == len(motion) and len(tfs[0].transforms) == 22
+    assert len(tfs) == len(motion)
+    children = {t.child_frame_id for t in tfs[0].transforms}
+    assert {"pelvis", "left_wrist", "head"} <= children and {s.frame_id for s in config.sites} <= children
     # The IK baseline puts the wrists where the controllers say.
     from sparse_body.core.kinematics import forward_kinematics
     from sparse_body.core.rotations import quat_to_matrix

@@ -66,5 +66,13 @@ def process_bag(
 
         frames = tqdm(frames, total=len(stream), desc=f"{estimator} {Path(bag_in).name}", unit="frame")
     poses = est.process(frames)  # offline: an estimator that can look ahead does here
-    write_estimate_bag(bag_out, poses, skeleton, sensors.fixed_frame, overwrite=overwrite, inputs=(Path(bag_in),))
+    write_estimate_bag(
+        bag_out,
+        poses,
+        skeleton,
+        sensors.fixed_frame,
+        overwrite=overwrite,
+        inputs=(Path(bag_in),),
+        trackers=(sensors, stream),
+    )
     return poses

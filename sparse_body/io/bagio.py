@@ -15,6 +15,7 @@ from pathlib import Path
 
 import numpy as np
 import yaml
+from rosbags.interfaces import Qos, QosDurability, QosHistory, QosLiveliness, QosReliability, QosTime
 from rosbags.rosbag2 import Reader, StoragePlugin, Writer
 from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 
@@ -24,11 +25,22 @@ from ..core.sensors import SensorConfig
 from ..core.skeleton import Skeleton
 from ..core.textfile import read_limited
 from ..core.types import BodyPose, TrackerStream
-from .output import FOOT_NAMES, body_transforms, contact_points, joint_state_names, joint_state_positions, stamp_parts
+from .output import (
+    FOOT_NAMES,
+    axis_link_transforms,
+    body_transforms,
+    contact_points,
+    joint_state_names,
+    joint_state_positions,
+    stamp_parts,
+    tracker_transforms,
+)
 from .tf_cache import TfCache, TfGuards
+from .urdf import body_urdf
 
 TF_TOPIC, TF_STATIC_TOPIC = "/tf", "/tf_static"
 JOINT_STATES_TOPIC, CONTACTS_TOPIC, STATUS_TOPIC = "/joint_states", "/foot_contacts", "/estimate_status"
+DESCRIPTION_TOPIC = "/robot_description"
 TF_TYPE = "tf2_msgs/msg/TFMessage"
 
 
@@ -254,6 +266,21 @@ def read_tracker_stream(
     )
 
 
+# robot_state_publisher's robot_description: kept for late subscribers, so `ros2 bag play`
+# offers it as transient local and RViz gets it whenever it starts
+LATCHED = Qos(
+    QosHistory.KEEP_LAST,
+    1,
+    QosReliability.RELIABLE,
+    QosDurability.TRANSIENT_LOCAL,
+    QosTime(0, 0),
+    QosTime(0, 0),
+    QosLiveliness.AUTOMATIC,
+    QosTime(0, 0),
+    False,
+)
+
+
 def write_estimate_bag(
     path: Path,
     poses: list[BodyPose],
@@ -262,17 +289,30 @@ def write_estimate_bag(
     prefix: str = "",
     overwrite: bool = False,
     inputs: tuple[Path, ...] = (),
+    trackers: tuple[SensorConfig, TrackerStream] | None = None,
 ) -> None:
-    """Per pose: one JointState, one FootContacts, one EstimateStatus and one /tf message."""
+    """Per pose: one JointState, one FootContacts, one EstimateStatus and one /tf message;
+    once, first: the body's URDF on /robot_description. So that a viewer draws the bag as it
+    is (Foxglove's 3D panel, or RViz with `ros2 bag play`), /tf holds every link of that URDF
+    and, with `trackers` (the input frames, one per pose), the trackers beside the body."""
     store = typestore()
     T = store.types
     names = joint_state_names()
+    if trackers is not None and len(trackers[1]) != len(poses):
+        raise ValueError(f"{len(poses)} poses but {len(trackers[1])} tracker frames")
     with bag_writer(path, overwrite, inputs) as writer:
         c_js = writer.add_connection(JOINT_STATES_TOPIC, "sensor_msgs/msg/JointState", typestore=store)
         c_fc = writer.add_connection(CONTACTS_TOPIC, "sparse_body/msg/FootContacts", typestore=store)
         c_st = writer.add_connection(STATUS_TOPIC, "sparse_body/msg/EstimateStatus", typestore=store)
         c_tf = writer.add_connection(TF_TOPIC, TF_TYPE, typestore=store)
-        for pose, ns in zip(poses, _log_times([p.stamp for p in poses]), strict=True):
+        c_urdf = writer.add_connection(
+            DESCRIPTION_TOPIC, "std_msgs/msg/String", typestore=store, offered_qos_profiles=[LATCHED]
+        )
+        log_ns = _log_times([p.stamp for p in poses])
+        if log_ns:
+            urdf = T["std_msgs/msg/String"](data=body_urdf(skeleton))
+            writer.write(c_urdf, log_ns[0], store.serialize_cdr(urdf, "std_msgs/msg/String"))
+        for i, (pose, ns) in enumerate(zip(poses, log_ns, strict=True)):
             header = _header(store, pose.stamp, fixed_frame)
             js = T["sensor_msgs/msg/JointState"](
                 header=_header(store, pose.stamp, ""),
@@ -303,10 +343,11 @@ def write_estimate_bag(
                 header=header, valid=bool(pose.valid), message="" if pose.valid else "held: too little tracker input"
             )
             writer.write(c_st, ns, store.serialize_cdr(status, "sparse_body/msg/EstimateStatus"))
-            tfs = [
-                _transform_msg(store, pose.stamp, t.parent, t.child, t.translation, t.rotation)
-                for t in body_transforms(pose, skeleton, fixed_frame, prefix)
-            ]
+            shown = body_transforms(pose, skeleton, fixed_frame, prefix) + axis_link_transforms(pose, skeleton, prefix)
+            if trackers is not None:
+                sensors, stream = trackers
+                shown += tracker_transforms(sensors, stream.positions[i], stream.orientations[i], stream.valid[i])
+            tfs = [_transform_msg(store, pose.stamp, t.parent, t.child, t.translation, t.rotation) for t in shown]
             writer.write(c_tf, ns, store.serialize_cdr(T[TF_TYPE](transforms=tfs), TF_TYPE))
 
 

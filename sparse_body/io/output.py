@@ -11,6 +11,7 @@ import numpy as np
 from ..core.contacts import FOOT_JOINTS
 from ..core.kinematics import forward_kinematics
 from ..core.rotations import JOINT_EULER_ORDER, matrix_to_euler, quat_to_matrix
+from ..core.sensors import SensorConfig
 from ..core.skeleton import JOINT_NAMES, NUM_JOINTS, PARENTS, Skeleton
 from ..core.types import BodyPose
 
@@ -70,6 +71,45 @@ def body_transforms(
                     prefix + JOINT_NAMES[PARENTS[j]], prefix + JOINT_NAMES[j], skeleton.offsets[j], pose.local_quats[j]
                 )
             )
+    return out
+
+
+def axis_link_name(body: str, axis: str) -> str:
+    """The URDF's massless link after a body joint's revolute joint about `axis` (z or y)."""
+    return f"{body}_r{axis}_link"
+
+
+def axis_link_transforms(pose: BodyPose, skeleton: Skeleton, prefix: str = "") -> list[Transform]:
+    """The two massless links inside each body joint of the URDF (io/urdf.py), placed as
+    robot_state_publisher places them from the JointState: <joint>_rz_link under the parent
+    link at the joint's offset, turned by Rz; <joint>_ry_link under it, turned by Ry. With
+    body_transforms' links, every link of the URDF has a transform, so a viewer that draws the
+    URDF from TF (Foxglove's 3D panel, RViz) finds each one. The body link itself still hangs
+    from its parent link directly, as the node publishes it live; both paths give it the same
+    pose, since Rx about the ry link's origin is the rest of the joint's rotation."""
+    half = joint_state_positions(pose).reshape(NUM_JOINTS - 1, len(AXES)) / 2.0  # z, y, x per joint
+    out = []
+    for j in range(1, NUM_JOINTS):
+        body, parent = prefix + JOINT_NAMES[j], prefix + JOINT_NAMES[PARENTS[j]]
+        z, y = half[j - 1, 0], half[j - 1, 1]
+        rz, ry = axis_link_name(body, "z"), axis_link_name(body, "y")
+        out.append(Transform(parent, rz, skeleton.offsets[j], np.array([0.0, 0.0, np.sin(z), np.cos(z)])))
+        out.append(Transform(rz, ry, np.zeros(3), np.array([0.0, np.sin(y), 0.0, np.cos(y)])))
+    return out
+
+
+def tracker_transforms(
+    sensors: SensorConfig, positions: np.ndarray, orientations: np.ndarray, valid: np.ndarray
+) -> list[Transform]:
+    """fixed frame -> each tracker frame with a usable sample in this frame, so a viewer shows
+    the trackers beside the body. An orientation-only tracker (IMU) has no place of its own
+    and is left out; a position-only one is drawn unturned."""
+    out = []
+    for s, site in enumerate(sensors.sites):
+        if not valid[s] or not site.has_position or not np.all(np.isfinite(positions[s])):
+            continue
+        rotation = orientations[s] if site.has_orientation else np.array([0.0, 0.0, 0.0, 1.0])
+        out.append(Transform(sensors.fixed_frame, site.frame_id, positions[s], rotation))
     return out
 
 

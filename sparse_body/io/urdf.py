@@ -9,7 +9,7 @@ from xml.sax.saxutils import quoteattr
 import numpy as np
 
 from ..core.skeleton import JOINT_NAMES, NUM_JOINTS, PARENTS, Skeleton
-from .output import AXES
+from .output import AXES, axis_link_name
 
 _AXIS_VECTORS = {"x": "1 0 0", "y": "0 1 0", "z": "0 0 1"}
 
@@ -37,7 +37,7 @@ def body_urdf(skeleton: Skeleton, name: str = "sparse_body") -> str:
         parent = JOINT_NAMES[PARENTS[j]]
         x, y, z = skeleton.offsets[j]
         for k, axis in enumerate(AXES):
-            child = body if k == len(AXES) - 1 else f"{body}_r{axis}_link"
+            child = body if k == len(AXES) - 1 else axis_link_name(body, axis)
             origin = f"{x:.6f} {y:.6f} {z:.6f}" if k == 0 else "0 0 0"
             parts.append(
                 f'  <joint name={quoteattr(f"{body}_r{axis}")} type="continuous">\n'

@@ -138,15 +138,16 @@ def test_outputs_are_never_half_written_nor_silently_replaced(tmp_path, monkeypa
         process_bag(tmp_path / "in", tmp_path / "out", "ik", config, motion.skeleton, progress=False)
     monkeypatch.undo()
     # Ctrl-C while writing: nothing is left behind, and the command exits 130 with one line
-    calls = []
+    log_times = bagio._log_times
 
-    def interrupted(*args):
-        calls.append(1)
-        if len(calls) > 5:
-            raise KeyboardInterrupt
-        return np.zeros((2, 3))
+    class Interrupted(list):  # Ctrl-C after five frames have been written
+        def __iter__(self):
+            for k, ns in enumerate(super().__iter__()):
+                if k == 5:
+                    raise KeyboardInterrupt
+                yield ns
 
-    monkeypatch.setattr(bagio, "contact_points", interrupted)
+    monkeypatch.setattr(bagio, "_log_times", lambda stamps: Interrupted(log_times(stamps)))
     before = sorted(p.name for p in tmp_path.iterdir())
     with pytest.raises(SystemExit) as ended:
         main(["process", str(tmp_path / "in"), str(tmp_path / "new"), "--sensors", "three_point", "--quiet"])

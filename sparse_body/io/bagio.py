@@ -22,18 +22,22 @@ from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 from .. import __version__
 from ..core.resources import share_dir
 from ..core.sensors import SensorConfig
-from ..core.skeleton import Skeleton
+from ..core.skeleton import NUM_JOINTS, Skeleton
 from ..core.textfile import read_limited
 from ..core.types import BodyPose, TrackerStream
+from . import cdr
 from .output import (
     FOOT_NAMES,
-    axis_link_transforms,
-    body_transforms,
-    contact_points,
+    HELD,
+    TransformTable,
+    axis_link_table,
+    body_table,
+    foot_points,
+    joint_angles,
     joint_state_names,
-    joint_state_positions,
     stamp_parts,
-    tracker_transforms,
+    tracker_sites,
+    tracker_table,
 )
 from .tf_cache import TfCache, TfGuards
 from .urdf import body_urdf
@@ -294,12 +298,37 @@ def write_estimate_bag(
     """Per pose: one JointState, one FootContacts, one EstimateStatus and one /tf message;
     once, first: the body's URDF on /robot_description. So that a viewer draws the bag as it
     is (Foxglove's 3D panel, or RViz with `ros2 bag play`), /tf holds every link of that URDF
-    and, with `trackers` (the input frames, one per pose), the trackers beside the body."""
-    store = typestore()
-    T = store.types
-    names = joint_state_names()
+    and, with `trackers` (the input frames, one per pose), the trackers beside the body.
+    The messages are encoded for the whole recording at once (io/cdr.py)."""
     if trackers is not None and len(trackers[1]) != len(poses):
         raise ValueError(f"{len(poses)} poses but {len(trackers[1])} tracker frames")
+    store = typestore()
+    stamps = np.array([p.stamp for p in poses], dtype=np.float64)
+    quats = np.array([p.local_quats for p in poses], dtype=np.float64).reshape(len(poses), NUM_JOINTS, 4)
+    roots = np.array([p.root_position for p in poses], dtype=np.float64).reshape(len(poses), 3)
+    angles = joint_angles(quats)
+    js = cdr.joint_state_messages(stamps, joint_state_names(), angles)
+    contacts = cdr.foot_contact_messages(
+        stamps,
+        fixed_frame,
+        list(FOOT_NAMES),
+        np.array([p.contact for p in poses], bool).reshape(len(poses), len(FOOT_NAMES)),
+        np.array([p.contact_probability for p in poses], np.float64).reshape(len(poses), len(FOOT_NAMES)),
+        foot_points(quats, roots, skeleton),
+    )
+    status = cdr.status_messages(stamps, fixed_frame, np.array([p.valid for p in poses], bool), HELD)
+    body = body_table(quats, roots, skeleton, fixed_frame, prefix) + axis_link_table(angles, skeleton, prefix)
+    tf: list[bytes] = [b""] * len(poses)
+    shown = tracker_sites(*trackers) if trackers is not None else np.zeros((len(poses), 0), bool)
+    for pattern in {tuple(row) for row in shown.tolist()}:  # frames with the same trackers
+        which = np.flatnonzero(np.all(shown == np.array(pattern, bool), axis=1))
+        table = TransformTable(body.parents, body.children, body.values[which])
+        if trackers is not None:
+            table = table + tracker_table(*trackers, which, tuple(np.flatnonzero(pattern)))
+        for i, data in zip(
+            which, cdr.tf_messages(stamps[which], table.parents, table.children, table.values), strict=True
+        ):
+            tf[i] = data
     with bag_writer(path, overwrite, inputs) as writer:
         c_js = writer.add_connection(JOINT_STATES_TOPIC, "sensor_msgs/msg/JointState", typestore=store)
         c_fc = writer.add_connection(CONTACTS_TOPIC, "sparse_body/msg/FootContacts", typestore=store)
@@ -308,47 +337,15 @@ def write_estimate_bag(
         c_urdf = writer.add_connection(
             DESCRIPTION_TOPIC, "std_msgs/msg/String", typestore=store, offered_qos_profiles=[LATCHED]
         )
-        log_ns = _log_times([p.stamp for p in poses])
+        log_ns = _log_times(stamps)
         if log_ns:
-            urdf = T["std_msgs/msg/String"](data=body_urdf(skeleton))
+            urdf = store.types["std_msgs/msg/String"](data=body_urdf(skeleton))
             writer.write(c_urdf, log_ns[0], store.serialize_cdr(urdf, "std_msgs/msg/String"))
-        for i, (pose, ns) in enumerate(zip(poses, log_ns, strict=True)):
-            header = _header(store, pose.stamp, fixed_frame)
-            js = T["sensor_msgs/msg/JointState"](
-                header=_header(store, pose.stamp, ""),
-                name=names,
-                position=joint_state_positions(pose),
-                velocity=np.zeros(0),
-                effort=np.zeros(0),
-            )
-            writer.write(c_js, ns, store.serialize_cdr(js, "sensor_msgs/msg/JointState"))
-            points = contact_points(pose, skeleton)
-            contacts = [
-                T["sparse_body/msg/FootContact"](
-                    name=n,
-                    in_contact=bool(pose.contact[k]),
-                    probability=float(pose.contact_probability[k]),
-                    contact_point=T["geometry_msgs/msg/Point"](*map(float, points[k])),
-                )
-                for k, n in enumerate(FOOT_NAMES)
-            ]
-            writer.write(
-                c_fc,
-                ns,
-                store.serialize_cdr(
-                    T["sparse_body/msg/FootContacts"](header=header, contacts=contacts), "sparse_body/msg/FootContacts"
-                ),
-            )
-            status = T["sparse_body/msg/EstimateStatus"](
-                header=header, valid=bool(pose.valid), message="" if pose.valid else "held: too little tracker input"
-            )
-            writer.write(c_st, ns, store.serialize_cdr(status, "sparse_body/msg/EstimateStatus"))
-            shown = body_transforms(pose, skeleton, fixed_frame, prefix) + axis_link_transforms(pose, skeleton, prefix)
-            if trackers is not None:
-                sensors, stream = trackers
-                shown += tracker_transforms(sensors, stream.positions[i], stream.orientations[i], stream.valid[i])
-            tfs = [_transform_msg(store, pose.stamp, t.parent, t.child, t.translation, t.rotation) for t in shown]
-            writer.write(c_tf, ns, store.serialize_cdr(T[TF_TYPE](transforms=tfs), TF_TYPE))
+        for i, ns in enumerate(log_ns):
+            writer.write(c_js, ns, js[i])
+            writer.write(c_fc, ns, contacts[i])
+            writer.write(c_st, ns, status[i])
+            writer.write(c_tf, ns, tf[i])
 
 
 def read_topic(path: Path, topic: str) -> list:

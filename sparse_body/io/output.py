@@ -13,7 +13,7 @@ from ..core.kinematics import forward_kinematics
 from ..core.rotations import JOINT_EULER_ORDER, matrix_to_euler, quat_to_matrix
 from ..core.sensors import SensorConfig
 from ..core.skeleton import JOINT_NAMES, NUM_JOINTS, PARENTS, Skeleton
-from ..core.types import BodyPose
+from ..core.types import BodyPose, TrackerStream
 
 AXES = ("z", "y", "x")  # JOINT_EULER_ORDER, one revolute joint per axis, outermost first
 assert JOINT_EULER_ORDER == "ZYX"
@@ -24,12 +24,20 @@ def joint_state_names() -> list[str]:
     return [f"{name}_r{axis}" for name in JOINT_NAMES[1:] for axis in AXES]
 
 
-def joint_state_positions(pose: BodyPose) -> np.ndarray:
-    """Angles (radians) in joint_state_names() order: local = Rz(a) @ Ry(b) @ Rx(c)."""
-    local = quat_to_matrix(pose.local_quats[1:])
+def joint_angles(local_quats: np.ndarray) -> np.ndarray:
+    """JointState positions (radians, joint_state_names() order) of poses' local rotations
+    (..., 22, 4): local = Rz(a) @ Ry(b) @ Rx(c) for every joint below the pelvis."""
+    local_quats = np.asarray(local_quats, dtype=np.float64)
+    local = quat_to_matrix(local_quats[..., 1:, :])
     with warnings.catch_warnings():  # gimbal lock still yields a valid decomposition
         warnings.simplefilter("ignore", UserWarning)
-        return matrix_to_euler(local, JOINT_EULER_ORDER).reshape(-1)
+        angles = matrix_to_euler(local, JOINT_EULER_ORDER)
+    return angles.reshape(local_quats.shape[:-2] + (len(AXES) * (NUM_JOINTS - 1),))
+
+
+def joint_state_positions(pose: BodyPose) -> np.ndarray:
+    """One pose's JointState positions (joint_angles)."""
+    return joint_angles(pose.local_quats)
 
 
 def pose_from_joint_state(names, positions, root_position, root_quat, stamp: float) -> BodyPose:
@@ -59,19 +67,53 @@ class Transform:
     rotation: np.ndarray  # (4,) x y z w
 
 
+@dataclass(frozen=True)
+class TransformTable:
+    """The same transforms over many frames (one /tf message each): parents[k] -> children[k],
+    values (frames, k, 7): translation, then rotation x y z w, as a TFMessage holds them."""
+
+    parents: tuple[str, ...]
+    children: tuple[str, ...]
+    values: np.ndarray
+
+    def __add__(self, other: TransformTable) -> TransformTable:
+        return TransformTable(
+            self.parents + other.parents, self.children + other.children, np.concatenate([self.values, other.values], 1)
+        )
+
+    def frame(self, i: int) -> list[Transform]:
+        v = self.values[i]
+        return [
+            Transform(p, c, v[k, :3], v[k, 3:])
+            for k, (p, c) in enumerate(zip(self.parents, self.children, strict=True))
+        ]
+
+
+def body_table(
+    local_quats: np.ndarray,
+    roots: np.ndarray,
+    skeleton: Skeleton,
+    fixed_frame: str,
+    prefix: str = "",
+    links: bool = True,
+) -> TransformTable:
+    """fixed_frame -> pelvis, and (links=True) every parent link -> child link, for poses'
+    local rotations (frames, 22, 4) and roots (frames, 3)."""
+    local_quats, roots = np.asarray(local_quats, np.float64), np.asarray(roots, np.float64)
+    joints = range(NUM_JOINTS if links else 1)
+    values = np.empty((len(local_quats), len(joints), 7))
+    values[:, 0, :3] = roots
+    values[:, 1:, :3] = skeleton.offsets[1 : len(joints)]
+    values[:, :, 3:] = local_quats[:, : len(joints)]
+    parents = (fixed_frame,) + tuple(prefix + JOINT_NAMES[PARENTS[j]] for j in joints[1:])
+    return TransformTable(parents, tuple(prefix + JOINT_NAMES[j] for j in joints), values)
+
+
 def body_transforms(
     pose: BodyPose, skeleton: Skeleton, fixed_frame: str, prefix: str = "", links: bool = True
 ) -> list[Transform]:
-    """fixed_frame -> pelvis, and (links=True) every parent link -> child link."""
-    out = [Transform(fixed_frame, prefix + JOINT_NAMES[0], pose.root_position, pose.local_quats[0])]
-    if links:
-        for j in range(1, NUM_JOINTS):
-            out.append(
-                Transform(
-                    prefix + JOINT_NAMES[PARENTS[j]], prefix + JOINT_NAMES[j], skeleton.offsets[j], pose.local_quats[j]
-                )
-            )
-    return out
+    """One pose's body_table."""
+    return body_table(pose.local_quats[None], pose.root_position[None], skeleton, fixed_frame, prefix, links).frame(0)
 
 
 def axis_link_name(body: str, axis: str) -> str:
@@ -79,47 +121,62 @@ def axis_link_name(body: str, axis: str) -> str:
     return f"{body}_r{axis}_link"
 
 
-def axis_link_transforms(pose: BodyPose, skeleton: Skeleton, prefix: str = "") -> list[Transform]:
+def axis_link_table(angles: np.ndarray, skeleton: Skeleton, prefix: str = "") -> TransformTable:
     """The two massless links inside each body joint of the URDF (io/urdf.py), placed as
-    robot_state_publisher places them from the JointState: <joint>_rz_link under the parent
-    link at the joint's offset, turned by Rz; <joint>_ry_link under it, turned by Ry. With
-    body_transforms' links, every link of the URDF has a transform, so a viewer that draws the
-    URDF from TF (Foxglove's 3D panel, RViz) finds each one. The body link itself still hangs
-    from its parent link directly, as the node publishes it live; both paths give it the same
-    pose, since Rx about the ry link's origin is the rest of the joint's rotation."""
-    half = joint_state_positions(pose).reshape(NUM_JOINTS - 1, len(AXES)) / 2.0  # z, y, x per joint
-    out = []
+    robot_state_publisher places them from the JointState angles (frames, 63): <joint>_rz_link
+    under the parent link at the joint's offset, turned by Rz; <joint>_ry_link under it,
+    turned by Ry. With body_table's links, every link of the URDF has a transform, so a viewer
+    that draws the URDF from TF (Foxglove's 3D panel, RViz) finds each one. The body link
+    itself still hangs from its parent link directly, as the node publishes it live; both
+    paths give it the same pose, Rx about the ry link's origin being the rest of the joint."""
+    half = np.asarray(angles, np.float64).reshape(len(angles), NUM_JOINTS - 1, len(AXES)) / 2.0  # z, y, x
+    values = np.zeros((len(angles), NUM_JOINTS - 1, 2, 7))
+    values[:, :, 0, :3] = skeleton.offsets[1:]
+    values[:, :, 0, 5], values[:, :, 0, 6] = np.sin(half[..., 0]), np.cos(half[..., 0])  # about z
+    values[:, :, 1, 4], values[:, :, 1, 6] = np.sin(half[..., 1]), np.cos(half[..., 1])  # about y
+    parents, children = [], []
     for j in range(1, NUM_JOINTS):
-        body, parent = prefix + JOINT_NAMES[j], prefix + JOINT_NAMES[PARENTS[j]]
-        z, y = half[j - 1, 0], half[j - 1, 1]
-        rz, ry = axis_link_name(body, "z"), axis_link_name(body, "y")
-        out.append(Transform(parent, rz, skeleton.offsets[j], np.array([0.0, 0.0, np.sin(z), np.cos(z)])))
-        out.append(Transform(rz, ry, np.zeros(3), np.array([0.0, np.sin(y), 0.0, np.cos(y)])))
-    return out
+        body = prefix + JOINT_NAMES[j]
+        rz = axis_link_name(body, "z")
+        parents += [prefix + JOINT_NAMES[PARENTS[j]], rz]
+        children += [rz, axis_link_name(body, "y")]
+    return TransformTable(tuple(parents), tuple(children), values.reshape(len(angles), -1, 7))
 
 
-def tracker_transforms(
-    sensors: SensorConfig, positions: np.ndarray, orientations: np.ndarray, valid: np.ndarray
-) -> list[Transform]:
-    """fixed frame -> each tracker frame with a usable sample in this frame, so a viewer shows
-    the trackers beside the body. An orientation-only tracker (IMU) has no place of its own
-    and is left out; a position-only one is drawn unturned."""
-    out = []
-    for s, site in enumerate(sensors.sites):
-        if not valid[s] or not site.has_position or not np.all(np.isfinite(positions[s])):
-            continue
-        rotation = orientations[s] if site.has_orientation else np.array([0.0, 0.0, 0.0, 1.0])
-        out.append(Transform(sensors.fixed_frame, site.frame_id, positions[s], rotation))
-    return out
+def tracker_table(sensors: SensorConfig, stream: TrackerStream, which: np.ndarray, shown: tuple[int, ...]):
+    """fixed frame -> the trackers `shown` (site indices) in the frames `which` of a tracker
+    stream, so a viewer shows the trackers beside the body; a position-only tracker drawn
+    unturned. tracker_sites says which to show."""
+    values = np.zeros((len(which), len(shown), 7))
+    values[..., 6] = 1.0
+    for k, s in enumerate(shown):
+        values[:, k, :3] = stream.positions[which, s]
+        if sensors.sites[s].has_orientation:
+            values[:, k, 3:] = stream.orientations[which, s]
+    return TransformTable((sensors.fixed_frame,) * len(shown), tuple(sensors.sites[s].frame_id for s in shown), values)
+
+
+def tracker_sites(sensors: SensorConfig, stream: TrackerStream) -> np.ndarray:
+    """(frames, sites) bool: the trackers to show in each frame: a usable sample with a
+    position (an orientation-only IMU has no place of its own and is left out)."""
+    placed = np.array([site.has_position for site in sensors.sites], bool)
+    return stream.valid & placed & np.all(np.isfinite(stream.positions), axis=-1)
+
+
+def foot_points(local_quats: np.ndarray, roots: np.ndarray, skeleton: Skeleton) -> np.ndarray:
+    """(..., 2, 3) toe positions in the fixed frame, left then right, of poses' local
+    rotations (..., 22, 4) and roots (..., 3)."""
+    _, pos = forward_kinematics(quat_to_matrix(local_quats), roots, skeleton.offsets)
+    return pos[..., list(FOOT_JOINTS), :]
 
 
 def contact_points(pose: BodyPose, skeleton: Skeleton) -> np.ndarray:
-    """(2, 3) toe positions in the fixed frame, left then right."""
-    _, pos = forward_kinematics(quat_to_matrix(pose.local_quats), pose.root_position, skeleton.offsets)
-    return pos[list(FOOT_JOINTS)]
+    """One pose's foot_points."""
+    return foot_points(pose.local_quats, pose.root_position, skeleton)
 
 
 FOOT_NAMES = ("left_foot", "right_foot")
+HELD = "held: too little tracker input"  # EstimateStatus.message of a held pose, offline and by default live
 
 
 def stamp_parts(seconds: float) -> tuple[int, int]:

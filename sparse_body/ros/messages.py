@@ -12,6 +12,7 @@ from ..core.skeleton import Skeleton
 from ..core.types import BodyPose
 from ..io.output import (
     FOOT_NAMES,
+    HELD,
     body_transforms,
     contact_points,
     joint_state_names,
@@ -57,9 +58,7 @@ def foot_contacts(pose: BodyPose, skeleton: Skeleton, stamp: Time, frame_id: str
 
 
 def estimate_status(pose: BodyPose, stamp: Time, frame_id: str, reason: str = "") -> EstimateStatus:
-    msg = EstimateStatus(
-        valid=bool(pose.valid), message="" if pose.valid else (reason or "held: too little tracker input")
-    )
+    msg = EstimateStatus(valid=bool(pose.valid), message="" if pose.valid else (reason or HELD))
     msg.header.stamp, msg.header.frame_id = stamp, frame_id
     return msg
 

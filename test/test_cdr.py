@@ -1,0 +1,128 @@
+"""The output bag's messages, encoded for a whole recording at once (io/cdr.py), are byte for
+byte what rosbags' serialize_cdr makes of the same messages built one by one."""
+
+import numpy as np
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from rosbags.rosbag2 import Reader
+
+from sparse_body.apps.offline import make_bag, process_bag
+from sparse_body.core.sensors import load_sensor_config
+from sparse_body.data.synthetic import synthetic_walk
+from sparse_body.io import cdr
+from sparse_body.io.bagio import (
+    CONTACTS_TOPIC,
+    JOINT_STATES_TOPIC,
+    STATUS_TOPIC,
+    TF_TOPIC,
+    read_tracker_stream,
+    typestore,
+)
+from sparse_body.io.output import (
+    FOOT_NAMES,
+    HELD,
+    axis_link_table,
+    body_transforms,
+    contact_points,
+    joint_angles,
+    joint_state_names,
+    joint_state_positions,
+    stamp_parts,
+    tracker_sites,
+    tracker_table,
+)
+
+STORE = typestore()
+T = STORE.types
+
+
+def _stamp(seconds):
+    sec, nanosec = stamp_parts(seconds)
+    return T["builtin_interfaces/msg/Time"](sec=sec, nanosec=nanosec)
+
+
+def _header(seconds, frame_id):
+    return T["std_msgs/msg/Header"](stamp=_stamp(seconds), frame_id=frame_id)
+
+
+def _tf(seconds, transforms):
+    return STORE.serialize_cdr(
+        T["tf2_msgs/msg/TFMessage"](
+            transforms=[
+                T["geometry_msgs/msg/TransformStamped"](
+                    header=_header(seconds, t.parent),
+                    child_frame_id=t.child,
+                    transform=T["geometry_msgs/msg/Transform"](
+                        translation=T["geometry_msgs/msg/Vector3"](*map(float, t.translation)),
+                        rotation=T["geometry_msgs/msg/Quaternion"](*map(float, t.rotation)),
+                    ),
+                )
+                for t in transforms
+            ]
+        ),
+        "tf2_msgs/msg/TFMessage",
+    )
+
+
+@settings(max_examples=200, deadline=None)
+@given(
+    st.lists(
+        st.one_of(st.floats(0, 4e9), st.integers(0, 4_000_000_000).map(lambda s: s + 0.9999999996)),
+        min_size=1,
+        max_size=5,
+    )
+)
+def test_stamps_split_as_one_by_one_including_the_carry_into_seconds(seconds):
+    sec, nanosec = cdr.stamp_parts(np.array(seconds))
+    assert list(zip(sec.tolist(), nanosec.tolist(), strict=True)) == [stamp_parts(s) for s in seconds]
+
+
+def test_a_processed_bag_holds_exactly_the_messages_built_one_by_one(tmp_path):
+    motion = synthetic_walk(3.0)
+    config = load_sensor_config("six_point")
+    make_bag(motion, config, tmp_path / "in", start=1_700_000_000.123456789)
+    poses = process_bag(tmp_path / "in", tmp_path / "out", "ik", config, motion.skeleton, progress=False)
+    stream = read_tracker_stream(tmp_path / "in", config)
+    assert any(p.contact.any() for p in poses) and any(not p.contact.all() for p in poses)
+    poses[5] = poses[5].held(poses[5].stamp)  # an invalid estimate in the bag too
+    stream.valid[7, 1] = False  # and a frame without its left hand
+    from sparse_body.io.bagio import write_estimate_bag
+
+    write_estimate_bag(tmp_path / "out2", poses, motion.skeleton, "world", trackers=(config, stream))
+    with Reader(tmp_path / "out2") as reader:
+        raw = {}
+        for conn, _, data in reader.messages():
+            raw.setdefault(conn.topic, []).append(bytes(data))
+    shown = tracker_sites(config, stream)
+    for i, pose in enumerate(poses):
+        js = T["sensor_msgs/msg/JointState"](
+            header=_header(pose.stamp, ""),
+            name=joint_state_names(),
+            position=joint_state_positions(pose),
+            velocity=np.zeros(0),
+            effort=np.zeros(0),
+        )
+        assert raw[JOINT_STATES_TOPIC][i] == STORE.serialize_cdr(js, "sensor_msgs/msg/JointState"), i
+        points = contact_points(pose, motion.skeleton)
+        contacts = T["sparse_body/msg/FootContacts"](
+            header=_header(pose.stamp, "world"),
+            contacts=[
+                T["sparse_body/msg/FootContact"](
+                    name=n,
+                    in_contact=bool(pose.contact[k]),
+                    probability=float(pose.contact_probability[k]),
+                    contact_point=T["geometry_msgs/msg/Point"](*map(float, points[k])),
+                )
+                for k, n in enumerate(FOOT_NAMES)
+            ],
+        )
+        assert raw[CONTACTS_TOPIC][i] == STORE.serialize_cdr(contacts, "sparse_body/msg/FootContacts"), i
+        status = T["sparse_body/msg/EstimateStatus"](
+            header=_header(pose.stamp, "world"), valid=bool(pose.valid), message="" if pose.valid else HELD
+        )
+        assert raw[STATUS_TOPIC][i] == STORE.serialize_cdr(status, "sparse_body/msg/EstimateStatus"), i
+        links = axis_link_table(joint_angles(pose.local_quats)[None], motion.skeleton).frame(0)
+        trackers = tracker_table(config, stream, np.array([i]), tuple(np.flatnonzero(shown[i]))).frame(0)
+        transforms = body_transforms(pose, motion.skeleton, "world") + links + trackers
+        assert raw[TF_TOPIC][i] == _tf(pose.stamp, transforms), i
+    assert len(raw[TF_TOPIC]) == len(poses) and b"left_controller" not in raw[TF_TOPIC][7]

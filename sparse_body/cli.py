@@ -6,6 +6,7 @@ Kept at the package's top level as the entry point that users and tests name
 from __future__ import annotations
 
 import argparse
+import os
 import re
 import sys
 from collections import Counter
@@ -322,18 +323,39 @@ def cmd_make_bag(args) -> int:
 
 
 def cmd_process(args) -> int:
-    from .apps.evaluation import parse_estimator_spec
+    from .apps.batch import SUMMARY, Settings, is_bag, process_many
     from .apps.offline import process_bag
     from .core.calibration import person_body
     from .core.sensors import load_sensor_config
+    from .estimators.base import parse_estimator_spec
+    from .io.bagio import BagError
 
     name, options = parse_estimator_spec(args.estimator)
     if args.smooth:
         options["smooth"] = True
-    refused: dict[str, int] = {}
     body = person_body(args.calibration, args.height)
+    guards = TfGuards(clock_window=args.clock_window, play_radius=args.play_radius)
+    inputs = [Path(p) for p in args.bag_in]
+    if len(inputs) > 1 or (inputs[0].is_dir() and not is_bag(inputs[0])):  # many: OUT is a folder
+        global _left_when_stopped
+        _left_when_stopped = (
+            f"the bags finished are kept (see {Path(args.bag_out) / SUMMARY}), the ones being written were "
+            "removed; the same command resumes"
+        )
+        settings = Settings(name, options, load_sensor_config(args.sensors), body, args.fps, guards, args.overwrite)
+        results = process_many(inputs, Path(args.bag_out), settings, args.jobs, progress=not args.quiet)
+        count = Counter(r.status for r in results)
+        failed = [r for r in results if r.status == "failed"]
+        print(
+            f"{args.bag_out}: {len(results)} bags, {count['done']} done, {count['skipped']} skipped "
+            f"(finished before), {len(failed)} failed; each bag in {Path(args.bag_out) / SUMMARY}"
+        )
+        if failed:
+            raise BagError(f"{len(failed)} of {len(results)} bags failed, the first: {failed[0].error}")
+        return 0
+    refused: dict[str, int] = {}
     poses = process_bag(
-        Path(args.bag_in),
+        inputs[0],
         Path(args.bag_out),
         name,
         load_sensor_config(args.sensors),
@@ -342,7 +364,7 @@ def cmd_process(args) -> int:
         progress=not args.quiet,
         overwrite=args.overwrite,
         refused=refused,
-        guards=TfGuards(clock_window=args.clock_window, play_radius=args.play_radius),
+        guards=guards,
         **options,
     )
     invalid = sum(not p.valid for p in poses)
@@ -585,9 +607,23 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--overwrite", action="store_true", help="replace OUT if it exists")
     p.set_defaults(func=cmd_make_bag)
 
-    p = sub.add_parser("process", help="run an estimator over a tracker bag and write an estimate bag")
-    p.add_argument("bag_in")
-    p.add_argument("bag_out")
+    p = sub.add_parser(
+        "process",
+        help="run an estimator over a tracker bag and write an estimate bag; or over many bags into a folder",
+    )
+    p.add_argument(
+        "bag_in",
+        nargs="+",
+        metavar="IN",
+        help="a tracker bag; several, or a folder of them: each is processed into the folder OUT",
+    )
+    p.add_argument("bag_out", metavar="OUT", help="the estimate bag; with several inputs, the folder for them")
+    p.add_argument(
+        "--jobs",
+        type=_between_int(1, 1024),
+        default=len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1),
+        help="worker processes for several bags (default: the cores this process may use)",
+    )
     p.add_argument(
         "--estimator",
         default="ik",
@@ -755,6 +791,10 @@ def _one_line(err: BaseException) -> str:
     return " ".join(str(err).split()) or type(err).__name__
 
 
+# what a stop (Ctrl-C, SIGTERM) leaves: a command that keeps finished parts says so
+_left_when_stopped = "nothing written"
+
+
 def _terminate(signum, frame):
     raise Terminated
 
@@ -773,10 +813,10 @@ def main(argv: list[str] | None = None) -> None:
         command = f"sparse-body {args.command}"
         sys.exit(args.func(args))
     except Terminated:
-        print(f"{command}: terminated; nothing written", file=sys.stderr)
+        print(f"{command}: terminated; {_left_when_stopped}", file=sys.stderr)
         sys.exit(EXIT_TERMINATED)
     except KeyboardInterrupt:  # partial output was removed on the way out
-        print(f"{command}: interrupted; nothing written", file=sys.stderr)
+        print(f"{command}: interrupted; {_left_when_stopped}", file=sys.stderr)
         sys.exit(EXIT_INTERRUPTED)
     except (ValueError, OSError, EOFError, YAMLError, MemoryError, RecursionError) as err:
         # ValueError includes MotionFileError, BagError, OutputError, SensorConfigError, CalibrationError

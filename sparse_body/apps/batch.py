@@ -1,0 +1,216 @@
+"""Many recordings at once: `sparse-body process IN... OUT_FOLDER --jobs N`.
+
+Each input bag becomes OUT_FOLDER/<its name>, written as one bag is (process_bag: under a
+temporary name, moved into place when complete), by one of N worker processes. A bag that
+fails is reported with its error and the others go on; a bag whose output is already there
+(a complete bag of ours: nothing else is ever left under that name) is skipped, so a run
+that was stopped resumes where it was. Every run writes a summary (each bag: frames,
+invalid estimates, refused samples, seconds, error) beside the outputs."""
+
+from __future__ import annotations
+
+import json
+import multiprocessing
+import os
+import signal
+import time
+from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+
+from ..core.sensors import SensorConfig
+from ..core.skeleton import Skeleton
+from ..io.bagio import BagError, OutputError, written_by_us
+from ..io.tf_guards import TfGuards
+
+SUMMARY = "sparse_body_summary.json"  # beside the outputs; replaced only when it is ours
+SUMMARY_KEY = "sparse_body.process"
+
+
+@dataclass(frozen=True)
+class Settings:
+    """What every bag of a run is processed with (sent to each worker)."""
+
+    estimator: str
+    options: dict
+    sensors: SensorConfig
+    skeleton: Skeleton
+    fps: float
+    guards: TfGuards
+    overwrite: bool = False
+
+
+@dataclass
+class BagResult:
+    """One line of the summary."""
+
+    input: str
+    output: str
+    status: str  # done, skipped (finished before), failed
+    frames: int = 0
+    invalid: int = 0
+    refused: dict[str, int] = field(default_factory=dict)
+    seconds: float = 0.0
+    error: str = ""
+
+
+def is_bag(path: Path) -> bool:
+    """A rosbag2 directory (metadata.yaml in it) or a single MCAP file."""
+    return (path.is_dir() and (path / "metadata.yaml").is_file()) or (path.is_file() and path.suffix == ".mcap")
+
+
+def expand_inputs(given: list[Path]) -> list[Path]:
+    """The bags named, with a folder that is not a bag standing for the bags directly in it."""
+    bags: list[Path] = []
+    for path in given:
+        if not path.exists():
+            raise BagError(f"{path}: no such bag or folder")
+        if is_bag(path) or not path.is_dir():
+            bags.append(path)
+            continue
+        found = sorted(p for p in path.iterdir() if is_bag(p) and not p.name.startswith("."))
+        if not found:
+            raise BagError(f"{path}: a folder with no bags in it")
+        bags.extend(found)
+    names = [bag.name.removesuffix(".mcap") for bag in bags]
+    twice = sorted({n for n in names if names.count(n) > 1})
+    if twice:
+        raise BagError(f"two inputs would have the same output name: {', '.join(twice)} (rename one, or run twice)")
+    return bags
+
+
+def output_for(bag: Path, out_dir: Path) -> Path:
+    return out_dir / bag.name.removesuffix(".mcap")
+
+
+class _Stopped(Exception):
+    """SIGTERM from the parent (Ctrl-C or SIGTERM to the run): the bag being written is removed
+    on the way out (bagio.bag_writer), then the worker ends."""
+
+
+_writing = False  # in a worker: a bag is being processed
+
+
+def _stop(signum, frame):
+    if _writing:
+        raise _Stopped
+    os._exit(143)  # between bags: nothing to clean up
+
+
+def _process_one(bag: Path, out: Path, settings: Settings) -> BagResult:
+    """A worker's task: one bag, every error caught and reported as its result."""
+    from .offline import process_bag
+
+    global _writing
+    start = time.perf_counter()
+    result = BagResult(str(bag), str(out), "done")
+    refused: dict[str, int] = {}
+    try:
+        _writing = True
+        poses = process_bag(
+            bag,
+            out,
+            settings.estimator,
+            settings.sensors,
+            settings.skeleton,
+            settings.fps,
+            progress=False,
+            overwrite=settings.overwrite,
+            refused=refused,
+            guards=settings.guards,
+            **settings.options,
+        )
+        result.frames, result.invalid = len(poses), sum(not p.valid for p in poses)
+    except (ValueError, OSError, EOFError, MemoryError, RecursionError) as err:
+        result.status, result.error = "failed", " ".join(str(err).split()) or type(err).__name__
+    except _Stopped:
+        os._exit(143)  # the half-written bag is gone; the pool would hand this worker another
+    finally:
+        _writing = False
+    result.refused, result.seconds = refused, round(time.perf_counter() - start, 3)
+    return result
+
+
+def _worker_init() -> None:
+    # the parent says when to stop: the terminal's SIGINT reaches every worker too, and the
+    # pool takes a worker that raised for one that may start the next bag
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    signal.signal(signal.SIGTERM, _stop)
+
+
+def process_many(
+    inputs: list[Path], out_dir: Path, settings: Settings, jobs: int, progress: bool = True
+) -> list[BagResult]:
+    """Process every input bag into out_dir with `jobs` worker processes; returns one result a
+    bag, in input order, and writes them to out_dir / SUMMARY."""
+    bags = expand_inputs(inputs)
+    out_dir.mkdir(exist_ok=True)
+    summary = out_dir / SUMMARY
+    _check_summary(summary)
+    results: dict[int, BagResult] = {}
+    todo = []
+    for i, bag in enumerate(bags):
+        out = output_for(bag, out_dir)
+        if written_by_us(out) and not settings.overwrite:
+            results[i] = BagResult(str(bag), str(out), "skipped", error="finished before (--overwrite redoes it)")
+        else:
+            todo.append(i)
+    bar = None
+    if progress:
+        from tqdm import tqdm
+
+        bar = tqdm(total=len(bags), initial=len(results), desc=f"{settings.estimator} bags", unit="bag")
+    # fork: a worker starts with the modules loaded (spawn would import them again)
+    context = multiprocessing.get_context("fork" if os.name == "posix" else "spawn")
+    with ProcessPoolExecutor(
+        max_workers=max(1, min(jobs, len(todo) or 1)), mp_context=context, initializer=_worker_init
+    ) as pool:
+        pending: dict[Future, int] = {
+            pool.submit(_process_one, bags[i], output_for(bags[i], out_dir), settings): i for i in todo
+        }
+        try:
+            while pending:
+                done, _ = wait(pending, return_when=FIRST_COMPLETED)
+                for future in done:
+                    i = pending.pop(future)
+                    results[i] = future.result()
+                    if bar is not None:
+                        bar.update(1)
+                        bar.set_postfix(frames=sum(r.frames for r in results.values()))
+                    _write_summary(summary, bags, results)
+        except BaseException:
+            for future in pending:
+                future.cancel()
+            for process in list(getattr(pool, "_processes", {}).values()):
+                process.terminate()  # SIGTERM: each removes its half-written bag (bagio.bag_writer)
+            raise
+        finally:
+            if bar is not None:
+                bar.close()  # before the command's last line
+    ordered = [results[i] for i in range(len(bags))]
+    _write_summary(summary, bags, results)
+    return ordered
+
+
+def _check_summary(path: Path) -> None:
+    if path.is_symlink() or (path.exists() and not _is_our_summary(path)):
+        raise OutputError(f"{path}: exists and is not a summary sparse_body wrote; it is never replaced")
+
+
+def _is_our_summary(path: Path) -> bool:
+    try:
+        return path.is_file() and path.stat().st_size < 64 << 20 and SUMMARY_KEY in json.loads(path.read_text())
+    except (OSError, ValueError):
+        return False
+
+
+def _write_summary(path: Path, bags: list[Path], results: dict[int, BagResult]) -> None:
+    """The run so far, replaced as a whole (a reader never sees half a file)."""
+    body = {
+        SUMMARY_KEY: "one entry per input bag of the last run: done, skipped (finished before) or failed",
+        "bags": [asdict(results[i]) for i in sorted(results)],
+        "pending": [str(bags[i]) for i in range(len(bags)) if i not in results],
+    }
+    tmp = path.with_name(f".{path.name}.{os.getpid()}")
+    tmp.write_text(json.dumps(body, indent=1) + "\n")
+    os.replace(tmp, path)

@@ -1,0 +1,127 @@
+"""Many recordings at once (issue 29): `sparse-body process IN... OUT --jobs N`."""
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+
+import pytest
+from rosbags.rosbag2 import Reader
+
+from sparse_body.apps.batch import SUMMARY
+from sparse_body.apps.offline import make_bag, process_bag
+from sparse_body.cli import EXIT_INPUT, EXIT_INTERRUPTED, main
+from sparse_body.core.sensors import load_sensor_config
+from sparse_body.data.synthetic import synthetic_walk
+from sparse_body.io.bagio import written_by_us
+
+
+def _messages(bag):
+    with Reader(bag) as reader:
+        return [(c.topic, t, bytes(d)) for c, t, d in reader.messages()]
+
+
+def _hidden(folder):
+    return [p for p in folder.rglob("*") if p.name.startswith(".")]
+
+
+def _bags(folder, seconds, count):
+    folder.mkdir()
+    config = load_sensor_config("six_point")
+    for k in range(count):
+        make_bag(synthetic_walk(seconds + 0.5 * k), config, folder / f"walk{k}")
+    return config
+
+
+def test_a_folder_of_bags_is_processed_by_workers_as_one_by_one_and_a_bad_bag_stops_nothing(tmp_path, capsys):
+    config = _bags(tmp_path / "bags", 2.0, 3)
+    (tmp_path / "bags" / "broken").mkdir()
+    (tmp_path / "bags" / "broken" / "metadata.yaml").write_text("rosbag2_bagfile_information: {}\n")
+    out = tmp_path / "out"
+    with pytest.raises(SystemExit) as ended:
+        main(["process", str(tmp_path / "bags"), str(out), "--jobs", "2", "--quiet"])
+    err = capsys.readouterr().err
+    assert ended.value.code == EXIT_INPUT and len(err.strip().splitlines()) == 1 and "broken" in err, err
+    summary = json.loads((out / SUMMARY).read_text())
+    status = {os.path.basename(b["input"]): b for b in summary["bags"]}
+    assert {k: b["status"] for k, b in status.items()} == {
+        "broken": "failed",
+        "walk0": "done",
+        "walk1": "done",
+        "walk2": "done",
+    }
+    assert "cannot be read" in status["broken"]["error"] and status["walk1"]["frames"] == 150
+    assert not (out / "broken").exists() and not _hidden(out)  # every file under its final name
+    for k in range(3):  # what a worker wrote is what one process writes
+        process_bag(tmp_path / "bags" / f"walk{k}", tmp_path / f"one{k}", "ik", config, _skeleton(), progress=False)
+        assert _messages(out / f"walk{k}") == _messages(tmp_path / f"one{k}")
+        assert sorted(p.name for p in (out / f"walk{k}").iterdir()) == ["metadata.yaml", f"walk{k}.mcap"]
+    # run again: the finished bags are skipped, untouched; the broken one is tried again
+    written = {p: p.stat().st_mtime_ns for p in out.rglob("*.mcap")}
+    with pytest.raises(SystemExit):
+        main(["process", str(tmp_path / "bags"), str(out), "--jobs", "2", "--quiet"])
+    again = {os.path.basename(b["input"]): b["status"] for b in json.loads((out / SUMMARY).read_text())["bags"]}
+    assert again == {"broken": "failed", "walk0": "skipped", "walk1": "skipped", "walk2": "skipped"}
+    assert {p: p.stat().st_mtime_ns for p in out.rglob("*.mcap")} == written
+
+
+def _skeleton():
+    from sparse_body.core.calibration import person_body
+
+    return person_body(None, 1.75)  # the command's body without --height or --calibration
+
+
+def test_a_summary_or_output_of_the_users_is_never_replaced(tmp_path, capsys):
+    _bags(tmp_path / "bags", 1.0, 2)
+    out = tmp_path / "out"
+    out.mkdir()
+    (out / SUMMARY).write_text("my notes")
+    with pytest.raises(SystemExit) as ended:
+        main(["process", str(tmp_path / "bags"), str(out), "--quiet"])
+    assert ended.value.code != 0 and "never replaced" in capsys.readouterr().err
+    assert (out / SUMMARY).read_text() == "my notes" and sorted(p.name for p in out.iterdir()) == [SUMMARY]
+    (out / SUMMARY).unlink()
+    (out / "walk1").mkdir()
+    (out / "walk1" / "mine.txt").write_text("mine")
+    with pytest.raises(SystemExit) as ended:
+        main(["process", str(tmp_path / "bags"), str(out), "--quiet", "--overwrite"])
+    statuses = {os.path.basename(b["input"]): b["status"] for b in json.loads((out / SUMMARY).read_text())["bags"]}
+    assert statuses == {"walk0": "done", "walk1": "failed"} and (out / "walk1" / "mine.txt").read_text() == "mine"
+
+
+def test_ctrl_c_keeps_the_finished_bags_and_removes_the_ones_being_written(tmp_path):
+    _bags(tmp_path / "bags", 20.0, 4)
+    out = tmp_path / "out"
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "sparse_body.cli", "process", str(tmp_path / "bags"), str(out), "--jobs", "2"],
+        stderr=subprocess.PIPE,
+        stdout=subprocess.DEVNULL,
+        text=True,
+        start_new_session=True,  # a terminal's Ctrl-C goes to the whole group: the workers too
+        preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL),
+    )
+    try:
+        deadline, pending = time.monotonic() + 600, None
+        while time.monotonic() < deadline and proc.poll() is None:  # a busy machine works slowly
+            try:
+                summary = json.loads((out / SUMMARY).read_text())
+            except (OSError, ValueError):
+                summary = None
+            if summary and summary["bags"]:
+                pending = summary["pending"]
+                break
+            time.sleep(0.05)
+        assert pending, "every bag finished before the interrupt: nothing to test"
+        os.killpg(proc.pid, signal.SIGINT)
+        _, err = proc.communicate(timeout=300)
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+    assert proc.returncode == EXIT_INTERRUPTED, err
+    assert "Traceback" not in err and "bags finished are kept" in err.strip().splitlines()[-1], err
+    assert not _hidden(out), _hidden(out)  # nothing half-written, under any name
+    done = [os.path.basename(b["output"]) for b in json.loads((out / SUMMARY).read_text())["bags"]]
+    assert sorted(p.name for p in out.iterdir() if p.is_dir()) == sorted(done)
+    assert all(written_by_us(out / name) and _messages(out / name) for name in done)

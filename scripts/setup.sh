@@ -100,6 +100,17 @@ for path in glob.glob(f"{venv}/share/*/cmake/*.cmake"):
 PY
 if [ "$PROFILE" = dev ]; then
   install_requirements deps-dev "$ROOT/requirements-train.txt" "$ROOT/requirements-test.txt"
+  # The viewer's browser test drives Debian's chromium (playwright's own browsers come from a
+  # CDN a CI machine may not reach). Installed where this runs as root with apt; elsewhere the
+  # test skips and says so.
+  if ! command -v chromium >/dev/null && command -v apt-get >/dev/null && [ "$(id -u)" = 0 ]; then
+    say "installing Debian's chromium for the viewer's browser test (apt-get)"
+    mkdir -p "$STAMPS"
+    { DEBIAN_FRONTEND=noninteractive apt-get install -y -q chromium \
+      || { apt-get update -q && DEBIAN_FRONTEND=noninteractive apt-get install -y -q chromium; }; } \
+      > "$STAMPS/chromium.log" 2>&1 \
+      || say "chromium could not be installed (see $STAMPS/chromium.log); the browser test will skip"
+  fi
 fi
 
 msg_hash=$(inputs_hash "$ROOT/CMakeLists.txt" "$ROOT/package.xml" "$ROOT"/msg/*.msg "$ROOT"/srv/*.srv "$STAMPS/deps")

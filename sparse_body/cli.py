@@ -393,6 +393,27 @@ def cmd_demo(args) -> int:
     return 0
 
 
+def cmd_view(args) -> int:
+    from .apps.batch import is_bag
+    from .apps.viewer import bag_bodies, write_body_page
+
+    source = Path(args.source) if args.source else None
+    if source is not None and is_bag(source):
+        positions, trackers, fps = bag_bodies(source)
+        parts = {"estimate": positions, "trackers": trackers}
+        name = source.name
+    else:
+        if source is not None:
+            args.motion = str(source)
+        elif not args.clip:
+            raise ValueError("view needs something to show: an estimate bag, a motion file or --clip ID")
+        motion = _motion(args)
+        parts, fps, name = {"truth": motion.positions}, motion.fps, motion.name
+    page = write_body_page(Path(args.output or f"{name}.html"), fps, title=name, **parts)
+    print(f"written {page}: open it in a browser (no network needed)")
+    return 0
+
+
 def cmd_bench(args) -> int:
     from .apps.bench import bench_dragposer, bench_network, run, run_goals
 
@@ -659,6 +680,14 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.add_argument("--overwrite", action="store_true", help="replace BAG_OUT if it exists")
     p.set_defaults(func=cmd_process)
+
+    p = sub.add_parser("view", help="an HTML page that plays a body in 3D: an estimate bag, a motion file or a clip")
+    p.add_argument("source", nargs="?", help="an estimate bag (what process wrote) or a motion file")
+    p.add_argument("--clip", help="a CMU clip ID instead (the motion capture folder: --mocap)")
+    p.add_argument("--mocap", help="the CMU folder")
+    p.add_argument("--output", "-o", help="the page (default: NAME.html here)")
+    p.add_argument("--fps", type=_fps, default=60.0, help="a motion file's frame rate where it has none")
+    p.set_defaults(func=cmd_view, motion=None, seconds=0.0)
 
     p = sub.add_parser("bench", help="step times and end-to-end latency over DDS, beside their goals")
     p.add_argument(

@@ -4,6 +4,7 @@ of it on /tf, and the trackers, so Foxglove's 3D panel or RViz shows the body as
 import xml.etree.ElementTree as ET
 
 import numpy as np
+import pytest
 from rosbags.interfaces import QosDurability
 from rosbags.rosbag2 import Reader
 
@@ -81,3 +82,67 @@ def test_a_processed_bag_holds_the_urdf_its_links_on_tf_and_the_trackers(tmp_pat
             want_rot = rot @ _axis_rotation(axis, angle[name])
             np.testing.assert_allclose(poses[child][0], want_rot, atol=1e-6, err_msg=name)
             np.testing.assert_allclose(poses[child][1], pos + rot @ xyz, atol=1e-6, err_msg=name)
+
+
+def test_the_page_of_an_estimate_bag_shows_the_body_and_plays_in_a_real_browser(tmp_path):
+    import shutil
+
+    pytest.importorskip("plotly")
+    playwright = pytest.importorskip(
+        "playwright.sync_api", reason="playwright (requirements-test.txt) is not installed"
+    )
+    chromium = shutil.which("chromium") or shutil.which("chromium-browser")
+    if chromium is None:
+        pytest.skip("no chromium here (Debian's package chromium; `make setup-dev` installs it where it can)")
+    from PIL import Image
+
+    from sparse_body.apps.viewer import bag_bodies, write_body_page
+    from sparse_body.core.kinematics import forward_kinematics
+
+    motion = synthetic_walk(3.0)
+    config = load_sensor_config("six_point")
+    make_bag(motion, config, tmp_path / "in")
+    poses = process_bag(tmp_path / "in", tmp_path / "out", "ik", config, motion.skeleton, progress=False)
+    positions, trackers, fps = bag_bodies(tmp_path / "out")
+    _, want = forward_kinematics(
+        quat_to_matrix(np.array([p.local_quats for p in poses])),
+        np.array([p.root_position for p in poses]),
+        motion.skeleton.offsets,
+    )
+    np.testing.assert_allclose(positions, want, atol=1e-9)  # the bag's body is the estimate
+    assert fps == 60.0 and trackers.shape == (len(poses), len(config.sites), 3)
+    page = write_body_page(tmp_path / "body.html", fps, estimate=positions, trackers=trackers, title="walk")
+    assert '<script src="http' not in page.read_text()  # plotly.js is inside: no network needed
+
+    blue = np.array([0x1F, 0x5F, 0xBF])
+
+    def body_pixels(png) -> np.ndarray:
+        image = np.asarray(Image.open(png).convert("RGB"), dtype=int)
+        return np.all(np.abs(image - blue) < 40, axis=-1)  # the estimate's bones and joints
+
+    with playwright.sync_playwright() as p:
+        browser = p.chromium.launch(
+            executable_path=chromium, args=["--no-sandbox", "--enable-unsafe-swiftshader", "--use-angle=swiftshader"]
+        )
+        try:
+            view = browser.new_page(viewport={"width": 900, "height": 700})
+            view.set_default_timeout(300_000)  # software WebGL on a busy machine: every step is slow
+            view.route(
+                "**/*", lambda route: route.continue_() if route.request.url.startswith("file:") else route.abort()
+            )
+            view.goto(page.as_uri())
+            view.wait_for_selector("text=t = 0.00 s")
+            view.wait_for_timeout(1000)
+            view.screenshot(path=tmp_path / "start.png")
+            view.get_by_text("play", exact=True).click()
+            view.wait_for_function(  # the slider has moved on: the animation plays
+                "() => ![...document.querySelectorAll('text')].some(t => t.textContent === 't = 0.00 s')"
+            )
+            view.get_by_text("pause", exact=True).click()
+            view.wait_for_timeout(1000)
+            view.screenshot(path=tmp_path / "played.png")
+        finally:
+            browser.close()
+    start, played = body_pixels(tmp_path / "start.png"), body_pixels(tmp_path / "played.png")
+    assert start.sum() > 100, "no body drawn"
+    assert played.sum() > 100 and (start != played).sum() > 50, "the body did not move when played"

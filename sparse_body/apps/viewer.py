@@ -1,0 +1,268 @@
+"""`sparse-body view`: a self-contained HTML page that plays a body in 3D: an estimate bag
+(what `process` wrote), a motion file or clip (the truth), or both from `demo`.
+
+plotly draws it: its offline HTML carries plotly.js inside the page (no network to open it),
+its 3D scenes orbit and zoom with the mouse, and its animation frames, play button and
+slider give play, pause and scrub with nothing written by hand but a few lines of script
+(`#play` in the address starts it playing, which the browser test uses). three.js would draw
+faster but needs a JavaScript build; matplotlib's GIF (demo) cannot be turned or scrubbed.
+
+The page: the estimate in blue (joints coloured by their error in cm where the truth is
+known), the truth in grey, trackers in red, a floor grid, the camera fixed on the whole
+motion so the body walks through it, at the recording's real speed (at most 30 frames a
+second drawn: every second frame of a 60 Hz recording, each shown twice as long)."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+
+from ..core.skeleton import JOINT_NAMES, NUM_JOINTS, PARENTS
+
+MAX_FPS = 30.0  # frames drawn a second: WebGL redraws 3D scenes whole
+MAX_FRAMES = 9000  # five minutes at 30 frames a second; longer recordings are drawn sparser
+ERROR_RANGE_CM = 20.0  # the colour scale's top: an error this large is fully red
+BONES = [(PARENTS[j], j) for j in range(1, NUM_JOINTS)]
+
+
+class ViewError(ValueError):
+    """Nothing to show: the input holds no body, or no frames."""
+
+
+def _lines(positions: np.ndarray) -> np.ndarray:
+    """(frames, 3 * bones, 3): each bone's two ends and a gap (NaN), as one plotly line trace."""
+    ends = np.full((len(positions), len(BONES), 3, 3), np.nan)
+    ends[:, :, 0] = positions[:, [p for p, _ in BONES]]
+    ends[:, :, 1] = positions[:, [c for _, c in BONES]]
+    return ends.reshape(len(positions), -1, 3)
+
+
+def _round(a: np.ndarray) -> list:
+    """Millimetres are enough on screen, and keep the page small; NaN becomes null (a gap)."""
+    out = np.round(a, 3).astype(object)
+    out[~np.isfinite(a)] = None
+    return out.tolist()
+
+
+def body_page(
+    fps: float,
+    estimate: np.ndarray | None = None,
+    truth: np.ndarray | None = None,
+    trackers: np.ndarray | None = None,
+    title: str = "sparse_body",
+    floor: float | None = None,
+) -> str:
+    """The page's HTML. estimate, truth: (frames, 22, 3) joint positions; trackers: (frames,
+    k, 3), NaN where a tracker has no sample; all in metres, z up."""
+    import plotly.graph_objects as go
+
+    shown = [a for a in (estimate, truth) if a is not None]
+    if not shown or not len(shown[0]):
+        raise ViewError("nothing to show: no body in the input")
+    frames = len(shown[0])
+    if not fps > 0:
+        raise ViewError(f"a frame rate must be positive, got {fps}")
+    step = max(int(np.ceil(fps / MAX_FPS - 1e-6)), int(np.ceil(frames / MAX_FRAMES)))
+    picks = np.arange(0, frames, step)
+    every = np.concatenate([a.reshape(-1, 3) for a in shown + ([trackers] if trackers is not None else [])])
+    every = every[np.all(np.isfinite(every), axis=1)]
+    if not len(every):
+        raise ViewError("nothing to show: every position is missing or not finite")
+    low, high = every.min(0), every.max(0)
+    floor = float(low[2]) if floor is None else floor
+    error = None
+    if estimate is not None and truth is not None:
+        error = 100 * np.linalg.norm(estimate - truth, axis=-1)
+
+    def points(xyz: np.ndarray, **style):
+        return go.Scatter3d(x=_round(xyz[:, 0]), y=_round(xyz[:, 1]), z=_round(xyz[:, 2]), **style)
+
+    def traces(i: int) -> list:
+        out = []
+        if truth is not None:
+            out.append(
+                points(_lines(truth[i : i + 1])[0], mode="lines", line={"color": "#999999", "width": 6}, name="truth")
+            )
+        if estimate is not None:
+            out.append(
+                points(
+                    _lines(estimate[i : i + 1])[0], mode="lines", line={"color": "#1f5fbf", "width": 6}, name="estimate"
+                )
+            )
+            marker = {"size": 4, "color": "#1f5fbf"}
+            if error is not None:
+                marker = {
+                    "size": 5,
+                    "color": _round(error[i]),
+                    "cmin": 0.0,
+                    "cmax": ERROR_RANGE_CM,
+                    "colorscale": [[0, "#1f5fbf"], [0.25, "#2ca02c"], [0.6, "#ff9f1c"], [1, "#d62728"]],
+                    "colorbar": {"title": {"text": "error cm"}, "len": 0.5},
+                }
+            name = "joints" + (" (error)" if error is not None else "")
+            out.append(points(estimate[i], mode="markers", marker=marker, text=list(JOINT_NAMES), name=name))
+        if trackers is not None:
+            marker = {"size": 6, "color": "#d62728", "symbol": "diamond"}
+            out.append(points(trackers[i], mode="markers", marker=marker, name="trackers"))
+        return out
+
+    margin = 0.3
+    x = np.linspace(low[0] - margin, high[0] + margin, 9)
+    y = np.linspace(low[1] - margin, high[1] + margin, 9)
+    grid_x, grid_y = np.meshgrid(x, y)
+    floor_trace = go.Surface(
+        x=grid_x,
+        y=grid_y,
+        z=np.full_like(grid_x, floor),
+        showscale=False,
+        opacity=0.6,
+        colorscale=[[0, "#cfcfcf"], [1, "#cfcfcf"]],
+        contours={"x": {"show": True, "color": "#888888"}, "y": {"show": True, "color": "#888888"}},
+        hoverinfo="skip",
+        name="floor",
+    )
+    duration = 1000.0 * step / fps  # ms a drawn frame stays: the recording's own speed
+    first = traces(0)
+    moving = list(range(1, 1 + len(first)))  # every trace but the floor
+    figure = go.Figure(
+        data=[floor_trace, *first], frames=[go.Frame(data=traces(i), traces=moving, name=str(i)) for i in picks]
+    )
+    span = high - low + 2 * margin
+    ranges = [[float(low[k] - margin), float(high[k] + margin)] for k in range(2)]
+    ranges.append([floor, float(max(high[2], floor + 0.5) + margin)])
+    figure.update_layout(
+        title={
+            "text": f"{title}: {frames / fps:.1f} s at {fps:g} Hz"
+            + (f", one frame in {step} drawn" if step > 1 else "")
+        },
+        scene={
+            "xaxis": {"range": ranges[0], "title": "x (m)"},
+            "yaxis": {"range": ranges[1], "title": "y (m)"},
+            "zaxis": {"range": ranges[2], "title": "z (m)"},
+            "aspectmode": "manual",
+            "aspectratio": {
+                k: float(v / max(span)) for k, v in zip("xyz", [*span[:2], ranges[2][1] - floor], strict=True)
+            },
+            "camera": {"eye": {"x": 0.9, "y": -1.2, "z": 0.6}},
+        },
+        legend={"x": 0.0, "y": 1.0},
+        margin={"l": 0, "r": 0, "t": 40, "b": 0},
+        updatemenus=[
+            {
+                "type": "buttons",
+                "direction": "left",
+                "x": 0.05,
+                "y": 0.02,
+                "xanchor": "left",
+                "buttons": [
+                    {
+                        "label": "play",
+                        "method": "animate",
+                        "args": [
+                            None,
+                            {
+                                "frame": {"duration": duration, "redraw": True},
+                                "transition": {"duration": 0},
+                                "fromcurrent": True,
+                            },
+                        ],
+                    },
+                    {
+                        "label": "pause",
+                        "method": "animate",
+                        "args": [[None], {"frame": {"duration": 0, "redraw": False}, "mode": "immediate"}],
+                    },
+                ],
+            }
+        ],
+        sliders=[
+            {
+                "x": 0.2,
+                "len": 0.78,
+                "y": 0.02,
+                "currentvalue": {"prefix": "t = ", "suffix": " s"},
+                "steps": [
+                    {
+                        "label": f"{i / fps:.2f}",
+                        "method": "animate",
+                        "args": [[str(i)], {"frame": {"duration": 0, "redraw": True}, "mode": "immediate"}],
+                    }
+                    for i in picks
+                ],
+            }
+        ],
+    )
+    play = json.dumps({"frame": {"duration": duration, "redraw": True}, "transition": {"duration": 0}})
+    # `#play` in the address plays on load (the browser test, a link to share)
+    script = f"if (window.location.hash === '#play') {{ Plotly.animate('{{plot_id}}', null, {play}); }}"
+    return figure.to_html(include_plotlyjs=True, full_html=True, post_script=script, auto_play=False)
+
+
+def write_body_page(path: Path, fps: float, **parts) -> Path:
+    """body_page written to path (a new file, or one this command wrote: an HTML page)."""
+    path = Path(path)
+    html = body_page(fps, **parts)
+    if path.exists() and (
+        path.is_dir() or path.suffix != ".html" or "plotly" not in path.read_text(errors="replace")[:200_000]
+    ):
+        raise ViewError(f"{path}: exists and is not a page this command wrote; choose another name")
+    tmp = path.with_name(f".{path.name}.partial")
+    tmp.write_text(html)
+    tmp.replace(path)
+    return path
+
+
+def bag_bodies(bag: Path) -> tuple[np.ndarray, np.ndarray | None, float]:
+    """(joint positions (frames, 22, 3), trackers (frames, k, 3) or None, frame rate) of an
+    estimate bag: the body from its /tf links (fixed frame -> pelvis -> ...), the trackers
+    the other frames directly under the fixed frame."""
+    from ..core.kinematics import forward_kinematics
+    from ..core.rotations import quat_to_matrix
+    from ..io.bagio import TF_TOPIC, read_topic
+
+    try:
+        messages = read_topic(bag, TF_TOPIC)
+    except Exception as err:  # noqa: BLE001 - rosbags raises many kinds for a broken file
+        raise ViewError(f"{bag}: cannot be read as a rosbag2 ({err})") from None
+    names = {name: j for j, name in enumerate(JOINT_NAMES)}
+    stamps, quats, roots, offsets, tracker_rows, tracker_names = [], [], [], None, [], []
+    for msg in messages:
+        by_child = {t.child_frame_id: t for t in msg.transforms}
+        if not all(n in by_child for n in JOINT_NAMES):
+            continue  # not a body message (or a body of another prefix)
+        fixed = by_child[JOINT_NAMES[0]].header.frame_id
+        q = np.empty((NUM_JOINTS, 4))
+        off = np.empty((NUM_JOINTS, 3))
+        for name, j in names.items():
+            t = by_child[name].transform
+            q[j] = (t.rotation.x, t.rotation.y, t.rotation.z, t.rotation.w)
+            off[j] = (t.translation.x, t.translation.y, t.translation.z)
+        stamp = by_child[JOINT_NAMES[0]].header.stamp
+        stamps.append(stamp.sec + 1e-9 * stamp.nanosec)
+        quats.append(q)
+        roots.append(off[0].copy())
+        offsets = off if offsets is None else offsets
+        row = {}
+        for child, t in by_child.items():
+            if t.header.frame_id == fixed and child != JOINT_NAMES[0]:
+                row[child] = (t.transform.translation.x, t.transform.translation.y, t.transform.translation.z)
+                if child not in tracker_names:
+                    tracker_names.append(child)
+        tracker_rows.append(row)
+    if not quats or offsets is None:
+        raise ViewError(f"{bag}: no body on /tf (a bag `sparse-body process` wrote has one)")
+    offsets[0] = 0.0
+    _, positions = forward_kinematics(quat_to_matrix(np.array(quats)), np.array(roots), offsets)
+    trackers = None
+    if tracker_names:
+        trackers = np.full((len(quats), len(tracker_names), 3), np.nan)
+        for i, row in enumerate(tracker_rows):
+            for k, name in enumerate(tracker_names):
+                if name in row:
+                    trackers[i, k] = row[name]
+    gaps = np.diff(stamps)
+    gaps = gaps[gaps > 0]
+    fps = round(float(1.0 / np.median(gaps)), 3) if len(gaps) else 60.0  # stamps are rounded to ns
+    return positions, trackers, fps

@@ -75,6 +75,13 @@ def _skeleton():
 
 def test_a_summary_or_output_of_the_users_is_never_replaced(tmp_path, capsys):
     _bags(tmp_path / "bags", 1.0, 2)
+    for inside in (tmp_path / "bags", tmp_path / "bags" / "walk0" / "out"):  # among or inside the inputs
+        with pytest.raises(SystemExit) as ended:
+            main(["process", str(tmp_path / "bags"), str(inside), "--quiet"])
+        assert ended.value.code != 0 and "is (or is inside) the input" in capsys.readouterr().err
+    assert sorted(p.name for p in (tmp_path / "bags").rglob("*")) == sorted(
+        ["walk0", "walk1", "metadata.yaml", "metadata.yaml", "walk0.mcap", "walk1.mcap"]
+    )
     out = tmp_path / "out"
     out.mkdir()
     (out / SUMMARY).write_text("my notes")

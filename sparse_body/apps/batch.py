@@ -144,6 +144,10 @@ def process_many(
     """Process every input bag into out_dir with `jobs` worker processes; returns one result a
     bag, in input order, and writes them to out_dir / SUMMARY."""
     bags = expand_inputs(inputs)
+    target = out_dir.resolve()
+    for given in inputs:  # the outputs would land among (or inside) the inputs
+        if target == given.resolve() or given.resolve() in target.parents:
+            raise OutputError(f"{out_dir}: is (or is inside) the input {given}; choose another output folder")
     out_dir.mkdir(exist_ok=True)
     summary = out_dir / SUMMARY
     _check_summary(summary)

@@ -9,6 +9,7 @@ import sys
 import time
 from pathlib import Path
 
+import numpy as np
 import yaml
 
 
@@ -52,6 +53,7 @@ class Listener:
         self.node = rclpy.create_node("test_listener")
         self.received = {t: [] for t in topics}
         self.arrival = {t: [] for t in topics}
+        self.arrival_wall = {t: [] for t in topics}  # time.time(): latency against header stamps
         for topic, msg_type in topics.items():
             self.node.create_subscription(msg_type, topic, self._keep(topic), (qos or {}).get(topic, 50))
 
@@ -59,6 +61,7 @@ class Listener:
         def callback(msg):
             self.received[topic].append(msg)
             self.arrival[topic].append(time.monotonic())
+            self.arrival_wall[topic].append(time.time())
 
         return callback
 
@@ -105,12 +108,16 @@ STARTUP_LIMIT = 300.0
 PLAYBACK_LIMIT = 600.0
 
 
-def replay_bag(rclpy, ros_env, tmp_path: Path, motion, config, estimator_params: dict, until_valid: int = 0):
+def replay_bag(
+    rclpy, ros_env, tmp_path: Path, motion, config, estimator_params: dict, until_valid: int = 0, watch_tf: bool = True
+):
     """A tracker bag of `motion` played by the real tracker bridge into the real estimator
     node (default parameters but those given); returns the Listener after the whole bag has
     played (deadlines generous enough for a starved CPU). until_valid=N: the bridge loops the
     bag until N valid estimates have arrived instead, for a test that needs N whatever
-    rate a starved machine leaves the estimator."""
+    rate a starved machine leaves the estimator. watch_tf=False: the listener leaves /tf
+    alone (decoding the node's link TF in Python starves a listener measuring latency), and
+    playback is told by the stamps of the estimates made from tracker input."""
     from rclpy.qos import DurabilityPolicy, QoSProfile
     from sensor_msgs.msg import JointState
     from std_msgs.msg import String
@@ -134,11 +141,10 @@ def replay_bag(rclpy, ros_env, tmp_path: Path, motion, config, estimator_params:
         rclpy,
         {
             "joint_states": JointState,
-            "foot_contacts": FootContacts,
-            "/tf": TFMessage,
             "estimate_status": EstimateStatus,
             "robot_description": String,
-            "/diagnostics": DiagnosticArray,
+            # all but what latency needs: a listener busy decoding is late in taking JointState
+            **({"/tf": TFMessage, "foot_contacts": FootContacts, "/diagnostics": DiagnosticArray} if watch_tf else {}),
         },
         qos={
             "robot_description": latched,
@@ -154,13 +160,20 @@ def replay_bag(rclpy, ros_env, tmp_path: Path, motion, config, estimator_params:
         )
         bridge = start_node(
             "sparse_body.ros.tracker_bridge_node",
-            {"bag": str(tmp_path / "trackers"), "min_subscribers": 2, "start_delay": 0.5, "loop": until_valid > 0},
+            {
+                "bag": str(tmp_path / "trackers"),
+                "min_subscribers": 2 if watch_tf else 1,  # the estimator, and this listener when it takes /tf
+                "start_delay": 0.5,
+                "loop": until_valid > 0,
+            },
             "sparse_body_tracker_bridge",
             tmp_path,
             ros_env,
         )
 
         def tracker_messages():
+            if not watch_tf:
+                return len(motion)
             return sum(any(tf.child_frame_id in frames for tf in m.transforms) for m in listener.received["/tf"])
 
         # Until the whole bag has played and arrived, however long a loaded machine takes to start
@@ -183,7 +196,13 @@ def replay_bag(rclpy, ros_env, tmp_path: Path, motion, config, estimator_params:
     what = f"{until_valid} valid estimates did not arrive" if until_valid else "the bridge did not play the whole bag"
     assert played, f"{what} within {PLAYBACK_LIMIT} s: " + bridge_log.read_text()[-2000:]
     listener.tracker_stamps = sorted(
-        {
+        {  # estimates made from tracker input carry its stamp
+            stamp_key(m.header.stamp)
+            for m in listener.received["estimate_status"]
+            if not m.message.startswith("held: no tracker input")
+        }
+        if not watch_tf
+        else {
             stamp_key(tf.header.stamp)
             for m in listener.received["/tf"]
             for tf in m.transforms
@@ -191,6 +210,19 @@ def replay_bag(rclpy, ros_env, tmp_path: Path, motion, config, estimator_params:
         }
     )
     return listener
+
+
+def latencies_ms(listener, topic: str) -> np.ndarray:
+    """Receive time minus header stamp of a topic's messages during playback, in ms (the
+    bridge stamps trackers with the wall clock, and outputs carry the tracker stamp used)."""
+    first, last = listener.tracker_stamps[0], listener.tracker_stamps[-1]
+    return 1000.0 * np.array(
+        [
+            arrived - (m.header.stamp.sec + m.header.stamp.nanosec * 1e-9)
+            for m, arrived in zip(listener.received[topic], listener.arrival_wall[topic], strict=True)
+            if first <= stamp_key(m.header.stamp) <= last
+        ]
+    )
 
 
 def diagnostic_values(listener, name_part: str) -> dict:

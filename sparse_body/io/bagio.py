@@ -27,14 +27,10 @@ from ..core.textfile import read_limited
 from ..core.types import BodyPose, TrackerStream
 from . import cdr
 from .output import (
-    FOOT_NAMES,
-    HELD,
     TransformTable,
     axis_link_table,
     body_table,
-    foot_points,
     joint_angles,
-    joint_state_names,
     stamp_parts,
     tracker_sites,
     tracker_table,
@@ -307,21 +303,11 @@ def write_estimate_bag(
     quats = np.array([p.local_quats for p in poses], dtype=np.float64).reshape(len(poses), NUM_JOINTS, 4)
     roots = np.array([p.root_position for p in poses], dtype=np.float64).reshape(len(poses), 3)
     angles = joint_angles(quats)
-    js = cdr.joint_state_messages(stamps, joint_state_names(), angles)
-    contacts = cdr.foot_contact_messages(
-        stamps,
-        fixed_frame,
-        list(FOOT_NAMES),
-        np.array([p.contact for p in poses], bool).reshape(len(poses), len(FOOT_NAMES)),
-        np.array([p.contact_probability for p in poses], np.float64).reshape(len(poses), len(FOOT_NAMES)),
-        foot_points(quats, roots, skeleton),
-    )
-    status = cdr.status_messages(stamps, fixed_frame, np.array([p.valid for p in poses], bool), HELD)
+    js, contacts, status = cdr.estimate_messages(poses, skeleton, fixed_frame)
     body = body_table(quats, roots, skeleton, fixed_frame, prefix) + axis_link_table(angles, skeleton, prefix)
     tf: list[bytes] = [b""] * len(poses)
     shown = tracker_sites(*trackers) if trackers is not None else np.zeros((len(poses), 0), bool)
-    for pattern in {tuple(row) for row in shown.tolist()}:  # frames with the same trackers
-        which = np.flatnonzero(np.all(shown == np.array(pattern, bool), axis=1))
+    for pattern, which in cdr.same_rows(shown):  # frames with the same trackers
         table = TransformTable(body.parents, body.children, body.values[which])
         if trackers is not None:
             table = table + tracker_table(*trackers, which, tuple(np.flatnonzero(pattern)))

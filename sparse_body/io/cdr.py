@@ -13,9 +13,15 @@ dataclass per field, about 70 microseconds a transform; the bytes are the same (
 from __future__ import annotations
 
 import struct
+from collections.abc import Sequence
 from dataclasses import dataclass, field
+from functools import lru_cache
 
 import numpy as np
+
+from ..core.skeleton import NUM_JOINTS, Skeleton
+from ..core.types import BodyPose
+from .output import FOOT_NAMES, HELD, foot_points, joint_angles, joint_state_names
 
 ENCAPSULATION = b"\x00\x01\x00\x00"  # CDR, little-endian
 
@@ -90,27 +96,41 @@ def _header(layout: Layout, frame_id: str) -> int:
     return offset
 
 
-def tf_messages(stamps, parents: list[str], children: list[str], values: np.ndarray) -> list[bytes]:
-    """tf2_msgs/TFMessage per frame, each holding the transforms parents[k] -> children[k]
-    stamped with the frame's stamp; values (frames, k, 7): translation, then quaternion xyzw."""
+@lru_cache(maxsize=64)
+def _tf_template(parents: tuple[str, ...], children: tuple[str, ...]) -> tuple[bytes, np.ndarray, np.ndarray]:
+    """(template, stamp offsets, number offsets) of a TFMessage of these transforms."""
     layout = Layout()
     layout.uint32(len(children))
-    slots = []
+    stamps, numbers = [], []
     for parent, child in zip(parents, children, strict=True):
-        stamp = _header(layout, parent)
+        stamps.append(_header(layout, parent))
         layout.string(child)
-        slots.append((stamp, layout.doubles(7)))  # Vector3 and Quaternion: 7 doubles in a row
-    rows = layout.rows(len(values))
+        numbers.append(layout.doubles(7))  # Vector3 and Quaternion: 7 doubles in a row
+    return bytes(layout.buf), np.array(stamps), np.array(numbers)
+
+
+def _scatter(rows: np.ndarray, offsets: np.ndarray, data: np.ndarray) -> None:
+    """data (messages, len(offsets), width) bytes written at each offset of each row at once."""
+    rows[:, offsets[:, None] + np.arange(data.shape[-1])] = data
+
+
+def tf_messages(stamps, parents: Sequence[str], children: Sequence[str], values: np.ndarray) -> list[bytes]:
+    """tf2_msgs/TFMessage per frame, each holding the transforms parents[k] -> children[k]
+    stamped with the frame's stamp; values (frames, k, 7): translation, then quaternion xyzw."""
+    template, stamp_at, numbers_at = _tf_template(tuple(parents), tuple(children))
+    rows = np.tile(np.frombuffer(template, np.uint8), (len(values), 1))
     sec, nanosec = stamp_parts(stamps)
-    for k, (stamp, numbers) in enumerate(slots):
-        _put_stamp(rows, stamp, sec, nanosec)
-        _put(rows, numbers, "<f8", values[:, k])
+    stamp = np.empty((len(values), 2), "<u4")
+    stamp[:, 0], stamp[:, 1] = sec.astype("<i4").view("<u4"), nanosec
+    _scatter(rows, stamp_at, np.repeat(stamp.view(np.uint8)[:, None, :], len(stamp_at), axis=1))
+    numbers = np.ascontiguousarray(values, "<f8").reshape(len(values), len(children), 7)
+    _scatter(rows, numbers_at, numbers.view(np.uint8))
     return [row.tobytes() for row in rows]
 
 
-def joint_state_messages(stamps, names: list[str], positions: np.ndarray) -> list[bytes]:
-    """sensor_msgs/JointState per frame: no frame_id, the names, positions (frames, len(names)),
-    no velocities or efforts."""
+@lru_cache(maxsize=8)
+def _joint_state_template(names: tuple[str, ...]) -> tuple[bytes, int, int]:
+    """(template, stamp offset, positions offset): no frame_id, no velocities or efforts."""
     layout = Layout()
     stamp = _header(layout, "")
     layout.uint32(len(names))
@@ -120,10 +140,34 @@ def joint_state_messages(stamps, names: list[str], positions: np.ndarray) -> lis
     numbers = layout.doubles(len(names))
     layout.uint32(0)  # velocity
     layout.uint32(0)  # effort
-    rows = layout.rows(len(positions))
+    return bytes(layout.buf), stamp, numbers
+
+
+def joint_state_messages(stamps, names: Sequence[str], positions: np.ndarray) -> list[bytes]:
+    """sensor_msgs/JointState per frame: no frame_id, the names, positions (frames, len(names)),
+    no velocities or efforts."""
+    template, stamp, numbers = _joint_state_template(tuple(names))
+    rows = np.tile(np.frombuffer(template, np.uint8), (len(positions), 1))
     _put_stamp(rows, stamp, *stamp_parts(stamps))
     _put(rows, numbers, "<f8", positions)
     return [row.tobytes() for row in rows]
+
+
+@lru_cache(maxsize=16)
+def _contacts_template(
+    frame_id: str, names: tuple[str, ...], pattern: tuple[bool, ...]
+) -> tuple[bytes, int, list[tuple[int, int]]]:
+    """(template, stamp offset, (probability, point) offsets per foot) for one contact pattern
+    (in_contact is a byte, so each pattern has its own template)."""
+    layout = Layout()
+    stamp = _header(layout, frame_id)
+    layout.uint32(len(names))
+    feet = []
+    for name, touching in zip(names, pattern, strict=True):
+        layout.string(name)
+        layout.boolean(touching)
+        feet.append((layout.float32(), layout.doubles(3)))
+    return bytes(layout.buf), stamp, feet
 
 
 def foot_contact_messages(
@@ -133,17 +177,9 @@ def foot_contact_messages(
     feet), points (frames, feet, 3)."""
     out: list[bytes] = [b""] * len(stamps)
     contact = np.asarray(contact, bool)
-    for pattern in {tuple(row) for row in contact.tolist()}:  # in_contact is a byte: a template per pattern
-        layout = Layout()
-        stamp = _header(layout, frame_id)
-        layout.uint32(len(names))
-        feet = []
-        for name, touching in zip(names, pattern, strict=True):
-            layout.string(name)
-            layout.boolean(touching)
-            feet.append((layout.float32(), layout.doubles(3)))
-        which = np.flatnonzero(np.all(contact == np.array(pattern, bool), axis=1))
-        rows = layout.rows(len(which))
+    for pattern, which in same_rows(contact):
+        template, stamp, feet = _contacts_template(frame_id, tuple(names), pattern)
+        rows = np.tile(np.frombuffer(template, np.uint8), (len(which), 1))
         _put_stamp(rows, stamp, *stamp_parts(np.asarray(stamps)[which]))
         for k, (prob, point) in enumerate(feet):
             _put(rows, prob, "<f4", np.asarray(probability, np.float64)[which, k].astype(np.float32))
@@ -153,18 +189,56 @@ def foot_contact_messages(
     return out
 
 
+@lru_cache(maxsize=16)
+def _status_template(frame_id: str, valid: bool, message: str) -> tuple[bytes, int]:
+    layout = Layout()
+    stamp = _header(layout, frame_id)
+    layout.boolean(valid)
+    layout.string(message)
+    return bytes(layout.buf), stamp
+
+
 def status_messages(stamps, frame_id: str, valid: np.ndarray, held_message: str) -> list[bytes]:
     """sparse_body/EstimateStatus per frame: valid with an empty message, else held_message."""
     out: list[bytes] = [b""] * len(stamps)
-    valid = np.asarray(valid, bool)
-    for state in (True, False):
-        which = np.flatnonzero(valid == state)
-        layout = Layout()
-        stamp = _header(layout, frame_id)
-        layout.boolean(state)
-        layout.string("" if state else held_message)
-        rows = layout.rows(len(which))
+    for (state,), which in same_rows(np.asarray(valid, bool)[:, None]):
+        template, stamp = _status_template(frame_id, state, "" if state else held_message)
+        rows = np.tile(np.frombuffer(template, np.uint8), (len(which), 1))
         _put_stamp(rows, stamp, *stamp_parts(np.asarray(stamps)[which]))
         for i, row in zip(which, rows, strict=True):
             out[i] = row.tobytes()
     return out
+
+
+def same_rows(flags: np.ndarray) -> list[tuple[tuple[bool, ...], np.ndarray]]:
+    """(pattern, indices of the rows equal to it) for each distinct row of a (rows, k) bool
+    array: frames that share a message shape are encoded together."""
+    flags = np.asarray(flags, bool)
+    if flags.shape[1] == 0 or len(flags) == 1:  # every row alike (the live node's one pose)
+        return [(tuple(bool(v) for v in flags[0]), np.arange(len(flags)))] if len(flags) else []
+    patterns, inverse = np.unique(flags, axis=0, return_inverse=True)
+    inverse = inverse.reshape(-1)
+    return [(tuple(bool(v) for v in p), np.flatnonzero(inverse == i)) for i, p in enumerate(patterns)]
+
+
+def estimate_messages(
+    poses: list[BodyPose], skeleton: Skeleton, fixed_frame: str, held_message: str = HELD, stamps=None
+) -> tuple[list[bytes], list[bytes], list[bytes]]:
+    """(JointState, FootContacts, EstimateStatus) per pose, stamped with the poses' stamps or
+    `stamps`: the one builder of the estimate bag and of the live node's messages."""
+    stamps = np.array([p.stamp for p in poses] if stamps is None else stamps, dtype=np.float64)
+    quats = np.array([p.local_quats for p in poses], dtype=np.float64).reshape(len(poses), NUM_JOINTS, 4)
+    roots = np.array([p.root_position for p in poses], dtype=np.float64).reshape(len(poses), 3)
+    feet = len(FOOT_NAMES)
+    return (
+        joint_state_messages(stamps, joint_state_names(), joint_angles(quats)),
+        foot_contact_messages(
+            stamps,
+            fixed_frame,
+            list(FOOT_NAMES),
+            np.array([p.contact for p in poses], bool).reshape(len(poses), feet),
+            np.array([p.contact_probability for p in poses], np.float64).reshape(len(poses), feet),
+            foot_points(quats, roots, skeleton),
+        ),
+        status_messages(stamps, fixed_frame, np.array([p.valid for p in poses], bool), held_message),
+    )

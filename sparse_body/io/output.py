@@ -1,5 +1,5 @@
 """A body pose as the ROS outputs carry it, without ROS types: JointState names and values,
-TF transforms and foot contacts. ros/ and bagio.py wrap these in rclpy or rosbags messages."""
+TF transforms and foot contacts. io/cdr.py encodes them as messages, for bags and the live node."""
 
 from __future__ import annotations
 

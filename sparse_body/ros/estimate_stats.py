@@ -16,7 +16,7 @@ WINDOW = 600  # estimates the rate and latency figures are taken over
 @dataclass
 class EstimateStats:
     steps: deque = field(default_factory=lambda: deque(maxlen=WINDOW))  # when estimates were made (monotonic)
-    latency: deque = field(default_factory=lambda: deque(maxlen=WINDOW))  # seconds from tracker stamp to estimate
+    latency: deque = field(default_factory=lambda: deque(maxlen=WINDOW))  # tracker stamp to outputs sent, s
     invalid: int = 0
     errors: int = 0
     resets: int = 0  # clock jumps back

@@ -42,10 +42,11 @@ from ..core.tracker_filter import FilterConfig
 from ..core.types import BodyPose
 from ..estimators import create_estimator
 from ..estimators.base import Estimator, parse_estimator_spec
+from ..io import cdr
+from ..io.output import HELD, body_table
 from ..io.tf_cache import TfGuards
 from ..io.urdf import body_urdf
 from ..methods import NAMES
-from . import messages
 from .estimate_stats import EstimateStats
 from .spin import init, spin_until_shutdown
 from .tf_input import TfReader
@@ -125,6 +126,9 @@ RANGES = {
     "play_radius": (0.1, 1e6),
 }
 # What a configured node applies at once; the rest is refused until it is cleaned up.
+# seconds a fallback tick may come later than its period before the node counts itself as
+# stalled (not running) rather than the trackers as silent
+STALL = 0.25
 LIVE = {"stale_timeout", "tracker_timeout", "publish_link_tf", "autostart"}
 
 
@@ -239,7 +243,7 @@ class EstimatorNode(LifecycleNode):
             return TransitionCallbackReturn.FAILURE
         self.sensors, self.params = sensors, p
         self._frames = [s.frame_id for s in sensors.sites]
-        own = {p["frame_prefix"] + name for name in JOINT_NAMES}  # the body's links, as messages.transforms names them
+        own = {p["frame_prefix"] + name for name in JOINT_NAMES}  # the body's links, as body_table names them
         guards = TfGuards(clock_window=p["clock_window"], play_radius=p["play_radius"])
         self.tf_in = TfReader(
             self, set(self._frames), own, self._tracker_arrived, guards, also=self._looked_up_frames(p)
@@ -248,7 +252,6 @@ class EstimatorNode(LifecycleNode):
         overrides = QoSOverridingOptions.with_default_policies()
         from tf2_msgs.msg import TFMessage  # here, not at import: the stand-in exists only after setup
 
-        self._tf_message = TFMessage
         ns = self.OUTPUTS
         # one profile object per publisher: rclpy's QoS overrides change the object they are given
         self.pub_joints = self.create_lifecycle_publisher(
@@ -302,6 +305,7 @@ class EstimatorNode(LifecycleNode):
         self._last_input = -np.inf  # the newest tracker stamp the last estimate used
         self._last_step = -np.inf  # when it was made (monotonic)
         self._last_arrival = -np.inf  # when a new tracker sample last arrived (monotonic)
+        self._last_tick = time.monotonic()  # when the fallback timer last ran (monotonic)
         self._silence_seen = False  # the last call found the trackers silent (see _estimate)
         self.timer = self.create_timer(1.0 / self.params["output_rate"], self._tick)
         self.diag_timer = self.create_timer(1.0, self._publish_diagnostics)
@@ -368,7 +372,15 @@ class EstimatorNode(LifecycleNode):
             self._estimate(fallback=False)
 
     def _tick(self) -> None:
-        if time.monotonic() - self._last_step >= 1.5 / self.params["output_rate"]:
+        now = time.monotonic()
+        # A tick far later than its period: this node was not running (stopped, or starved of
+        # CPU), so how long the trackers were silent meanwhile is unknown. Silence is counted
+        # only while the node runs: the stall moves the last arrival forward.
+        stall = now - self._last_tick - 1.0 / self.params["output_rate"]
+        if stall > STALL:
+            self._last_arrival = min(now, self._last_arrival + stall)
+        self._last_tick = now
+        if now - self._last_step >= 1.5 / self.params["output_rate"]:
             self._estimate(fallback=True)
 
     def _estimate(self, fallback: bool) -> None:
@@ -385,11 +397,13 @@ class EstimatorNode(LifecycleNode):
         if not pose.valid:
             self._stats.invalid += 1
             reason = reason or self._held_reason(frame, no_input, silent)
-        self._publish(pose, messages.to_time(source_time), reason)
+        self._publish(pose, source_time, reason)
         self._last_step = time.monotonic()
         if not no_input:
             self._last_input = newest
-        self._stats.estimated(self._last_step, fallback, None if no_input else now - source_time)
+        # latency to the moment the outputs left, the step and encoding included
+        published = self.get_clock().now().nanoseconds * 1e-9
+        self._stats.estimated(self._last_step, fallback, None if no_input else published - source_time)
 
     def _restart_on_jump_back(self, now: float) -> None:
         """A clock jump back (a looping bag, a restarted simulation): start afresh."""
@@ -454,14 +468,20 @@ class EstimatorNode(LifecycleNode):
         missing = [s for s, ok in zip(self.sensors.site_names, frame.valid, strict=True) if not ok]
         return f"held: no usable pose from {', '.join(missing)}" if missing else "held"
 
-    def _publish(self, pose: BodyPose, stamp, reason: str) -> None:
+    def _publish(self, pose: BodyPose, stamp: float, reason: str) -> None:
         assert self.pub_joints and self.pub_contacts and self.pub_status and self.pub_tf
         frame_id, p = self.sensors.fixed_frame, self.params
-        self.pub_joints.publish(messages.joint_state(pose, stamp))
-        self.pub_contacts.publish(messages.foot_contacts(pose, self.skeleton, stamp, frame_id))
-        self.pub_status.publish(messages.estimate_status(pose, stamp, frame_id, reason))
-        links = messages.transforms(pose, self.skeleton, stamp, frame_id, p["frame_prefix"], p["publish_link_tf"])
-        self.pub_tf.publish(self._tf_message(transforms=links))
+        # the estimate bag's encoder (io/cdr.py), one pose at a time: the same bytes live and
+        # offline, without building a Python message object per field
+        (joints,), (contacts,), (status,) = cdr.estimate_messages(
+            [pose], self.skeleton, frame_id, reason or HELD, stamps=[stamp]
+        )
+        self.pub_joints.publish(joints)
+        self.pub_contacts.publish(contacts)
+        self.pub_status.publish(status)
+        quats, root = pose.local_quats[None], pose.root_position[None]
+        links = body_table(quats, root, self.skeleton, frame_id, p["frame_prefix"], p["publish_link_tf"])
+        self.pub_tf.publish(cdr.tf_messages([stamp], links.parents, links.children, links.values)[0])
 
     def _held(self, stamp: float) -> BodyPose:
         if self._last_good is None:

@@ -19,6 +19,9 @@ from ..io.tf_cache import TfCache, TfGuards
 # instead of working through a backlog (100 messages were 1.3 s of lag at 60 Hz plus the
 # node's own link TF); a few per tracker still holds trackers published one per message.
 TF_QUEUE_PER_TRACKER, TF_QUEUE_MIN = 1, 4
+# at most this many waiting /tf messages are taken in one go (more than the queue holds, so
+# all of them; the bound only keeps a publisher faster than the ingest from starving the node)
+MAX_DRAINED = 64
 
 
 def tf_qos(tracker_count: int) -> QoSProfile:
@@ -59,6 +62,7 @@ class TfReader:
         self.ignore_frames = set(ignore_frames) - set(tracker_frames)
         self.on_tracker = on_tracker
         self._node = node
+        self.drained = 0  # /tf messages taken early because the node was behind (diagnostics)
         self._subs = [
             node.create_subscription(TFMessage, "/tf", lambda m: self._on_tf(m, False), tf_qos(len(tracker_frames))),
             node.create_subscription(TFMessage, "/tf_static", lambda m: self._on_tf(m, True), TF_STATIC_QOS),
@@ -69,12 +73,29 @@ class TfReader:
         return {reason.value: count for reason, count in self.cache.refused.items()}
 
     def _on_tf(self, msg, static: bool) -> None:
+        now = self._node.get_clock().now().nanoseconds * 1e-9
+        arrived = self._ingest(msg, static, now)
+        if not static:
+            # A node that fell behind finds more /tf messages waiting: take them all now, so the
+            # one estimate that follows uses the newest samples instead of working through a
+            # backlog one estimate a message (the executor would hand them over one per wait).
+            # take_message is what rclpy's executor itself calls on a subscription's handle.
+            sub = self._subs[0]
+            for _ in range(MAX_DRAINED):
+                with sub.handle:
+                    taken = sub.handle.take_message(sub.msg_type, sub.raw)
+                if taken is None:
+                    break
+                arrived |= self._ingest(taken[0], False, now)
+                self.drained += 1
+        if arrived and self.on_tracker is not None:
+            self.on_tracker()
+
+    def _ingest(self, msg, static: bool, now: float) -> bool:
         transforms = msg.transforms
         if self.ignore_frames:  # the node's own link TF comes back on /tf
             transforms = [tf for tf in transforms if tf.child_frame_id not in self.ignore_frames]
-        now = self._node.get_clock().now().nanoseconds * 1e-9
-        if self.cache.ingest(transforms, static, now).arrived and self.on_tracker is not None:
-            self.on_tracker()
+        return self.cache.ingest(transforms, static, now).arrived
 
     def take_jump_back(self) -> bool:
         """Whether the input started again (a looping bag) since the last call."""

@@ -44,6 +44,7 @@ def _nodes(context):
             "height": height,
             "calibration": arg("calibration"),
             "model_path": arg("model_path"),
+            "foxglove_port": int(arg("foxglove_port")),
             "publish_link_tf": False,
             "autostart": True,
         },
@@ -131,6 +132,11 @@ def generate_launch_description():
             DeclareLaunchArgument("bag", default_value="", description="rosbag2 of tracker TF to replay"),
             DeclareLaunchArgument("loop", default_value="false", description="replay the bag again and again"),
             DeclareLaunchArgument("rviz", default_value="false", description="start RViz"),
+            DeclareLaunchArgument(
+                "foxglove_port",
+                default_value="0",
+                description="serve the body live to the Foxglove app on this WebSocket port (0: off)",
+            ),
             DeclareLaunchArgument(
                 "refine",
                 default_value="false",

@@ -44,6 +44,7 @@ def test_a_missing_robot_state_publisher_is_said_and_nothing_is_started_for_it(m
         "bag": "",
         "refine": "false",
         "robot_state_publisher": "true",
+        "foxglove_port": "0",
     }.items():
         context.launch_configurations[name] = value
     actions = module._nodes(context)
@@ -79,6 +80,7 @@ def test_a_calibration_file_is_the_body_of_the_estimator_and_of_robot_state_publ
         "bag": "",
         "refine": "false",
         "robot_state_publisher": "true",
+        "foxglove_port": "0",
     }.items():
         context.launch_configurations[name] = value
     actions = module._nodes(context)

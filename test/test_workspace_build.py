@@ -168,6 +168,7 @@ ROSDEP_KEYS = {
     "matplotlib": "python3-matplotlib",
     "pillow": "python3-pil",
     "python-osc": None,
+    "foxglove-sdk": None,  # the live view (ros/live_view.py); no rosdep key checked here, so installed with pip
     "plotly": None,  # the viewer (apps/viewer.py); no rosdep key checked here, so installed with pip
 }
 

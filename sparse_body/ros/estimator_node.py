@@ -18,6 +18,7 @@ from __future__ import annotations
 import sys
 import time
 from dataclasses import replace
+from typing import TYPE_CHECKING
 
 import numpy as np
 import rclpy
@@ -50,6 +51,9 @@ from ..methods import NAMES
 from .estimate_stats import EstimateStats
 from .spin import init, spin_until_shutdown
 from .tf_input import TfReader
+
+if TYPE_CHECKING:
+    from .live_view import LiveView
 
 FILTER_DEFAULTS = FilterConfig()  # the filter's defaults are the estimators' (core/tracker_filter.py)
 
@@ -111,6 +115,12 @@ PARAMETERS = {
     "frame_prefix": ("", "prefix of the body's TF frames"),
     "publish_link_tf": (True, "publish every body link on /tf (off when robot_state_publisher does)"),
     "autostart": (False, "configure and activate on start-up (without a lifecycle manager)"),
+    "foxglove_port": (
+        0,
+        "serve the outputs, the trackers and the URDF to the Foxglove app on this WebSocket port "
+        "(open ws://foxglove_host:PORT; needs foxglove-sdk); 0: off",
+    ),
+    "foxglove_host": ("127.0.0.1", "address the Foxglove WebSocket server listens on (0.0.0.0: every network)"),
 }
 # Numbers outside these bounds are refused with the reason (at configure and on a live set).
 RANGES = {
@@ -124,11 +134,12 @@ RANGES = {
     "tracker_timeout": (0.01, 60.0),
     "clock_window": (0.0, 1e9),
     "play_radius": (0.1, 1e6),
+    "foxglove_port": (0, 65535),
 }
-# What a configured node applies at once; the rest is refused until it is cleaned up.
 # seconds a fallback tick may come later than its period before the node counts itself as
 # stalled (not running) rather than the trackers as silent
 STALL = 0.25
+# What a configured node applies at once; the rest is refused until it is cleaned up.
 LIVE = {"stale_timeout", "tracker_timeout", "publish_link_tf", "autostart"}
 
 
@@ -180,6 +191,7 @@ class EstimatorNode(LifecycleNode):
     pub_joints: LifecyclePublisher | None = None
     pub_contacts: LifecyclePublisher | None = None
     pub_status: LifecyclePublisher | None = None
+    live_view: LiveView | None = None
     pub_tf: LifecyclePublisher | None = None
     pub_diag: LifecyclePublisher | None = None
     pub_description: Publisher | None = None
@@ -268,6 +280,16 @@ class EstimatorNode(LifecycleNode):
         latched = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL)
         self.pub_description = self.create_publisher(String, ns + "robot_description", latched)
         self.pub_description.publish(String(data=body_urdf(self.skeleton)))
+        if p["foxglove_port"]:
+            from .live_view import LiveView, LiveViewError
+
+            try:
+                self.live_view = LiveView(p["foxglove_host"], p["foxglove_port"], body_urdf(self.skeleton))
+            except LiveViewError as err:
+                self.get_logger().error(f"configure failed: {err}")
+                self._release()
+                return TransitionCallbackReturn.FAILURE
+            self.get_logger().info(f"live view: open ws://{p['foxglove_host']}:{self.live_view.port} in Foxglove")
         self.get_logger().info(
             f"configured: {self._method()} on {sensors.name} ({', '.join(sensors.site_names)}) "
             f"in frame {sensors.fixed_frame!r}"
@@ -340,6 +362,9 @@ class EstimatorNode(LifecycleNode):
             self.destroy_publisher(self.pub_description)
         if self.tf_in is not None:
             self.tf_in.destroy()
+        if self.live_view is not None:
+            self.live_view.close()
+            self.live_view = None
         self.tf_in = self.estimator = None
         self.pub_joints = self.pub_contacts = self.pub_status = self.pub_tf = self.pub_diag = None
         self.pub_description = None
@@ -398,6 +423,8 @@ class EstimatorNode(LifecycleNode):
             self._stats.invalid += 1
             reason = reason or self._held_reason(frame, no_input, silent)
         self._publish(pose, source_time, reason)
+        if self.live_view is not None:
+            self.live_view.log_trackers(frame, self.sensors.fixed_frame, self._frames)
         self._last_step = time.monotonic()
         if not no_input:
             self._last_input = newest
@@ -481,7 +508,12 @@ class EstimatorNode(LifecycleNode):
         self.pub_status.publish(status)
         quats, root = pose.local_quats[None], pose.root_position[None]
         links = body_table(quats, root, self.skeleton, frame_id, p["frame_prefix"], p["publish_link_tf"])
-        self.pub_tf.publish(cdr.tf_messages([stamp], links.parents, links.children, links.values)[0])
+        tf = cdr.tf_messages([stamp], links.parents, links.children, links.values)[0]
+        self.pub_tf.publish(tf)
+        if self.live_view is not None:
+            for topic, data in (("/joint_states", joints), ("/foot_contacts", contacts), ("/estimate_status", status)):
+                self.live_view.log(topic, data, stamp)
+            self.live_view.log("/tf", tf, stamp)
 
     def _held(self, stamp: float) -> BodyPose:
         if self._last_good is None:
@@ -502,6 +534,8 @@ class EstimatorNode(LifecycleNode):
         msg = DiagnosticArray(status=[status])
         msg.header.stamp = self.get_clock().now().to_msg()
         self.pub_diag.publish(msg)
+        if self.live_view is not None:
+            self.live_view.log_description(self.get_clock().now().nanoseconds * 1e-9)
 
 
 def main(args=None, node_class=None) -> None:

@@ -1,0 +1,86 @@
+"""A live view without RViz: what the estimator node publishes, served to the Foxglove app
+over its WebSocket protocol (the foxglove-sdk package), so a user with a headset and no ROS
+desktop opens ws://HOST:PORT in Foxglove and sees the body move with its trackers.
+
+The channels carry the node's own CDR bytes (io/cdr.py) with ROS 2 message definitions as
+their schemas ("ros2msg"), so Foxglove decodes them as it decodes a ROS bag: /joint_states,
+/foot_contacts, /estimate_status, /tf (the body's links, and the trackers the estimate used
+as `<tracker frame>_seen`), and /robot_description (the URDF; sent again every second, since a client
+only receives what is logged after it subscribed)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..core.types import TrackerFrame
+from ..io import cdr
+from ..io.bagio import typestore
+
+CHANNELS = {
+    "/joint_states": "sensor_msgs/msg/JointState",
+    "/foot_contacts": "sparse_body/msg/FootContacts",
+    "/estimate_status": "sparse_body/msg/EstimateStatus",
+    "/tf": "tf2_msgs/msg/TFMessage",
+    "/robot_description": "std_msgs/msg/String",
+}
+SEEN = "_seen"  # suffix of the tracker frames drawn beside the body (the input /tf has the originals)
+
+
+class LiveViewError(RuntimeError):
+    """The live view cannot start (the package is missing, the port is taken)."""
+
+
+class LiveView:
+    """A Foxglove WebSocket server of its own (its own foxglove Context) with a channel per
+    output topic."""
+
+    def __init__(self, host: str, port: int, urdf: str) -> None:
+        try:
+            import foxglove
+        except ImportError as err:
+            raise LiveViewError(f"foxglove_port needs foxglove-sdk (pip install foxglove-sdk): {err}") from err
+        self._context = foxglove.Context()
+        try:
+            self.server = foxglove.start_server(name="sparse_body", host=host, port=port, context=self._context)
+        except Exception as err:  # noqa: BLE001 - the SDK raises its own error types
+            raise LiveViewError(f"the live view cannot serve on {host}:{port}: {err}") from err
+        store = typestore()
+        self._channels = {
+            topic: foxglove.Channel(
+                topic,
+                schema=foxglove.Schema(
+                    name=typename, encoding="ros2msg", data=store.generate_msgdef(typename, ros_version=2)[0].encode()
+                ),
+                message_encoding="cdr",
+                context=self._context,
+            )
+            for topic, typename in CHANNELS.items()
+        }
+        layout = cdr.Layout()
+        layout.string(urdf)
+        self._description = bytes(layout.buf)
+
+    @property
+    def port(self) -> int:
+        return int(self.server.port)
+
+    def log(self, topic: str, data: bytes, stamp: float) -> None:
+        self._channels[topic].log(data, log_time=int(stamp * 1e9))
+
+    def log_trackers(self, frame: TrackerFrame, fixed_frame: str, frame_ids: list[str]) -> None:
+        """The trackers with a usable pose, as transforms from the fixed frame to their TF
+        frame's name + SEEN (frame_ids: the TF frame of each of frame.sites)."""
+        finite = np.isfinite(frame.positions).all(axis=1) & np.isfinite(frame.orientations).all(axis=1)
+        ok = frame.valid & finite
+        if not ok.any():
+            return
+        children = [name + SEEN for name, shown in zip(frame_ids, ok, strict=True) if shown]
+        values = np.concatenate([frame.positions[ok], frame.orientations[ok]], axis=1)[None]
+        data = cdr.tf_messages([frame.stamp], [fixed_frame] * len(children), children, values)[0]
+        self.log("/tf", data, frame.stamp)
+
+    def log_description(self, stamp: float) -> None:
+        self.log("/robot_description", self._description, stamp)
+
+    def close(self) -> None:
+        self.server.stop()

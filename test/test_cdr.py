@@ -1,6 +1,9 @@
 """The output bag's messages, encoded for a whole recording at once (io/cdr.py), are byte for
 byte what rosbags' serialize_cdr makes of the same messages built one by one."""
 
+import contextlib
+import functools
+
 import numpy as np
 from hypothesis import given, settings
 from hypothesis import strategies as st
@@ -126,3 +129,62 @@ def test_a_processed_bag_holds_exactly_the_messages_built_one_by_one(tmp_path):
         transforms = body_transforms(pose, motion.skeleton, "world") + links + trackers
         assert raw[TF_TOPIC][i] == _tf(pose.stamp, transforms), i
     assert len(raw[TF_TOPIC]) == len(poses) and b"left_controller" not in raw[TF_TOPIC][7]
+
+
+_names = st.text(alphabet=st.characters(codec="utf-8", exclude_characters="\x00"), max_size=12)
+
+
+@settings(max_examples=150, deadline=None)
+@given(
+    st.lists(
+        st.tuples(
+            _names,
+            _names,
+            st.integers(-(2**31), 2**31 - 1),
+            st.integers(0, 999_999_999),
+            st.lists(st.floats(allow_nan=True, allow_infinity=True), min_size=7, max_size=7),
+        ),
+        max_size=6,
+    ),
+    st.booleans(),
+)
+def test_read_tf_gives_what_rosbags_decodes_either_byte_order(transforms, little_endian):
+    """read_tf (the live /tf reader's and the bag reader's) against rosbags' deserializer."""
+    msg = T["tf2_msgs/msg/TFMessage"](
+        transforms=[
+            T["geometry_msgs/msg/TransformStamped"](
+                header=T["std_msgs/msg/Header"](stamp=T["builtin_interfaces/msg/Time"](sec, nanosec), frame_id=parent),
+                child_frame_id=child,
+                transform=T["geometry_msgs/msg/Transform"](
+                    translation=T["geometry_msgs/msg/Vector3"](*values[:3]),
+                    rotation=T["geometry_msgs/msg/Quaternion"](*values[3:]),
+                ),
+            )
+            for parent, child, sec, nanosec, values in transforms
+        ]
+    )
+    data = bytes(STORE.serialize_cdr(msg, "tf2_msgs/msg/TFMessage", little_endian=little_endian))
+    rows = cdr.read_tf(data)
+    assert len(rows) == len(transforms)
+    for (parent, child, stamp, values), (p, c, sec, nanosec, v) in zip(rows, transforms, strict=True):
+        assert (parent, child, stamp) == (p, c, sec + nanosec * 1e-9)
+        assert np.array_equal(values, v, equal_nan=True)
+
+
+@settings(max_examples=300, deadline=None)
+@given(st.binary(max_size=400), st.integers(0, 400))
+def test_read_tf_refuses_bytes_that_are_no_tfmessage_with_its_own_error(junk, cut):
+    """Whatever the network sends: MalformedMessage or rows, never another exception."""
+    real = _real_tf()
+    for data in (junk, b"\x00\x01\x00\x00" + junk, real[:cut], real[:cut] + junk):
+        with contextlib.suppress(cdr.MalformedMessage):
+            cdr.read_tf(data)
+
+
+@functools.cache
+def _real_tf() -> bytes:
+    from sparse_body.core.types import BodyPose
+
+    motion = synthetic_walk(0.1)
+    pose = BodyPose(0.0, motion.local_quats[0], motion.root_positions[0], valid=True)
+    return bytes(_tf(1.5, body_transforms(pose, motion.skeleton, "world")))

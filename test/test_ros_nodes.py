@@ -229,8 +229,10 @@ def test_a_calibration_file_gives_the_body_the_node_estimates_and_publishes(ros_
 
 
 def test_bad_tracker_input_is_reported_and_never_gives_non_finite_output(ros_env, tmp_path):
-    """NaN poses, a tracker that stops, one never seen, out-of-order stamps, a clock jump back."""
+    """NaN poses, a tracker that stops, one never seen, out-of-order stamps, a clock jump back,
+    bytes that are no TFMessage."""
     from geometry_msgs.msg import TransformStamped
+    from rclpy.serialization import serialize_message
 
     from sparse_body.data.virtual_trackers import synthesize_trackers
     from sparse_body.ros.messages import to_time
@@ -276,6 +278,12 @@ def test_bad_tracker_input_is_reported_and_never_gives_non_finite_output(ros_env
                 )
                 msgs.append(m)
             pub.publish(TFMessage(transforms=msgs))
+            if i % 30 == 0:  # bytes that are no TFMessage: a count that lies, a message cut short
+                pub.publish(
+                    b"\x00\x01\x00\x00\xff\xff\xff\x7f"
+                    if i % 60
+                    else serialize_message(TFMessage(transforms=msgs))[:-9]
+                )
             listener.spin_for(1.0 / 60)
             if t > 7.5:
                 break
@@ -299,6 +307,7 @@ def test_bad_tracker_input_is_reported_and_never_gives_non_finite_output(ros_env
             values.update({kv.key: kv.value for kv in st.values})
     assert int(values["rejected samples: non-finite"]) > 0
     assert int(values["rejected samples: out of order"]) > 0
+    assert int(values["rejected samples: malformed message"]) > 0
     assert int(values["clock jumps back"]) >= 1
     assert values["right_hand age [s]"] == "never seen"
     assert any("stale or missing trackers" in m and "pelvis" in m for m in messages)
@@ -376,6 +385,7 @@ def test_a_qos_override_changes_only_the_publisher_it_names(ros_env, tmp_path):
 
 def test_the_tf_reader_ignores_the_frames_its_node_publishes(ros_env):
     from geometry_msgs.msg import TransformStamped
+    from rclpy.serialization import serialize_message
 
     from sparse_body.ros.tf_input import TfReader
 
@@ -390,13 +400,15 @@ def test_the_tf_reader_ignores_the_frames_its_node_publishes(ros_env):
             tf.header.stamp = node.get_clock().now().to_msg()
             tf.transform.rotation.w = 1.0
             msg.transforms.append(tf)
-        reader._on_tf(msg, False)
+        reader._on_tf(serialize_message(msg), False)  # the reader subscribes raw: bytes
         assert reader.lookup("world", "hmd") is not None  # a tracker frame is never ignored
         assert reader.lookup("world", "pelvis") is None and reader.lookup("world", "head") is None
         assert moved == [1]
         msg.transforms[2].header.stamp.sec = 5  # judged by the node's clock: refused, counted
-        reader._on_tf(msg, False)
+        reader._on_tf(serialize_message(msg), False)
         assert moved == [1] and reader.rejected["stamp far from the clock"] == 1
+        reader._on_tf(serialize_message(msg)[:-3], False)  # cut short: counted, nothing else
+        assert moved == [1] and reader.rejected["malformed message"] == 1
         reader.destroy()
     finally:
         node.destroy_node()

@@ -215,13 +215,13 @@ def read_tracker_stream(
 ) -> TrackerStream:
     """The trackers at each input frame of a bag: every /tf message that moves a tracker
     frame is one frame, sampled at the newest tracker stamp held. The messages go through the
-    same TfCache.ingest as the live node's, with the bag's receive time as the clock: a
+    same TfCache ingest as the live node's (read by io/cdr.py's read_tf, as the live node
+    reads them), with the bag's receive time as the clock: a
     tracker whose sample in that message was refused is invalid in that frame, and every
     refusal is counted in `refused` (reason -> count) when a dict is given."""
     path = Path(path)
     if not path.exists():
         raise BagError(f"{path}: no such bag")
-    store = typestore()
     cache = TfCache({s.frame_id for s in config.sites}, guards)
     times, frames = [], []
     try:
@@ -231,9 +231,11 @@ def read_tracker_stream(
                 raise BagError(
                     f"{path}: no {TF_TOPIC} topic (topics: {', '.join(sorted({c.topic for c in reader.connections}))})"
                 )
+            for conn in conns:
+                if conn.msgtype != TF_TYPE:
+                    raise BagError(f"{path}: {conn.topic} holds {conn.msgtype}, not {TF_TYPE}")
             for conn, log_ns, raw in reader.messages(connections=conns):
-                msg = store.deserialize_cdr(raw, conn.msgtype)
-                got = cache.ingest(msg.transforms, conn.topic == TF_STATIC_TOPIC, log_ns * 1e-9)
+                got = cache.ingest_rows(cdr.read_tf(raw), conn.topic == TF_STATIC_TOPIC, log_ns * 1e-9)
                 cache.jumped_back = False  # the estimator starts over where the stamps go back (process)
                 if not got.moved:
                     continue

@@ -242,3 +242,44 @@ def estimate_messages(
         ),
         status_messages(stamps, fixed_frame, np.array([p.valid for p in poses], bool), held_message),
     )
+
+
+class MalformedMessage(ValueError):
+    """Bytes that are not a TFMessage in XCDR1 (cut short, a bad string, another encoding)."""
+
+
+# (parent, child, stamp in seconds, (x, y, z, qx, qy, qz, qw)) of one transform
+TfRow = tuple[str, str, float, tuple[float, ...]]
+
+
+def read_tf(data: bytes) -> list[TfRow]:
+    """The transforms of a serialised tf2_msgs/TFMessage, read field by field with struct:
+    about 20 times cheaper than building rclpy's or rosbags' message objects (the live /tf
+    and the bag reader both read /tf this way). Raises MalformedMessage for bytes that are
+    not one (the network can send anything)."""
+    try:
+        if len(data) < 8 or data[0] != 0 or data[1] not in (0, 1) or data[2:4] != b"\x00\x00":
+            raise MalformedMessage("not a plain CDR message")
+        end = "<" if data[1] == 1 else ">"
+        u32, stamp_fmt, numbers = struct.Struct(end + "I"), struct.Struct(end + "iI"), struct.Struct(end + "7d")
+        (count,) = u32.unpack_from(data, 4)
+        if count > (len(data) - 8) // 72:  # each transform takes at least 72 bytes: a count that lies
+            raise MalformedMessage(f"{count} transforms in {len(data)} bytes")
+        at, rows = 8, []
+        for _ in range(count):
+            sec, nanosec = stamp_fmt.unpack_from(data, at)
+            parent, at = _read_string(data, at + 8, u32)
+            child, at = _read_string(data, at + (-(at - 4) % 4), u32)
+            at += -(at - 4) % 8
+            rows.append((parent, child, sec + nanosec * 1e-9, numbers.unpack_from(data, at)))
+            at += 56
+        return rows
+    except (struct.error, UnicodeDecodeError) as err:
+        raise MalformedMessage(str(err)) from err
+
+
+def _read_string(data: bytes, at: int, u32: struct.Struct) -> tuple[str, int]:
+    (size,) = u32.unpack_from(data, at)
+    if size == 0 or at + 4 + size > len(data) or data[at + 4 + size - 1] != 0:
+        raise MalformedMessage("a string without its end")
+    return data[at + 4 : at + 3 + size].decode(), at + 4 + size

@@ -46,6 +46,14 @@ class Accepted(Enum):
     FAR_FROM_CLOCK = "stamp far from the clock"
     OUT_OF_PLAY_SPACE = "outside the play space"
     TOO_DEEP = "parent chain too deep"
+    MALFORMED = "malformed message"  # a whole /tf message that cannot be read (live: any peer can send one)
+
+
+def _row(tf):
+    """A TransformStamped object as the row read_tf gives."""
+    tr, q, stamp = tf.transform.translation, tf.transform.rotation, tf.header.stamp
+    seconds = stamp.sec + stamp.nanosec * 1e-9
+    return tf.header.frame_id, tf.child_frame_id, seconds, (tr.x, tr.y, tr.z, q.x, q.y, q.z, q.w)
 
 
 @dataclass(slots=True)
@@ -84,14 +92,16 @@ class TfCache:
 
     # -- in -----------------------------------------------------------------------------------
     def ingest(self, transforms, static: bool = False, now: float | None = None) -> Ingested:
-        """Take one /tf (or /tf_static) message's transforms, rclpy's or rosbags' (the same
-        fields). `now`: the clock to judge stamps by (None: not judged)."""
+        """Take one /tf (or /tf_static) message's transforms as message objects, rclpy's or
+        rosbags' (the same fields). `now`: the clock to judge stamps by (None: not judged)."""
+        return self.ingest_rows(map(_row, transforms), static, now)  # one row at a time: a flood costs no list
+
+    def ingest_rows(self, rows, static: bool = False, now: float | None = None) -> Ingested:
+        """Take one /tf (or /tf_static) message's transforms as io/cdr.py's read_tf gives them:
+        (parent, child, stamp, (x, y, z, qx, qy, qz, qw)). The one ingest, live and offline."""
         out = Ingested()
-        for tf in transforms:
-            stamp = tf.header.stamp.sec + tf.header.stamp.nanosec * 1e-9
-            tr, q = tf.transform.translation, tf.transform.rotation
-            child = tf.child_frame_id
-            result = self.set(tf.header.frame_id, child, stamp, (tr.x, tr.y, tr.z), (q.x, q.y, q.z, q.w), static, now)
+        for parent, child, stamp, values in rows:
+            result = self.set(parent, child, stamp, values[:3], values[3:], static, now)
             if child not in self.trackers:
                 continue
             taken = result in (Accepted.OK, Accepted.JUMPED_BACK)

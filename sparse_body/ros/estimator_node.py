@@ -524,6 +524,7 @@ class EstimatorNode(LifecycleNode):
         assert self.tf_in is not None and self.pub_diag is not None  # the timer exists only while active
         rejected = self.tf_in.rejected
         level, message, values = self._stats.status(self.sensors.site_names, self._ages, self._site_valid, rejected)
+        values["/tf messages caught up"] = str(self.tf_in.drained)  # taken at once by a node running behind
         status = DiagnosticStatus(
             level=level,
             name=f"{self.get_name()}: estimator",

@@ -66,8 +66,8 @@ class TfReader:
         self.ignore_frames = set(ignore_frames) - set(tracker_frames)
         self.on_tracker = on_tracker
         self._node = node
-        self.drained = 0  # /tf messages taken early because the node was behind (diagnostics)
-        self._subs = [
+        self.drained = 0  # /tf messages taken at once because the node ran behind (on /diagnostics)
+        self._subs = [  # /tf first: _on_tf takes what waits on it
             node.create_subscription(
                 TFMessage, "/tf", lambda m: self._on_tf(m, False), tf_qos(len(tracker_frames)), raw=True
             ),

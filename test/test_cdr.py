@@ -18,6 +18,7 @@ from sparse_body.io.bagio import (
     JOINT_STATES_TOPIC,
     STATUS_TOPIC,
     TF_TOPIC,
+    _transform_msg,
     read_tracker_stream,
     typestore,
 )
@@ -49,22 +50,9 @@ def _header(seconds, frame_id):
 
 
 def _tf(seconds, transforms):
-    return STORE.serialize_cdr(
-        T["tf2_msgs/msg/TFMessage"](
-            transforms=[
-                T["geometry_msgs/msg/TransformStamped"](
-                    header=_header(seconds, t.parent),
-                    child_frame_id=t.child,
-                    transform=T["geometry_msgs/msg/Transform"](
-                        translation=T["geometry_msgs/msg/Vector3"](*map(float, t.translation)),
-                        rotation=T["geometry_msgs/msg/Quaternion"](*map(float, t.rotation)),
-                    ),
-                )
-                for t in transforms
-            ]
-        ),
-        "tf2_msgs/msg/TFMessage",
-    )
+    """The reference: rosbags' encoder of the messages the tracker bag writer builds."""
+    msgs = [_transform_msg(STORE, seconds, t.parent, t.child, t.translation, t.rotation) for t in transforms]
+    return STORE.serialize_cdr(T["tf2_msgs/msg/TFMessage"](transforms=msgs), "tf2_msgs/msg/TFMessage")
 
 
 @settings(max_examples=200, deadline=None)

@@ -63,9 +63,10 @@ class Layout:
     def float32(self) -> int:
         return self._slot(4, 4)
 
-    def rows(self, count: int) -> np.ndarray:
-        """count copies of the template, one message per row."""
-        return np.tile(np.frombuffer(bytes(self.buf), np.uint8), (count, 1))
+
+def _rows(template: bytes, count: int) -> np.ndarray:
+    """count copies of a message template, one message per row, for numpy to fill in."""
+    return np.tile(np.frombuffer(template, np.uint8), (count, 1))
 
 
 def stamp_parts(seconds: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -118,7 +119,7 @@ def tf_messages(stamps, parents: Sequence[str], children: Sequence[str], values:
     """tf2_msgs/TFMessage per frame, each holding the transforms parents[k] -> children[k]
     stamped with the frame's stamp; values (frames, k, 7): translation, then quaternion xyzw."""
     template, stamp_at, numbers_at = _tf_template(tuple(parents), tuple(children))
-    rows = np.tile(np.frombuffer(template, np.uint8), (len(values), 1))
+    rows = _rows(template, len(values))
     sec, nanosec = stamp_parts(stamps)
     stamp = np.empty((len(values), 2), "<u4")
     stamp[:, 0], stamp[:, 1] = sec.astype("<i4").view("<u4"), nanosec
@@ -147,7 +148,7 @@ def joint_state_messages(stamps, names: Sequence[str], positions: np.ndarray) ->
     """sensor_msgs/JointState per frame: no frame_id, the names, positions (frames, len(names)),
     no velocities or efforts."""
     template, stamp, numbers = _joint_state_template(tuple(names))
-    rows = np.tile(np.frombuffer(template, np.uint8), (len(positions), 1))
+    rows = _rows(template, len(positions))
     _put_stamp(rows, stamp, *stamp_parts(stamps))
     _put(rows, numbers, "<f8", positions)
     return [row.tobytes() for row in rows]
@@ -179,7 +180,7 @@ def foot_contact_messages(
     contact = np.asarray(contact, bool)
     for pattern, which in same_rows(contact):
         template, stamp, feet = _contacts_template(frame_id, tuple(names), pattern)
-        rows = np.tile(np.frombuffer(template, np.uint8), (len(which), 1))
+        rows = _rows(template, len(which))
         _put_stamp(rows, stamp, *stamp_parts(np.asarray(stamps)[which]))
         for k, (prob, point) in enumerate(feet):
             _put(rows, prob, "<f4", np.asarray(probability, np.float64)[which, k].astype(np.float32))
@@ -203,7 +204,7 @@ def status_messages(stamps, frame_id: str, valid: np.ndarray, held_message: str)
     out: list[bytes] = [b""] * len(stamps)
     for (state,), which in same_rows(np.asarray(valid, bool)[:, None]):
         template, stamp = _status_template(frame_id, state, "" if state else held_message)
-        rows = np.tile(np.frombuffer(template, np.uint8), (len(which), 1))
+        rows = _rows(template, len(which))
         _put_stamp(rows, stamp, *stamp_parts(np.asarray(stamps)[which]))
         for i, row in zip(which, rows, strict=True):
             out[i] = row.tobytes()

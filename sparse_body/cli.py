@@ -395,21 +395,35 @@ def cmd_demo(args) -> int:
 
 def cmd_view(args) -> int:
     from .apps.batch import is_bag
+    from .apps.evaluation import is_results_file
     from .apps.viewer import bag_bodies, write_body_page
 
     source = Path(args.source) if args.source else None
+    title = None
     if source is not None and is_bag(source):
         positions, trackers, fps = bag_bodies(source)
         parts = {"estimate": positions, "trackers": trackers}
         name = source.name
+    elif source is not None and is_results_file(source):
+        from .apps.result_view import view_clip
+        from .data.catalog import find_mocap_root
+
+        if not args.clip:
+            raise ValueError("a results file holds many clips: name one with --clip")
+        shown = view_clip(source, args.clip, args.estimator, find_mocap_root(args.mocap))
+        parts, fps, title = shown.parts(), shown.run.motion.fps, shown.title
+        name = f"{shown.run.motion.name}_{shown.result.estimator}"
+        print(title)
     else:
+        if args.estimator:
+            raise ValueError("--estimator picks a result of a results file (what eval --output wrote)")
         if source is not None:
             args.motion = str(source)
         elif not args.clip:
             raise ValueError("view needs something to show: an estimate bag, a motion file or --clip ID")
         motion = _motion(args)
         parts, fps, name = {"truth": motion.positions}, motion.fps, motion.name
-    page = write_body_page(Path(args.output or f"{name}.html"), fps, title=name, **parts)
+    page = write_body_page(Path(args.output or f"{name}.html"), fps, title=title or name, **parts)
     print(f"written {page}: open it in a browser (no network needed)")
     return 0
 
@@ -681,9 +695,20 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--overwrite", action="store_true", help="replace BAG_OUT if it exists")
     p.set_defaults(func=cmd_process)
 
-    p = sub.add_parser("view", help="an HTML page that plays a body in 3D: an estimate bag, a motion file or a clip")
-    p.add_argument("source", nargs="?", help="an estimate bag (what process wrote) or a motion file")
-    p.add_argument("--clip", help="a CMU clip ID instead (the motion capture folder: --mocap)")
+    p = sub.add_parser(
+        "view", help="an HTML page that plays a body in 3D: an estimate bag, a motion file, a clip or an eval result"
+    )
+    p.add_argument(
+        "source",
+        nargs="?",
+        help="an estimate bag (what process wrote), a motion file, or a results file (what eval wrote) with --clip",
+    )
+    p.add_argument(
+        "--clip",
+        help="a CMU clip ID instead (the motion capture folder: --mocap), or the clip of a results file to estimate"
+        " again",
+    )
+    p.add_argument("--estimator", help="which estimator's result, where a results file holds several for the clip")
     p.add_argument("--mocap", help="the CMU folder")
     p.add_argument("--output", "-o", help="the page (default: NAME.html here)")
     p.add_argument("--fps", type=_fps, default=60.0, help="a motion file's frame rate where it has none")

@@ -201,3 +201,40 @@ def test_results_go_to_a_named_results_folder(tmp_path, capsys, monkeypatch):
     assert os.listdir(work) == ["sparse_body_results"]
     written = work / "sparse_body_results" / "eval_ik_six_point.json"
     assert written.is_file() and f"results: {written.relative_to(work)}" in err
+
+
+def test_view_estimates_a_clip_of_a_result_again_and_gets_the_figure_the_file_holds(tmp_path, capsys):
+    """A results file keeps metrics, not poses: `view RESULTS --clip` runs the clip again as
+    eval did (its file, seed, protocol) and says the figure now beside the stored one."""
+    from sparse_body.apps.result_view import METRIC, view_clip
+
+    dist = gen.by_motion_class(tmp_path / "dist")
+    out = tmp_path / "results.json"
+    argv = eval_args("--estimator", "reference", "--motion", dist / "walk", "--faulty", "5", "--output", out)
+    code, _, _ = run_cli(capsys, *argv)
+    assert code == 0
+    stored = json.loads(out.read_text())
+    clip = stored[0]["clips"][0]
+    assert clip["source"].endswith(")") and " with " in clip["source"]  # an AMC with its actor's ASF
+
+    shown = view_clip(out, clip["clip"], "ik")
+    assert shown.now == pytest.approx(clip[METRIC], rel=1e-9)  # the same estimate, not a similar one
+    assert shown.parts()["estimate"].shape == (clip["frames"], 22, 3)
+    code, said, _ = run_cli(capsys, "view", out, "--clip", clip["clip"], "--estimator", "ik", "-o", tmp_path / "p.html")
+    assert code == 0 and f"(stored {clip[METRIC]:.2f})" in said and (tmp_path / "p.html").stat().st_size > 100_000
+
+    code, _, err = run_cli(capsys, "view", out, "--clip", clip["clip"])
+    assert code != 0 and "choose one with --estimator" in err and len(err.strip().splitlines()) == 1
+    code, _, err = run_cli(capsys, "view", out, "--clip", "nope.amc", "--estimator", "ik")
+    assert code != 0 and "no clip 'nope.amc'" in err
+
+    amc = clip["source"].partition(" with ")[0]
+    with open(amc, "a") as f:  # the file is not what was evaluated any more
+        f.write("\n")
+    code, _, err = run_cli(capsys, "view", out, "--clip", clip["clip"], "--estimator", "ik")
+    assert code != 0 and "content changed" in err
+    for result in stored:  # a file written before results said their protocol
+        del result["protocol_spec"]
+    out.write_text(json.dumps(stored))
+    code, _, err = run_cli(capsys, "view", out, "--clip", clip["clip"], "--estimator", "ik")
+    assert code != 0 and "run the eval again" in err

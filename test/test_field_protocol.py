@@ -210,3 +210,12 @@ def test_eval_command_runs_the_field_protocol_by_default_and_the_lab_on_request(
     assert field["protocol"] == "field, vr noise" and lab["protocol"] == "lab"
     assert field["summary"]["MPJPE [cm]"] > lab["summary"]["MPJPE [cm]"]
     assert lab["summary"]["End-effector PE [cm]"] < 0.2
+
+
+def test_a_protocol_comes_back_equal_from_the_json_a_results_file_keeps():
+    import json
+
+    from sparse_body.data.field_protocol import FIELD, LAB, Protocol
+
+    for protocol in (FIELD, LAB, Protocol.named("height", "none", 5.0, 0.01, 10.0)):
+        assert Protocol.from_json(json.loads(json.dumps(protocol.to_json()))) == protocol

@@ -40,12 +40,25 @@ ESTIMATOR = "sparse_body.ros.estimator_node"
 BRIDGE = "sparse_body.ros.tracker_bridge_node"
 
 
+RESEND_AFTER = 20.0  # s without an answer before the request goes again
+
+
 def _call(node, client, request, timeout=STARTUP_LIMIT):
+    """The first answer to REQUEST. A request unanswered for RESEND_AFTER goes again and the
+    earlier ones stay pending: a clean CI run once waited 300 s for a ChangeState that was
+    never answered. Every request these tests send may arrive twice: a repeated lifecycle
+    transition is refused without a change, a repeated GetState or SetParameters changes nothing."""
+    deadline = time.monotonic() + timeout
     assert client.wait_for_service(timeout_sec=timeout), f"no service {client.srv_name}"
-    future = client.call_async(request)
-    rclpy.spin_until_future_complete(node, future, timeout_sec=timeout)
-    assert future.done(), f"{client.srv_name} did not answer"
-    return future.result()
+    futures = []
+    while (left := deadline - time.monotonic()) > 0:
+        futures.append(client.call_async(request))
+        wait_until = time.monotonic() + min(RESEND_AFTER, left)
+        while time.monotonic() < wait_until and not any(f.done() for f in futures):
+            rclpy.spin_once(node, timeout_sec=0.1)
+        if done := [f for f in futures if f.done()]:
+            return done[0].result()
+    raise AssertionError(f"{client.srv_name} did not answer {len(futures)} requests in {timeout:.0f} s")
 
 
 def test_lifecycle_transitions_gate_the_outputs(ros_env, tmp_path):
@@ -548,6 +561,8 @@ def test_a_bad_height_refuses_configure_with_the_reason_and_the_node_stays_up(ro
         ).success
         assert _call(node, get, GetState.Request()).current_state.id == State.PRIMARY_STATE_UNCONFIGURED
         assert proc.poll() is None
+    except AssertionError as err:  # what the node said, which the failure alone does not tell
+        raise AssertionError(f"{err}\nthe node's log:\n{(tmp_path / 'bad_height.log').read_text()}") from None
     finally:
         listener.destroy()
         stop(proc)

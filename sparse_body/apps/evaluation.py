@@ -9,7 +9,7 @@ from __future__ import annotations
 import json
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -21,7 +21,7 @@ from ..core.rotations import quat_to_matrix
 from ..core.sensors import SensorConfig
 from ..data import MotionFileError
 from ..data.catalog import DEFAULT_FPS, load_clip, split_clips
-from ..data.field_protocol import FIELD, Protocol, user_view
+from ..data.field_protocol import FIELD, Protocol, UserView, user_view
 from ..data.motion import Motion
 from ..data.motion_inputs import (
     AMC_FPS,
@@ -67,6 +67,7 @@ class EvalResult:
     sources: list[str] = field(default_factory=list)
     skipped: list[dict[str, str]] = field(default_factory=list)
     settings: dict = field(default_factory=dict)  # what a resumed run must share
+    protocol_spec: dict = field(default_factory=dict)  # Protocol.to_json(): what `view` re-runs
 
     @property
     def summary(self) -> dict[str, float]:
@@ -116,6 +117,7 @@ class EvalResult:
             "split": self.split,
             "protocol": self.protocol,
             "settings": self.settings,
+            "protocol_spec": self.protocol_spec,
             "frames": int(sum(self.frames)),
             "seconds": self.seconds,
             "summary": self.summary,
@@ -143,6 +145,7 @@ class EvalResult:
             [r.get("source", "") for r in rows],
             list(data.get("skipped", [])),
             dict(data.get("settings", {})),
+            dict(data.get("protocol_spec", {})),  # absent from files written before it
         )
 
 
@@ -168,23 +171,33 @@ def clip_interval(
     return out
 
 
-def evaluate_motion(
+@dataclass
+class Estimated:
+    """One estimator's run over one motion: what evaluate_motion scores and `view` draws."""
+
+    motion: Motion  # moved so that its floor is z = 0
+    view: UserView  # what the estimator was given
+    positions: np.ndarray  # (T, 22, 3) the estimate's joints, placed with view.skeleton
+    global_rotations: np.ndarray  # (T, 22, 3, 3)
+    local_rotations: np.ndarray  # (T, 22, 3, 3)
+    contacts: np.ndarray  # (T, 2) left, right
+
+
+def estimate_motion(
     motion: Motion,
     estimator_name: str,
     sensors: SensorConfig,
     protocol: Protocol = FIELD,
     seed: int = 0,
-    per_joint: bool = False,
     **options,
-) -> dict[str, float]:
-    """Metrics of one estimator on one motion, from the motion's own virtual trackers as the
-    protocol hands them to a user's estimator (its body, mounting, noise).
+) -> Estimated:
+    """The estimate of one motion from its own virtual trackers as the protocol hands them to
+    a user's estimator (its body, mounting, noise).
 
     The motion is first moved so that its floor is z = 0, as in a calibrated VR play space:
     estimators that need the floor (IK contacts, LoBSTr's reference height) find it there.
     The estimate's joints are placed with the body the estimator was given, as a user's
-    avatar or robot would show them. per_joint: each joint's errors as well
-    (core/metrics.py: per_joint_metrics)."""
+    avatar or robot would show them."""
     floor = estimate_floor(motion.positions)
     motion = Motion(
         motion.name, motion.fps, motion.skeleton, motion.local_quats, motion.root_positions - [0.0, 0.0, floor]
@@ -196,25 +209,35 @@ def evaluate_motion(
     local = quat_to_matrix(np.stack([p.local_quats for p in poses]))
     root = np.stack([p.root_position for p in poses])
     glob, pos = forward_kinematics(local, root, view.skeleton.offsets)
-    pred_contacts = np.stack([p.contact for p in poses])
-    floor = 0.0
+    return Estimated(motion, view, pos, glob, local, np.stack([p.contact for p in poses]))
+
+
+def evaluate_motion(*args, per_joint: bool = False, **options) -> dict[str, float]:
+    """Metrics of estimate_motion(*args, **options) against the motion itself. per_joint:
+    each joint's errors as well (core/metrics.py: per_joint_metrics)."""
+    return score(estimate_motion(*args, **options), per_joint)
+
+
+def score(run: Estimated, per_joint: bool = False) -> dict[str, float]:
+    """The metrics of an estimate against the motion it was made from."""
+    motion, floor = run.motion, 0.0
     gt_contacts = contact_labels(motion.positions, motion.fps, floor)
-    tracked = sorted({s.joint_index for s in sensors.sites})
+    tracked = sorted({s.joint_index for s in run.view.sensors.sites})
     metrics = sequence_metrics(
-        pos,
-        glob,
-        local,
+        run.positions,
+        run.global_rotations,
+        run.local_rotations,
         motion.positions,
         motion.global_rotations,
         motion.local_rotations,
         motion.fps,
         floor,
         gt_contacts,
-        pred_contacts,
+        run.contacts,
         tracked,
     )
     if per_joint:
-        metrics.update(per_joint_metrics(pos, motion.positions, local, motion.local_rotations))
+        metrics.update(per_joint_metrics(run.positions, motion.positions, run.local_rotations, motion.local_rotations))
     return metrics
 
 
@@ -311,7 +334,11 @@ def run_evaluation(
     results = []
     for spec in specs:
         settings = {"fps": fps, "per_joint": per_joint, **{k: str(v) for k, v in options.items()}}
-        results.append(EvalResult(spec, sensors.name, split, protocol=protocol.label, settings=settings))
+        results.append(
+            EvalResult(
+                spec, sensors.name, split, protocol=protocol.label, settings=settings, protocol_spec=protocol.to_json()
+            )
+        )
     if out is not None:
         results = _resumed(results, out)
     iterator = items
@@ -367,7 +394,11 @@ def _resumed(results: list[EvalResult], out: Path) -> list[EvalResult]:
             b.settings,
         )
 
-    return [next((e for e in earlier if same(e, r)), r) for r in results]
+    # a file written before results kept their protocol_spec gets it from the run that extends it
+    return [
+        next((replace(e, protocol_spec=e.protocol_spec or r.protocol_spec) for e in earlier if same(e, r)), r)
+        for r in results
+    ]
 
 
 def format_table(

@@ -17,7 +17,7 @@ The lab protocol is the one the papers report: the true skeleton, exact mounting
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import asdict, dataclass, replace
 
 import numpy as np
 from scipy.spatial.transform import Rotation
@@ -93,6 +93,16 @@ class Protocol:
                 raise ValueError("an oracle skeleton comes with the true mounting: no mounting error")
             return cls("oracle", model, 0.0, 0.0, 0.0)
         return cls(skeleton, model, mounting_translation_std=mounting_error)
+
+    def to_json(self) -> dict:
+        """Every field, so that a results file says exactly what its estimators were given."""
+        return asdict(self)
+
+    @classmethod
+    def from_json(cls, data: dict) -> Protocol:
+        noise = dict(data["noise"])
+        noise["occlusion_sites"] = tuple(noise.get("occlusion_sites", ()))
+        return cls(**{**data, "noise": TrackerNoise(**noise)})
 
 
 FIELD = Protocol()

@@ -400,7 +400,18 @@ def cmd_view(args) -> int:
 
     source = Path(args.source) if args.source else None
     title = None
-    if source is not None and is_bag(source):
+    if args.source and args.source.startswith(("ws://", "wss://")):
+        from .apps.live_record import record_tf
+        from .apps.viewer import tf_bodies
+
+        messages, malformed = record_tf(args.source, args.seconds)
+        positions, trackers, fps = tf_bodies(messages, args.source)
+        parts, name = {"estimate": positions, "trackers": trackers}, "live"
+        print(
+            f"{len(positions)} estimates in {args.seconds:g} s"
+            + (f"; {malformed} /tf messages that were not TFMessages left out" if malformed else "")
+        )
+    elif source is not None and is_bag(source):
         positions, trackers, fps = bag_bodies(source)
         parts = {"estimate": positions, "trackers": trackers}
         name = source.name
@@ -701,7 +712,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument(
         "source",
         nargs="?",
-        help="an estimate bag (what process wrote), a motion file, or a results file (what eval wrote) with --clip",
+        help="an estimate bag (what process wrote), a motion file, a results file (what eval wrote) with --clip,"
+        " or ws://HOST:PORT, the estimator's live view (foxglove_port), recorded for --seconds",
     )
     p.add_argument(
         "--clip",
@@ -712,7 +724,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--mocap", help="the CMU folder")
     p.add_argument("--output", "-o", help="the page (default: NAME.html here)")
     p.add_argument("--fps", type=_fps, default=60.0, help="a motion file's frame rate where it has none")
-    p.set_defaults(func=cmd_view, motion=None, seconds=0.0)
+    p.add_argument("--seconds", type=float, default=10.0, help="how long to record a live view (at most 600)")
+    p.set_defaults(func=cmd_view, motion=None)
 
     p = sub.add_parser("bench", help="step times and end-to-end latency over DDS, beside their goals")
     p.add_argument(

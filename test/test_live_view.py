@@ -19,7 +19,9 @@ websockets = pytest.importorskip("websockets", reason="websockets is not install
 
 from ros_helpers import STARTUP_LIMIT, start_node, stop  # noqa: E402
 
+from sparse_body.apps.live_record import record_tf  # noqa: E402
 from sparse_body.apps.offline import make_bag  # noqa: E402
+from sparse_body.apps.viewer import tf_bodies  # noqa: E402
 from sparse_body.core.sensors import load_sensor_config  # noqa: E402
 from sparse_body.data.synthetic import synthetic_walk  # noqa: E402
 from sparse_body.io.bagio import typestore  # noqa: E402
@@ -97,6 +99,7 @@ def test_a_websocket_client_sees_the_body_and_trackers_live(ros_env, tmp_path):
             return sum(m.valid for m in status) >= 20 and got["/robot_description"]
 
         channels, received = asyncio.run(collect(port, enough, STARTUP_LIMIT))
+        recorded, malformed = record_tf(f"ws://127.0.0.1:{port}", 3.0)  # `sparse-body view ws://...`
     finally:
         stop(est, *([bridge] if bridge else []))
     assert enough(received), log.read_text()[-2000:]
@@ -113,6 +116,11 @@ def test_a_websocket_client_sees_the_body_and_trackers_live(ros_env, tmp_path):
     assert {s.frame_id + SEEN for s in config.sites} & frames, frames  # the trackers beside the body
     urdf = store.deserialize_cdr(received["/robot_description"][0], "std_msgs/msg/String").data
     assert urdf.lstrip().startswith("<") and "<robot" in urdf
+
+    positions, trackers, fps = tf_bodies(recorded, "live")  # what the page of a recorded live view draws
+    assert malformed == 0 and len(positions) > 10 and np.all(np.isfinite(positions))
+    assert len({tuple(np.round(p[0], 6)) for p in positions}) > 10  # the body moves
+    assert trackers is not None and trackers.shape[1] == len(config.sites) and np.isfinite(trackers).any()
 
 
 def test_a_taken_port_is_a_one_line_error():

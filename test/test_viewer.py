@@ -146,3 +146,18 @@ def test_the_page_of_an_estimate_bag_shows_the_body_and_plays_in_a_real_browser(
     start, played = body_pixels(tmp_path / "start.png"), body_pixels(tmp_path / "played.png")
     assert start.sum() > 100, "no body drawn"
     assert played.sum() > 100 and (start != played).sum() > 50, "the body did not move when played"
+
+
+def test_a_live_view_that_is_not_there_is_a_one_line_error(capsys):
+    import socket
+
+    from sparse_body.cli import main
+
+    with socket.socket() as s:  # a port nobody listens on
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    for extra, said in (([], "no live view there"), (["--seconds", "0"], "seconds must be between")):
+        with pytest.raises(SystemExit) as ended:
+            main(["view", f"ws://127.0.0.1:{port}", *extra])
+        err = capsys.readouterr().err
+        assert ended.value.code != 0 and said in err and len(err.strip().splitlines()) == 1, err

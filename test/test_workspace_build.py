@@ -169,6 +169,7 @@ ROSDEP_KEYS = {
     "pillow": "python3-pil",
     "python-osc": None,
     "foxglove-sdk": None,  # the live view (ros/live_view.py); no rosdep key checked here, so installed with pip
+    "websockets": None,  # `view ws://...` records the live view (apps/live_record.py); installed with pip
     "plotly": None,  # the viewer (apps/viewer.py); no rosdep key checked here, so installed with pip
 }
 

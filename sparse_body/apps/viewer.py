@@ -20,6 +20,7 @@ from pathlib import Path
 import numpy as np
 
 from ..core.skeleton import JOINT_NAMES, NUM_JOINTS, PARENTS
+from ..io.cdr import TfRow
 
 MAX_FPS = 30.0  # frames drawn a second: WebGL redraws 3D scenes whole
 MAX_FRAMES = 9000  # five minutes at 30 frames a second; longer recordings are drawn sparser
@@ -215,44 +216,56 @@ def write_body_page(path: Path, fps: float, **parts) -> Path:
 
 
 def bag_bodies(bag: Path) -> tuple[np.ndarray, np.ndarray | None, float]:
-    """(joint positions (frames, 22, 3), trackers (frames, k, 3) or None, frame rate) of an
-    estimate bag: the body from its /tf links (fixed frame -> pelvis -> ...), the trackers
-    the other frames directly under the fixed frame."""
-    from ..core.kinematics import forward_kinematics
-    from ..core.rotations import quat_to_matrix
-    from ..io.bagio import TF_TOPIC, read_topic
+    """tf_bodies of an estimate bag's /tf."""
+    from rosbags.rosbag2 import Reader
+
+    from ..io.bagio import TF_TOPIC
+    from ..io.cdr import MalformedMessage, read_tf
 
     try:
-        messages = read_topic(bag, TF_TOPIC)
+        with Reader(Path(bag)) as reader:
+            tf = [c for c in reader.connections if c.topic == TF_TOPIC]
+            messages = [read_tf(raw) for _, _, raw in reader.messages(connections=tf)]
+    except MalformedMessage as err:
+        raise ViewError(f"{bag}: a /tf message that is not a TFMessage ({err})") from None
     except Exception as err:  # noqa: BLE001 - rosbags raises many kinds for a broken file
         raise ViewError(f"{bag}: cannot be read as a rosbag2 ({err})") from None
+    return tf_bodies(messages, str(bag))
+
+
+def tf_bodies(messages: list[list[TfRow]], source: str) -> tuple[np.ndarray, np.ndarray | None, float]:
+    """(joint positions (frames, 22, 3), trackers (frames, k, 3) or None, frame rate) of the
+    /tf messages of an estimate (a bag, the live view): a frame per message with every body
+    link (fixed frame -> pelvis -> ...); the trackers are the other frames directly under the
+    fixed frame, from that message or those since the previous body (the live view sends
+    them apart), NaN where a tracker was not seen."""
+    from ..core.kinematics import forward_kinematics
+    from ..core.rotations import quat_to_matrix
+
     names = {name: j for j, name in enumerate(JOINT_NAMES)}
     stamps, quats, roots, offsets, tracker_rows, tracker_names = [], [], [], None, [], []
-    for msg in messages:
-        by_child = {t.child_frame_id: t for t in msg.transforms}
+    loose: list[TfRow] = []  # rows since the last body
+    for rows in messages:
+        by_child = {child: (parent, stamp, numbers) for parent, child, stamp, numbers in rows}
         if not all(n in by_child for n in JOINT_NAMES):
-            continue  # not a body message (or a body of another prefix)
-        fixed = by_child[JOINT_NAMES[0]].header.frame_id
-        q = np.empty((NUM_JOINTS, 4))
-        off = np.empty((NUM_JOINTS, 3))
-        for name, j in names.items():
-            t = by_child[name].transform
-            q[j] = (t.rotation.x, t.rotation.y, t.rotation.z, t.rotation.w)
-            off[j] = (t.translation.x, t.translation.y, t.translation.z)
-        stamp = by_child[JOINT_NAMES[0]].header.stamp
-        stamps.append(stamp.sec + 1e-9 * stamp.nanosec)
-        quats.append(q)
-        roots.append(off[0].copy())
-        offsets = off if offsets is None else offsets
+            loose += rows  # not a body message (trackers, or a body of another prefix)
+            continue
+        fixed, stamp, _ = by_child[JOINT_NAMES[0]]
+        numbers = np.array([by_child[name][2] for name in names])  # x y z, qx qy qz qw
+        stamps.append(stamp)
+        quats.append(numbers[:, 3:])
+        roots.append(numbers[0, :3].copy())
+        offsets = numbers[:, :3] if offsets is None else offsets
         row = {}
-        for child, t in by_child.items():
-            if t.header.frame_id == fixed and child != JOINT_NAMES[0]:
-                row[child] = (t.transform.translation.x, t.transform.translation.y, t.transform.translation.z)
+        for parent, child, _, values in loose + rows:
+            if parent == fixed and child != JOINT_NAMES[0]:
+                row[child] = values[:3]
                 if child not in tracker_names:
                     tracker_names.append(child)
         tracker_rows.append(row)
+        loose = []
     if not quats or offsets is None:
-        raise ViewError(f"{bag}: no body on /tf (a bag `sparse-body process` wrote has one)")
+        raise ViewError(f"{source}: no body on /tf (a bag `sparse-body process` wrote has one)")
     offsets[0] = 0.0
     _, positions = forward_kinematics(quat_to_matrix(np.array(quats)), np.array(roots), offsets)
     trackers = None

@@ -81,7 +81,7 @@ install_requirements() {   # stamp name, then the requirement files
   mark_done "$stamp" "$hash"
 }
 
-install_requirements deps "$ROOT/requirements.txt" "$ROOT/requirements-ros.txt"
+install_requirements deps "$ROOT/requirements.txt" "$ROOT/requirements-ros.txt" "$ROOT/requirements-cluster.txt"
 # The CMake files exported by the ROS wheels name the include paths of the machine that
 # built them; point them at this interpreter and this numpy (idempotent).
 "$VPY" - "$VENV" <<'PY'

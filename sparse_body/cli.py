@@ -336,14 +336,17 @@ def cmd_process(args) -> int:
     body = person_body(args.calibration, args.height)
     guards = TfGuards(clock_window=args.clock_window, play_radius=args.play_radius)
     inputs = [Path(p) for p in args.bag_in]
-    if len(inputs) > 1 or (inputs[0].is_dir() and not is_bag(inputs[0])):  # many: OUT is a folder
+    many = len(inputs) > 1 or (inputs[0].is_dir() and not is_bag(inputs[0]))
+    if many or args.cluster:  # OUT is a folder
         global _left_when_stopped
         _left_when_stopped = (
             f"the bags finished are kept (see {Path(args.bag_out) / SUMMARY}), the ones being written were "
             "removed; the same command resumes"
         )
         settings = Settings(name, options, load_sensor_config(args.sensors), body, args.fps, guards, args.overwrite)
-        results = process_many(inputs, Path(args.bag_out), settings, args.jobs, progress=not args.quiet)
+        results = process_many(
+            inputs, Path(args.bag_out), settings, args.jobs, progress=not args.quiet, cluster=args.cluster
+        )
         count = Counter(r.status for r in results)
         failed = [r for r in results if r.status == "failed"]
         print(
@@ -669,6 +672,12 @@ def build_parser() -> argparse.ArgumentParser:
         type=_between_int(1, 1024),
         default=len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1),
         help="worker processes for several bags (default: the cores this process may use)",
+    )
+    p.add_argument(
+        "--cluster",
+        metavar="ADDRESS",
+        help="run the bags as tasks on a Ray cluster (HOST:PORT of `ray start --head`, or auto) whose nodes "
+        "see the same files, instead of --jobs processes here; OUT is a folder",
     )
     p.add_argument(
         "--estimator",

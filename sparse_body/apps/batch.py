@@ -5,7 +5,13 @@ temporary name, moved into place when complete), by one of N worker processes. A
 fails is reported with its error and the others go on; a bag whose output is already there
 (a complete bag of ours: nothing else is ever left under that name) is skipped, so a run
 that was stopped resumes where it was. Every run writes a summary (each bag: frames,
-invalid estimates, refused samples, seconds, error) beside the outputs."""
+invalid estimates, refused samples, seconds, error) beside the outputs.
+
+With `--cluster ADDRESS` the bags go to a Ray cluster instead (one task a bag; its nodes see
+the same storage): Ray is the engine this field uses to spread work over machines, and it
+keeps workers, scheduling and node failures out of this file. A task whose worker or node
+died is sent again (at most RETRIES times), which the summary records; its half-written bag
+never takes the output's name (bagio.bag_writer), and its leftover is removed here."""
 
 from __future__ import annotations
 
@@ -13,6 +19,7 @@ import json
 import multiprocessing
 import os
 import signal
+import socket
 import time
 from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
 from dataclasses import asdict, dataclass, field
@@ -52,6 +59,11 @@ class BagResult:
     refused: dict[str, int] = field(default_factory=dict)
     seconds: float = 0.0
     error: str = ""
+    retried: list[str] = field(default_factory=list)  # why each earlier attempt ended (a cluster's)
+
+
+RETRIES = 3  # a bag whose worker died is sent again at most this many times (--cluster)
+CONNECT_TIMEOUT = 10.0  # s for the cluster's head to answer
 
 
 def is_bag(path: Path) -> bool:
@@ -139,10 +151,16 @@ def _worker_init() -> None:
 
 
 def process_many(
-    inputs: list[Path], out_dir: Path, settings: Settings, jobs: int, progress: bool = True
+    inputs: list[Path],
+    out_dir: Path,
+    settings: Settings,
+    jobs: int,
+    progress: bool = True,
+    cluster: str | None = None,
 ) -> list[BagResult]:
-    """Process every input bag into out_dir with `jobs` worker processes; returns one result a
-    bag, in input order, and writes them to out_dir / SUMMARY."""
+    """Process every input bag into out_dir with `jobs` worker processes, or as tasks on the Ray
+    cluster at `cluster` ("auto": the one this machine is part of); returns one result a bag,
+    in input order, and writes them to out_dir / SUMMARY."""
     bags = expand_inputs(inputs)
     target = out_dir.resolve()
     for given in inputs:  # the outputs would land among (or inside) the inputs
@@ -164,36 +182,114 @@ def process_many(
         from tqdm import tqdm
 
         bar = tqdm(total=len(bags), initial=len(results), desc=f"{settings.estimator} bags", unit="bag")
+
+    def record(i: int, result: BagResult) -> None:
+        results[i] = result
+        if bar is not None:
+            bar.update(1)
+            bar.set_postfix(frames=sum(r.frames for r in results.values()))
+        _write_summary(summary, bags, results)
+
+    try:
+        tasks = [(i, bags[i], output_for(bags[i], out_dir)) for i in todo]
+        if cluster is None:
+            _run_here(tasks, settings, jobs, record)
+        else:
+            _run_on_cluster(tasks, settings, cluster, record)
+    finally:
+        if bar is not None:
+            bar.close()  # before the command's last line
+    ordered = [results[i] for i in range(len(bags))]
+    _write_summary(summary, bags, results)
+    return ordered
+
+
+Task = tuple[int, Path, Path]  # the bag's place in the run, the bag, its output
+
+
+def _run_here(tasks: list[Task], settings: Settings, jobs: int, record) -> None:
+    """The bags on `jobs` worker processes of this machine."""
     # fork: a worker starts with the modules loaded (spawn would import them again)
     context = multiprocessing.get_context("fork" if os.name == "posix" else "spawn")
     with ProcessPoolExecutor(
-        max_workers=max(1, min(jobs, len(todo) or 1)), mp_context=context, initializer=_worker_init
+        max_workers=max(1, min(jobs, len(tasks) or 1)), mp_context=context, initializer=_worker_init
     ) as pool:
-        pending: dict[Future, int] = {
-            pool.submit(_process_one, bags[i], output_for(bags[i], out_dir), settings): i for i in todo
-        }
+        pending: dict[Future, int] = {pool.submit(_process_one, bag, out, settings): i for i, bag, out in tasks}
         try:
             while pending:
                 done, _ = wait(pending, return_when=FIRST_COMPLETED)
                 for future in done:
-                    i = pending.pop(future)
-                    results[i] = future.result()
-                    if bar is not None:
-                        bar.update(1)
-                        bar.set_postfix(frames=sum(r.frames for r in results.values()))
-                    _write_summary(summary, bags, results)
+                    record(pending.pop(future), future.result())
         except BaseException:
             for future in pending:
                 future.cancel()
-            for process in list(getattr(pool, "_processes", {}).values()):
+            for process in multiprocessing.active_children():  # the pool's workers: this run has no others
                 process.terminate()  # SIGTERM: each removes its half-written bag (bagio.bag_writer)
             raise
-        finally:
-            if bar is not None:
-                bar.close()  # before the command's last line
-    ordered = [results[i] for i in range(len(bags))]
-    _write_summary(summary, bags, results)
-    return ordered
+
+
+def _run_on_cluster(tasks: list[Task], settings: Settings, address: str, record) -> None:
+    """One Ray task a bag. A task that ends because its worker process or node died is sent
+    again, up to RETRIES times; one that raises (a bug: _process_one reports every error a
+    bag can cause) fails its bag with the error, and the others go on."""
+    try:
+        import ray
+        from ray import exceptions as ray_errors
+    except ImportError:
+        raise OutputError("--cluster needs Ray: pip install 'ray>=2.40' (make setup installs it)") from None
+    host, _, port = address.rpartition(":")
+    if address != "auto":  # Ray itself retries an address nobody answers for minutes
+        if not port.isdigit():
+            raise OutputError(f"--cluster {address}: not HOST:PORT (the address `ray start --head` gives) or auto")
+        try:
+            socket.create_connection((host.strip("[]") or "127.0.0.1", int(port)), timeout=CONNECT_TIMEOUT).close()
+        except OSError as err:
+            raise OutputError(
+                f"--cluster {address}: no Ray cluster there ({err}; HOST:PORT of `ray start --head`)"
+            ) from None
+    try:
+        ray.init(address=address, logging_level="ERROR", log_to_driver=False, configure_logging=False)
+    except (ConnectionError, RuntimeError, ValueError) as err:
+        raise OutputError(f"--cluster {address}: no Ray cluster there ({' '.join(str(err).split())})") from None
+    by_ref: dict = {}
+    try:
+        remote = ray.remote(num_cpus=1, max_retries=0)(_process_one)  # retried here, to record why
+        # absolute: a worker's folder is its own (the nodes see the same storage, not the same cwd)
+        by_ref.update({remote.remote(bag.absolute(), out.absolute(), settings): (i, bag, out) for i, bag, out in tasks})
+        retried: dict[int, list[str]] = {i: [] for i, _, _ in tasks}
+        while by_ref:
+            (ref,), _ = ray.wait(list(by_ref), num_returns=1)
+            i, bag, out = by_ref.pop(ref)
+            try:
+                result = ray.get(ref)
+            except ray_errors.RayTaskError as err:
+                result = BagResult(str(bag), str(out), "failed", error=" ".join(str(err.cause).split()))
+            except ray_errors.RayError as err:  # the worker or its node died
+                retried[i].append(type(err).__name__)
+                if len(retried[i]) <= RETRIES:
+                    by_ref[remote.remote(bag.absolute(), out.absolute(), settings)] = (i, bag, out)
+                    continue
+                result = BagResult(str(bag), str(out), "failed", error=f"its worker died {len(retried[i])} times")
+            result.input, result.output, result.retried = str(bag), str(out), retried[i]
+            if retried[i]:
+                _remove_leftovers(out)
+            record(i, result)
+    except BaseException:
+        for ref in by_ref:
+            ray.cancel(ref)  # KeyboardInterrupt in the task: bag_writer removes its half-written bag
+        raise
+    finally:
+        ray.shutdown()
+
+
+def _remove_leftovers(out: Path) -> None:
+    """The half-written bags of attempts whose worker died (killed, bagio.bag_writer could not
+    clean up): our hidden `.NAME.partial-PID` folders holding nothing but NAME."""
+    import shutil
+
+    for left in out.parent.glob(f".{out.name}.partial-*"):
+        if left.is_dir() and not left.is_symlink() and {p.name for p in left.iterdir()} <= {out.name}:
+            shutil.rmtree(left, ignore_errors=True)
 
 
 def _check_summary(path: Path) -> None:

@@ -6,6 +6,7 @@ single process writes, and the summary says which bag was sent again and why."""
 import contextlib
 import json
 import os
+import shutil
 import signal
 import socket
 import subprocess
@@ -139,6 +140,7 @@ def test_bags_on_a_cluster_survive_a_killed_worker_and_equal_one_process(tmp_pat
         stop_sessions({p.pid for p in nodes})
         for node in nodes:
             node.wait(timeout=10)
+        shutil.rmtree(ray_dir, ignore_errors=True)
     said = (tmp_path / "out" / SUMMARY).read_text()
     summary = json.loads(said)["bags"]
     assert [b["status"] for b in summary] == ["done"] * 3, said

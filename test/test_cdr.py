@@ -26,11 +26,10 @@ from sparse_body.io.output import (
     FOOT_NAMES,
     HELD,
     axis_link_table,
-    body_transforms,
-    contact_points,
+    body_table,
+    foot_points,
     joint_angles,
     joint_state_names,
-    joint_state_positions,
     stamp_parts,
     tracker_sites,
     tracker_table,
@@ -38,6 +37,11 @@ from sparse_body.io.output import (
 
 STORE = typestore()
 T = STORE.types
+
+
+def body_transforms(pose, skeleton, fixed_frame):
+    """One pose's transforms, as a message built one by one holds them."""
+    return body_table(pose.local_quats[None], pose.root_position[None], skeleton, fixed_frame).frame(0)
 
 
 def _stamp(seconds):
@@ -89,12 +93,12 @@ def test_a_processed_bag_holds_exactly_the_messages_built_one_by_one(tmp_path):
         js = T["sensor_msgs/msg/JointState"](
             header=_header(pose.stamp, ""),
             name=joint_state_names(),
-            position=joint_state_positions(pose),
+            position=joint_angles(pose.local_quats),
             velocity=np.zeros(0),
             effort=np.zeros(0),
         )
         assert raw[JOINT_STATES_TOPIC][i] == STORE.serialize_cdr(js, "sensor_msgs/msg/JointState"), i
-        points = contact_points(pose, motion.skeleton)
+        points = foot_points(pose.local_quats, pose.root_position, motion.skeleton)
         contacts = T["sparse_body/msg/FootContacts"](
             header=_header(pose.stamp, "world"),
             contacts=[

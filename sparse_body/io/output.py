@@ -35,13 +35,8 @@ def joint_angles(local_quats: np.ndarray) -> np.ndarray:
     return angles.reshape(local_quats.shape[:-2] + (len(AXES) * (NUM_JOINTS - 1),))
 
 
-def joint_state_positions(pose: BodyPose) -> np.ndarray:
-    """One pose's JointState positions (joint_angles)."""
-    return joint_angles(pose.local_quats)
-
-
 def pose_from_joint_state(names, positions, root_position, root_quat, stamp: float) -> BodyPose:
-    """The inverse of joint_state_positions: a pose from a JointState of our 63 joints (in
+    """The inverse of joint_angles: a pose from a JointState of our 63 joints (in
     any order) and the root's pose (from TF). Missing joints or non-finite values: ValueError."""
     from ..core.rotations import euler_to_matrix, matrix_to_quat
 
@@ -109,13 +104,6 @@ def body_table(
     return TransformTable(parents, tuple(prefix + JOINT_NAMES[j] for j in joints), values)
 
 
-def body_transforms(
-    pose: BodyPose, skeleton: Skeleton, fixed_frame: str, prefix: str = "", links: bool = True
-) -> list[Transform]:
-    """One pose's body_table."""
-    return body_table(pose.local_quats[None], pose.root_position[None], skeleton, fixed_frame, prefix, links).frame(0)
-
-
 def axis_link_name(body: str, axis: str) -> str:
     """The URDF's massless link after a body joint's revolute joint about `axis` (z or y)."""
     return f"{body}_r{axis}_link"
@@ -168,11 +156,6 @@ def foot_points(local_quats: np.ndarray, roots: np.ndarray, skeleton: Skeleton) 
     rotations (..., 22, 4) and roots (..., 3)."""
     _, pos = forward_kinematics(quat_to_matrix(local_quats), roots, skeleton.offsets)
     return pos[..., list(FOOT_JOINTS), :]
-
-
-def contact_points(pose: BodyPose, skeleton: Skeleton) -> np.ndarray:
-    """One pose's foot_points."""
-    return foot_points(pose.local_quats, pose.root_position, skeleton)
 
 
 FOOT_NAMES = ("left_foot", "right_foot")

@@ -93,7 +93,7 @@ def messages(bag: Path) -> list[tuple[str, int, bytes]]:
 
 def test_bags_on_a_cluster_survive_a_killed_worker_and_equal_one_process(tmp_path):
     config = load_sensor_config("six_point")
-    walk = synthetic_walk(12.0)
+    walk = synthetic_walk(20.0)
     (tmp_path / "in").mkdir()
     for k in range(3):
         make_bag(walk, config, tmp_path / "in" / f"walk{k}")

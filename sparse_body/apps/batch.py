@@ -22,7 +22,7 @@ import signal
 import socket
 import time
 from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 
 from ..core.sensors import SensorConfig
@@ -267,7 +267,10 @@ def _run_on_cluster(tasks: list[Task], settings: Settings, address: str, record)
             except ray_errors.RayError as err:  # the worker or its node died
                 retried[i].append(type(err).__name__)
                 if len(retried[i]) <= RETRIES:
-                    by_ref[remote.remote(bag.absolute(), out.absolute(), settings)] = (i, bag, out)
+                    # a worker killed after its bag took the output's name leaves a complete bag of
+                    # ours there: the retry replaces it (what is not ours is refused all the same)
+                    again = replace(settings, overwrite=True)
+                    by_ref[remote.remote(bag.absolute(), out.absolute(), again)] = (i, bag, out)
                     continue
                 result = BagResult(str(bag), str(out), "failed", error=f"its worker died {len(retried[i])} times")
             result.input, result.output, result.retried = str(bag), str(out), retried[i]

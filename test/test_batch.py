@@ -132,3 +132,21 @@ def test_ctrl_c_keeps_the_finished_bags_and_removes_the_ones_being_written(tmp_p
     done = [os.path.basename(b["output"]) for b in json.loads((out / SUMMARY).read_text())["bags"]]
     assert sorted(p.name for p in out.iterdir() if p.is_dir()) == sorted(done)
     assert all(written_by_us(out / name) and _messages(out / name) for name in done)
+
+
+def test_leftovers_of_killed_writers_go_and_nothing_else(tmp_path):
+    from sparse_body.io.bagio import remove_leftovers
+
+    out = tmp_path / "walk"
+    out.mkdir()  # the finished bag
+    ours = tmp_path / ".walk.partial-123"
+    (ours / "walk").mkdir(parents=True)
+    (ours / "walk" / "walk.mcap").write_bytes(b"half")
+    someone = tmp_path / ".walk.partial-9"  # the same pattern, holding something else
+    someone.mkdir()
+    (someone / "notes.txt").write_text("mine")
+    link = tmp_path / ".walk.partial-7"
+    link.symlink_to(ours)
+    remove_leftovers(out)
+    assert not ours.exists() and out.is_dir()
+    assert (someone / "notes.txt").read_text() == "mine" and link.is_symlink()

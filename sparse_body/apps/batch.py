@@ -27,7 +27,7 @@ from pathlib import Path
 
 from ..core.sensors import SensorConfig
 from ..core.skeleton import Skeleton
-from ..io.bagio import BagError, OutputError, written_by_us
+from ..io.bagio import BagError, OutputError, remove_leftovers, written_by_us
 from ..io.tf_guards import TfGuards
 
 SUMMARY = "sparse_body_summary.json"  # beside the outputs; replaced only when it is ours
@@ -275,7 +275,7 @@ def _run_on_cluster(tasks: list[Task], settings: Settings, address: str, record)
                 result = BagResult(str(bag), str(out), "failed", error=f"its worker died {len(retried[i])} times")
             result.input, result.output, result.retried = str(bag), str(out), retried[i]
             if retried[i]:
-                _remove_leftovers(out)
+                remove_leftovers(out)  # no attempt of it runs any more
             record(i, result)
     except BaseException:
         for ref in by_ref:
@@ -283,16 +283,6 @@ def _run_on_cluster(tasks: list[Task], settings: Settings, address: str, record)
         raise
     finally:
         ray.shutdown()
-
-
-def _remove_leftovers(out: Path) -> None:
-    """The half-written bags of attempts whose worker died (killed, bagio.bag_writer could not
-    clean up): our hidden `.NAME.partial-PID` folders holding nothing but NAME."""
-    import shutil
-
-    for left in out.parent.glob(f".{out.name}.partial-*"):
-        if left.is_dir() and not left.is_symlink() and {p.name for p in left.iterdir()} <= {out.name}:
-            shutil.rmtree(left, ignore_errors=True)
 
 
 def _check_summary(path: Path) -> None:

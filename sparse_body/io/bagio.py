@@ -150,6 +150,19 @@ def check_output(path: Path, overwrite: bool = False, inputs: tuple[Path, ...] =
     return path
 
 
+def _partial(path: Path, pid: int | str) -> Path:
+    """The hidden folder a bag is written in before it takes its name."""
+    return path.with_name(f".{path.name}.partial-{pid}")
+
+
+def remove_leftovers(path: Path) -> None:
+    """What killed writers of `path` left (SIGKILL: bag_writer could not clean up): our hidden
+    partial folders beside it holding nothing but the bag. Only while no writer of it runs."""
+    for left in path.parent.glob(_partial(path, "*").name):
+        if left.is_dir() and not left.is_symlink() and {p.name for p in left.iterdir()} <= {path.name}:
+            shutil.rmtree(left, ignore_errors=True)
+
+
 @contextmanager
 def bag_writer(path: Path, overwrite: bool = False, inputs: tuple[Path, ...] = ()):
     """A rosbag2 (MCAP) Writer on a temporary name beside `path`, moved into place only when
@@ -158,7 +171,7 @@ def bag_writer(path: Path, overwrite: bool = False, inputs: tuple[Path, ...] = (
     by check_output before and again just before it is replaced."""
     path = check_output(path, overwrite, inputs)
     # the bag is made under its own name inside a hidden folder, so that its file is NAME.mcap
-    partial = path.with_name(f".{path.name}.partial-{os.getpid()}")
+    partial = _partial(path, os.getpid())
     tmp = partial / path.name
     old = path.with_name(f".{path.name}.replaced-{os.getpid()}")
     shutil.rmtree(partial, ignore_errors=True)

@@ -50,6 +50,23 @@ def test_rotation_errors():
     assert M.mpjre(pred, gt, M.LOWER) == pytest.approx(22 / 8)
 
 
+def test_the_axis_angle_definition_of_the_avatarposer_family_beside_the_geodesic_one():
+    from scipy.spatial.transform import Rotation
+
+    def about_x(angles):  # (T, 22, 3, 3): every joint turned by angles[t] about x
+        return np.broadcast_to(
+            Rotation.from_rotvec(np.outer(angles, [1.0, 0.0, 0.0])).as_matrix()[:, None], (len(angles), 22, 3, 3)
+        )
+
+    turned, still = about_x(np.full(4, np.deg2rad(30.0))), about_x(np.zeros(4))
+    assert M.mpjre(turned, still) == pytest.approx(30.0)
+    assert M.mpjre_axis_angle(turned, still) == pytest.approx(10.0)  # 30 degrees on one of three components
+    # 174 degrees about +x against 174 about -x: the components differ by 348 degrees, which
+    # wraps to 12, as does the geodesic angle between them
+    a, b = about_x(np.full(2, np.deg2rad(174.0))), about_x(np.full(2, -np.deg2rad(174.0)))
+    assert M.mpjre(a, b) == pytest.approx(12.0) and M.mpjre_axis_angle(a, b) == pytest.approx(4.0)
+
+
 def test_ground_skate_and_contact_accuracy():
     pos = _still(3)
     pos[:, LF, 2] = [-0.02, 0.0, 0.05]

@@ -199,7 +199,7 @@ wears them, a VR system's noise):
 {table("three_point/field")}
 
 Lab protocol (`--skeleton oracle --noise none`, the papers' setting; the AvatarJLM paper reports
-3.35 cm MPJPE, 2.90 deg MPJRE, 20.79 cm/s MPJVE on AMASS Protocol 1, trained on 90 % of CMU,
+3.35 cm MPJPE, 2.90 deg MPJRE (axis-angle components: a third of our geodesic MPJRE for one-axis turns, docs/reference.md), 20.79 cm/s MPJVE on AMASS Protocol 1, trained on 90 % of CMU,
 BMLrub and HDM05, and 7.75 cm on CMU when trained on the other datasets, Protocol 2: a guide,
 not a like-for-like comparison):
 

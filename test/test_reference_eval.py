@@ -186,3 +186,21 @@ def test_eval_takes_a_users_own_motion_files(tmp_path, mocap_root, capsys):
     with pytest.raises(SystemExit) as ended:
         main(["eval", "--estimator", "ik", "--motion", str(tmp_path / "absent.bvh"), "--quiet"])
     assert ended.value.code == 1 and "no such file or folder" in capsys.readouterr().err
+
+
+def test_intervals_drawn_by_person_are_wider_when_a_persons_clips_move_together():
+    from sparse_body.apps.evaluation import EvalResult, clip_interval, format_table
+
+    per_clip = [{"MPJPE [cm]": v} for v in (1.0, 1.0, 1.0, 3.0, 3.0, 3.0)]
+    people = ["16", "16", "16", "43", "43", "43"]
+    by_clip = clip_interval(per_clip, [100] * 6)["MPJPE [cm]"]
+    by_person = clip_interval(per_clip, [100] * 6, units=people)["MPJPE [cm]"]
+    assert by_person == [1.0, 3.0]  # two people: either one twice, or both
+    assert 1.0 < by_clip[0] < 2.0 < by_clip[1] < 3.0
+    assert clip_interval(per_clip, [100] * 6, units=["16"] * 6) == {}  # one person: no interval
+
+    result = EvalResult("ik", "six_point", "test", [f"c{k}" for k in range(6)], [100] * 6, per_clip, subjects=people)
+    data = result.to_json()
+    assert data["interval_95_by_subject"]["MPJPE [cm]"] == by_person
+    assert EvalResult.from_json(data).subjects == people
+    assert "[1.00, 3.00] by person (2 people)" in format_table([result])

@@ -50,6 +50,7 @@ class EvalItem:
     group: str = ""
     source: str = ""
     check_plausible: bool = False  # a user's file: say when its skeleton does not fit the motion
+    subject: str = ""  # the person (a CMU clip's subject): intervals drawn by person
 
 
 @dataclass
@@ -68,6 +69,7 @@ class EvalResult:
     skipped: list[dict[str, str]] = field(default_factory=list)
     settings: dict = field(default_factory=dict)  # what a resumed run must share
     protocol_spec: dict = field(default_factory=dict)  # Protocol.to_json(): what `view` re-runs
+    subjects: list[str] = field(default_factory=list)  # each clip's person, where known
 
     @property
     def summary(self) -> dict[str, float]:
@@ -80,6 +82,7 @@ class EvalResult:
         self.keys.append(item.key)
         self.groups.append(item.group)
         self.sources.append(item.source)
+        self.subjects.append(item.subject)
 
     def by_group(self) -> dict[str, EvalResult]:
         out: dict[str, EvalResult] = {}
@@ -96,9 +99,10 @@ class EvalResult:
     def to_json(self, intervals: bool = True) -> dict:
         """intervals=False: without the bootstrap intervals (a run's in-between writes, which
         would otherwise redo 1000 draws per group after every clip)."""
-        interval = clip_interval if intervals else (lambda *_: {})
+        interval = clip_interval if intervals else (lambda *_, **__: {})
         clips = [{"clip": c, "frames": n, **m} for c, n, m in zip(self.clips, self.frames, self.per_clip, strict=True)]
-        for extra, values in (("key", self.keys), ("group", self.groups), ("source", self.sources)):
+        extras = (("key", self.keys), ("group", self.groups), ("source", self.sources), ("subject", self.subjects))
+        for extra, values in extras:
             if len(values) == len(clips):
                 for row, v in zip(clips, values, strict=True):
                     row[extra] = v
@@ -122,14 +126,21 @@ class EvalResult:
             "seconds": self.seconds,
             "summary": self.summary,
             "interval_95": interval(self.per_clip, self.frames),
+            "interval_95_by_subject": interval(self.per_clip, self.frames, units=self.subject_units()),
             "groups": groups,
             "skipped": self.skipped,
             "clips": clips,
         }
 
+    def subject_units(self) -> list[str] | None:
+        """Each clip's person, where every clip has one and there are two people or more."""
+        if len(self.subjects) != len(self.clips) or not all(self.subjects) or len(set(self.subjects)) < 2:
+            return None
+        return self.subjects
+
     @classmethod
     def from_json(cls, data: dict) -> EvalResult:
-        info = ("clip", "frames", "key", "group", "source")
+        info = ("clip", "frames", "key", "group", "source", "subject")
         rows = data.get("clips", [])
         return cls(
             data["estimator"],
@@ -146,21 +157,34 @@ class EvalResult:
             list(data.get("skipped", [])),
             dict(data.get("settings", {})),
             dict(data.get("protocol_spec", {})),  # absent from files written before it
+            [r.get("subject", "") for r in rows],
         )
 
 
 def clip_interval(
-    per_clip: list[dict[str, float]], frames: list[int], draws: int = 1000, seed: int = 0
+    per_clip: list[dict[str, float]],
+    frames: list[int],
+    draws: int = 1000,
+    seed: int = 0,
+    units: list[str] | None = None,
 ) -> dict[str, list[float]]:
     """A 95 % bootstrap interval of each frame-weighted mean, clips drawn with replacement
-    (how far the figure could move with other clips of the same kind); none under 2 clips."""
-    if len(per_clip) < 2:
+    (how far the figure could move with other clips of the same kind); none under 2 clips.
+    units: each clip's person, to draw people with all their clips instead (how far it could
+    move with other people: wider, as a person's clips move together); none without units."""
+    if len(per_clip) < 2 or (units is not None and len(set(units)) < 2):
         return {}
     keys = list(per_clip[0])
     values = np.array([[row.get(k, np.nan) for k in keys] for row in per_clip], dtype=float)
     weights = np.asarray(frames, dtype=float)[:, None] * np.isfinite(values)
     values = np.nan_to_num(values)
-    picks = np.random.default_rng(seed).integers(0, len(per_clip), (draws, len(per_clip)))
+    if units is not None:  # one row per person: the sums of their clips
+        names = sorted(set(units))
+        member = np.array([[u == n for u in units] for n in names], dtype=float)
+        values, weights = member @ (values * weights), member @ weights
+        with np.errstate(invalid="ignore", divide="ignore"):
+            values = np.nan_to_num(values / weights)
+    picks = np.random.default_rng(seed).integers(0, len(values), (draws, len(values)))
     with np.errstate(invalid="ignore", divide="ignore"):
         means = (values * weights)[picks].sum(1) / weights[picks].sum(1)
     out = {}
@@ -252,7 +276,7 @@ def split_items(mocap_root: Path, split: str, fps: float = DEFAULT_FPS, limit: i
     """The clips of a part of the CMU split (or of an imported folder's), seeded by their place
     in the split (the split's order is fixed, so the draws are too)."""
     return [
-        EvalItem(c.clip_id, c.clip_id, k, lambda c=c: load_clip(c, fps), c.subject, str(c.path))
+        EvalItem(c.clip_id, c.clip_id, k, lambda c=c: load_clip(c, fps), c.subject, str(c.path), subject=c.subject)
         for k, c in enumerate(split_clips(mocap_root, split, limit))
     ]
 
@@ -431,7 +455,24 @@ def format_table(
     where = "the motion files given" if results[0].split == "files" else f"the {results[0].split} split"
     protocol = "protocols as named" if mixed else f"{results[0].protocol} protocol"
     lines.append(f"({len(results[0].clips)} clips of {where}, {frames} frames; {protocol})")
-    return "\n".join(lines + legend)
+    return "\n".join(lines + _intervals(results) + legend)
+
+
+def _intervals(results: list[EvalResult], metric: str = "MPJPE [cm]") -> list[str]:
+    """The headline metric's 95 % bootstrap intervals, clips drawn and people drawn, a line a
+    result: how far each mean could move with other clips, or other people."""
+    lines = []
+    for r in results:
+        mean = r.summary.get(metric, float("nan"))
+        by_clip = clip_interval(r.per_clip, r.frames).get(metric)
+        if not np.isfinite(mean) or not by_clip:
+            continue
+        text = f"  {r.estimator}/{r.sensors}: {mean:.2f}, 95 % interval [{by_clip[0]:.2f}, {by_clip[1]:.2f}] by clip"
+        units = r.subject_units()
+        if units is not None and (by_person := clip_interval(r.per_clip, r.frames, units=units).get(metric)):
+            text += f", [{by_person[0]:.2f}, {by_person[1]:.2f}] by person ({len(set(units))} people)"
+        lines.append(text)
+    return [f"{metric}, bootstrap:"] + lines if lines else []
 
 
 def format_groups(results: list[EvalResult], metric: str = "MPJPE [cm]", label: str = "group") -> str:

@@ -51,7 +51,9 @@ def cmd_eval(args) -> int:
             compare = METHODS[name].compare_with if name in METHODS else ()
             specs += [s for s in compare if s not in specs]
             reference.update(paper_figures(name, sensors.name, args.faulty, args.occlusion))
-    protocol = Protocol.named(args.skeleton, args.noise, args.faulty, args.mounting_error, args.occlusion)
+    protocol = Protocol.named(
+        args.skeleton, args.noise, args.faulty, args.mounting_error, args.occlusion, args.hand_loss, args.hand_loss_mode
+    )
     if args.motion:  # the files are found and every AMC paired with its ASF before any work
         from .data.motion_inputs import balanced, find_inputs
 
@@ -594,6 +596,20 @@ def build_parser() -> argparse.ArgumentParser:
         help="DTP's foot occlusion: in about this share (%%) of the frames one or both foot trackers "
         "lose sight for half a second and report the origin with the identity rotation or noise "
         "within a leg's length",
+    )
+    p.add_argument(
+        "--hand-loss",
+        type=_percent,
+        default=0.0,
+        metavar="PERCENT",
+        help="a headset losing its controllers: each hand out of view in about this share (%%) of the "
+        "frames, 0.2-2 s at a time; adds the hands' error while lost and their recovery jump",
+    )
+    p.add_argument(
+        "--hand-loss-mode",
+        choices=("lost", "frozen"),
+        default="lost",
+        help="how a lost hand is reported: no sample (lost) or its last sample repeated (frozen)",
     )
     p.add_argument(
         "--limit",

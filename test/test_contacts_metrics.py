@@ -84,3 +84,20 @@ def test_weighted_mean_skips_nan():
     rows = [{"a": 1.0, "b": float("nan")}, {"a": 4.0, "b": 2.0}]
     out = M.weighted_mean(rows, [1, 2])
     assert out["a"] == pytest.approx(3.0) and out["b"] == pytest.approx(2.0)
+
+
+def test_a_hand_that_snaps_back_when_its_tracker_returns_is_measured_by_its_jump():
+    T = 120
+    gt = np.zeros((T, 22, 3))
+    gt[:, :, 0] = 0.01 * np.arange(T)[:, None]  # everything walks 1 cm a frame
+    pred = gt.copy()
+    lost = np.zeros((T, 1), dtype=bool)
+    lost[40:60] = True
+    hand = J["left_wrist"]
+    pred[40:60, hand] = gt[39, hand]  # held where it was last seen: 1 to 20 cm behind
+    out = M.loss_metrics(pred, gt, lost, [hand], fps=60.0)
+    assert out["Lost PE [cm]"] == pytest.approx(np.mean(np.arange(1, 21)))
+    # back in view at frame 60: from 20 cm behind to the truth, 21 cm in one frame where the truth moved 1
+    assert out["Recovery jump [cm]"] == pytest.approx(20.0)
+    nothing = M.loss_metrics(pred, gt, np.zeros((T, 1), dtype=bool), [hand], fps=60.0)
+    assert np.isnan(nothing["Lost PE [cm]"]) and np.isnan(nothing["Recovery jump [cm]"])

@@ -217,5 +217,7 @@ def test_a_protocol_comes_back_equal_from_the_json_a_results_file_keeps():
 
     from sparse_body.data.field_protocol import FIELD, LAB, Protocol
 
-    for protocol in (FIELD, LAB, Protocol.named("height", "none", 5.0, 0.01, 10.0)):
+    losing = Protocol.named("calibrated", "vr", lost_percent=10.0, loss_mode="frozen")
+    for protocol in (FIELD, LAB, Protocol.named("height", "none", 5.0, 0.01, 10.0), losing):
         assert Protocol.from_json(json.loads(json.dumps(protocol.to_json()))) == protocol
+    assert losing.label == "field, vr noise, hands frozen in 10 % of frames"

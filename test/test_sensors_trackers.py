@@ -111,3 +111,33 @@ def test_drops_occlusion_and_orientation_only():
     )
     err = np.linalg.norm(bounded.positions[:, foot] - motion.positions[:, J["left_ankle"]], axis=-1)
     assert err.max() <= motion.skeleton.leg_length() + 0.1 and err.max() > 0.1
+
+
+@pytest.mark.parametrize("mode", ["lost", "frozen"])
+def test_hands_out_of_view_for_a_share_of_frames_lost_or_frozen_and_nothing_else_moves(mode):
+    from sparse_body.data.synthetic import synthetic_walk
+    from sparse_body.data.virtual_trackers import VR_NOISE, synthesize_trackers
+
+    motion = synthetic_walk(120.0)
+    config = load_sensor_config("three_point")
+    noise = VR_NOISE.losing_hands(20.0, mode)
+    assert noise.lost_percent == pytest.approx(20.0)
+    plain, losing = synthesize_trackers(motion, config, VR_NOISE, 3), synthesize_trackers(motion, config, noise, 3)
+    assert plain.lost is None and losing.lost is not None
+    head, hands = config.site_names.index("head"), [config.site_names.index(h) for h in ("left_hand", "right_hand")]
+    assert not losing.lost[:, head].any()
+    np.testing.assert_array_equal(losing.positions[:, head], plain.positions[:, head])  # drawn after the rest
+    for s in hands:
+        out = losing.lost[:, s]
+        assert 0.12 < out.mean() < 0.28, out.mean()  # about 20 % of the frames
+        edges = np.flatnonzero(np.diff(np.r_[0, out.astype(int), 0]))
+        lengths = (edges[1::2] - edges[::2])[edges[1::2] < len(out)]  # the clip's end cuts its last one
+        assert lengths.min() >= 0.2 * 60 - 1 and lengths.max() <= 2.0 * 60 + 1  # 0.2-2 s at a time
+        np.testing.assert_array_equal(losing.positions[~out, s], plain.positions[~out, s])
+        if mode == "lost":
+            assert not losing.valid[out, s].any() and np.isnan(losing.positions[out, s]).all()
+        else:  # valid, and the sample before the loss again
+            assert losing.valid[out, s].all()
+            for start, end in zip(edges[::2], edges[1::2], strict=True):
+                if start > 0:
+                    assert (losing.positions[start:end, s] == plain.positions[start - 1, s]).all()

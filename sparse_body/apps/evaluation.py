@@ -16,7 +16,7 @@ import numpy as np
 
 from ..core.contacts import contact_labels, estimate_floor
 from ..core.kinematics import forward_kinematics
-from ..core.metrics import per_joint_metrics, sequence_metrics, weighted_mean
+from ..core.metrics import loss_metrics, per_joint_metrics, sequence_metrics, weighted_mean
 from ..core.rotations import quat_to_matrix
 from ..core.sensors import SensorConfig
 from ..data import MotionFileError
@@ -260,6 +260,10 @@ def score(run: Estimated, per_joint: bool = False) -> dict[str, float]:
         run.contacts,
         tracked,
     )
+    lost = run.view.stream.lost
+    if lost is not None:  # a protocol that takes trackers out of view (--hand-loss)
+        joints = [site.joint_index for site in run.view.sensors.sites]
+        metrics.update(loss_metrics(run.positions, motion.positions, lost, joints, motion.fps))
     if per_joint:
         metrics.update(per_joint_metrics(run.positions, motion.positions, run.local_rotations, motion.local_rotations))
     return metrics

@@ -132,6 +132,33 @@ def per_joint_metrics(pred_pos, gt_pos, pred_local, gt_local) -> dict[str, float
     }
 
 
+RECOVERY_SECONDS = 0.5  # after a tracker returns, how long its joint is watched for a jump
+
+
+def loss_metrics(pred_pos, gt_pos, lost: np.ndarray, joints, fps: float) -> dict[str, float]:
+    """What a user sees when a tracker drops out of view and returns (lost: (T, S) frames each
+    site was out of view; joints: each site's joint). "Lost PE": the sites' joints' error while
+    out of view. "Recovery jump": the largest step of such a joint within RECOVERY_SECONDS after
+    its tracker returns, beyond the true joint's own step (a hand that snaps back). NaN where
+    nothing was lost, or nothing returned."""
+    err, jumps = [], []
+    window = max(1, round(RECOVERY_SECONDS * fps))
+    for s, j in enumerate(joints):
+        out = lost[:, s]
+        if not out.any():
+            continue
+        err.append(np.linalg.norm(pred_pos[out, j] - gt_pos[out, j], axis=-1))
+        step = np.linalg.norm(np.diff(pred_pos[:, j], axis=0), axis=-1)
+        true_step = np.linalg.norm(np.diff(gt_pos[:, j], axis=0), axis=-1)
+        for r in np.flatnonzero(out[:-1] & ~out[1:]) + 1:  # the first frame back in view
+            span = slice(r - 1, min(r - 1 + window, len(step)))  # step[r - 1] moves into frame r
+            jumps.append(float(np.max(step[span] - true_step[span])))
+    return {
+        "Lost PE [cm]": float(np.concatenate(err).mean() * 100) if err else float("nan"),
+        "Recovery jump [cm]": max(jumps) * 100 if jumps else float("nan"),
+    }
+
+
 def weighted_mean(rows: list[dict[str, float]], weights: list[float]) -> dict[str, float]:
     """Frame-weighted mean of per-sequence metrics, ignoring NaN entries."""
     out = {}

@@ -36,6 +36,7 @@ class TrackerStream:
     positions: np.ndarray  # (T, S, 3)
     orientations: np.ndarray  # (T, S, 4)
     valid: np.ndarray  # (T, S)
+    lost: np.ndarray | None = None  # (T, S) frames a simulated tracker was out of view (known only to a simulation)
 
     def __len__(self) -> int:
         return len(self.times)

@@ -9,7 +9,7 @@ field protocol gives it only what a user has:
   mounting_translation_std to measure what it costs;
 - tracker noise of a VR system (Lighthouse / headset grade unless told otherwise);
 - feet trackers occluded in a share of the frames when asked (DTP's occlusion model; not by
-  default);
+  default), and hands out of view of a headset's cameras, lost or frozen (not by default);
 - the body the T-pose calibration fits: the person first stands in a T-pose (synthesized
   in their own body, held a second, never quite exact), then moves as in the clip.
 The lab protocol is the one the papers report: the true skeleton, exact mounting, no noise.
@@ -52,12 +52,20 @@ class Protocol:
         if self == LAB:
             return "lab"
         plain = replace(
-            self.noise, fault_probability=0.0, occlusion_probability=0.0, occlusion_frames=30, occlusion_mode="origin"
+            self.noise,
+            fault_probability=0.0,
+            occlusion_probability=0.0,
+            occlusion_frames=30,
+            occlusion_mode="origin",
+            loss_probability=0.0,
+            loss_mode="lost",
         )
         noise = next((n for n, v in NOISE_MODELS.items() if v == plain), "custom")
         faults = f", {self.noise.fault_probability * 100:g} % faulty" if self.noise.fault_probability else ""
         if self.noise.occlusion_probability:
             faults += f", feet occluded in {self.noise.occluded_percent:.3g} % of frames"
+        if self.noise.loss_probability:
+            faults += f", hands {self.noise.loss_mode} in {self.noise.lost_percent:.3g} % of frames"
         name = (
             "field"
             if replace(self, noise=VR_NOISE, mounting_translation_std=0.0) == FIELD
@@ -77,10 +85,12 @@ class Protocol:
         faulty_percent: float = 0.0,
         mounting_error: float = 0.0,
         occluded_percent: float = 0.0,
+        lost_percent: float = 0.0,
+        loss_mode: str = "lost",
     ) -> Protocol:
         """The protocol of `sparse-body eval --skeleton S --noise N --faulty P --mounting-error M
-        --occlusion O`: an oracle skeleton comes with the true mounting (the lab's), the others
-        with a user's."""
+        --occlusion O --hand-loss L --hand-loss-mode MODE`: an oracle skeleton comes with the
+        true mounting (the lab's), the others with a user's."""
         if noise not in NOISE_MODELS:
             raise ValueError(f"noise must be one of {', '.join(NOISE_MODELS)}, got {noise!r}")
         if not 0.0 <= mounting_error <= 0.1:
@@ -88,6 +98,8 @@ class Protocol:
         model = replace(NOISE_MODELS[noise], fault_probability=faulty_percent / 100)
         if occluded_percent:
             model = model.occluding(occluded_percent)
+        if lost_percent:
+            model = model.losing_hands(lost_percent, loss_mode)
         if skeleton == "oracle":
             if mounting_error:
                 raise ValueError("an oracle skeleton comes with the true mounting: no mounting error")
@@ -100,8 +112,7 @@ class Protocol:
 
     @classmethod
     def from_json(cls, data: dict) -> Protocol:
-        noise = dict(data["noise"])
-        noise["occlusion_sites"] = tuple(noise.get("occlusion_sites", ()))
+        noise = {k: tuple(v) if isinstance(v, list) else v for k, v in data["noise"].items()}  # JSON has no tuples
         return cls(**{**data, "noise": TrackerNoise(**noise)})
 
 
@@ -180,7 +191,7 @@ def calibrated_stream(stream: TrackerStream, calibration: Calibration) -> Tracke
         if site in calibration.offsets:
             ok = np.all(np.isfinite(orientations[:, s]), axis=1)
             orientations[ok, s] = calibration.apply(site, orientations[ok, s])
-    return TrackerStream(stream.sites, stream.times, stream.positions, orientations, stream.valid)
+    return TrackerStream(stream.sites, stream.times, stream.positions, orientations, stream.valid, stream.lost)
 
 
 def user_view(motion: Motion, sensors: SensorConfig, protocol: Protocol = FIELD, seed: int = 0) -> UserView:
@@ -190,7 +201,7 @@ def user_view(motion: Motion, sensors: SensorConfig, protocol: Protocol = FIELD,
         return UserView(motion.skeleton, sensors, synthesize_trackers(motion, sensors, protocol.noise, seed))
     worn = mounted_as_worn(sensors, protocol, rng)
     # the T-pose is taken standing in full view of the base stations: no foot occluded
-    visible = replace(protocol.noise, occlusion_probability=0.0)
+    visible = replace(protocol.noise, occlusion_probability=0.0, loss_probability=0.0)
     tpose = synthesize_trackers(tpose_motion(motion, protocol, rng), worn, visible, seed + 1)
     calibration = calibrate_from_tpose(tpose, sensors)
     stream = calibrated_stream(synthesize_trackers(motion, worn, protocol.noise, seed), calibration)

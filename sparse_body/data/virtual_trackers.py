@@ -13,6 +13,7 @@ from ..core.types import TrackerStream
 from .motion import Motion
 
 OCCLUSION_MODES = ("origin", "bounded", "either")
+LOSS_MODES = ("lost", "frozen")
 
 
 @dataclass(frozen=True)
@@ -34,10 +35,37 @@ class TrackerNoise:
     # disconnects (valid = False, no values) for fault_frames frames.
     fault_probability: float = 0.0
     fault_frames: int = 100
+    # Lost controllers (a headset's inside-out tracking): a hand leaves the cameras' view
+    # (behind the back, close to the body). In each frame it is tracked, it is lost with this
+    # probability, for a time uniform in loss_seconds, and reported as lost (valid = False,
+    # no values) or frozen at its last sample (valid, as some runtimes report it).
+    loss_probability: float = 0.0
+    loss_seconds: tuple[float, float] = (0.2, 2.0)
+    loss_sites: tuple[str, ...] = ("left_hand", "right_hand")
+    loss_mode: str = "lost"
 
     def __post_init__(self) -> None:
         if self.occlusion_mode not in OCCLUSION_MODES:
             raise ValueError(f"occlusion_mode must be one of {', '.join(OCCLUSION_MODES)}, got {self.occlusion_mode!r}")
+        if self.loss_mode not in LOSS_MODES:
+            raise ValueError(f"loss_mode must be one of {', '.join(LOSS_MODES)}, got {self.loss_mode!r}")
+        if not 0.0 < self.loss_seconds[0] <= self.loss_seconds[1]:
+            raise ValueError(f"loss_seconds must be (shortest, longest) above 0, got {self.loss_seconds!r}")
+
+    def losing_hands(self, percent: float, mode: str = "lost") -> TrackerNoise:
+        """This noise with each hand lost in about `percent` % of the frames (`sparse-body eval
+        --hand-loss`), for loss_seconds at a time, reported as `mode`."""
+        if not 0.0 <= percent < 100.0:
+            raise ValueError(f"the lost share must be from 0 to under 100 %, got {percent!r}")
+        share = percent / 100
+        mean_frames = 60.0 * sum(self.loss_seconds) / 2  # at 60 Hz, the catalogue's rate
+        return replace(self, loss_probability=share / (mean_frames * (1.0 - share)), loss_mode=mode)
+
+    @property
+    def lost_percent(self) -> float:
+        """The share of frames each hand is lost (%), as losing_hands() sets it."""
+        p, n = self.loss_probability, 60.0 * sum(self.loss_seconds) / 2
+        return 100 * p * n / (1 + p * n)
 
     def occluding(self, percent: float, frames: int = 30) -> TrackerNoise:
         """This noise with feet occluded in about `percent` % of the frames, for `frames`
@@ -97,6 +125,21 @@ def _occlusions(T: int, sites: list[str], noise: TrackerNoise, rng: np.random.Ge
     return out
 
 
+def _losses(T: int, fps: float, noise: TrackerNoise, rng: np.random.Generator) -> np.ndarray:
+    """(T,) the frames a site is lost in: each loss starts in a tracked frame with
+    loss_probability and lasts a time uniform in loss_seconds."""
+    lost = np.zeros(T, dtype=bool)
+    t = 0
+    while t < T:
+        if rng.random() < noise.loss_probability:
+            frames = max(1, round(rng.uniform(*noise.loss_seconds) * fps))
+            lost[t : t + frames] = True
+            t += frames + 1  # back in view for a frame at least
+        else:
+            t += 1
+    return lost
+
+
 def synthesize_trackers(
     motion: Motion, config: SensorConfig, noise: TrackerNoise = NO_NOISE, seed: int = 0
 ) -> TrackerStream:
@@ -141,5 +184,19 @@ def synthesize_trackers(
             valid[t : t + noise.fault_frames, s] = False
             positions[t : t + noise.fault_frames, s] = np.nan
             orientations[t : t + noise.fault_frames, s] = np.nan
+    lost = None
+    if noise.loss_probability > 0:  # drawn last: the other draws stay what they were without it
+        lost = np.zeros((T, S), dtype=bool)
+        for s, site in enumerate(config.sites):
+            if site.site not in noise.loss_sites:
+                continue
+            lost[:, s] = _losses(T, motion.fps, noise, rng)
+            if noise.loss_mode == "lost":
+                valid[lost[:, s], s] = False
+                positions[lost[:, s], s] = np.nan
+                orientations[lost[:, s], s] = np.nan
+            else:  # each lost frame repeats the last sample before the loss
+                last = np.maximum.accumulate(np.where(lost[:, s], 0, np.arange(T)))
+                positions[:, s], orientations[:, s] = positions[last, s], orientations[last, s]
     times = np.arange(T) / motion.fps
-    return TrackerStream(config.site_names, times, positions, orientations, valid)
+    return TrackerStream(config.site_names, times, positions, orientations, valid, lost)

@@ -187,16 +187,14 @@ def run_demo(
             animation, motion.positions, pos, stream.positions, motion.fps, f"{estimator} / {sensors.name}", tops=tops
         )
         print(f"animation: {animation}")
-        from .viewer import write_body_page
+        from .viewer import stream_trackers, write_body_page
 
         page = write_body_page(
             out_dir / "demo.html",
             motion.fps,
             estimate=pos,
             truth=motion.positions,
-            trackers=np.where(
-                (stream.valid & np.array([s.has_position for s in sensors.sites]))[..., None], stream.positions, np.nan
-            ),
+            trackers=stream_trackers(stream, sensors),
             title=f"{estimator} / {sensors.name}",
             floor=floor,
         )

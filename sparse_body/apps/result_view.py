@@ -19,7 +19,7 @@ from ..data.field_protocol import Protocol
 from ..data.motion_inputs import find_inputs
 from ..estimators.base import parse_estimator_spec
 from .evaluation import Estimated, EvalItem, EvalResult, estimate_motion, file_items, score, split_items
-from .viewer import ViewError
+from .viewer import ViewError, stream_trackers
 
 METRIC = "MPJPE [cm]"
 RERUN_SETTINGS = {"fps", "per_joint"}  # what `view` can take from a result's settings
@@ -43,12 +43,10 @@ class ClipView:
 
     def parts(self) -> dict[str, np.ndarray]:
         """write_body_page's estimate, truth and trackers (NaN where a tracker had no position)."""
-        stream, sites = self.run.view.stream, self.run.view.sensors.sites
-        shown = stream.valid & np.array([s.has_position for s in sites])
         return {
             "estimate": self.run.positions,
             "truth": self.run.motion.positions,
-            "trackers": np.where(shown[..., None], stream.positions, np.nan),
+            "trackers": stream_trackers(self.run.view.stream, self.run.view.sensors),
         }
 
 

@@ -19,7 +19,9 @@ from pathlib import Path
 
 import numpy as np
 
+from ..core.sensors import SensorConfig
 from ..core.skeleton import JOINT_NAMES, NUM_JOINTS, PARENTS
+from ..core.types import TrackerStream
 from ..io.cdr import TfRow
 
 MAX_FPS = 30.0  # frames drawn a second: WebGL redraws 3D scenes whole
@@ -199,6 +201,13 @@ def body_page(
     # `#play` in the address plays on load (the browser test, a link to share)
     script = f"if (window.location.hash === '#play') {{ Plotly.animate('{{plot_id}}', null, {play}); }}"
     return figure.to_html(include_plotlyjs=True, full_html=True, post_script=script, auto_play=False)
+
+
+def stream_trackers(stream: TrackerStream, sensors: SensorConfig) -> np.ndarray:
+    """(frames, sites, 3) the trackers' positions to draw: NaN where a sample is missing or
+    its site has no position (an IMU)."""
+    shown = stream.valid & np.array([s.has_position for s in sensors.sites])
+    return np.where(shown[..., None], stream.positions, np.nan)
 
 
 def write_body_page(path: Path, fps: float, **parts) -> Path:

@@ -223,8 +223,17 @@ def _run_here(tasks: list[Task], settings: Settings, jobs: int, record) -> None:
         except BaseException:
             for future in pending:
                 future.cancel()
-            for process in multiprocessing.active_children():  # the pool's workers: this run has no others
+            workers = multiprocessing.active_children()  # the pool's workers: this run has no others
+            for process in workers:
                 process.terminate()  # SIGTERM: each removes its half-written bag (bagio.bag_writer)
+            for process in workers:
+                process.join(timeout=10)
+            # a bag that finished as the run was stopped is on disk: the summary says so too
+            wait(pending, timeout=1.0)
+            for future, i in pending.items():
+                finished = future.done() and not future.cancelled() and future.exception() is None
+                if finished and (result := future.result()).status == "done":  # not one the stop broke off
+                    record(i, result)
             raise
 
 

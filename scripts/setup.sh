@@ -204,4 +204,10 @@ if ! up_to_date package "$pkg_hash"; then
   mark_done package "$pkg_hash"
 fi
 
+# The per-frame kernels are compiled by numba on first use and cached beside their sources
+# (sparse_body/core/__pycache__); compiling them here spares the first node its seconds.
+say "compiling the per-frame kernels (numba)"
+"$VPY" -c 'from sparse_body.core.mat3 import compile_kernels; compile_kernels()' \
+  || die "compiling the per-frame kernels failed"
+
 say "ready: activate with 'source $VENV/bin/activate'"

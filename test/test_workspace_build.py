@@ -160,6 +160,7 @@ def test_an_installed_node_comes_up_and_ends_on_sigint_with_exit_code_0(prefix, 
 ROSDEP_KEYS = {
     "numpy": "python3-numpy",
     "scipy": "python3-scipy",
+    "numba": "python3-numba",
     "pyyaml": "python3-yaml",
     "onnxruntime": "python3-onnxruntime-pip",
     "rosbags": "python3-rosbags-pip",

@@ -35,6 +35,7 @@ from std_msgs.msg import String
 from sparse_body.msg import EstimateStatus, FootContacts
 
 from ..core.calibration import CalibrationError, person_body
+from ..core.mat3 import compile_kernels
 from ..core.rotations import matrix_to_quat
 from ..core.sensors import SensorConfigError, load_sensor_config
 from ..core.skeleton import JOINT_NAMES, standing_pose
@@ -245,6 +246,7 @@ class EstimatorNode(LifecycleNode):
             if p["calibration"]:
                 self.get_logger().info(f"the body of {p['calibration']}: {self.skeleton.height():.2f} m tall")
             self.estimator = self._make_estimator(p, sensors)
+            compile_kernels()  # here, not at the first estimate: numba compiles (or loads) on first use
         except (SensorConfigError, CalibrationError, ValueError, FileNotFoundError) as err:
             self.get_logger().error(f"configure failed: {err}")
             self._release()

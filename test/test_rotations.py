@@ -63,3 +63,26 @@ def test_slerp_resample_hits_source_samples_and_midpoints():
     out = R.slerp_resample(q, np.array([0.0, 1.0]), np.array([0.0, 0.5, 1.0]))
     assert R.angle_between(np.eye(3), R.quat_to_matrix(out[1])) == pytest.approx(0.5)
     np.testing.assert_allclose(np.abs(out[[0, 2]]), np.abs(q), atol=1e-12)
+
+
+def test_the_compiled_one_pose_conversions_equal_the_batched_numpy_ones(rng):
+    """One pose's conversions run compiled (core/mat3.py), a batch's in numpy: the same
+    numbers within 1e-12, near-identity and half-turn rotations included."""
+    from sparse_body.core.kinematics import forward_kinematics
+    from sparse_body.core.rotations import heading, rotations_to_quat, sixd_to_matrix, yaw_matrix, yaw_matrix_of
+    from sparse_body.core.skeleton import Skeleton
+
+    m = Rotation.random(300, random_state=1).as_matrix()
+    m[:20] = Rotation.from_rotvec(rng.normal(size=(20, 3)) * 1e-9).as_matrix()
+    m[20:40] = Rotation.from_rotvec(np.pi * Rotation.random(20, random_state=2).as_rotvec() / 3.0).as_matrix()
+    np.testing.assert_allclose(rotations_to_quat(m), rotations_to_quat(m[None])[0], rtol=0, atol=1e-12)
+    d6 = rng.normal(size=(300, 6))
+    np.testing.assert_allclose(sixd_to_matrix(d6), sixd_to_matrix(d6[None])[0], rtol=0, atol=1e-12)
+    for r in m[::10]:
+        np.testing.assert_allclose(yaw_matrix_of(r), yaw_matrix(heading(r)), rtol=0, atol=1e-12)
+    offsets = Skeleton.canonical().offsets
+    local, root = m[:22], rng.normal(size=3)
+    for one, batch in zip(
+        forward_kinematics(local, root, offsets), forward_kinematics(local[None], root[None], offsets), strict=True
+    ):
+        np.testing.assert_allclose(one, batch[0], rtol=0, atol=1e-12)

@@ -34,6 +34,7 @@ from .skeleton import NUM_JOINTS, PARENTS
 
 X, Y, Z = np.eye(3)
 _PARENTS = np.array(PARENTS, dtype=np.int64)
+_ALL_BUT_ROOT = np.arange(1, NUM_JOINTS)
 
 
 @dataclass(frozen=True)
@@ -340,7 +341,7 @@ def _solve_body(local, root, offsets, goals, has_goal, keep_shape, spine_toleran
         _fit_spine(local, root, offsets, goals[_SPINE[4]], keep_shape, spine_tolerance)
     glob = np.empty_like(local)
     pos = np.empty((NUM_JOINTS, 3))
-    mat3.forward_kinematics_into(local, root, offsets, glob, pos)
+    mat3.forward_kinematics_into(local, root, offsets, _PARENTS, _ALL_BUT_ROOT, glob, pos)
     for row in range(len(_LIMB_JOINTS)):
         limb = _LIMB_JOINTS[row]
         upper, hinge, end, foot = limb[0], limb[1], limb[2], limb[4]

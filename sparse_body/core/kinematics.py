@@ -4,7 +4,10 @@ from __future__ import annotations
 
 import numpy as np
 
+from . import mat3
 from .skeleton import JOINT_INDEX, NUM_JOINTS, PARENTS
+
+_PARENTS = np.array(PARENTS, dtype=np.int64)
 
 
 def forward_kinematics(local_rot: np.ndarray, root_pos: np.ndarray, offsets: np.ndarray, joints=None):
@@ -18,12 +21,11 @@ def forward_kinematics(local_rot: np.ndarray, root_pos: np.ndarray, offsets: np.
     """
     local_rot = np.asarray(local_rot, dtype=np.float64)
     if local_rot.ndim == 3 and np.ndim(offsets) == 2:
-        return _forward_kinematics_one(
-            local_rot,
-            np.asarray(root_pos, dtype=np.float64),
-            offsets,
-            range(1, NUM_JOINTS) if joints is None else joints,
-        )
+        glob, pos = np.empty_like(local_rot), np.empty((NUM_JOINTS, 3))
+        subset = _ALL_BUT_ROOT if joints is None else np.asarray(joints, dtype=np.int64)
+        root_pos, offsets = np.asarray(root_pos, dtype=np.float64), np.asarray(offsets, dtype=np.float64)
+        mat3.forward_kinematics_into(local_rot, root_pos, offsets, _PARENTS, subset, glob, pos)  # compiled
+        return glob, pos
     if joints is not None:
         raise ValueError("a joint subset is for one pose with one skeleton")
     lead = local_rot.shape[:-3]
@@ -45,6 +47,7 @@ def forward_kinematics(local_rot: np.ndarray, root_pos: np.ndarray, offsets: np.
     return glob, pos
 
 
+_ALL_BUT_ROOT = np.arange(1, NUM_JOINTS)
 # the legs, parents before children: what a foot's IK needs, a third of the body's FK
 LEG_JOINTS = tuple(
     JOINT_INDEX[n]
@@ -68,16 +71,3 @@ def global_to_local(global_rot: np.ndarray) -> np.ndarray:
     for j in range(1, NUM_JOINTS):
         local[..., j, :, :] = np.swapaxes(global_rot[..., PARENTS[j], :, :], -1, -2) @ global_rot[..., j, :, :]
     return local
-
-
-def _forward_kinematics_one(local_rot: np.ndarray, root_pos: np.ndarray, offsets: np.ndarray, joints):
-    """One pose: plain matrix products (einsum's per-call cost dominates at this size,
-    and IK runs this many times a frame)."""
-    glob = np.empty_like(local_rot)
-    pos = np.empty((NUM_JOINTS, 3))
-    glob[0], pos[0] = local_rot[0], root_pos
-    for j in joints:
-        p = PARENTS[j]
-        glob[j] = glob[p] @ local_rot[j]
-        pos[j] = pos[p] + glob[p] @ offsets[j]
-    return glob, pos

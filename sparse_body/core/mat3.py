@@ -17,15 +17,10 @@ import math
 import numpy as np
 from numba import njit as _njit
 
-from .skeleton import NUM_JOINTS, PARENTS
-
 
 def njit(fn):
     """numba.njit with the package's settings: cached on disk, numpy's error model."""
     return _njit(cache=True, error_model="numpy")(fn)
-
-
-_PARENTS = np.array(PARENTS, dtype=np.int64)
 
 
 @njit
@@ -108,29 +103,101 @@ def between(a, b):
 
 
 @njit
-def forward_kinematics_into(local, root, offsets, glob, pos) -> None:
-    """One pose's global rotations and positions, written into glob (22, 3, 3) and pos (22, 3)."""
+def quat_matrix(q):
+    """A unit quaternion (x y z w) as a rotation matrix; rotations.unit_quat_matrix."""
+    x, y, z, w = q[0], q[1], q[2], q[3]
+    out = np.empty((3, 3))
+    out[0, 0], out[0, 1], out[0, 2] = 1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)
+    out[1, 0], out[1, 1], out[1, 2] = 2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)
+    out[2, 0], out[2, 1], out[2, 2] = 2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)
+    return out
+
+
+@njit
+def forward_kinematics_into(local, root, offsets, parents, joints, glob, pos) -> None:
+    """One pose's global rotations and positions, written into glob (J, 3, 3) and pos (J, 3):
+    the root and then joints (parents before children)."""
     glob[0] = local[0]
     pos[0] = root
-    for j in range(1, NUM_JOINTS):
-        p = _PARENTS[j]
+    for j in joints:
+        p = parents[j]
         glob[j] = mul(glob[p], local[j])
         pos[j] = pos[p] + vec(glob[p], offsets[j])
+
+
+@njit
+def quats(m):
+    """Quaternions (N, 4) of orthonormal matrices (N, 3, 3); rotations.rotations_to_quat."""
+    out = np.empty((len(m), 4))
+    for n in range(len(m)):
+        r = m[n]
+        d0, d1, d2 = r[0, 0], r[1, 1], r[2, 2]
+        x = 0.5 * math.sqrt(max(0.0, 1 + d0 - d1 - d2))
+        y = 0.5 * math.sqrt(max(0.0, 1 - d0 + d1 - d2))
+        z = 0.5 * math.sqrt(max(0.0, 1 - d0 - d1 + d2))
+        w = 0.5 * math.sqrt(max(0.0, 1 + d0 + d1 + d2))
+        x, y, z = (
+            math.copysign(x, r[2, 1] - r[1, 2]),
+            math.copysign(y, r[0, 2] - r[2, 0]),
+            math.copysign(z, r[1, 0] - r[0, 1]),
+        )
+        size = math.sqrt(x * x + y * y + z * z + w * w)
+        out[n, 0], out[n, 1], out[n, 2], out[n, 3] = x / size, y / size, z / size, w / size
+    return out
+
+
+@njit
+def sixd_matrices(d6):
+    """Rotation matrices (N, 3, 3) from 6D (N, 6); rotations.sixd_to_matrix."""
+    out = np.empty((len(d6), 3, 3))
+    for n in range(len(d6)):
+        a, b = d6[n, 0:3], d6[n, 3:6]
+        a = a / norm(a)
+        b = b - (a[0] * b[0] + a[1] * b[1] + a[2] * b[2]) * a
+        b = b / norm(b)
+        c = cross(a, b)
+        for i in range(3):
+            out[n, i, 0], out[n, i, 1], out[n, i, 2] = a[i], b[i], c[i]
+    return out
+
+
+@njit
+def yaw_frame(m):
+    """The rotation about +z to the heading of m's forward (+x) axis on the ground plane;
+    rotations.yaw_matrix(rotations.heading(m))."""
+    yaw = math.atan2(m[1, 0], m[0, 0])
+    c, s = math.cos(yaw), math.sin(yaw)
+    out = np.zeros((3, 3))
+    out[0, 0], out[0, 1], out[1, 0], out[1, 1], out[2, 2] = c, -s, s, c, 1.0
+    return out
 
 
 def compile_kernels() -> None:
     """Compile (or load from the disk cache) every kernel of the per-frame path by running
     each once; setup runs it, so that the first estimator started after an install does not
-    spend seconds compiling (numba compiles on first call)."""
-    from .body_ik import LIMBS, reach, solve_body
+    spend seconds compiling (numba compiles on first call), and so does the estimator node
+    at configure."""
+    from ..estimators.base import create_estimator
+    from .body_ik import LIMBS, reach
+    from .kinematics import LEG_JOINTS, forward_kinematics
+    from .rotations import sixd_to_matrix, yaw_matrix_of
+    from .sensors import load_sensor_config
     from .skeleton import Skeleton, standing_pose
+    from .types import TrackerFrame
 
-    offsets = Skeleton.canonical().offsets
+    skeleton = Skeleton.canonical()
     local, root = standing_pose(), np.array([0.0, 0.0, 0.9])
-    glob, pos = np.empty((NUM_JOINTS, 3, 3)), np.empty((NUM_JOINTS, 3))
-    forward_kinematics_into(local, root, offsets, glob, pos)
-    targets = {end: pos[end] + 0.05 for end in (15, *LIMBS)}
-    for keep in (False, True):
-        solve_body(local, root, offsets, targets, keep_shape=keep)
+    glob, pos = forward_kinematics(local, root, skeleton.offsets)
+    forward_kinematics(local, root, skeleton.offsets, joints=LEG_JOINTS)
+    sensors = load_sensor_config("six_point")
+    ik = create_estimator("ik", sensors, skeleton)  # the filter, the joint targets, solve_body, quaternions
+    sites = sensors.site_names
+    for t in range(3):
+        ends = np.array([pos[s.joint_index] for s in sensors.sites])
+        quats = np.tile([0.0, 0.0, 0.0, 1.0], (len(sites), 1))
+        ik.step(TrackerFrame(t / 60, sites, ends, quats, np.ones(len(sites), dtype=bool)))
     limb = next(iter(LIMBS.values()))
-    reach(local.copy(), glob[0], pos[limb.upper], offsets, limb, pos[limb.end], offsets[limb.end], exact_hinge=False)
+    for exact in (False, True):
+        reach(local.copy(), glob[0], pos[limb.upper], skeleton.offsets, limb, pos[limb.end], None, exact)
+    sixd_to_matrix(np.tile([1.0, 0.0, 0.0, 0.0, 1.0, 0.0], (4, 1)))
+    yaw_matrix_of(np.eye(3))

@@ -12,6 +12,8 @@ import math
 import numpy as np
 from scipy.spatial.transform import Rotation, Slerp
 
+from . import mat3
+
 # JointState carries a 3-DoF joint as three revolute joints applied in this order about the
 # parent-aligned axes: R = Rz(yaw) @ Ry(pitch) @ Rx(roll), i.e. intrinsic Z-Y-X.
 JOINT_EULER_ORDER = "ZYX"
@@ -50,8 +52,11 @@ def rotations_to_quat(m: np.ndarray) -> np.ndarray:
     """Quaternions (..., 4) of rotation matrices that are orthonormal already (an estimator's
     output), without scipy's orthogonalisation: several times faster at 22 joints. Each
     component's size comes from the diagonal, its sign from the skew part (w >= 0); accurate
-    to about 1e-8 where a component is near zero."""
+    to about 1e-8 where a component is near zero. One pose's (J, 3, 3) is compiled
+    (mat3.quats): an estimator's output, every frame."""
     m = np.asarray(m, dtype=np.float64)
+    if m.ndim == 3:
+        return mat3.quats(m)
     d0, d1, d2 = m[..., 0, 0], m[..., 1, 1], m[..., 2, 2]
     q = 0.5 * np.sqrt(
         np.maximum(0.0, np.stack([1 + d0 - d1 - d2, 1 - d0 + d1 - d2, 1 - d0 - d1 + d2, 1 + d0 + d1 + d2], -1))
@@ -90,8 +95,11 @@ def matrix_to_6d(m: np.ndarray) -> np.ndarray:
 
 
 def sixd_to_matrix(d6: np.ndarray) -> np.ndarray:
-    """Gram-Schmidt of the two 3-vectors back to a rotation matrix (columns a, b, a x b)."""
+    """Gram-Schmidt of the two 3-vectors back to a rotation matrix (columns a, b, a x b).
+    One frame's (N, 6) is compiled (mat3.sixd_matrices): a network's output, every frame."""
     d6 = np.asarray(d6, dtype=np.float64)
+    if d6.ndim == 2:
+        return mat3.sixd_matrices(d6)
     a = d6[..., 0:3] / np.linalg.norm(d6[..., 0:3], axis=-1, keepdims=True)
     b = d6[..., 3:6] - np.sum(a * d6[..., 3:6], axis=-1, keepdims=True) * a
     b = b / np.linalg.norm(b, axis=-1, keepdims=True)
@@ -158,6 +166,13 @@ def yaw_matrix(yaw: np.ndarray | float) -> np.ndarray:
     c, s = np.cos(yaw), np.sin(yaw)
     z, o = np.zeros_like(yaw), np.ones_like(yaw)
     return np.stack([np.stack([c, -s, z], -1), np.stack([s, c, z], -1), np.stack([z, z, o], -1)], -2)
+
+
+def yaw_matrix_of(m: np.ndarray) -> np.ndarray:
+    """yaw_matrix(heading(m)): the turn about +z to each rotation's heading (compiled for one
+    rotation, mat3.yaw_frame)."""
+    m = np.asarray(m, dtype=np.float64)
+    return mat3.yaw_frame(m) if m.ndim == 2 else yaw_matrix(heading(m))
 
 
 def heading(m: np.ndarray) -> np.ndarray:

@@ -11,6 +11,8 @@ from typing import ClassVar, TypeGuard
 import numpy as np
 import yaml
 
+from ..core import mat3
+from ..core.mat3 import njit
 from ..core.rotations import matrix_to_quat
 from ..core.sensors import SensorConfig
 from ..core.skeleton import Skeleton, standing_pose
@@ -32,6 +34,56 @@ def estimator_names() -> list[str]:
 def full_target(target) -> TypeGuard[tuple[np.ndarray, np.ndarray]]:
     """Whether a joint_target gives both a position and a rotation (a full pose)."""
     return target is not None and target[0] is not None and target[1] is not None
+
+
+# what joint_target makes of a site's sample
+_NONE, _POSE, _ROTATION, _POSITION = 0, 1, 2, 3
+
+
+def _mounting(sensors: SensorConfig, sites: tuple[str, ...]):
+    """The kernel's view of the sensor configuration in a frame's site order: what each site
+    measures and the inverse of its mounting (a site the configuration lacks measures nothing)."""
+    known = set(sensors.site_names)
+    specs = [sensors.site(s) if s in known else None for s in sites]
+    has_position = np.array([s is not None and s.has_position for s in specs], np.bool_)
+    has_orientation = np.array([s is not None and s.has_orientation for s in specs], np.bool_)
+    unmount = np.array([s.joint_rotation(np.array([0.0, 0.0, 0.0, 1.0])) if s else np.eye(3) for s in specs]).reshape(
+        -1, 3, 3
+    )
+    offset = np.array([s.offset_translation if s else (0.0, 0.0, 0.0) for s in specs], float).reshape(-1, 3)
+    return has_position, has_orientation, unmount, offset
+
+
+@njit
+def _joint_targets(positions, orientations, valid, has_position, has_orientation, unmount, offset):
+    """Every site's joint target at once: positions (S, 3), rotations (S, 3, 3) and what each
+    site gives (_NONE, _POSE, _ROTATION, _POSITION). unmount: the mounting rotation's inverse
+    (joint rotation = tracker rotation @ unmount); offset: the tracker in its joint's frame."""
+    count = len(valid)
+    out_p, out_r = np.zeros((count, 3)), np.zeros((count, 3, 3))
+    kinds = np.zeros(count, np.int64)
+    for i in range(count):
+        if not valid[i]:
+            continue
+        p, q = positions[i], orientations[i]
+        # a sum or a dot product is finite exactly when every element is
+        has_pos = has_position[i] and math.isfinite(p[0] + p[1] + p[2])
+        q2 = q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3]
+        norm = math.sqrt(q2) if math.isfinite(q2) else 0.0
+        has_rot = has_orientation[i] and 0.9 < norm < 1.1
+        if has_position[i] and not has_pos:
+            continue  # a position tracker without its position: unusable
+        if has_rot:
+            out_r[i] = mat3.mul(mat3.quat_matrix(q / norm), unmount[i])
+        if has_pos and has_rot:
+            out_p[i] = p - mat3.vec(out_r[i], offset[i])
+            kinds[i] = _POSE
+        elif has_rot:
+            kinds[i] = _ROTATION
+        elif has_pos:
+            out_p[i] = p
+            kinds[i] = _POSITION
+    return out_p, out_r, kinds
 
 
 class Estimator(ABC):
@@ -63,6 +115,8 @@ class Estimator(ABC):
         self.sensors = sensors
         self.skeleton = skeleton
         self.fps = fps
+        self._targets_of: TrackerFrame | None = None  # the frame whose joint targets are held
+        self._mounting_sites: tuple[str, ...] = ()
         self.use_filter(FilterConfig())
 
     def use_filter(self, config: FilterConfig, smooth: bool = False) -> None:
@@ -119,25 +173,30 @@ class Estimator(ABC):
 
         A position-only tracker gives its own position (its mounting offset cannot be undone
         without an orientation); an orientation-only tracker (IMU) gives (None, rotation):
-        a rotation constraint, never an invented position."""
+        a rotation constraint, never an invented position. Every site of a frame is
+        converted at once, in one compiled call, the first time the frame is asked."""
         if site not in frame.sites:
             return None
-        spec = self.sensors.site(site)
+        if frame is not self._targets_of:
+            self._targets_of, self._targets = frame, self._frame_targets(frame)
+        positions, rotations, kinds = self._targets
         i = frame.index(site)
-        if not frame.valid[i]:
-            return None
-        pos, quat = np.asarray(frame.positions[i], float), np.asarray(frame.orientations[i], float)
-        # a sum or a dot product is finite exactly when every element is (and is cheaper here)
-        has_pos = spec.has_position and math.isfinite(pos.sum())
-        norm = math.sqrt(q2) if math.isfinite(q2 := float(quat @ quat)) else 0.0
-        has_rot = spec.has_orientation and 0.9 < norm < 1.1
-        if spec.has_position and not has_pos:
-            return None  # a position tracker without its position: unusable
-        if has_pos and has_rot:
-            return spec.joint_pose(pos, quat / norm)
-        if has_rot:
-            return None, spec.joint_rotation(quat / norm)
-        return (pos, None) if has_pos else None
+        kind = kinds[i]
+        if kind == _POSE:
+            return positions[i].copy(), rotations[i].copy()
+        if kind == _ROTATION:
+            return None, rotations[i].copy()
+        return (positions[i].copy(), None) if kind == _POSITION else None
+
+    def _frame_targets(self, frame: TrackerFrame):
+        if frame.sites != self._mounting_sites:  # the frame's site order, once per site set
+            self._mounting_sites, self._mounting = frame.sites, _mounting(self.sensors, frame.sites)
+        return _joint_targets(
+            np.asarray(frame.positions, float),
+            np.asarray(frame.orientations, float),
+            np.asarray(frame.valid, np.bool_),
+            *self._mounting,
+        )
 
     def held_pose(self, stamp: float) -> BodyPose:
         """The last output (self._last) again, marked invalid; before any, the estimator's

@@ -19,7 +19,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ...core.rotations import heading, matrix_to_6d, yaw_matrix
+from ...core.rotations import matrix_to_6d, yaw_matrix_of
 from ...core.sensors import SITE_JOINTS
 from ...core.skeleton import JOINT_INDEX
 
@@ -40,7 +40,7 @@ def reference(head_pos: np.ndarray, head_rot: np.ndarray) -> tuple[np.ndarray, n
     rotation (..., 3, 3) of the head's heading)."""
     origin = np.array(head_pos, dtype=np.float64, copy=True)
     origin[..., 2] = 0.0
-    return origin, yaw_matrix(heading(head_rot))
+    return origin, yaw_matrix_of(head_rot)
 
 
 def features(

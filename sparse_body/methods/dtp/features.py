@@ -21,7 +21,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ...core.rotations import heading, yaw_matrix
+from ...core.rotations import yaw_matrix_of
 from ...core.sensors import SITE_JOINTS
 from ...core.skeleton import JOINT_INDEX, NUM_JOINTS
 
@@ -54,7 +54,7 @@ def window_features(
     leaf_features; current: the window index (or one per window) whose heading and floor
     position are the reference."""
     ref_pos, ref_rot = _at(pelvis_pos, current, 1), _at(pelvis_rot, current, 2)
-    yaw_t = np.swapaxes(yaw_matrix(heading(ref_rot)), -1, -2)[..., None, :, :]  # (..., 1, 3, 3)
+    yaw_t = np.swapaxes(yaw_matrix_of(ref_rot), -1, -2)[..., None, :, :]  # (..., 1, 3, 3)
     rel = np.einsum("...ij,...j->...i", yaw_t, pelvis_pos - ref_pos[..., None, :])
     rel[..., 2] = pelvis_pos[..., 2]
     rot = (yaw_t @ pelvis_rot).reshape(pelvis_rot.shape[:-2] + (9,))

@@ -14,7 +14,7 @@ import numpy as np
 
 from ...core.body_ik import KEEP_BEND_TOLERANCE, solve_body
 from ...core.contacts import FOOT_JOINTS, ToeContacts
-from ...core.rotations import axis_angle_to_matrix, heading, rotations_to_quat, yaw_matrix
+from ...core.rotations import axis_angle_to_matrix, rotations_to_quat, yaw_matrix_of
 from ...core.sensors import SITE_JOINTS
 from ...core.skeleton import JOINT_INDEX as J
 from ...core.skeleton import PARENTS, standing_pose
@@ -72,7 +72,7 @@ class IKEstimator(Estimator):
         if pelvis_pose:
             local[0], root = pelvis[1], pelvis[0]
         elif head is not None and head[0] is not None and head[1] is not None:
-            facing = yaw_matrix(heading(head[1]))
+            facing = yaw_matrix_of(head[1])
             root = head[0] - facing @ self._head_above_pelvis
             # a pelvis IMU (orientation only) still gives the pelvis its rotation
             local[0] = pelvis[1] if pelvis is not None and pelvis[1] is not None else facing

@@ -25,7 +25,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ...core.rotations import heading, matrix_to_6d, sixd_to_matrix, yaw_matrix
+from ...core.rotations import matrix_to_6d, sixd_to_matrix, yaw_matrix_of
 from ...core.skeleton import JOINT_INDEX, UPPER_BODY
 
 # The tracked joints, in input order: the reference comes from the pelvis.
@@ -60,7 +60,7 @@ def output_count(learned_upper: bool) -> int:
 
 def reference_frames(pelvis_rot: np.ndarray) -> np.ndarray:
     """(..., 3, 3) yaw-only frames from pelvis rotations."""
-    return yaw_matrix(heading(pelvis_rot))
+    return yaw_matrix_of(pelvis_rot)
 
 
 def features(

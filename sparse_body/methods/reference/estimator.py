@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ...core.rotations import heading, matrix_to_quat, yaw_matrix
+from ...core.rotations import matrix_to_quat, yaw_matrix_of
 from ...core.skeleton import JOINT_INDEX, standing_pose
 from ...core.types import BodyPose, TrackerFrame
 from ...estimators.base import Estimator, full_target
@@ -34,9 +34,9 @@ class ReferenceEstimator(Estimator):
         pelvis = pelvis if full_target(pelvis) else None  # needs a full pose
         head = head if full_target(head) else None
         if pelvis is not None:
-            root_pos, root_rot = pelvis[0], yaw_matrix(heading(pelvis[1]))
+            root_pos, root_rot = pelvis[0], yaw_matrix_of(pelvis[1])
         elif head is not None:
-            root_rot = yaw_matrix(heading(head[1]))
+            root_rot = yaw_matrix_of(head[1])
             root_pos = head[0] - root_rot @ self._head_above_pelvis
         else:
             return None

@@ -148,6 +148,8 @@ def test_replayed_bag_gives_one_valid_estimate_per_tracker_frame_with_small_end_
     assert sum(s.valid for s in statuses) >= 0.95 * len(statuses), {s.message for s in statuses if not s.valid}
     values = diagnostic_values(listener, "estimator")
     assert int(values["estimates driven by input"]) >= 10, values  # the trackers drove estimates
+    # its own link TF came back on /tf and was known by its bytes, not read
+    assert int(values["own /tf messages skipped"]) >= 10, values
     contacts = listener.received["foot_contacts"]
     assert contacts and [c.name for c in contacts[-1].contacts] == ["left_foot", "right_foot"]
     urdf = listener.received["robot_description"][0].data

@@ -498,7 +498,7 @@ class EstimatorNode(LifecycleNode):
         return f"held: no usable pose from {', '.join(missing)}" if missing else "held"
 
     def _publish(self, pose: BodyPose, stamp: float, reason: str) -> None:
-        assert self.pub_joints and self.pub_contacts and self.pub_status and self.pub_tf
+        assert self.pub_joints and self.pub_contacts and self.pub_status and self.pub_tf and self.tf_in
         frame_id, p = self.sensors.fixed_frame, self.params
         # the estimate bag's encoder (io/cdr.py), one pose at a time: the same bytes live and
         # offline, without building a Python message object per field
@@ -512,6 +512,7 @@ class EstimatorNode(LifecycleNode):
         links = body_table(quats, root, self.skeleton, frame_id, p["frame_prefix"], p["publish_link_tf"])
         tf = cdr.tf_messages([stamp], links.parents, links.children, links.values)[0]
         self.pub_tf.publish(tf)
+        self.tf_in.published(tf)
         if self.live_view is not None:
             for topic, data in (("/joint_states", joints), ("/foot_contacts", contacts), ("/estimate_status", status)):
                 self.live_view.log(topic, data, stamp)
@@ -527,6 +528,7 @@ class EstimatorNode(LifecycleNode):
         rejected = self.tf_in.rejected
         level, message, values = self._stats.status(self.sensors.site_names, self._ages, self._site_valid, rejected)
         values["/tf messages caught up"] = str(self.tf_in.drained)  # taken at once by a node running behind
+        values["own /tf messages skipped"] = str(self.tf_in.own_skipped)  # known by their bytes, not read
         status = DiagnosticStatus(
             level=level,
             name=f"{self.get_name()}: estimator",

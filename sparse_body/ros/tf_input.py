@@ -6,13 +6,16 @@ hides what the node must count and act on: refused non-finite samples (tf2 only 
 clock jumps back (the estimator must start over) and the arrival of a tracker sample (which
 drives the estimate). The reader takes /tf as bytes and reads them with io/cdr.py's read_tf
 (rclpy's message objects cost about 20 times more: 1.2 ms for the node's own 22-link message
-on a loaded machine), drops the frames the node publishes itself, hands the rest to the
+on a loaded machine), skips the messages the node published itself (by their bytes) and drops any other
+transform of the node's own links (robot_state_publisher's), hands the rest to the
 TfCache's one ingest (the bag reader's too: its guards and counts are in io/tf_cache.py),
 judged by the node's clock, and tells the node when a tracker moved. Bytes that are no
 TFMessage are counted ("malformed message") and dropped.
 """
 
 from __future__ import annotations
+
+from collections import deque
 
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 
@@ -26,6 +29,9 @@ TF_QUEUE_PER_TRACKER, TF_QUEUE_MIN = 1, 4
 # at most this many waiting /tf messages are taken in one go (more than the queue holds, so
 # all of them; the bound only keeps a publisher faster than the ingest from starving the node)
 MAX_DRAINED = 64
+# the node's own /tf messages remembered, to know them when they come back (a few estimates'
+# worth: one comes back within milliseconds, or never once the history has moved on)
+OWN_KEPT = 8
 
 
 def tf_qos(tracker_count: int) -> QoSProfile:
@@ -67,6 +73,12 @@ class TfReader:
         self.on_tracker = on_tracker
         self._node = node
         self.drained = 0  # /tf messages taken at once because the node ran behind (on /diagnostics)
+        # The node's own link TF comes back on /tf, 22 transforms at the output rate. Known by
+        # its bytes (the reader takes /tf raw, and DDS hands the publisher's bytes over as they
+        # were), it costs a hash instead of a parse; own_skipped counts them (on /diagnostics).
+        self._own: deque[bytes] = deque(maxlen=OWN_KEPT)
+        self._own_set: set[bytes] = set()
+        self.own_skipped = 0
         self._subs = [  # /tf first: _on_tf takes what waits on it
             node.create_subscription(
                 TFMessage, "/tf", lambda m: self._on_tf(m, False), tf_qos(len(tracker_frames)), raw=True
@@ -97,7 +109,18 @@ class TfReader:
         if arrived and self.on_tracker is not None:
             self.on_tracker()
 
+    def published(self, data: bytes) -> None:
+        """The node published this /tf message: skip it when it comes back."""
+        if len(self._own) == OWN_KEPT:
+            self._own_set.discard(self._own[0])
+        self._own.append(data)
+        self._own_set.add(data)
+
     def _ingest(self, data: bytes, static: bool, now: float) -> bool:
+        if not static and data in self._own_set:
+            self._own_set.discard(data)
+            self.own_skipped += 1
+            return False
         try:
             rows = read_tf(data)
         except MalformedMessage:

@@ -82,7 +82,12 @@ def test_the_compiled_one_pose_conversions_equal_the_batched_numpy_ones(rng):
         np.testing.assert_allclose(yaw_matrix_of(r), yaw_matrix(heading(r)), rtol=0, atol=1e-12)
     offsets = Skeleton.canonical().offsets
     local, root = m[:22], rng.normal(size=3)
-    for one, batch in zip(
-        forward_kinematics(local, root, offsets), forward_kinematics(local[None], root[None], offsets), strict=True
+    batch = np.stack([local, m[22:44], m[44:66]])  # three poses: compiled as a batch
+    roots = rng.normal(size=(3, 3))
+    reference = forward_kinematics(batch[None], roots[None], offsets)  # (1, 3, ...): numpy's loop
+    for one, numpy_way in zip(
+        forward_kinematics(local, root, offsets), forward_kinematics(local[None, None], root, offsets), strict=True
     ):
-        np.testing.assert_allclose(one, batch[0], rtol=0, atol=1e-12)
+        np.testing.assert_allclose(one, numpy_way[0, 0], rtol=0, atol=1e-12)
+    for compiled, numpy_way in zip(forward_kinematics(batch, roots, offsets), reference, strict=True):
+        np.testing.assert_allclose(compiled, numpy_way[0], rtol=0, atol=1e-12)

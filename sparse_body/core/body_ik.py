@@ -97,7 +97,7 @@ def _hinge_angle(m, i: int) -> float:
 
 def hinge_angle(m: np.ndarray, axis: np.ndarray) -> float:
     """The angle of m about a coordinate axis (exact when m is a rotation about it)."""
-    return _hinge_angle(np.asarray(m, float), int(np.argmax(axis)))
+    return _hinge_angle(np.ascontiguousarray(m, float), int(np.argmax(axis)))
 
 
 @njit
@@ -134,7 +134,7 @@ def reach_angle(a, w, axis, distance: float, current: float, limits: tuple[float
     ball joint's frame. Of the two solutions the one within the limits, nearest the current
     angle, wins."""
     low, high = limits if limits is not None else (-math.inf, math.inf)
-    f = np.asarray
+    f = np.ascontiguousarray  # the kernels are compiled for contiguous arrays: one signature
     return _reach_angle(f(a, float), f(w, float), f(axis, float), distance, current, limits is not None, low, high)
 
 
@@ -182,7 +182,7 @@ def reach(
     so turned it cannot make the limb long or short enough (within 5 mm).
     Returns the new global rotations of the ball joint and of the hinge."""
     w = offsets[limb.end] if end_vector is None else end_vector
-    f = np.asarray
+    f = np.ascontiguousarray  # the kernels are compiled for contiguous arrays: one signature
     return _reach(
         local,
         f(parent_rot, float),
@@ -277,7 +277,7 @@ def fit_spine(
     long; then it is bent anew, uniformly. A curve that changes every frame crosses that
     line often, and the spine flips between the two (jitter): a wider tolerance trades
     millimetres at the head for a calmer spine."""
-    f = np.asarray
+    f = np.ascontiguousarray  # the kernels are compiled for contiguous arrays: one signature
     _fit_spine(local, f(root, float), f(offsets, float), f(head_target, float), keep_bend, float(tolerance))
 
 
@@ -393,7 +393,7 @@ def solve_body(
     has_goal = np.zeros(NUM_JOINTS, dtype=np.bool_)
     for joint, target in targets.items():
         goals[joint], has_goal[joint] = target, True
-    f = np.asarray
+    f = np.ascontiguousarray  # the kernels are compiled for contiguous arrays: one signature
     return _solve_body(
         f(local, float), f(root, float), f(offsets, float), goals, has_goal, keep_shape, float(spine_tolerance)
     )

@@ -20,16 +20,21 @@ def forward_kinematics(local_rot: np.ndarray, root_pos: np.ndarray, offsets: np.
     the other joints' entries are left undefined.
     """
     local_rot = np.asarray(local_rot, dtype=np.float64)
+    if local_rot.ndim in (3, 4):  # the compiled paths take contiguous arrays (one signature)
+        local_rot = np.ascontiguousarray(local_rot)
     if local_rot.ndim == 3 and np.ndim(offsets) == 2:
         glob, pos = np.empty_like(local_rot), np.empty((NUM_JOINTS, 3))
         subset = _ALL_BUT_ROOT if joints is None else np.asarray(joints, dtype=np.int64)
-        root_pos, offsets = np.asarray(root_pos, dtype=np.float64), np.asarray(offsets, dtype=np.float64)
+        root_pos, offsets = np.ascontiguousarray(root_pos, np.float64), np.ascontiguousarray(offsets, np.float64)
         mat3.forward_kinematics_into(local_rot, root_pos, offsets, _PARENTS, subset, glob, pos)  # compiled
         return glob, pos
     if joints is not None:
         raise ValueError("a joint subset is for one pose with one skeleton")
     lead = local_rot.shape[:-3]
     offsets = np.asarray(offsets, dtype=np.float64)
+    if local_rot.ndim == 4 and offsets.ndim == 2:  # a batch of poses of one body (an optimiser's): compiled
+        root = np.ascontiguousarray(np.broadcast_to(np.asarray(root_pos, dtype=np.float64), lead + (3,)))
+        return mat3.forward_kinematics_batch(local_rot, root, np.ascontiguousarray(offsets), _PARENTS)
     shared = offsets.ndim == 2  # one body for the whole batch: a matrix-vector product per joint
     if not shared:
         offsets = np.broadcast_to(offsets, lead + (NUM_JOINTS, 3))

@@ -126,6 +126,19 @@ def forward_kinematics_into(local, root, offsets, parents, joints, glob, pos) ->
 
 
 @njit
+def forward_kinematics_batch(local, root, offsets, parents):
+    """Global rotations (B, J, 3, 3) and positions (B, J, 3) of B poses on one body."""
+    glob, pos = np.empty_like(local), np.empty((len(local), len(offsets), 3))
+    for b in range(len(local)):
+        glob[b, 0], pos[b, 0] = local[b, 0], root[b]
+        for j in range(1, len(offsets)):
+            p = parents[j]
+            glob[b, j] = mul(glob[b, p], local[b, j])
+            pos[b, j] = pos[b, p] + vec(glob[b, p], offsets[j])
+    return glob, pos
+
+
+@njit
 def quats(m):
     """Quaternions (N, 4) of orthonormal matrices (N, 3, 3); rotations.rotations_to_quat."""
     out = np.empty((len(m), 4))

@@ -227,9 +227,9 @@ class TrackerFilter:
             self.reset()
         pos, rot = self._pos, self._rot
         positions, orientations = _filter_frame(
-            np.asarray(frame.positions, dtype=float),
-            np.asarray(frame.orientations, dtype=float),
-            np.asarray(frame.valid, dtype=np.bool_),
+            np.ascontiguousarray(frame.positions, dtype=float),
+            np.ascontiguousarray(frame.orientations, dtype=float),
+            np.ascontiguousarray(frame.valid, dtype=np.bool_),
             float(frame.stamp),
             self._noise,
             float(c.gap),

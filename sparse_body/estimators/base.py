@@ -192,9 +192,9 @@ class Estimator(ABC):
         if frame.sites != self._mounting_sites:  # the frame's site order, once per site set
             self._mounting_sites, self._mounting = frame.sites, _mounting(self.sensors, frame.sites)
         return _joint_targets(
-            np.asarray(frame.positions, float),
-            np.asarray(frame.orientations, float),
-            np.asarray(frame.valid, np.bool_),
+            np.ascontiguousarray(frame.positions, float),
+            np.ascontiguousarray(frame.orientations, float),
+            np.ascontiguousarray(frame.valid, np.bool_),
             *self._mounting,
         )
 

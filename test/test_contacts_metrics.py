@@ -99,5 +99,29 @@ def test_a_hand_that_snaps_back_when_its_tracker_returns_is_measured_by_its_jump
     assert out["Lost PE [cm]"] == pytest.approx(np.mean(np.arange(1, 21)))
     # back in view at frame 60: from 20 cm behind to the truth, 21 cm in one frame where the truth moved 1
     assert out["Recovery jump [cm]"] == pytest.approx(20.0)
+    assert out["Settle time [s]"] == 0.0  # back on the truth at once
     nothing = M.loss_metrics(pred, gt, np.zeros((T, 1), dtype=bool), [hand], fps=60.0)
     assert np.isnan(nothing["Lost PE [cm]"]) and np.isnan(nothing["Recovery jump [cm]"])
+    assert np.isnan(nothing["Settle time [s]"])
+
+
+def test_the_settle_time_is_how_long_a_returned_hand_takes_to_come_back_to_its_usual_error():
+    """A hand 1 cm off in view; held 20 cm off while lost and for a while after its return, it
+    closes the gap by 1 cm a frame from frame 70: within 2 cm of its usual 1 cm once 2.5 cm off
+    (frame 87), which it stays: 27 frames after the return at frame 60. A second return that
+    never settles before the clip ends counts the time it had."""
+    T, fps, hand = 200, 60.0, J["left_wrist"]
+    gt = np.zeros((T, 22, 3))
+    pred = gt.copy()
+    pred[:, hand, 0] = 0.01
+    lost = np.zeros((T, 1), dtype=bool)
+    lost[40:60] = True
+    pred[40:70, hand, 0] = 0.20
+    pred[70:90, hand, 0] = 0.195 - 0.01 * np.arange(20)
+    pred[90:, hand, 0] = 0.01
+    out = M.loss_metrics(pred, gt, lost, [hand], fps=fps)
+    assert out["Settle time [s]"] == pytest.approx(27 / fps)
+    lost[150:180] = True
+    pred[150:, hand, 0] = 0.20  # lost again, and never back
+    out = M.loss_metrics(pred, gt, lost, [hand], fps=fps)
+    assert out["Settle time [s]"] == pytest.approx((27 / fps + (T - 180) / fps) / 2)

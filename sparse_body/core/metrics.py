@@ -132,6 +132,8 @@ def per_joint_metrics(pred_pos, gt_pos, pred_local, gt_local) -> dict[str, float
     }
 
 
+# the settle time's band above a joint's usual error (metres), and how long it must stay in it
+SETTLE_BAND, SETTLE_HOLD = 0.02, 0.1
 RECOVERY_SECONDS = 0.5  # after a tracker returns, how long its joint is watched for a jump
 
 
@@ -139,23 +141,36 @@ def loss_metrics(pred_pos, gt_pos, lost: np.ndarray, joints, fps: float) -> dict
     """What a user sees when a tracker drops out of view and returns (lost: (T, S) frames each
     site was out of view; joints: each site's joint). "Lost PE": the sites' joints' error while
     out of view. "Recovery jump": the largest step of such a joint within RECOVERY_SECONDS after
-    its tracker returns, beyond the true joint's own step (a hand that snaps back). NaN where
+    its tracker returns, beyond the true joint's own step (a hand that snaps back). "Settle
+    time": the mean time from a return until the joint's error is back within SETTLE_BAND of
+    its usual level (its median error in view) and stays there SETTLE_HOLD seconds; a return
+    that never settles before the next loss or the clip's end counts the time it had. NaN where
     nothing was lost, or nothing returned."""
-    err, jumps = [], []
-    window = max(1, round(RECOVERY_SECONDS * fps))
+    err, jumps, settle = [], [], []
+    window, hold = max(1, round(RECOVERY_SECONDS * fps)), max(1, round(SETTLE_HOLD * fps))
     for s, j in enumerate(joints):
         out = lost[:, s]
         if not out.any():
             continue
-        err.append(np.linalg.norm(pred_pos[out, j] - gt_pos[out, j], axis=-1))
+        error = np.linalg.norm(pred_pos[:, j] - gt_pos[:, j], axis=-1)
+        err.append(error[out])
         step = np.linalg.norm(np.diff(pred_pos[:, j], axis=0), axis=-1)
         true_step = np.linalg.norm(np.diff(gt_pos[:, j], axis=0), axis=-1)
+        usual = np.median(error[~out]) if (~out).any() else 0.0
+        # settled[k]: frames k .. k + hold - 1 all within the band
+        within = (error <= usual + SETTLE_BAND).astype(int)
+        settled = np.convolve(within, np.ones(hold, dtype=int), "valid") == hold
+        starts = np.flatnonzero(~out[:-1] & out[1:]) + 1  # the first frame of each loss
         for r in np.flatnonzero(out[:-1] & ~out[1:]) + 1:  # the first frame back in view
             span = slice(r - 1, min(r - 1 + window, len(step)))  # step[r - 1] moves into frame r
             jumps.append(float(np.max(step[span] - true_step[span])))
+            end = next((k for k in starts if k > r), len(error))  # the next loss, or the end
+            found = np.flatnonzero(settled[r : max(r, end - hold + 1)])
+            settle.append((found[0] if len(found) else end - r) / fps)
     return {
         "Lost PE [cm]": float(np.concatenate(err).mean() * 100) if err else float("nan"),
         "Recovery jump [cm]": max(jumps) * 100 if jumps else float("nan"),
+        "Settle time [s]": float(np.mean(settle)) if settle else float("nan"),
     }
 
 

@@ -22,6 +22,7 @@ from sparse_body.methods.lobstr.features import (
     INPUT_JOINTS,
     apply_legs,
     apply_upper,
+    features,
     leg_targets,
     sequence_features,
     upper_targets,
@@ -74,6 +75,18 @@ def test_features_do_not_depend_on_where_the_person_stands_or_faces(clip):
         np.tile([0, 0, 0.3, 0, 0, 0, 0, 0, 0], (len(clip), 1)),
         atol=1e-9,
     )
+
+
+def test_one_frame_s_compiled_features_equal_the_sequence_s(clip):
+    """A streaming step's features (compiled) and a sequence's (numpy, what training sees)
+    agree within 1e-12, with and without the pose, at any floor."""
+    pos, rot = clip.positions[:, INPUT_JOINTS], clip.global_rotations[:, INPUT_JOINTS]
+    for pose in (False, True):
+        for floor in (0.0, 0.07):
+            sequence = sequence_features(pos, rot, floor, pose=pose)
+            for t in range(1, len(clip), 7):
+                one = features(pos[t], rot[t], pos[t - 1], rot[t - 1], floor, pose=pose)
+                np.testing.assert_allclose(one, sequence[t], rtol=0, atol=1e-12)
 
 
 def test_leg_targets_round_trip_through_apply_legs(clip):

@@ -9,6 +9,7 @@ sine) weight, so the foot does not snap. A contact point the leg can no longer r
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -57,8 +58,8 @@ class ContactHold:
         for side, foot in enumerate(self._feet):
             toe, hip, knee = pos[FOOT_JOINTS[side]], pos[_HIPS[side]], pos[_KNEES[side]]
             # what hip and knee can reach with the ankle as the network has it
-            span = 0.999 * (np.linalg.norm(knee - hip) + np.linalg.norm(toe - knee))
-            if foot.anchor is not None and np.linalg.norm(foot.anchor - hip) > span:
+            span = 0.999 * (math.dist(knee, hip) + math.dist(toe, knee))  # math: numpy's per-call cost
+            if foot.anchor is not None and math.dist(foot.anchor, hip) > span:
                 contact = contact.copy()
                 contact[side] = False  # out of reach: let it go rather than stretch
             if contact[side]:

@@ -14,6 +14,7 @@ input longer than max_gap, or time going back, starts the state over.
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
 
 import numpy as np
@@ -151,7 +152,7 @@ class LobstrEstimator(Estimator):
         """Whether the solved head and hands are within REACHED of their targets (the
         INPUT_SITES targets of this frame)."""
         return all(
-            np.linalg.norm(positions[joint] - target[0]) <= REACHED
+            math.dist(positions[joint], target[0]) <= REACHED
             for joint, target in zip(_ENDS, targets[1:], strict=True)
         )
 

@@ -25,6 +25,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from ...core import mat3
+from ...core.mat3 import njit
 from ...core.rotations import matrix_to_6d, sixd_to_matrix, yaw_matrix_of
 from ...core.skeleton import JOINT_INDEX, UPPER_BODY
 
@@ -75,8 +77,13 @@ def features(
     pose, (..., 70): the current pose's 33 after them.
 
     positions (..., 4, 3) already scaled to the canonical body (the floor too), rotations
-    (..., 4, 3, 3); joint order INPUT_SITES.
+    (..., 4, 3, 3); joint order INPUT_SITES. One frame's (4, 3) is compiled (a streaming
+    step's); a sequence's runs in numpy, the same numbers within 1e-12 (test_lobstr).
     """
+    if np.ndim(positions) == 2:
+        c = np.ascontiguousarray
+        args = (positions, rotations, previous_positions, previous_rotations)
+        return _frame_features(*(c(a, dtype=np.float64) for a in args), float(floor), pose)
     ref = reference_frames(rotations[..., 0, :, :])
     ref_prev = reference_frames(previous_rotations[..., 0, :, :])
     refT, ref_prevT = np.swapaxes(ref, -1, -2), np.swapaxes(ref_prev, -1, -2)
@@ -98,6 +105,40 @@ def features(
             parts += [rel[..., k, :], matrix_to_6d(q[..., k, :, :])]
         parts.append(matrix_to_6d(refT @ rotations[..., 0, :, :]))
     return np.concatenate(parts, axis=-1)
+
+
+@njit
+def _put_6d(out, at, m) -> int:
+    """matrix_to_6d(m) written into out at `at`; the index after it."""
+    for c in range(2):
+        for r in range(3):
+            out[at + 3 * c + r] = m[r, c]
+    return at + 6
+
+
+@njit
+def _frame_features(positions, rotations, previous_positions, previous_rotations, floor, pose):
+    """features() of one frame, in the same order."""
+    out = np.empty(FEATURES + POSE_FEATURES * pose)
+    ref, ref_prev = mat3.yaw_frame(rotations[0]), mat3.yaw_frame(previous_rotations[0])
+    root, root_prev = positions[0], previous_positions[0]
+    out[0:3] = mat3.tvec(ref, root - root_prev)
+    at = _put_6d(out, 3, mat3.tmul(ref_prev, ref))
+    rel, q = np.empty((3, 3)), np.empty((3, 3, 3))
+    for k in range(3):
+        rel[k] = mat3.tvec(ref, positions[k + 1] - root)
+        q[k] = mat3.tmul(ref, rotations[k + 1])
+        q_prev = mat3.tmul(ref_prev, previous_rotations[k + 1])
+        out[at : at + 3] = rel[k] - mat3.tvec(ref_prev, previous_positions[k + 1] - root_prev)
+        at = _put_6d(out, at + 3, mat3.tmul(q_prev, q[k]))
+    out[at] = root[2] - floor
+    at += 1
+    if pose:
+        for k in range(3):
+            out[at : at + 3] = rel[k]
+            at = _put_6d(out, at + 3, q[k])
+        _put_6d(out, at, mat3.tmul(ref, rotations[0]))
+    return out
 
 
 def sequence_features(

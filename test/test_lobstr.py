@@ -89,6 +89,25 @@ def test_one_frame_s_compiled_features_equal_the_sequence_s(clip):
                 np.testing.assert_allclose(one, sequence[t], rtol=0, atol=1e-12)
 
 
+def test_applying_an_output_is_numpy_s_sixd_and_the_hips_turned_from_the_reference_frame(rng):
+    """apply_legs / apply_upper (compiled) against the numpy expression they replaced."""
+    from scipy.spatial.transform import Rotation
+
+    from sparse_body.core.rotations import heading, sixd_to_matrix, yaw_matrix
+    from sparse_body.methods.lobstr.features import HIPS, LEG_JOINTS, UPPER_JOINTS
+
+    local = Rotation.random(22, random_state=5).as_matrix()
+    legs6, upper6 = rng.normal(size=48), rng.normal(size=78)
+    legs = sixd_to_matrix(legs6.reshape(1, 8, 6))[0]  # numpy's batched path
+    expected = local.copy()
+    expected[list(LEG_JOINTS)] = legs
+    expected[list(HIPS)] = local[0].T @ yaw_matrix(heading(local[0])) @ legs[:2]
+    np.testing.assert_allclose(apply_legs(local, legs6), expected, rtol=0, atol=1e-12)
+    expected = local.copy()
+    expected[list(UPPER_JOINTS)] = sixd_to_matrix(upper6.reshape(1, -1, 6))[0]
+    np.testing.assert_allclose(apply_upper(local, upper6), expected, rtol=0, atol=1e-12)
+
+
 def test_leg_targets_round_trip_through_apply_legs(clip):
     glob, local = clip.global_rotations, clip.local_rotations
     targets = leg_targets(glob, local)

@@ -10,6 +10,8 @@ tracker's orientation. Untracked legs keep a standing pose. Orientation-only tra
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from ...core.body_ik import KEEP_BEND_TOLERANCE, solve_body
@@ -89,7 +91,7 @@ class IKEstimator(Estimator):
                 end = J[SITE_JOINTS[site]]
                 local[end] = glob[PARENTS[end]].T @ target[1]
                 glob[end] = target[1]
-        if not (np.all(np.isfinite(local)) and np.all(np.isfinite(root))):
+        if not math.isfinite(local.sum() + np.sum(root)):  # a sum is finite only when every element is
             self._reset()
             return None
         if start is None:

@@ -152,12 +152,11 @@ class LobstrEstimator(Estimator):
         """Whether the solved head and hands are within REACHED of their targets (the
         INPUT_SITES targets of this frame)."""
         return all(
-            math.dist(positions[joint], target[0]) <= REACHED
-            for joint, target in zip(_ENDS, targets[1:], strict=True)
+            math.dist(positions[joint], target[0]) <= REACHED for joint, target in zip(_ENDS, targets[1:], strict=True)
         )
 
     def _estimate(self, frame: TrackerFrame) -> BodyPose | None:
-        targets = [self.joint_target(frame, s) for s in INPUT_SITES]
+        targets = [self.upper.joint_target(frame, s) for s in INPUT_SITES]  # the IK converts the same frame next
         if not all(full_target(t) for t in targets):
             return None  # keep the previous sample: the next velocity spans the gap
         pos = (np.stack([t[0] for t in targets]) - [0.0, 0.0, self.floor]) * self.scale
@@ -186,7 +185,7 @@ class LobstrEstimator(Estimator):
         contact = prob > self.threshold
         if self.contacts:
             local = self.contacts.apply(local, root, contact)
-        if not np.all(np.isfinite(prob)):
+        if not math.isfinite(prob.sum()):
             self.reset()
             return None
         self._state, self._prev = state, (frame.stamp, pos, rot)

@@ -27,7 +27,7 @@ import numpy as np
 
 from ...core import mat3
 from ...core.mat3 import njit
-from ...core.rotations import matrix_to_6d, sixd_to_matrix, yaw_matrix_of
+from ...core.rotations import matrix_to_6d, yaw_matrix_of
 from ...core.skeleton import JOINT_INDEX, UPPER_BODY
 
 # The tracked joints, in input order: the reference comes from the pelvis.
@@ -165,19 +165,31 @@ def upper_targets(local_rot: np.ndarray) -> np.ndarray:
     return matrix_to_6d(out).reshape(out.shape[:-3] + (UPPER_OUTPUTS,))
 
 
+@njit
+def _replaced(local_rot, joints, output, hips_in_reference):
+    """A copy of local_rot with joints' rotations from a 6D output; with hips_in_reference the
+    first two (the hips) are in the reference frame (leg_targets) and turned into the pelvis's."""
+    local = local_rot.copy()
+    turned = mat3.sixd_matrices(output.reshape(len(joints), 6))
+    for i in range(len(joints)):
+        local[joints[i]] = turned[i]
+    if hips_in_reference:
+        pelvis_from_reference = mat3.tmul(local[0], mat3.yaw_frame(local[0]))
+        for i in range(2):
+            local[joints[i]] = mat3.mul(pelvis_from_reference, turned[i])
+    return local
+
+
+_UPPER_INDEX, _LEG_INDEX = np.array(UPPER_JOINTS, dtype=np.int64), np.array(LEG_JOINTS, dtype=np.int64)
+
+
 def apply_upper(local_rot: np.ndarray, output: np.ndarray) -> np.ndarray:
     """A body's local rotations (22, 3, 3) with the upper body replaced by a network output (78,)."""
-    local = local_rot.copy()
-    local[list(UPPER_JOINTS)] = sixd_to_matrix(np.asarray(output, dtype=np.float64).reshape(len(UPPER_JOINTS), 6))
-    return local
+    c = np.ascontiguousarray
+    return _replaced(c(local_rot, dtype=np.float64), _UPPER_INDEX, c(output, dtype=np.float64), False)
 
 
 def apply_legs(local_rot: np.ndarray, output: np.ndarray) -> np.ndarray:
     """A body's local rotations (22, 3, 3) with the legs replaced by a network output (48,)."""
-    legs = sixd_to_matrix(np.asarray(output, dtype=np.float64).reshape(len(LEG_JOINTS), 6))
-    local = local_rot.copy()
-    pelvis = local[0]
-    ref = reference_frames(pelvis)
-    local[list(LEG_JOINTS)] = legs
-    local[list(HIPS)] = pelvis.T @ ref @ legs[:2]
-    return local
+    c = np.ascontiguousarray
+    return _replaced(c(local_rot, dtype=np.float64), _LEG_INDEX, c(output, dtype=np.float64), True)

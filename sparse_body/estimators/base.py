@@ -117,6 +117,7 @@ class Estimator(ABC):
         self.fps = fps
         self._targets_of: TrackerFrame | None = None  # the frame whose joint targets are held
         self._mounting_sites: tuple[str, ...] = ()
+        self._rows: dict[tuple, np.ndarray] = {}  # full_targets: (frame sites, sites) -> rows
         self.use_filter(FilterConfig())
 
     def use_filter(self, config: FilterConfig, smooth: bool = False) -> None:
@@ -187,6 +188,23 @@ class Estimator(ABC):
         if kind == _ROTATION:
             return None, rotations[i].copy()
         return (positions[i].copy(), None) if kind == _POSITION else None
+
+    def full_targets(self, frame: TrackerFrame, sites: tuple[str, ...]):
+        """(positions (n, 3), rotations (n, 3, 3)) of the sites' joint targets when every one
+        of them gives a full pose, else None: joint_target for a method that needs them all,
+        as arrays."""
+        key = (frame.sites, sites)
+        rows = self._rows.get(key)
+        if rows is None:
+            if not set(sites) <= set(frame.sites):
+                return None
+            rows = self._rows[key] = np.array([frame.index(s) for s in sites], dtype=np.int64)
+        if frame is not self._targets_of:
+            self._targets_of, self._targets = frame, self._frame_targets(frame)
+        positions, rotations, kinds = self._targets
+        if not (kinds[rows] == _POSE).all():
+            return None
+        return positions[rows], rotations[rows]
 
     def _frame_targets(self, frame: TrackerFrame):
         if frame.sites != self._mounting_sites:  # the frame's site order, once per site set

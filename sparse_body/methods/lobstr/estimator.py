@@ -30,7 +30,7 @@ from ...core.sensors import SITE_JOINTS
 from ...core.skeleton import JOINT_INDEX as J
 from ...core.skeleton import body_scale, standing_pose
 from ...core.types import BodyPose, TrackerFrame
-from ...estimators.base import Estimator, full_target
+from ...estimators.base import Estimator
 from ...estimators.onnx_model import load_model
 from ...estimators.options import FLOOR, MAX_GAP, THREADS, Range
 from ..ik.estimator import IKEstimator
@@ -135,6 +135,7 @@ class LobstrEstimator(Estimator):
         self._start = standing_pose()  # the network replaces all but the pelvis, and the legs after
         self.scale = body_scale(skeleton)
         self.floor, self.max_gap, self.threshold = floor_height, max_gap, contact_threshold
+        self._floor = np.array([0.0, 0.0, floor_height])
         # Feet trackers, if configured, are not LoBSTr's input: the upper body sees only its four.
         self.upper = IKEstimator(sensors.subset(INPUT_SITES), skeleton, fps)
         self.contacts = ContactHold(skeleton, release_frames) if contact_ik else None
@@ -148,19 +149,19 @@ class LobstrEstimator(Estimator):
         self._prev: tuple[float, np.ndarray, np.ndarray] | None = None
 
     @staticmethod
-    def _reached(targets, positions: np.ndarray) -> bool:
-        """Whether the solved head and hands are within REACHED of their targets (the
-        INPUT_SITES targets of this frame)."""
+    def _reached(joints: np.ndarray, positions: np.ndarray) -> bool:
+        """Whether the solved head and hands are within REACHED of their targets (joints: the
+        INPUT_SITES targets' positions of this frame)."""
         return all(
-            math.dist(positions[joint], target[0]) <= REACHED for joint, target in zip(_ENDS, targets[1:], strict=True)
+            math.dist(positions[joint], target) <= REACHED for joint, target in zip(_ENDS, joints[1:], strict=True)
         )
 
     def _estimate(self, frame: TrackerFrame) -> BodyPose | None:
-        targets = [self.upper.joint_target(frame, s) for s in INPUT_SITES]  # the IK converts the same frame next
-        if not all(full_target(t) for t in targets):
+        targets = self.upper.full_targets(frame, INPUT_SITES)  # the IK converts the same frame next
+        if targets is None:
             return None  # keep the previous sample: the next velocity spans the gap
-        pos = (np.stack([t[0] for t in targets]) - [0.0, 0.0, self.floor]) * self.scale
-        rot = np.stack([t[1] for t in targets])
+        joints, rot = targets
+        pos = (joints - self._floor) * self.scale
         if self._prev is None or not 0 < frame.stamp - self._prev[0] <= self.max_gap:
             self._state = self.model.initial_state()
             if self.contacts:
@@ -175,7 +176,7 @@ class LobstrEstimator(Estimator):
         upper = None
         if self.learned_upper:
             upper = self.upper.solve(frame, apply_upper(self._start, out[OUTPUTS:]), self.spine_tolerance)
-            if upper is not None and not self._reached(targets, upper[3]):
+            if upper is not None and not self._reached(joints, upper[3]):
                 upper = None  # a predicted torso that leaves a tracker out of reach: the IK's frame
         upper = upper or self.upper.solve(frame)
         if upper is None:

@@ -61,6 +61,20 @@ def _call(node, client, request, timeout=STARTUP_LIMIT):
     raise AssertionError(f"{client.srv_name} did not answer {len(futures)} requests in {timeout:.0f} s")
 
 
+def _lifecycle(node, name: str):
+    """(transition(id) -> success, state() -> id) of the lifecycle node NAME, by its services."""
+    change = node.create_client(ChangeState, f"/{name}/change_state")
+    get = node.create_client(GetState, f"/{name}/get_state")
+
+    def transition(tid):
+        return _call(node, change, ChangeState.Request(transition=Transition(id=tid))).success
+
+    def state():
+        return _call(node, get, GetState.Request()).current_state.id
+
+    return transition, state
+
+
 def test_lifecycle_transitions_gate_the_outputs(ros_env, tmp_path):
     proc = start_node(
         ESTIMATOR, {"sensors": "three_point", "estimator": "reference"}, "sparse_body_estimator", tmp_path, ros_env
@@ -68,15 +82,7 @@ def test_lifecycle_transitions_gate_the_outputs(ros_env, tmp_path):
     listener = Listener(rclpy, {"joint_states": JointState})
     try:
         node = listener.node
-        change = node.create_client(ChangeState, "/sparse_body_estimator/change_state")
-        get = node.create_client(GetState, "/sparse_body_estimator/get_state")
-
-        def transition(tid):
-            return _call(node, change, ChangeState.Request(transition=Transition(id=tid))).success
-
-        def state():
-            return _call(node, get, GetState.Request()).current_state.id
-
+        transition, state = _lifecycle(node, "sparse_body_estimator")
         assert state() == State.PRIMARY_STATE_UNCONFIGURED
         assert transition(Transition.TRANSITION_CONFIGURE) and state() == State.PRIMARY_STATE_INACTIVE
         listener.spin_for(1.0)
@@ -693,3 +699,61 @@ def test_a_node_stopped_longer_than_tracker_timeout_is_late_not_invalid_when_it_
     after = statuses[before:]
     assert len(after) >= 30
     assert [s.message for s in after if not s.valid] == [], [s.message for s in statuses if not s.valid]
+
+
+def test_the_bridge_is_a_lifecycle_node_whose_transitions_start_and_stop_the_samples(ros_env, tmp_path):
+    """autostart:=false: the bridge waits unconfigured and publishes nothing; configure reads
+    the bag, activate starts it playing on /tf, deactivate stops it, cleanup releases it; a
+    configure that fails (no such bag) leaves it up and unconfigured. With autostart (the
+    default) the same failure ends the process with exit code 1 and the reason in its log."""
+    from tf2_msgs.msg import TFMessage
+
+    config = load_sensor_config("six_point")
+    make_bag(synthetic_walk(4.0), config, tmp_path / "trackers")
+    params = {"bag": str(tmp_path / "trackers"), "loop": True, "autostart": False, "start_delay": 0.0}
+    bridge = start_node(BRIDGE, params, "sparse_body_tracker_bridge", tmp_path, ros_env)
+    listener = Listener(rclpy, {"/tf": TFMessage})
+    tf = listener.received["/tf"]
+    try:
+        node = listener.node
+        transition, state = _lifecycle(node, "sparse_body_tracker_bridge")
+        assert state() == State.PRIMARY_STATE_UNCONFIGURED
+        assert transition(Transition.TRANSITION_CONFIGURE) and state() == State.PRIMARY_STATE_INACTIVE
+        listener.spin_for(1.0)
+        assert tf == []  # configured, not active: nothing on /tf
+        assert transition(Transition.TRANSITION_ACTIVATE)
+        assert listener.spin_until(lambda: len(tf) >= 30, STARTUP_LIMIT)
+        assert {t.child_frame_id for m in tf for t in m.transforms} == {s.frame_id for s in config.sites}
+        assert transition(Transition.TRANSITION_DEACTIVATE)
+        listener.spin_for(0.5)
+        count = len(tf)
+        listener.spin_for(1.0)
+        assert len(tf) == count  # deactivated: stopped
+        assert transition(Transition.TRANSITION_ACTIVATE)  # and it plays again
+        assert listener.spin_until(lambda: len(tf) >= count + 30, STARTUP_LIMIT)
+        assert transition(Transition.TRANSITION_DEACTIVATE) and transition(Transition.TRANSITION_CLEANUP)
+        assert state() == State.PRIMARY_STATE_UNCONFIGURED
+
+        from rcl_interfaces.msg import Parameter, ParameterType, ParameterValue
+        from rcl_interfaces.srv import SetParameters
+
+        setp = node.create_client(SetParameters, "/sparse_body_tracker_bridge/set_parameters")
+        missing = str(tmp_path / "no_such_bag")
+        value = ParameterValue(type=ParameterType.PARAMETER_STRING, string_value=missing)
+        _call(node, setp, SetParameters.Request(parameters=[Parameter(name="bag", value=value)]))
+        assert not transition(Transition.TRANSITION_CONFIGURE)
+        assert state() == State.PRIMARY_STATE_UNCONFIGURED and bridge.poll() is None
+    finally:
+        listener.destroy()
+        stop(bridge)
+    assert "configure failed" in (tmp_path / "sparse_body_tracker_bridge.log").read_text()
+
+    failing = tmp_path / "autostart"
+    failing.mkdir()
+    proc = start_node(BRIDGE, {"bag": missing}, "sparse_body_tracker_bridge", failing, ros_env)
+    try:
+        assert proc.wait(timeout=STARTUP_LIMIT) == 1
+    finally:
+        stop(proc)
+    log = (failing / "sparse_body_tracker_bridge.log").read_text()
+    assert "configure failed" in log and "no_such_bag" in log, log

@@ -219,6 +219,30 @@ def write_tracker_bag(
             writer.write(conn, log_ns[i], data)
 
 
+def read_tf_messages(path: Path) -> list[tuple[float, list]]:
+    """Every /tf message of a bag as (seconds from the first message, its transforms as
+    cdr.read_tf rows (parent, child, stamp, (tx, ty, tz, qx, qy, qz, qw)))): what the tracker
+    bridge replays, read as the live node and read_tracker_stream read /tf."""
+    path = Path(path)
+    out: list[tuple[float, list]] = []
+    try:
+        with Reader(path) as reader:
+            conns = [c for c in reader.connections if c.topic == TF_TOPIC]
+            if not conns:
+                raise BagError(f"{path}: no {TF_TOPIC} topic")
+            first = None
+            for _, log_ns, raw in reader.messages(connections=conns):
+                first = log_ns if first is None else first
+                out.append(((log_ns - first) * 1e-9, cdr.read_tf(raw)))
+    except BagError:
+        raise
+    except Exception as err:  # noqa: BLE001 - rosbags' and the decoder's errors: a bag we cannot read
+        raise BagError(f"{path}: cannot be read as a rosbag2 ({err})") from None
+    if not out:  # a loop over nothing would spin a core
+        raise BagError(f"{path}: no {TF_TOPIC} messages to play")
+    return out
+
+
 def read_tracker_stream(
     path: Path,
     config: SensorConfig,

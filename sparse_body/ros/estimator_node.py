@@ -15,13 +15,11 @@ Staleness is judged in the trackers' own time, so a starved CPU shows up as late
 
 from __future__ import annotations
 
-import sys
 import time
 from dataclasses import replace
 from typing import TYPE_CHECKING
 
 import numpy as np
-import rclpy
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rcl_interfaces.msg import ParameterDescriptor, SetParametersResult
 from rclpy.lifecycle import LifecycleNode, LifecyclePublisher, LifecycleState, TransitionCallbackReturn
@@ -50,7 +48,7 @@ from ..io.tf_cache import TfGuards
 from ..io.urdf import body_urdf
 from ..methods import NAMES
 from .estimate_stats import EstimateStats
-from .spin import init, spin_until_shutdown
+from .spin import init, start_and_spin
 from .tf_input import TfReader
 
 if TYPE_CHECKING:
@@ -545,15 +543,7 @@ class EstimatorNode(LifecycleNode):
 
 def main(args=None, node_class=None) -> None:
     init(args)  # a signal while the model loads ends the node as soon as spinning starts
-    node = (node_class or EstimatorNode)()
-    if node.get_parameter("autostart").value:
-        if node.trigger_configure() != TransitionCallbackReturn.SUCCESS:
-            node.get_logger().fatal("configure failed; exiting")
-            node.destroy_node()
-            rclpy.try_shutdown()
-            sys.exit(1)
-        node.trigger_activate()
-    spin_until_shutdown(node)
+    start_and_spin((node_class or EstimatorNode)())
 
 
 if __name__ == "__main__":

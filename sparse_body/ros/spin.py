@@ -9,6 +9,7 @@ a second and the node is destroyed and the context shut down in order, from the 
 from __future__ import annotations
 
 import signal
+import sys
 import threading
 
 import rclpy
@@ -32,6 +33,22 @@ def init(args=None) -> None:
 
 def stop_requested() -> bool:
     return _STOP.is_set()
+
+
+def start_and_spin(node, threads: int = 1) -> None:
+    """A lifecycle node's main: configure and activate it when its autostart parameter says so
+    (a configure that fails ends the process with exit code 1, its reason logged by the node),
+    then spin_until_shutdown."""
+    from rclpy.lifecycle import TransitionCallbackReturn
+
+    if node.get_parameter("autostart").value:
+        if node.trigger_configure() != TransitionCallbackReturn.SUCCESS:
+            node.get_logger().fatal("configure failed; exiting")
+            node.destroy_node()
+            rclpy.try_shutdown()
+            sys.exit(1)
+        node.trigger_activate()
+    spin_until_shutdown(node, threads)
 
 
 def spin_until_shutdown(node, threads: int = 1) -> None:

@@ -13,6 +13,13 @@
 A T-pose calibration (service ~/calibrate) measures each tracker's rotation offset and the
 person's height; from then on (and at start, from the `calibration` file) the bridge
 publishes joint-aligned orientations.
+
+A lifecycle node, as the estimator is: configure reads the parameters, opens the source
+(ros/tracker_sources.py: the bag is read, a port is bound) and makes the publishers and the
+service; activate starts the samples flowing, deactivate stops them, cleanup releases it
+all. With autostart (the default) it configures and activates itself, so a launch file or
+`ros2 run` needs no lifecycle manager; a configure that fails then ends the process with
+the reason in one line and exit code 1.
 """
 
 from __future__ import annotations
@@ -20,7 +27,6 @@ from __future__ import annotations
 import threading
 import time
 from pathlib import Path
-from typing import TYPE_CHECKING
 
 import numpy as np
 import rclpy
@@ -28,19 +34,19 @@ from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from geometry_msgs.msg import TransformStamped
 from rcl_interfaces.msg import ParameterDescriptor
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
-from rclpy.node import Node
+from rclpy.lifecycle import LifecycleNode, LifecyclePublisher, LifecycleState, TransitionCallbackReturn
+from rclpy.publisher import Publisher
 from rclpy.qos import QoSProfile
+from rclpy.service import Service
+from rclpy.timer import Timer
 
-from ..adapters.vmc import DEFAULT_PORT, map_device, parse_device_map
+from ..adapters.vmc import DEFAULT_PORT
 from ..core.calibration import Calibration, CalibrationError, calibrate_tpose
-from ..core.sensors import SensorConfigError, load_sensor_config
-from ..io.bagio import TF_TOPIC, BagError, typestore
+from ..core.sensors import SensorConfig, SensorConfigError, load_sensor_config
+from ..io.bagio import BagError
 from .messages import to_time
-from .spin import init, spin_until_shutdown
-
-if TYPE_CHECKING:  # imported where used: each source loads only its own transport
-    from ..adapters.serial_reader import SerialTrackerReader
-    from ..adapters.vmc import VmcReceiver
+from .spin import init, start_and_spin
+from .tracker_sources import BagSource, DeviceSource, Sample, TrackerSource
 
 SOURCES = ("bag", "vmc", "serial")
 PARAMETERS = {
@@ -69,190 +75,151 @@ PARAMETERS = {
         "folder under which a ~/calibrate request's save_path may write (it must exist); "
         "empty: requests cannot name a file, only the calibration parameter's is written",
     ),
+    "autostart": (True, "configure and activate on start-up (false: wait for a lifecycle manager)"),
 }
 MAX_CALIBRATION_SECONDS = 30.0
 
 
-def load_tf_frames(path: str) -> list[tuple[float, list]]:
-    """(seconds from the first message, [(parent, child, stamp, translation, rotation)]) per /tf message."""
-    from rosbags.rosbag2 import Reader
+class TrackerBridge(LifecycleNode):
+    """Tracker samples from a TrackerSource, published on /tf; handles made in configure,
+    destroyed in cleanup (ros2/demos' lifecycle talker)."""
 
-    store = typestore()
-    out, first = [], None
-    try:
-        with Reader(Path(path)) as reader:
-            conns = [c for c in reader.connections if c.topic == TF_TOPIC]
-            if not conns:
-                raise BagError(f"{path}: no {TF_TOPIC} topic")
-            for conn, t_ns, raw in reader.messages(connections=conns):
-                msg = store.deserialize_cdr(raw, conn.msgtype)
-                first = t_ns if first is None else first
-                out.append(
-                    (
-                        (t_ns - first) * 1e-9,
-                        [
-                            (
-                                tf.header.frame_id,
-                                tf.child_frame_id,
-                                tf.header.stamp.sec + tf.header.stamp.nanosec * 1e-9,
-                                (tf.transform.translation.x, tf.transform.translation.y, tf.transform.translation.z),
-                                (
-                                    tf.transform.rotation.x,
-                                    tf.transform.rotation.y,
-                                    tf.transform.rotation.z,
-                                    tf.transform.rotation.w,
-                                ),
-                            )
-                            for tf in msg.transforms
-                        ],
-                    )
-                )
-    except BagError:
-        raise
-    except Exception as err:  # noqa: BLE001
-        raise BagError(f"{path}: cannot be read as a rosbag2 ({err})") from None
-    if not out:  # a loop over nothing would spin a core
-        raise BagError(f"{path}: no {TF_TOPIC} messages to play")
-    return out
+    source: TrackerSource | None = None
+    pub: LifecyclePublisher | None = None
+    pub_diag: Publisher | None = None
+    service: Service | None = None
+    diag_timer: Timer | None = None
 
-
-class TrackerBridge(Node):
     def __init__(self, **kwargs) -> None:
         super().__init__("sparse_body_tracker_bridge", **kwargs)
-        self._stop = threading.Event()
-        self.adapter: VmcReceiver | SerialTrackerReader | None = None
-        self._thread = None
         for name, (default, text) in PARAMETERS.items():
             self.declare_parameter(name, default, ParameterDescriptor(description=text))
+        self.params: dict = {}
+        self.calibration: Calibration | None = None
+        self._collect: dict[str, list] | None = None
+        self._lock = threading.Lock()  # the calibration and the collection, shared with the source's thread
+        self._counts_lock = threading.Lock()
+        self.published = 0
+        self._active = threading.Event()  # samples go out only while active
+
+    # -- lifecycle -------------------------------------------------------------------------
+    def on_configure(self, state: LifecycleState) -> TransitionCallbackReturn:
         p = {name: self.get_parameter(name).value for name in PARAMETERS}
-        if p["source"] not in SOURCES:
-            raise ValueError(f"parameter 'source' must be one of {', '.join(SOURCES)}, got {p['source']!r}")
-        self.params = p
-        self.sensors = load_sensor_config(p["sensors"])
-        self.site_of_frame = {s.frame_id: s.site for s in self.sensors.sites}
-        self.calibration = None
-        if p["calibration"] and Path(p["calibration"]).exists():
-            self.calibration = Calibration.load(p["calibration"])
-            self.get_logger().info(f"applying the calibration in {p['calibration']}")
-        from tf2_msgs.msg import TFMessage
+        try:
+            if p["source"] not in SOURCES:
+                raise ValueError(f"parameter 'source' must be one of {', '.join(SOURCES)}, got {p['source']!r}")
+            sensors = load_sensor_config(p["sensors"])
+            self.calibration = None
+            if p["calibration"] and Path(p["calibration"]).exists():
+                self.calibration = Calibration.load(p["calibration"])
+                self.get_logger().info(f"applying the calibration in {p['calibration']}")
+            self.params, self.sensors = p, sensors
+            self.source = self._make_source(p, sensors)
+        except (ValueError, BagError, SensorConfigError, CalibrationError, OSError) as err:
+            self.get_logger().error(f"configure failed: {err}")
+            return TransitionCallbackReturn.FAILURE
+        from tf2_msgs.msg import TFMessage  # here, not at import: the stand-in exists only after setup
 
         from ..srv import Calibrate
 
         self._msg_type = TFMessage
-        self.pub = self.create_publisher(TFMessage, "/tf", QoSProfile(depth=100))
+        self.pub = self.create_lifecycle_publisher(TFMessage, "/tf", QoSProfile(depth=100))
         self.pub_diag = self.create_publisher(DiagnosticArray, "/diagnostics", QoSProfile(depth=10))
         # its own callback group: the service waits while samples arrive, the rest (diagnostics)
         # goes on in the executor's other thread
-        self.create_service(
+        self.service = self.create_service(
             Calibrate, "~/calibrate", self._on_calibrate, callback_group=MutuallyExclusiveCallbackGroup()
         )
-        self.counts = {"published": 0, "stale": 0, "unmapped": 0}
-        self.unmapped: set[str] = set()
-        self._collect: dict[str, list] | None = None
-        self._lock = threading.Lock()
-        self._counts_lock = threading.Lock()
-        self.finished = threading.Event()
+        self.diag_timer = self.create_timer(1.0, self._publish_diagnostics)
+        return TransitionCallbackReturn.SUCCESS
+
+    def _make_source(self, p: dict, sensors: SensorConfig) -> TrackerSource:
         if p["source"] == "bag":
             if not p["bag"]:
                 raise ValueError("parameter 'bag' is empty: name a rosbag2 of tracker TF")
-            if p["rate"] <= 0:
-                raise ValueError(f"parameter 'rate' must be positive, got {p['rate']}")
-            self.frames = load_tf_frames(p["bag"])
-            self.get_logger().info(f"playing {len(self.frames)} TF messages from {p['bag']}")
-            self._thread = threading.Thread(target=self._play, daemon=True)
-            self._thread.start()
-        else:
-            self._start_device_source(p)
-        self.create_timer(1.0, self._publish_diagnostics)
-
-    # -- live devices ----------------------------------------------------------------
-    def _start_device_source(self, p) -> None:
-        entries = [e for e in p["devices"] if e]
-        if not entries:
-            entries = (
-                ["hmd:*=head"]
-                if p["source"] == "vmc"
-                else [f"serial:{i + 1}={s.site}" for i, s in enumerate(self.sensors.sites)]
+            source = BagSource(
+                p["bag"],
+                sensors,
+                self._send,
+                lambda: self.get_clock().now().nanoseconds * 1e-9,
+                p["rate"],
+                p["loop"],
+                p["restamp"],
+                self._wait_for_subscribers,
+                self.get_logger().info,
             )
-        self.device_map = parse_device_map(entries)
-        unknown = {site for _, site in self.device_map} - set(self.sensors.site_names)
-        if unknown:
-            raise ValueError(
-                f"devices map to {', '.join(sorted(unknown))}, which sensor configuration "
-                f"{self.sensors.name!r} does not have"
-            )
-        if p["source"] == "vmc":
-            from ..adapters.vmc import VmcReceiver
+            self.get_logger().info(f"playing {len(source.frames)} TF messages from {p['bag']}")
+            return source
+        device = DeviceSource(p["source"], p, sensors, self._send)
+        self.get_logger().info(device.where)
+        return device
 
-            receiver = self.adapter = VmcReceiver(self._on_samples, p["vmc_host"], p["vmc_port"])
-            self.get_logger().info(f"listening for VMC on {receiver.address[0]}:{receiver.address[1]}")
-        else:
-            from ..adapters.serial_reader import SerialTrackerReader
+    def on_activate(self, state: LifecycleState) -> TransitionCallbackReturn:
+        result = super().on_activate(state)  # the /tf publisher first: the source sends at once
+        assert self.source is not None  # activate follows a successful configure
+        self._active.set()
+        self.source.start()
+        return result
 
-            self.adapter = SerialTrackerReader(p["serial_port"], self._on_samples, p["serial_baudrate"])
-            self.get_logger().info(f"reading serial trackers from {p['serial_port']}")
+    def on_deactivate(self, state: LifecycleState) -> TransitionCallbackReturn:
+        self._stop_source()
+        return super().on_deactivate(state)
 
-    def _count(self, key: str, n: int = 1) -> None:
-        """Counters are changed from the adapters' and the player's threads."""
-        with self._counts_lock:
-            self.counts[key] += n
+    def on_cleanup(self, state: LifecycleState) -> TransitionCallbackReturn:
+        self._release()
+        return TransitionCallbackReturn.SUCCESS
 
-    def _on_samples(self, samples) -> None:
-        now = time.time()
-        transforms = []
-        for sample in samples:
-            site = map_device(sample.device, self.device_map)
-            if site is None:
-                self._count("unmapped")
-                with self._counts_lock:
-                    self.unmapped.add(sample.device)
-                continue
-            if sample.stamp < now - self.params["stale_after"]:
-                self._count("stale")
-                continue
-            spec = self.sensors.site(site)
-            position = sample.position if (sample.position is not None and spec.has_position) else None
-            transforms.append(self._transform(site, spec.frame_id, sample.stamp, position, sample.orientation))
-        self._send(transforms)
+    def on_shutdown(self, state: LifecycleState) -> TransitionCallbackReturn:
+        self._release()
+        return TransitionCallbackReturn.SUCCESS
 
-    # -- the bag --------------------------------------------------------------------
-    def _wait_for_subscribers(self) -> bool:
+    def _stop_source(self) -> None:
+        self._active.clear()
+        if self.source is not None:
+            self.source.stop()
+
+    def _release(self) -> None:
+        self._stop_source()
+        if self.source is not None:
+            self.source.close()
+        if self.diag_timer is not None:
+            self.destroy_timer(self.diag_timer)
+        if self.service is not None:
+            self.destroy_service(self.service)
+        if self.pub is not None:
+            self.destroy_lifecycle_publisher(self.pub)
+        if self.pub_diag is not None:
+            self.destroy_publisher(self.pub_diag)
+        self.source = self.pub = self.pub_diag = self.service = self.diag_timer = None
+
+    def destroy_node(self) -> None:
+        self._release()  # the source's thread must be out of publish() before the participant goes
+        super().destroy_node()
+
+    # -- publishing ------------------------------------------------------------------------
+    def _wait_for_subscribers(self, stop: threading.Event) -> bool:
         # /tf is volatile: what is published before a subscriber is matched is lost to it.
-        while self.pub.get_subscription_count() < self.params["min_subscribers"]:
-            if self._stop.wait(0.05):
+        pub = self.pub
+        while pub is not None and pub.get_subscription_count() < self.params["min_subscribers"]:
+            if stop.wait(0.05):
                 return False
-        return not self._stop.wait(self.params["start_delay"])
+        return not stop.wait(self.params["start_delay"])
 
-    def _play(self) -> None:
-        if not self._wait_for_subscribers():
+    def _send(self, samples: list[Sample]) -> None:
+        pub = self.pub
+        if not samples or pub is None or not self._active.is_set():
             return
-        while True:
-            start = time.monotonic()
-            for t_rel, transforms in self.frames:
-                delay = start + t_rel / self.params["rate"] - time.monotonic()
-                if delay > 0 and self._stop.wait(delay):
-                    return
-                now = self.get_clock().now().nanoseconds * 1e-9
-                self._send(
-                    [
-                        self._transform(
-                            self.site_of_frame.get(child),
-                            child,
-                            now if self.params["restamp"] else stamp,
-                            tr,
-                            q,
-                            parent,
-                        )
-                        for parent, child, stamp, tr, q in transforms
-                    ]
-                )
-            if not self.params["loop"]:
-                self.finished.set()
-                self.get_logger().info("finished playing")
-                return
+        transforms = [self._transform(*sample) for sample in samples]
+        try:
+            pub.publish(self._msg_type(transforms=transforms))
+        except Exception:  # noqa: BLE001 - a source thread racing the shutdown: its context is gone
+            if rclpy.ok() and self._active.is_set():
+                raise
+            return
+        with self._counts_lock:
+            self.published += len(transforms)
 
-    # -- common -----------------------------------------------------------------------
-    def _transform(self, site, frame_id, stamp, position, quat, parent=None) -> TransformStamped:
+    def _transform(self, site, parent, frame_id, stamp, position, quat) -> TransformStamped:
         quat = np.asarray(quat, dtype=float)
         if site is not None:
             with self._lock:
@@ -272,17 +239,6 @@ class TrackerBridge(Node):
             float, quat
         )
         return m
-
-    def _send(self, transforms) -> None:
-        if not transforms or self._stop.is_set():
-            return
-        try:
-            self.pub.publish(self._msg_type(transforms=transforms))
-        except Exception:  # noqa: BLE001 - a source thread racing the shutdown: its context is gone
-            if rclpy.ok() and not self._stop.is_set():
-                raise
-            return
-        self._count("published", len(transforms))
 
     def _save_path(self, requested: str) -> Path | None:
         """Where a calibration may be written: the calibration parameter's file, or a
@@ -346,53 +302,27 @@ class TrackerBridge(Node):
         return response
 
     def _publish_diagnostics(self) -> None:
+        assert self.source is not None and self.pub_diag is not None  # the timer exists only while configured
         status = DiagnosticStatus(name="sparse_body: tracker bridge", hardware_id=self.params["source"])
+        problem, figures = self.source.diagnostics()
         with self._counts_lock:
-            counts, unmapped = dict(self.counts), sorted(self.unmapped)
-        values = {
-            **{k: str(v) for k, v in counts.items()},
-            "unmapped devices": ", ".join(unmapped) or "none",
-            "calibrated": "yes" if self.calibration else "no",
-        }
-        level, message = DiagnosticStatus.OK, "ok"
-        if self.adapter is not None:  # a live transport: its own figures and problem
-            problem, figures = self.adapter.diagnostics()
-            values.update(figures)
-            if problem:
-                level, message = DiagnosticStatus.ERROR, problem
-        if counts["stale"] and level == DiagnosticStatus.OK:
-            level, message = DiagnosticStatus.WARN, f"{counts['stale']} stale samples dropped"
+            values = {"published": str(self.published), **figures}
+        values["calibrated"] = "yes" if self.calibration else "no"
+        level, message = DiagnosticStatus.OK, "ok" if self._active.is_set() else "inactive"
+        if problem:  # a live transport's own problem
+            level, message = DiagnosticStatus.ERROR, problem
+        elif values.get("stale", "0") != "0":
+            level, message = DiagnosticStatus.WARN, f"{values['stale']} stale samples dropped"
         status.level, status.message = level, message
         status.values = [KeyValue(key=k, value=v) for k, v in values.items()]
         msg = DiagnosticArray(status=[status])
         msg.header.stamp = self.get_clock().now().to_msg()
         self.pub_diag.publish(msg)
 
-    def destroy_node(self) -> None:
-        self._stop.set()
-        if self._thread is not None:
-            # The player must be out of publish() before the node and the DDS participant go:
-            # a thread left inside it at exit holds the writer's lock, and the participant's
-            # teardown then waits for it forever (a launch test's bridge was killed after
-            # 15 s on a starved machine; its join gave up after 2 s). A reliable publish
-            # blocks for a bounded time; 10 s stays within launch's SIGINT-to-SIGKILL 15 s.
-            self._thread.join(timeout=10.0)
-            if self._thread.is_alive():
-                self.get_logger().warning("the bag player did not stop within 10 s")
-        if self.adapter is not None:
-            self.adapter.close()
-        super().destroy_node()
-
 
 def main(args=None) -> None:
     init(args)
-    try:
-        node = TrackerBridge()
-    except (ValueError, BagError, SensorConfigError, CalibrationError) as err:
-        print(f"sparse_body_tracker_bridge: {err}", flush=True)
-        rclpy.try_shutdown()
-        raise SystemExit(1) from None
-    spin_until_shutdown(node, threads=2)
+    start_and_spin(TrackerBridge(), threads=2)
 
 
 if __name__ == "__main__":

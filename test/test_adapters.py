@@ -1,6 +1,7 @@
 """Tracker adapters without ROS: the serial protocol over a real pseudo-terminal, device
 clocks, VMC over real UDP with python-osc, T-pose calibration, and a short fuzzing run."""
 
+import re
 import subprocess
 import sys
 import threading
@@ -276,7 +277,9 @@ def test_a_short_fuzzing_run_finds_nothing(target, runs):
         [sys.executable, "-m", "sparse_body.apps.fuzz", target, str(runs)], capture_output=True, text=True, timeout=600
     )
     assert out.returncode == 0, out.stderr[-3000:]
-    assert f"Done {runs} runs" in out.stderr
+    # libFuzzer may run a few inputs more than asked (a clean CI run printed "Done 3010 runs")
+    done = re.search(r"Done (\d+) runs", out.stderr)
+    assert done and int(done.group(1)) >= runs, out.stderr[-3000:]
 
 
 def test_a_bundle_with_a_negative_element_size_does_not_hang_the_decoder():

@@ -11,12 +11,54 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from sparse_body.core.kinematics import forward_kinematics
-from sparse_body.core.rotations import cross3 as cross
-from sparse_body.core.rotations import rotation_about as about
-from sparse_body.core.rotations import rotation_between as swing
 from sparse_body.core.skeleton import JOINT_INDEX as J
-from sparse_body.core.skeleton import PARENTS
+from sparse_body.core.skeleton import NUM_JOINTS, PARENTS
+
+# the numpy helpers as they were (core/rotations.py and core/kinematics.py at 9209f2c), so
+# that the reference computes with none of the compiled kernels
+
+
+def cross(a, b) -> np.ndarray:
+    return np.array([a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]])
+
+
+def about(axis, angle: float) -> np.ndarray:
+    x, y, z = (float(v) for v in axis)
+    c, s = math.cos(angle), math.sin(angle)
+    t = 1.0 - c
+    return np.array(
+        [
+            [c + x * x * t, x * y * t - z * s, x * z * t + y * s],
+            [y * x * t + z * s, c + y * y * t, y * z * t - x * s],
+            [z * x * t - y * s, z * y * t + x * s, c + z * z * t],
+        ]
+    )
+
+
+def swing(a, b) -> np.ndarray:
+    a, b = np.asarray(a, float), np.asarray(b, float)
+    na, nb = math.sqrt(a @ a), math.sqrt(b @ b)
+    if na < 1e-12 or nb < 1e-12:
+        return np.eye(3)
+    a, b = a / na, b / nb
+    c = float(a @ b)
+    if c < -1.0 + 1e-9:
+        perp = cross(a, [1.0, 0.0, 0.0] if abs(a[0]) < 0.9 else [0.0, 1.0, 0.0])
+        return about(perp / math.sqrt(perp @ perp), math.pi)
+    k = cross(a, b)
+    kx = np.array([[0.0, -k[2], k[1]], [k[2], 0.0, -k[0]], [-k[1], k[0], 0.0]])
+    return np.eye(3) + kx + (kx @ kx) / (1.0 + c)
+
+
+def forward_kinematics(local_rot, root_pos, offsets):
+    glob, pos = np.empty_like(local_rot), np.empty((NUM_JOINTS, 3))
+    glob[0], pos[0] = local_rot[0], root_pos
+    for j in range(1, NUM_JOINTS):
+        p = PARENTS[j]
+        glob[j] = glob[p] @ local_rot[j]
+        pos[j] = pos[p] + glob[p] @ offsets[j]
+    return glob, pos
+
 
 X, Y, Z = np.eye(3)
 

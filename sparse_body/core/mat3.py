@@ -73,7 +73,7 @@ def cross(a, b):
 
 @njit
 def about(axis, angle: float):
-    """The rotation about a unit axis by angle (Rodrigues); rotations.rotation_about."""
+    """The rotation about a unit axis by angle (Rodrigues)."""
     x, y, z = axis[0], axis[1], axis[2]
     c, s = math.cos(angle), math.sin(angle)
     t = 1.0 - c
@@ -87,7 +87,7 @@ def about(axis, angle: float):
 @njit
 def between(a, b):
     """The smallest rotation taking direction a onto direction b (identity when either is
-    zero); rotations.rotation_between."""
+    zero)."""
     na, nb = norm(a), norm(b)
     if na < 1e-12 or nb < 1e-12:
         return np.eye(3)
@@ -104,7 +104,7 @@ def between(a, b):
 
 @njit
 def quat_matrix(q):
-    """A unit quaternion (x y z w) as a rotation matrix; rotations.unit_quat_matrix."""
+    """A unit quaternion (x y z w) as a rotation matrix."""
     x, y, z, w = q[0], q[1], q[2], q[3]
     out = np.empty((3, 3))
     out[0, 0], out[0, 1], out[0, 2] = 1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)

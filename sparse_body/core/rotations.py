@@ -7,8 +7,6 @@ offers in the needed shape is written here (6D, batched reshaping).
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
 from scipy.spatial.transform import Rotation, Slerp
 
@@ -32,15 +30,8 @@ def quat_to_matrix(q: np.ndarray) -> np.ndarray:
 
 def unit_quat_matrix(q) -> np.ndarray:
     """One unit quaternion (x y z w) as a matrix, without scipy's per-call overhead (the
-    trackers' hot path converts a handful per frame)."""
-    x, y, z, w = (float(v) for v in q)
-    return np.array(
-        [
-            [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
-            [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
-            [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
-        ]
-    )
+    trackers' hot path converts a handful per frame; compiled: mat3.quat_matrix)."""
+    return mat3.quat_matrix(np.ascontiguousarray(q, dtype=np.float64))
 
 
 def matrix_to_quat(m: np.ndarray) -> np.ndarray:
@@ -106,40 +97,17 @@ def sixd_to_matrix(d6: np.ndarray) -> np.ndarray:
     return np.stack([a, b, np.cross(a, b)], axis=-1)
 
 
-def cross3(a, b) -> np.ndarray:
-    """a x b for two 3-vectors (np.cross costs ten times more at this size)."""
-    return np.array([a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]])
-
-
 def rotation_about(axis, angle: float) -> np.ndarray:
-    """The rotation matrix about a unit axis (Rodrigues), for one rotation in a hot path."""
-    x, y, z = (float(v) for v in axis)
-    c, s = math.cos(angle), math.sin(angle)
-    t = 1.0 - c
-    return np.array(
-        [
-            [c + x * x * t, x * y * t - z * s, x * z * t + y * s],
-            [y * x * t + z * s, c + y * y * t, y * z * t - x * s],
-            [z * x * t - y * s, z * y * t + x * s, c + z * z * t],
-        ]
-    )
+    """The rotation matrix about a unit axis (Rodrigues), for one rotation in a hot path
+    (compiled: mat3.about)."""
+    return mat3.about(np.ascontiguousarray(axis, dtype=np.float64), float(angle))
 
 
 def rotation_between(a, b) -> np.ndarray:
     """The smallest rotation matrix taking direction a onto direction b (identity when
-    either is zero)."""
-    a, b = np.asarray(a, float), np.asarray(b, float)
-    na, nb = math.sqrt(a @ a), math.sqrt(b @ b)
-    if na < 1e-12 or nb < 1e-12:
-        return np.eye(3)
-    a, b = a / na, b / nb
-    c = float(a @ b)
-    if c < -1.0 + 1e-9:  # opposite directions: half a turn about any perpendicular axis
-        perp = cross3(a, [1.0, 0.0, 0.0] if abs(a[0]) < 0.9 else [0.0, 1.0, 0.0])
-        return rotation_about(perp / math.sqrt(perp @ perp), math.pi)
-    k = cross3(a, b)
-    kx = np.array([[0.0, -k[2], k[1]], [k[2], 0.0, -k[0]], [-k[1], k[0], 0.0]])
-    return np.eye(3) + kx + (kx @ kx) / (1.0 + c)
+    either is zero; compiled: mat3.between)."""
+    c = np.ascontiguousarray
+    return mat3.between(c(a, dtype=np.float64), c(b, dtype=np.float64))
 
 
 def angle_between(m1: np.ndarray, m2: np.ndarray) -> np.ndarray:

@@ -178,9 +178,7 @@ class Estimator(ABC):
         converted at once, in one compiled call, the first time the frame is asked."""
         if site not in frame.sites:
             return None
-        if frame is not self._targets_of:
-            self._targets_of, self._targets = frame, self._frame_targets(frame)
-        positions, rotations, kinds = self._targets
+        positions, rotations, kinds = self._converted(frame)
         i = frame.index(site)
         kind = kinds[i]
         if kind == _POSE:
@@ -199,12 +197,16 @@ class Estimator(ABC):
             if not set(sites) <= set(frame.sites):
                 return None
             rows = self._rows[key] = np.array([frame.index(s) for s in sites], dtype=np.int64)
-        if frame is not self._targets_of:
-            self._targets_of, self._targets = frame, self._frame_targets(frame)
-        positions, rotations, kinds = self._targets
+        positions, rotations, kinds = self._converted(frame)
         if not (kinds[rows] == _POSE).all():
             return None
         return positions[rows], rotations[rows]
+
+    def _converted(self, frame: TrackerFrame):
+        """The joint targets of every site of frame, converted once a frame."""
+        if frame is not self._targets_of:
+            self._targets_of, self._targets = frame, self._frame_targets(frame)
+        return self._targets
 
     def _frame_targets(self, frame: TrackerFrame):
         if frame.sites != self._mounting_sites:  # the frame's site order, once per site set

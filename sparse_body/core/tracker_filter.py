@@ -29,6 +29,8 @@ import numpy as np
 from .mat3 import njit
 from .types import TrackerFrame
 
+MAX_LAG = 0.5  # seconds: past this a live pose is too late to steer anything; offline, use smooth=true
+
 
 @dataclass(frozen=True)
 class FilterConfig:
@@ -42,12 +44,17 @@ class FilterConfig:
     # future in view there is no lag to trade, so it follows harder accelerations
     smooth_acceleration: float = 0.7
     smooth_spin_acceleration: float = 2.0
+    # live smoothing (core/fixed_lag.py): each pose is of the frame this many seconds before the
+    # newest, smoothed by the frames after it; 0: none (the filter alone, no added latency)
+    lag: float = 0.0
 
     def __post_init__(self) -> None:
         for name in self.__dataclass_fields__:
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, (int, float)) or not np.isfinite(value) or value < 0:
                 raise ValueError(f"filter {name} must be a finite number >= 0, got {value!r}")
+        if self.lag > MAX_LAG:
+            raise ValueError(f"filter lag must be from 0 to {MAX_LAG:g} (seconds), got {self.lag!r}")
 
     @property
     def enabled(self) -> bool:
@@ -217,6 +224,10 @@ class TrackerFilter:
 
     def reset(self) -> None:
         self._pos, self._rot = _Tracks(len(self.sites), 3), _Tracks(len(self.sites), 4)
+
+    def stream(self, frames):
+        """A recording's frames filtered, one out for each one in."""
+        return (self(frame) for frame in frames)
 
     def __call__(self, frame: TrackerFrame) -> TrackerFrame:
         c = self.config

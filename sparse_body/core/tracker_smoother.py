@@ -82,14 +82,24 @@ def _smooth_run(stamps: np.ndarray, samples: np.ndarray, q: float, r: float, spa
     out = [None] * n
     out[-1], rate = values[-1], rates[-1]
     for k in range(n - 2, -1, -1):  # backwards: each state corrected by what came after it
-        (p00, p01, p11), (value, pred_rate, (a, b, c)) = covs[k], predicted[k]
         dt = stamps[k + 1] - stamps[k]
-        # C = P F^T inv(P predicted), F = [[1, dt], [0, 1]]
-        gain = np.array([[p00 + dt * p01, p01], [p01 + dt * p11, p11]]) @ np.array([[c, -b], [-b, a]]) / (a * c - b * b)
-        d_value, d_rate = space.minus(out[k + 1], value), rate - pred_rate
-        out[k] = space.plus(values[k], gain[0, 0] * d_value + gain[0, 1] * d_rate)
-        rate = rates[k] + gain[1, 0] * d_value + gain[1, 1] * d_rate
+        out[k], rate = rts_step((values[k], rates[k], covs[k]), predicted[k], dt, (out[k + 1], rate), space)
     return np.array(out)
+
+
+def rts_step(filtered, predicted, dt: float, smoothed_next, space):
+    """One backward step of the smoother: a state as the forward filter left it (value, rate,
+    covariance), the prediction made from it for the next sample (dt later), and the next
+    sample's smoothed (value, rate) -> this sample's smoothed (value, rate)."""
+    value, rate, (p00, p01, p11) = filtered
+    pred_value, pred_rate, (a, b, c) = predicted
+    # C = P F^T inv(P predicted), F = [[1, dt], [0, 1]]
+    gain = np.array([[p00 + dt * p01, p01], [p01 + dt * p11, p11]]) @ np.array([[c, -b], [-b, a]]) / (a * c - b * b)
+    d_value, d_rate = space.minus(smoothed_next[0], pred_value), smoothed_next[1] - pred_rate
+    return (
+        space.plus(value, gain[0, 0] * d_value + gain[0, 1] * d_rate),
+        rate + gain[1, 0] * d_value + gain[1, 1] * d_rate,
+    )
 
 
 def _runs(stamps: np.ndarray, samples: np.ndarray, config: FilterConfig, jump: bool) -> list[slice]:

@@ -12,6 +12,7 @@ import numpy as np
 import yaml
 
 from ..core import mat3
+from ..core.fixed_lag import FixedLagSmoother
 from ..core.mat3 import njit
 from ..core.rotations import matrix_to_quat
 from ..core.sensors import SensorConfig
@@ -122,17 +123,29 @@ class Estimator(ABC):
 
     def use_filter(self, config: FilterConfig, smooth: bool = False) -> None:
         """Filter the tracker input this way from now on (from the next reset: no history).
-        smooth: process() smooths a whole recording forwards and backwards instead
-        (core/tracker_smoother.py); live steps keep the causal filter."""
-        self.input_filter = TrackerFilter(config, self.sensors.site_names)
+        config.lag > 0: each step's pose is of the frame that many seconds (in frames at
+        self.fps) before, smoothed by the frames since (core/fixed_lag.py). smooth: process()
+        smooths a whole recording forwards and backwards instead (core/tracker_smoother.py);
+        live steps keep the causal filter."""
+        self.input_filter: TrackerFilter | FixedLagSmoother
+        if config.lag > 0 and config.enabled:
+            self.input_filter = FixedLagSmoother(config, round(config.lag * self.fps))
+        else:
+            self.input_filter = TrackerFilter(config, self.sensors.site_names)
         self.smooth = smooth
 
+    @property
+    def lag(self) -> float:
+        """Seconds by which a step's pose is older than the frame given (the filter's lag)."""
+        return self.input_filter.lag_frames / self.fps if isinstance(self.input_filter, FixedLagSmoother) else 0.0
+
     def filtered(self, frames: Iterable[TrackerFrame]) -> Iterable[TrackerFrame]:
-        """A recording's frames as the method sees them: through the live filter one by one,
-        or, with smooth, the whole recording smoothed at once."""
+        """A recording's frames as the method sees them, one for each frame given and in
+        order: through the live filter (with its lag, if any), or, with smooth, the whole
+        recording smoothed at once."""
         if self.smooth:
             return smooth_frames(list(frames), self.input_filter.config)
-        return (self.input_filter(frame) for frame in frames)
+        return self.input_filter.stream(frames)
 
     def reset(self) -> None:
         """Forget all history (a new take, a clock jump back)."""
@@ -146,8 +159,12 @@ class Estimator(ABC):
     def step(self, frame: TrackerFrame) -> BodyPose:
         """The body at frame.stamp. What every method shares is here: too little input holds
         the last pose (invalid), a non-finite result starts the method over and holds too,
-        and the last valid pose is kept for holding."""
-        return self._step_filtered(self.input_filter(frame))
+        and the last valid pose is kept for holding. With a lag, the pose is of the frame that
+        long before, and held (invalid) until as many frames have come since a reset."""
+        filtered = self.input_filter(frame)
+        if filtered is None:
+            return self.held_pose(frame.stamp - self.lag)
+        return self._step_filtered(filtered)
 
     def _step_filtered(self, frame: TrackerFrame) -> BodyPose:
         """step() on a frame the filter (or the offline smoother) has already seen."""

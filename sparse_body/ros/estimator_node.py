@@ -37,8 +37,8 @@ from ..core.mat3 import compile_kernels
 from ..core.rotations import matrix_to_quat
 from ..core.sensors import SensorConfigError, load_sensor_config
 from ..core.skeleton import JOINT_NAMES, standing_pose
+from ..core.tracker_filter import MAX_LAG, FilterConfig
 from ..core.tracker_filter import PREFIX as FILTER
-from ..core.tracker_filter import FilterConfig
 from ..core.types import BodyPose
 from ..estimators import create_estimator
 from ..estimators.base import Estimator, parse_estimator_spec
@@ -87,6 +87,12 @@ PARAMETERS = {
         "motion with less lag and smooths less",
     ),
     "filter_spin_acceleration": (FILTER_DEFAULTS.spin_acceleration, "the same for turning (rad/s^2/sqrt(Hz))"),
+    "filter_lag": (
+        FILTER_DEFAULTS.lag,
+        "seconds of latency traded for steadiness: each estimate is of the trackers this long "
+        "before the newest (counted in frames at output_rate), smoothed by the samples since, "
+        "and stamped with their time; 0: none",
+    ),
     "output_rate": (
         60.0,
         "estimates per second when the trackers do not drive them (input slow, partial or "
@@ -128,6 +134,7 @@ RANGES = {
     "filter_rotation_noise": (0.0, 10.0),
     "filter_acceleration": (0.01, 1000.0),
     "filter_spin_acceleration": (0.01, 1000.0),
+    "filter_lag": (0.0, MAX_LAG),
     "output_rate": (0.1, 1000.0),
     "stale_timeout": (0.001, 10.0),
     "tracker_timeout": (0.01, 60.0),
@@ -417,8 +424,10 @@ class EstimatorNode(LifecycleNode):
             return
         frame, stamps, newest, no_input, silent = gathered
         pose, reason = self._step(frame)
-        # Stamp the outputs with the newest tracker stamp used, so latency can be measured.
+        # Stamp the outputs with the newest tracker stamp used, so latency can be measured; with
+        # a filter lag the pose is that much older, and so are its stamp and its latency.
         source_time = float(stamps[frame.valid].max()) if frame.valid.any() else now
+        source_time -= max(0.0, frame.stamp - pose.stamp)
         if not pose.valid:
             self._stats.invalid += 1
             reason = reason or self._held_reason(frame, no_input, silent)

@@ -52,7 +52,15 @@ def cmd_eval(args) -> int:
             specs += [s for s in compare if s not in specs]
             reference.update(paper_figures(name, sensors.name, args.faulty, args.occlusion))
     protocol = Protocol.named(
-        args.skeleton, args.noise, args.faulty, args.mounting_error, args.occlusion, args.hand_loss, args.hand_loss_mode
+        args.skeleton,
+        args.noise,
+        args.faulty,
+        args.mounting_error,
+        args.occlusion,
+        args.hand_loss,
+        args.hand_loss_mode,
+        args.jumps,
+        args.yaw_drift,
     )
     if args.motion:  # the files are found and every AMC paired with its ASF before any work
         from .data.motion_inputs import balanced, find_inputs
@@ -503,6 +511,8 @@ def _between_int(low: int, high: int):
 
 
 _percent = _between(0.0, 100.0, "%")
+_jumps_per_minute = _between(0.0, 600.0, "jumps a minute")
+_degrees_per_minute = _between(0.0, 360.0, "degrees a minute")
 _fps = _between(1.0, 1000.0, "Hz")
 _height = _between(0.5, 2.5, "metres")
 # an hour of synthetic motion is 216,000 frames at 60 Hz; longer runs belong in a recording
@@ -610,6 +620,22 @@ def build_parser() -> argparse.ArgumentParser:
         choices=("lost", "frozen"),
         default="lost",
         help="how a lost hand is reported: no sample (lost) or its last sample repeated (frozen)",
+    )
+    p.add_argument(
+        "--jumps",
+        type=_jumps_per_minute,
+        default=0.0,
+        metavar="PER_MINUTE",
+        help="Lighthouse reflections: about this many times a minute each tracked position jumps "
+        "2-8 cm in a random direction for 2-8 frames",
+    )
+    p.add_argument(
+        "--yaw-drift",
+        type=_degrees_per_minute,
+        default=0.0,
+        metavar="DEG_PER_MINUTE",
+        help="IMUs without a magnetometer: each orientation-only sensor's heading drifts at a steady "
+        "rate drawn per clip up to this (degrees a minute)",
     )
     p.add_argument(
         "--limit",

@@ -141,3 +141,47 @@ def test_hands_out_of_view_for_a_share_of_frames_lost_or_frozen_and_nothing_else
             for start, end in zip(edges[::2], edges[1::2], strict=True):
                 if start > 0:
                     assert (losing.positions[start:end, s] == plain.positions[start - 1, s]).all()
+
+
+def test_reflection_jumps_move_positions_a_few_centimetres_for_a_few_frames_and_nothing_else():
+    from sparse_body.data.field_protocol import Protocol
+    from sparse_body.data.virtual_trackers import VR_NOISE
+
+    motion = synthetic_walk(120.0)
+    config = load_sensor_config("six_point")
+    noise = VR_NOISE.jumping(6.0)  # about six a minute on each tracker
+    plain, jumping = synthesize_trackers(motion, config, VR_NOISE, 3), synthesize_trackers(motion, config, noise, 3)
+    np.testing.assert_array_equal(jumping.orientations, plain.orientations)  # positions only, drawn last
+    np.testing.assert_array_equal(jumping.valid, plain.valid)
+    for s in range(len(config.sites)):
+        moved = np.linalg.norm(jumping.positions[:, s] - plain.positions[:, s], axis=-1)
+        out = moved > 0
+        edges = np.flatnonzero(np.diff(np.r_[0, out.astype(int), 0]))
+        lengths = edges[1::2] - edges[::2]
+        assert 6 <= len(lengths) <= 24, len(lengths)  # about 12 in two minutes
+        assert lengths.min() >= 2 and lengths.max() <= 8
+        assert moved[out].min() >= 0.02 - 1e-12 and moved.max() <= 0.08 + 1e-12
+    assert "6 position jumps a minute" in Protocol(noise=noise).label
+    with pytest.raises(ValueError, match="jumps per minute must be from 0 to 600"):
+        VR_NOISE.jumping(-1.0)
+
+
+def test_imu_heading_drifts_about_the_vertical_at_a_steady_rate_and_pose_trackers_do_not():
+    from sparse_body.data.virtual_trackers import NO_NOISE
+
+    motion = synthetic_walk(60.0)
+    config = load_sensor_config("four_point_foot_imus")
+    plain = synthesize_trackers(motion, config, NO_NOISE, 1)
+    drifting = synthesize_trackers(motion, config, NO_NOISE.drifting(5.0), 1)
+    imus = [s for s, site in enumerate(config.sites) if not site.has_position]
+    assert imus, "the configuration has orientation-only sensors"
+    for s in range(len(config.sites)):
+        if s not in imus:
+            np.testing.assert_array_equal(drifting.orientations[:, s], plain.orientations[:, s])
+            continue
+        turn = Rotation.from_quat(drifting.orientations[:, s]) * Rotation.from_quat(plain.orientations[:, s]).inv()
+        rotvec = turn.as_rotvec()
+        assert np.allclose(rotvec[:, :2], 0, atol=1e-9)  # about the vertical only
+        yaw = np.rad2deg(rotvec[:, 2])
+        rate = np.polyfit(np.arange(len(yaw)) / motion.fps / 60, yaw, 1)[0]
+        assert 0 < abs(rate) <= 5.0 and np.allclose(yaw, rate * np.arange(len(yaw)) / motion.fps / 60, atol=1e-6)

@@ -59,6 +59,8 @@ class Protocol:
             occlusion_mode="origin",
             loss_probability=0.0,
             loss_mode="lost",
+            jump_probability=0.0,
+            yaw_drift=0.0,
         )
         noise = next((n for n, v in NOISE_MODELS.items() if v == plain), "custom")
         faults = f", {self.noise.fault_probability * 100:g} % faulty" if self.noise.fault_probability else ""
@@ -66,6 +68,10 @@ class Protocol:
             faults += f", feet occluded in {self.noise.occluded_percent:.3g} % of frames"
         if self.noise.loss_probability:
             faults += f", hands {self.noise.loss_mode} in {self.noise.lost_percent:.3g} % of frames"
+        if self.noise.jump_probability:
+            faults += f", {self.noise.jump_probability * 3600:.3g} position jumps a minute"
+        if self.noise.yaw_drift:
+            faults += f", IMU heading drift up to {self.noise.yaw_drift:g} deg/min"
         name = (
             "field"
             if replace(self, noise=VR_NOISE, mounting_translation_std=0.0) == FIELD
@@ -87,10 +93,12 @@ class Protocol:
         occluded_percent: float = 0.0,
         lost_percent: float = 0.0,
         loss_mode: str = "lost",
+        jumps_per_minute: float = 0.0,
+        yaw_drift: float = 0.0,
     ) -> Protocol:
         """The protocol of `sparse-body eval --skeleton S --noise N --faulty P --mounting-error M
-        --occlusion O --hand-loss L --hand-loss-mode MODE`: an oracle skeleton comes with the
-        true mounting (the lab's), the others with a user's."""
+        --occlusion O --hand-loss L --hand-loss-mode MODE --jumps J --yaw-drift D`: an oracle
+        skeleton comes with the true mounting (the lab's), the others with a user's."""
         if noise not in NOISE_MODELS:
             raise ValueError(f"noise must be one of {', '.join(NOISE_MODELS)}, got {noise!r}")
         if not 0.0 <= mounting_error <= 0.1:
@@ -100,6 +108,10 @@ class Protocol:
             model = model.occluding(occluded_percent)
         if lost_percent:
             model = model.losing_hands(lost_percent, loss_mode)
+        if jumps_per_minute:
+            model = model.jumping(jumps_per_minute)
+        if yaw_drift:
+            model = model.drifting(yaw_drift)
         if skeleton == "oracle":
             if mounting_error:
                 raise ValueError("an oracle skeleton comes with the true mounting: no mounting error")

@@ -43,6 +43,16 @@ class TrackerNoise:
     loss_seconds: tuple[float, float] = (0.2, 2.0)
     loss_sites: tuple[str, ...] = ("left_hand", "right_hand")
     loss_mode: str = "lost"
+    # Reflections (Lighthouse): a tracked position jumps a distance uniform in jump_size (metres,
+    # a random direction) for a number of frames uniform in jump_frames; a jump starts in each
+    # frame of each tracker with a position with jump_probability.
+    jump_probability: float = 0.0
+    jump_size: tuple[float, float] = (0.02, 0.08)
+    jump_frames: tuple[int, int] = (2, 8)
+    # Heading drift (an IMU without a magnetometer): an orientation-only sensor's heading turns
+    # about the vertical at a steady rate uniform in +-yaw_drift (degrees per minute), drawn per
+    # sensor and clip.
+    yaw_drift: float = 0.0
 
     def __post_init__(self) -> None:
         if self.occlusion_mode not in OCCLUSION_MODES:
@@ -51,6 +61,24 @@ class TrackerNoise:
             raise ValueError(f"loss_mode must be one of {', '.join(LOSS_MODES)}, got {self.loss_mode!r}")
         if not 0.0 < self.loss_seconds[0] <= self.loss_seconds[1]:
             raise ValueError(f"loss_seconds must be (shortest, longest) above 0, got {self.loss_seconds!r}")
+        if not 0.0 <= self.jump_size[0] <= self.jump_size[1] or not 1 <= self.jump_frames[0] <= self.jump_frames[1]:
+            raise ValueError(
+                f"jump_size and jump_frames must be (least, most), got {self.jump_size}, {self.jump_frames}"
+            )
+
+    def jumping(self, per_minute: float) -> TrackerNoise:
+        """This noise with about `per_minute` reflection jumps a minute on each tracked position
+        (`sparse-body eval --jumps`), at 60 Hz, the catalogue's rate."""
+        if not 0.0 <= per_minute <= 600.0:
+            raise ValueError(f"jumps per minute must be from 0 to 600, got {per_minute!r}")
+        return replace(self, jump_probability=per_minute / 3600.0)
+
+    def drifting(self, deg_per_minute: float) -> TrackerNoise:
+        """This noise with orientation-only sensors drifting in heading at up to
+        `deg_per_minute` (`sparse-body eval --yaw-drift`)."""
+        if not 0.0 <= deg_per_minute <= 360.0:
+            raise ValueError(f"the yaw drift must be from 0 to 360 degrees a minute, got {deg_per_minute!r}")
+        return replace(self, yaw_drift=deg_per_minute)
 
     def losing_hands(self, percent: float, mode: str = "lost") -> TrackerNoise:
         """This noise with each hand lost in about `percent` % of the frames (`sparse-body eval
@@ -198,5 +226,32 @@ def synthesize_trackers(
             else:  # each lost frame repeats the last sample before the loss
                 last = np.maximum.accumulate(np.where(lost[:, s], 0, np.arange(T)))
                 positions[:, s], orientations[:, s] = positions[last, s], orientations[last, s]
+    # drawn after every other draw, and only when asked: without them, the streams stay as they were
+    if noise.jump_probability > 0:
+        for s, site in enumerate(config.sites):
+            if site.has_position:
+                positions[:, s] += _jumps(T, noise, rng)
+    if noise.yaw_drift > 0:
+        for s, site in enumerate(config.sites):
+            if site.has_orientation and not site.has_position:
+                rate = np.deg2rad(rng.uniform(-noise.yaw_drift, noise.yaw_drift)) / 60.0  # rad/s
+                heading = Rotation.from_rotvec(np.outer(np.arange(T) / motion.fps * rate, [0.0, 0.0, 1.0]))
+                good = np.isfinite(orientations[:, s]).all(axis=1)
+                orientations[good, s] = (heading[good] * Rotation.from_quat(orientations[good, s])).as_quat()
     times = np.arange(T) / motion.fps
     return TrackerStream(config.site_names, times, positions, orientations, valid, lost)
+
+
+def _jumps(T: int, noise: TrackerNoise, rng: np.random.Generator) -> np.ndarray:
+    """(T, 3) the displacement reflections add to one tracker's positions."""
+    out = np.zeros((T, 3))
+    t = 0
+    while t < T:
+        if rng.random() < noise.jump_probability:
+            frames = int(rng.integers(noise.jump_frames[0], noise.jump_frames[1] + 1))
+            direction = rng.normal(size=3)
+            out[t : t + frames] = direction / np.linalg.norm(direction) * rng.uniform(*noise.jump_size)
+            t += frames + 1
+        else:
+            t += 1
+    return out

@@ -30,6 +30,13 @@ from .mat3 import njit
 from .types import TrackerFrame
 
 MAX_LAG = 0.5  # seconds: past this a live pose is too late to steer anything; offline, use smooth=true
+# the fields with an upper bound besides 0 (every field is a finite number >= 0)
+UPPER = {
+    "lag": (MAX_LAG, "seconds"),
+    "reacquire_speed": (100.0, "m/s"),
+    "carry_lost": (10.0, "seconds"),
+    "frozen_after": (10.0, "seconds"),
+}
 
 
 @dataclass(frozen=True)
@@ -47,14 +54,24 @@ class FilterConfig:
     # live smoothing (core/fixed_lag.py): each pose is of the frame this many seconds before the
     # newest, smoothed by the frames after it; 0: none (the filter alone, no added latency)
     lag: float = 0.0
+    # a tracker that comes back (lost, or leaping) starts where the estimate had its joint and
+    # catches up at this speed, m/s (core/reacquire.py); 0: at once (the target snaps back)
+    reacquire_speed: float = 0.0
+    # a lost tracker's target is carried with the head (its position and heading) for up to this
+    # many seconds, so every method keeps estimating (core/reacquire.py); 0: it is missing
+    carry_lost: float = 0.0
+    # a tracker whose sample repeats bit for bit this many seconds is lost, not still (a runtime
+    # that freezes a controller it lost; core/reacquire.py); 0: a repeated sample is believed
+    frozen_after: float = 0.0
 
     def __post_init__(self) -> None:
         for name in self.__dataclass_fields__:
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, (int, float)) or not np.isfinite(value) or value < 0:
                 raise ValueError(f"filter {name} must be a finite number >= 0, got {value!r}")
-        if self.lag > MAX_LAG:
-            raise ValueError(f"filter lag must be from 0 to {MAX_LAG:g} (seconds), got {self.lag!r}")
+        for name, (high, unit) in UPPER.items():
+            if getattr(self, name) > high:
+                raise ValueError(f"filter {name} must be from 0 to {high:g} ({unit}), got {getattr(self, name)!r}")
 
     @property
     def enabled(self) -> bool:

@@ -13,8 +13,10 @@ import yaml
 
 from ..core import mat3
 from ..core.fixed_lag import FixedLagSmoother
+from ..core.kinematics import forward_kinematics
 from ..core.mat3 import njit
-from ..core.rotations import matrix_to_quat
+from ..core.reacquire import FreezeGuard, Reacquisition
+from ..core.rotations import matrix_to_quat, quat_to_matrix
 from ..core.sensors import SensorConfig
 from ..core.skeleton import Skeleton, standing_pose
 from ..core.tracker_filter import FilterConfig, TrackerFilter, filter_config
@@ -132,6 +134,8 @@ class Estimator(ABC):
             self.input_filter = FixedLagSmoother(config, round(config.lag * self.fps))
         else:
             self.input_filter = TrackerFilter(config, self.sensors.site_names)
+        self.reacquisition = Reacquisition(config.reacquire_speed, config.carry_lost)
+        self.freeze_guard = FreezeGuard(config.frozen_after) if config.frozen_after > 0 else None
         self.smooth = smooth
 
     @property
@@ -143,6 +147,8 @@ class Estimator(ABC):
         """A recording's frames as the method sees them, one for each frame given and in
         order: through the live filter (with its lag, if any), or, with smooth, the whole
         recording smoothed at once."""
+        if self.freeze_guard is not None:
+            frames = map(self.freeze_guard, frames)
         if self.smooth:
             return smooth_frames(list(frames), self.input_filter.config)
         return self.input_filter.stream(frames)
@@ -150,7 +156,11 @@ class Estimator(ABC):
     def reset(self) -> None:
         """Forget all history (a new take, a clock jump back)."""
         self._last: BodyPose | None = None
+        self._shown: BodyPose | None = None  # the last pose given, valid or held
         self.input_filter.reset()
+        self.reacquisition.reset()
+        if self.freeze_guard is not None:
+            self.freeze_guard.reset()
         self._reset()
 
     def _reset(self) -> None:  # noqa: B027 - optional: a method without history has nothing to forget
@@ -161,7 +171,7 @@ class Estimator(ABC):
         the last pose (invalid), a non-finite result starts the method over and holds too,
         and the last valid pose is kept for holding. With a lag, the pose is of the frame that
         long before, and held (invalid) until as many frames have come since a reset."""
-        filtered = self.input_filter(frame)
+        filtered = self.input_filter(frame if self.freeze_guard is None else self.freeze_guard(frame))
         if filtered is None:
             return self.held_pose(frame.stamp - self.lag)
         return self._step_filtered(filtered)
@@ -177,12 +187,13 @@ class Estimator(ABC):
 
     def _checked(self, stamp: float, pose: BodyPose | None) -> BodyPose:
         if pose is None:
-            return self.held_pose(stamp)
-        if not pose.is_finite():
+            pose = self.held_pose(stamp)
+        elif not pose.is_finite():
             self.reset()
-            return self.held_pose(stamp)
-        if pose.valid:
+            pose = self.held_pose(stamp)
+        elif pose.valid:
             self._last = pose
+        self._shown = pose
         return pose
 
     def joint_target(self, frame: TrackerFrame, site: str):
@@ -228,12 +239,27 @@ class Estimator(ABC):
     def _frame_targets(self, frame: TrackerFrame):
         if frame.sites != self._mounting_sites:  # the frame's site order, once per site set
             self._mounting_sites, self._mounting = frame.sites, _mounting(self.sensors, frame.sites)
-        return _joint_targets(
+            known = set(self.sensors.site_names)
+            self._site_joints = np.array([self.sensors.site(s).joint_index if s in known else 0 for s in frame.sites])
+        targets = _joint_targets(
             np.ascontiguousarray(frame.positions, float),
             np.ascontiguousarray(frame.orientations, float),
             np.ascontiguousarray(frame.valid, np.bool_),
             *self._mounting,
         )
+        if self.reacquisition.enabled:
+            positions, rotations, kinds = targets
+            self.reacquisition.apply(
+                frame.stamp, positions, rotations, kinds, (_POSE, _POSITION), self._site_joints, self._shown_positions
+            )
+        return targets
+
+    def _shown_positions(self) -> np.ndarray | None:
+        """The joint positions (22, 3) of the last pose given, or None before any."""
+        shown = getattr(self, "_shown", None)
+        if shown is None:
+            return None
+        return forward_kinematics(quat_to_matrix(shown.local_quats), shown.root_position, self.skeleton.offsets)[1]
 
     def held_pose(self, stamp: float) -> BodyPose:
         """The last output (self._last) again, marked invalid; before any, the estimator's

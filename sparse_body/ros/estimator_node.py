@@ -37,8 +37,8 @@ from ..core.mat3 import compile_kernels
 from ..core.rotations import matrix_to_quat
 from ..core.sensors import SensorConfigError, load_sensor_config
 from ..core.skeleton import JOINT_NAMES, standing_pose
-from ..core.tracker_filter import MAX_LAG, FilterConfig
 from ..core.tracker_filter import PREFIX as FILTER
+from ..core.tracker_filter import UPPER, FilterConfig
 from ..core.types import BodyPose
 from ..estimators import create_estimator
 from ..estimators.base import Estimator, parse_estimator_spec
@@ -93,6 +93,21 @@ PARAMETERS = {
         "before the newest (counted in frames at output_rate), smoothed by the samples since, "
         "and stamped with their time; 0: none",
     ),
+    "filter_carry_lost": (
+        FILTER_DEFAULTS.carry_lost,
+        "seconds a lost tracker's last pose is carried with the head (position and heading), so "
+        "the estimate goes on; 0: a lost tracker is missing",
+    ),
+    "filter_frozen_after": (
+        FILTER_DEFAULTS.frozen_after,
+        "seconds after which a tracker sample repeated bit for bit counts as lost (a runtime "
+        "that freezes a lost controller); 0: repeated samples are believed",
+    ),
+    "filter_reacquire_speed": (
+        FILTER_DEFAULTS.reacquire_speed,
+        "m/s: a tracker that comes back starts where the estimate had its joint and catches up "
+        "at this speed (no snap); 0: at once",
+    ),
     "output_rate": (
         60.0,
         "estimates per second when the trackers do not drive them (input slow, partial or "
@@ -134,7 +149,7 @@ RANGES = {
     "filter_rotation_noise": (0.0, 10.0),
     "filter_acceleration": (0.01, 1000.0),
     "filter_spin_acceleration": (0.01, 1000.0),
-    "filter_lag": (0.0, MAX_LAG),
+    **{FILTER + name: (0.0, high) for name, (high, _) in UPPER.items()},
     "output_rate": (0.1, 1000.0),
     "stale_timeout": (0.001, 10.0),
     "tracker_timeout": (0.01, 60.0),

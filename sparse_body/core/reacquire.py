@@ -1,0 +1,155 @@
+"""What a method is given while a tracker is lost and when it comes back (the filter options
+`filter_carry_lost`, seconds, and `filter_reacquire_speed`, m/s).
+
+Carried: a lost tracker's last joint target moves on with the body, rigidly with the first
+tracker still followed (the head in every shipped configuration: its position and its
+heading), for up to carry_lost seconds. A method that needs every tracker (AvatarJLM, LoBSTr)
+keeps estimating instead of freezing the whole body, and every method sees the hand where a
+user expects it: where it was, relative to them.
+
+Eased: when a tracker comes back (after a loss, or when its samples leap further in a frame
+than a body part moves, as a frozen controller's do when tracking resumes), its joint target
+starts where the last estimate had that joint and catches up with the tracker at
+reacquire_speed: the offset shrinks by speed x dt a frame, so the joint's step is its
+tracker's own step plus at most that. The user sees a hand glide back rather than snap.
+
+Why here, on the joint targets every method reads: each method guessed a lost hand in its own
+way and snapped back from its guess (the README's tracker-failure table); treating the targets
+once gives every method the same loss and the same return.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+import numpy as np
+
+from . import mat3
+from .types import TrackerFrame
+
+# A tracked body part moving faster than this between two samples has not moved: its tracking
+# jumped (a frozen controller resuming, a relocalisation). Hands peak near 5-7 m/s in a swing.
+JUMP_SPEED = 10.0  # m/s
+
+
+class Reacquisition:
+    """Per site, in a frame's order: the last usable target, whether it is carried, and the
+    offset a returning tracker's target still has."""
+
+    def __init__(self, speed: float, carry: float) -> None:
+        self.speed, self.carry = float(speed), float(carry)
+        self.reset()
+
+    @property
+    def enabled(self) -> bool:
+        return self.speed > 0 or self.carry > 0
+
+    def reset(self) -> None:
+        self._stamp: float | None = None
+        self._sites = 0
+
+    def _start(self, count: int) -> None:
+        self._sites = count
+        self._last = np.zeros((count, 3))  # each site's last usable target (as the tracker gave it)
+        self._given = np.zeros((count, 3))  # and as the method was given it (eased)
+        self._last_rot = np.tile(np.eye(3), (count, 1, 1))
+        self._last_kind = np.zeros(count, dtype=np.int64)
+        self._usable = np.zeros(count, dtype=bool)  # given by its tracker in the frame before
+        self._seen = np.zeros(count, dtype=bool)  # given at some time since the reset
+        self._offset = np.zeros((count, 3))
+        self._lost_since = np.full(count, np.nan)  # stamp of the loss, while carried
+        # the body's tracker (index, position, rotation) when each site was lost, and in the frame before
+        self._anchor_then: list[tuple[int, np.ndarray, np.ndarray] | None] = [None] * count
+        self._anchor_last: tuple[int, np.ndarray, np.ndarray] | None = None
+
+    def apply(
+        self,
+        stamp: float,
+        positions: np.ndarray,
+        rotations: np.ndarray,
+        kinds: np.ndarray,
+        position_kinds: tuple[int, ...],
+        joints: np.ndarray,
+        shown: Callable[[], np.ndarray | None],
+    ) -> None:
+        """Treat one frame's joint targets in place: positions (S, 3), rotations (S, 3, 3),
+        kinds (S,) (a kind in position_kinds gives a position; 0 nothing); joints[s] site s's
+        joint; shown() the joint positions (22, 3) of the last pose the estimator gave."""
+        count = len(positions)
+        if self._sites != count:  # another site set: start afresh
+            self._start(count)
+        dt = 0.0 if self._stamp is None else max(0.0, stamp - self._stamp)
+        self._stamp = stamp
+        usable = np.isin(kinds, position_kinds)
+        raw, raw_rot, raw_kinds = positions.copy(), rotations.copy(), kinds.copy()
+        steps = np.linalg.norm(raw - self._last, axis=-1)
+        back = usable & ((self._seen & ~self._usable) | (self._usable & (dt > 0) & (steps > JUMP_SPEED * dt)))
+        steady = np.flatnonzero(usable & ~back & ~self._offset.any(axis=1))
+        anchor = int(steady[0]) if len(steady) else -1  # the body's tracker this frame
+        if back.any() and self.speed > 0:
+            pose = shown()
+            if pose is not None and anchor >= 0:
+                # the last pose may be older than this frame (held while a tracker was lost):
+                # carried with the body, it starts where the user saw it
+                pose = pose + (raw[anchor] - pose[joints[anchor]])
+            for r in np.flatnonzero(back):
+                self._offset[r] = 0.0 if pose is None else pose[joints[r]] - raw[r]
+        for s in range(count):
+            if usable[s]:
+                if not back[s] and self._offset[s].any():
+                    left = np.linalg.norm(self._offset[s])
+                    self._offset[s] *= max(0.0, 1.0 - self.speed * dt / left)
+                positions[s] = raw[s] + self._offset[s]
+                self._lost_since[s] = np.nan
+                continue
+            self._offset[s] = 0.0
+            if self.carry > 0 and self._seen[s] and anchor >= 0 and anchor != s:
+                if self._usable[s]:  # lost now: remember the anchor as it was
+                    self._lost_since[s] = stamp
+                    self._anchor_then[s] = self._anchor_last
+                then = self._anchor_then[s]
+                if then is not None and then[0] == anchor and stamp - self._lost_since[s] <= self.carry:
+                    turn = mat3.yaw_frame(raw_rot[anchor]) @ mat3.yaw_frame(then[2]).T
+                    positions[s] = raw[anchor] + turn @ (self._given[s] - then[1])
+                    rotations[s] = turn @ self._last_rot[s]
+                    kinds[s] = self._last_kind[s]
+        self._anchor_last = (anchor, raw[anchor].copy(), raw_rot[anchor].copy()) if anchor >= 0 else None
+        self._last[usable], self._given[usable] = raw[usable], positions[usable]
+        self._last_rot[usable], self._last_kind[usable] = raw_rot[usable], raw_kinds[usable]
+        self._usable, self._seen = usable, self._seen | usable
+
+
+class FreezeGuard:
+    """A tracker whose sample repeats bit for bit for frozen_after seconds is lost (valid =
+    False from then on, until it changes): some runtimes freeze a controller they lost at its
+    last pose rather than report it lost, and a live tracker's samples always differ by its
+    noise. Runs on the raw frames, before the filter, which would make a frozen sample look
+    alive."""
+
+    def __init__(self, frozen_after: float) -> None:
+        self.frozen_after = float(frozen_after)
+        self.reset()
+
+    def reset(self) -> None:
+        self._sites: tuple[str, ...] = ()
+
+    def __call__(self, frame: TrackerFrame) -> TrackerFrame:
+        if frame.sites != self._sites:
+            count = len(frame.sites)
+            self._sites = frame.sites
+            self._positions, self._orientations = np.full((count, 3), np.nan), np.full((count, 4), np.nan)
+            self._since = np.full(count, np.inf)  # when the repeated sample first came
+        positions = np.asarray(frame.positions, dtype=float)
+        orientations = np.asarray(frame.orientations, dtype=float)
+        same = _equal(positions, self._positions) & _equal(orientations, self._orientations)
+        self._since = np.where(same, self._since, frame.stamp)
+        self._positions, self._orientations = positions.copy(), orientations.copy()
+        frozen = same & (frame.stamp - self._since >= self.frozen_after)
+        if not (frozen & frame.valid).any():
+            return frame
+        return TrackerFrame(frame.stamp, frame.sites, frame.positions, frame.orientations, frame.valid & ~frozen)
+
+
+def _equal(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Rows equal bit for bit, a missing (NaN) value equal to a missing one."""
+    return ((a == b) | (np.isnan(a) & np.isnan(b))).all(axis=1)

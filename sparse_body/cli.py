@@ -109,10 +109,12 @@ def cmd_eval(args) -> int:
             if results[0].skipped
             else "no clips to evaluate"
         )
-    print(format_table(results, reference))
+    print(format_table(results, reference, intervals=args.intervals))
     groups = format_groups(results, label=args.group_by or ("folder" if args.motion else "group"))
     if groups:
         print(groups)
+    if results[0].subject_units() is not None:  # each person's own figure: the spread behind the mean
+        print(format_groups(results, label="person", by="subject"))
     print(f"written {out}")
     skipped = {s["clip"]: s["reason"] for r in results for s in r.skipped}
     if skipped:
@@ -641,6 +643,11 @@ def build_parser() -> argparse.ArgumentParser:
         "--limit",
         type=_positive_int,
         help="only N clips: the first of the split, or of the --motion files taken in turn from each group",
+    )
+    p.add_argument(
+        "--intervals",
+        action="store_true",
+        help="each mean in the table with its 95 %% bootstrap intervals, clips drawn and people drawn",
     )
     p.add_argument(
         "--per-joint",

@@ -204,3 +204,22 @@ def test_intervals_drawn_by_person_are_wider_when_a_persons_clips_move_together(
     assert data["interval_95_by_subject"]["MPJPE [cm]"] == by_person
     assert EvalResult.from_json(data).subjects == people
     assert "[1.00, 3.00] by person (2 people)" in format_table([result])
+
+
+def test_intervals_beside_every_mean_and_each_person_s_own_figure():
+    from sparse_body.apps.evaluation import EvalResult, clip_interval, format_groups, format_table
+
+    per_clip = [{"MPJPE [cm]": v, "Jitter [100m/s3]": 10 * v} for v in (1.0, 1.2, 0.8, 3.0, 3.2, 2.8)]
+    people = ["16", "16", "16", "43", "43", "43"]
+    result = EvalResult("ik", "six_point", "test", [f"c{k}" for k in range(6)], [100] * 6, per_clip, subjects=people)
+    table = format_table([result], intervals=True)
+    for metric in ("MPJPE [cm]", "Jitter [100m/s3]"):
+        lo, hi = clip_interval(per_clip, [100] * 6)[metric]
+        plo, phi = clip_interval(per_clip, [100] * 6, units=people)[metric]
+        row = next(line for line in table.splitlines() if line.startswith(metric))
+        assert row.endswith(f"[{lo:.2f}, {hi:.2f}] [{plo:.2f}, {phi:.2f}]"), row
+    assert format_table([result]).splitlines()[1].endswith(" 2.00")  # without: the means alone
+    persons = format_groups([result], label="person", by="subject").splitlines()
+    assert persons[0].startswith("MPJPE [cm] by person")
+    assert persons[1].startswith("16 (3 clips)") and " 1.00 [" in persons[1]
+    assert persons[2].startswith("43 (3 clips)") and " 3.00 [" in persons[2]

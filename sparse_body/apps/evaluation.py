@@ -84,9 +84,11 @@ class EvalResult:
         self.sources.append(item.source)
         self.subjects.append(item.subject)
 
-    def by_group(self) -> dict[str, EvalResult]:
+    def by_group(self, by: str = "group") -> dict[str, EvalResult]:
+        """The clips of each group (by="group": folder or prefix; by="subject": person)."""
         out: dict[str, EvalResult] = {}
-        for k, group in enumerate(self.groups if len(self.groups) == len(self.clips) else []):
+        keys = self.groups if by == "group" else self.subjects
+        for k, group in enumerate(keys if len(keys) == len(self.clips) else []):
             if group:
                 part = out.setdefault(
                     group, EvalResult(self.estimator, self.sensors, self.split, protocol=self.protocol)
@@ -430,11 +432,15 @@ def _resumed(results: list[EvalResult], out: Path) -> list[EvalResult]:
 
 
 def format_table(
-    results: list[EvalResult], reference: dict[str, dict[str, float]] | None = None, max_width: int = 100
+    results: list[EvalResult],
+    reference: dict[str, dict[str, float]] | None = None,
+    max_width: int = 100,
+    intervals: bool = False,
 ) -> str:
     """Metrics as rows, one column per result (and per paper figure given in reference).
     Columns whose names would make the table wider than max_width are numbered, and the
-    numbers named below the table, so it fits a normal terminal."""
+    numbers named below the table, so it fits a normal terminal. intervals: each mean with
+    its 95 % bootstrap intervals, clips drawn and (with two people or more) people drawn."""
     mixed = len({r.protocol for r in results}) > 1
     columns = [f"{r.estimator}/{r.sensors}" + (f" ({r.protocol})" if mixed else "") for r in results] + list(
         reference or {}
@@ -448,13 +454,26 @@ def format_table(
         legend = [f"  [{k + 1}] {c}" for k, c in enumerate(columns)]
         columns = [f"[{k + 1}]" for k in range(len(columns))]
         colw = 9
+    bounds: list[tuple[dict, dict]] = []
+    if intervals:
+        for r in results:
+            units = r.subject_units()
+            by_person = clip_interval(r.per_clip, r.frames, units=units) if units is not None else {}
+            bounds.append((clip_interval(r.per_clip, r.frames), by_person))
+        colw = max(colw, 34 if any(b[1] for b in bounds) else 22)
     lines = ["".ljust(width) + "".join(c.rjust(colw) for c in columns)]
     for key in keys:
         cells = []
-        for v in values:
+        for k, v in enumerate(values):
             x = v.get(key, float("nan"))
-            cells.append(("-" if not np.isfinite(x) else f"{x:.2f}").rjust(colw))
+            text = "-" if not np.isfinite(x) else f"{x:.2f}"
+            for found in bounds[k] if k < len(bounds) and np.isfinite(x) else ():
+                if key in found and np.all(np.isfinite(found[key])):
+                    text += f" [{found[key][0]:.2f}, {found[key][1]:.2f}]"
+            cells.append(text.rjust(colw))
         lines.append(key.ljust(width) + "".join(cells))
+    if intervals:
+        lines.append("(mean [95 % interval, clips drawn] [95 % interval, people drawn], by bootstrap)")
     frames = sum(results[0].frames)
     where = "the motion files given" if results[0].split == "files" else f"the {results[0].split} split"
     protocol = "protocols as named" if mixed else f"{results[0].protocol} protocol"
@@ -479,10 +498,13 @@ def _intervals(results: list[EvalResult], metric: str = "MPJPE [cm]") -> list[st
     return [f"{metric}, bootstrap:"] + lines if lines else []
 
 
-def format_groups(results: list[EvalResult], metric: str = "MPJPE [cm]", label: str = "group") -> str:
-    """One metric by group (folder, actor prefix or subject): the frame-weighted mean of each
-    result with its 95 % clip-bootstrap interval, and the group's clip count."""
-    parts = [r.by_group() for r in results]
+def format_groups(
+    results: list[EvalResult], metric: str = "MPJPE [cm]", label: str = "group", by: str = "group"
+) -> str:
+    """One metric by group (by="group": folder or actor prefix; by="subject": person): the
+    frame-weighted mean of each result with its 95 % clip-bootstrap interval, and the group's
+    clip count."""
+    parts = [r.by_group(by) for r in results]
     names = sorted({g for p in parts for g in p})
     if not names:
         return ""

@@ -119,6 +119,7 @@ class Estimator(ABC):
         self.skeleton = skeleton
         self.fps = fps
         self._targets_of: TrackerFrame | None = None  # the frame whose joint targets are held
+        self._targets_source: Estimator | None = None  # read_targets_from
         self._mounting_sites: tuple[str, ...] = ()
         self._rows: dict[tuple, np.ndarray] = {}  # full_targets: (frame sites, sites) -> rows
         self.use_filter(FilterConfig())
@@ -230,8 +231,17 @@ class Estimator(ABC):
             return None
         return positions[rows], rotations[rows]
 
+    def read_targets_from(self, outer: Estimator) -> None:
+        """Convert no frame here: take outer's joint targets. For an estimator used inside
+        another (LoBSTr's IK, a refined estimator's base and refiner): what outer does to its
+        targets (the lost-tracker options, with the poses outer gave) holds here too, once a
+        frame."""
+        self._targets_source = outer
+
     def _converted(self, frame: TrackerFrame):
         """The joint targets of every site of frame, converted once a frame."""
+        if self._targets_source is not None:
+            return self._targets_source._converted(frame)
         if frame is not self._targets_of:
             self._targets_of, self._targets = frame, self._frame_targets(frame)
         return self._targets

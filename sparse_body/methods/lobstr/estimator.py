@@ -138,6 +138,7 @@ class LobstrEstimator(Estimator):
         self._floor = np.array([0.0, 0.0, floor_height])
         # Feet trackers, if configured, are not LoBSTr's input: the upper body sees only its four.
         self.upper = IKEstimator(sensors.subset(INPUT_SITES), skeleton, fps)
+        self.upper.read_targets_from(self)  # one conversion a frame, the lost-tracker options included
         self.contacts = ContactHold(skeleton, release_frames) if contact_ik else None
         self.reset()
 
@@ -157,7 +158,7 @@ class LobstrEstimator(Estimator):
         )
 
     def _estimate(self, frame: TrackerFrame) -> BodyPose | None:
-        targets = self.upper.full_targets(frame, INPUT_SITES)  # the IK converts the same frame next
+        targets = self.full_targets(frame, INPUT_SITES)  # the IK reads the same conversion next
         if targets is None:
             return None  # keep the previous sample: the next velocity spans the gap
         joints, rot = targets

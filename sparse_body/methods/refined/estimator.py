@@ -35,6 +35,8 @@ class RefinedEstimator(Estimator):
         self.refiner = DragPoserEstimator(
             sensors, skeleton, fps, model_dir=model_dir, iterations=iterations, temporal_weight=0.0, tracker_prior=0.0
         )  # the base pose is the prior
+        for inner in (self.base, self.refiner):  # this estimator's targets: the lost-tracker options hold
+            inner.read_targets_from(self)
 
     def _reset(self) -> None:
         self.base.reset()

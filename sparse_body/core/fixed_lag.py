@@ -157,11 +157,9 @@ class FixedLagSmoother:
 
 
 def _usable(frame: TrackerFrame, i: int, space) -> np.ndarray | None:
-    """Site i's sample of this quantity as the live filter takes it, or None where it passes
-    untouched (non-finite; an orientation far from unit length)."""
-    if space is _Vector:
-        p = np.asarray(frame.positions[i], dtype=float)
-        return p if np.isfinite(p).all() else None
-    o = np.asarray(frame.orientations[i], dtype=float)
-    n2 = float(o @ o)
-    return o / math.sqrt(n2) if math.isfinite(n2) and 0.81 < n2 < 1.21 else None
+    """Site i's sample of this quantity as the live filter takes it (an orientation made unit
+    length), or None where it passes untouched (space.usable)."""
+    value = np.asarray((frame.positions if space is _Vector else frame.orientations)[i], dtype=float)
+    if not space.usable(value):
+        return None
+    return value if space is _Vector else value / math.sqrt(float(value @ value))

@@ -35,6 +35,11 @@ class _Vector:
     """Positions: plain vectors."""
 
     @staticmethod
+    def usable(value) -> bool:
+        """Whether the filter takes this sample (the live filter's test; else it passes untouched)."""
+        return bool(np.isfinite(value).all())
+
+    @staticmethod
     def advance(value, rate, dt):
         return value + rate * dt
 
@@ -49,6 +54,11 @@ class _Vector:
 
 class _Rotation:
     """Orientations (x, y, z, w), moved by world-frame rotation vectors."""
+
+    @staticmethod
+    def usable(value) -> bool:
+        """Finite and near unit length (the live filter's test)."""
+        return bool(np.isfinite(value).all() and 0.81 < value @ value < 1.21)
 
     @staticmethod
     def advance(value, rate, dt):
@@ -120,7 +130,7 @@ def smooth_frames(frames: list[TrackerFrame], config: FilterConfig) -> list[Trac
     positions = [np.array(f.positions, dtype=float) for f in frames]
     orientations = [np.array(f.orientations, dtype=float) for f in frames]
     stamps = np.array([f.stamp for f in frames], dtype=float)
-    quantities: list[tuple] = []  # (values, sample variance, process noise, space, usable sample, cut at jumps)
+    quantities: list[tuple] = []  # (values, sample variance, process noise, space, cut at jumps)
     if config.position_noise > 0:
         quantities.append(
             (
@@ -128,7 +138,6 @@ def smooth_frames(frames: list[TrackerFrame], config: FilterConfig) -> list[Trac
                 config.position_noise**2,
                 config.smooth_acceleration**2,
                 _Vector,
-                lambda v: np.isfinite(v).all(),
                 True,
             )
         )
@@ -139,15 +148,14 @@ def smooth_frames(frames: list[TrackerFrame], config: FilterConfig) -> list[Trac
                 math.radians(config.rotation_noise) ** 2,
                 config.smooth_spin_acceleration**2,
                 _Rotation,
-                lambda v: np.isfinite(v).all() and 0.81 < v @ v < 1.21,
                 False,
             )
         )
     for site in dict.fromkeys(s for f in frames for s in f.sites):
         rows = [(k, f.sites.index(site)) for k, f in enumerate(frames) if site in f.sites]
         rows = [(k, i) for k, i in rows if frames[k].valid[i]]
-        for arrays, r, q, space, usable, jump in quantities:
-            kept = [(k, s) for k, s in rows if usable(arrays[k][s])]
+        for arrays, r, q, space, jump in quantities:
+            kept = [(k, s) for k, s in rows if space.usable(arrays[k][s])]
             if len(kept) < 2:
                 continue
             times = stamps[[k for k, _ in kept]]

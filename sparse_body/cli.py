@@ -61,6 +61,7 @@ def cmd_eval(args) -> int:
         args.hand_loss_mode,
         args.jumps,
         args.yaw_drift,
+        args.calibrate_mounting,
     )
     if args.motion:  # the files are found and every AMC paired with its ASF before any work
         from .data.motion_inputs import balanced, find_inputs
@@ -589,8 +590,15 @@ def build_parser() -> argparse.ArgumentParser:
         type=_between(0.0, 0.5, "metres"),
         default=0.0,
         metavar="METRES",
-        help="an error no calibration finds in each tracker's mounting translation (std per axis, per "
-        "clip; not with --skeleton oracle)",
+        help="an error in each tracker's mounting translation, unknown to the user (std per axis, per "
+        "clip; not with --skeleton oracle); the T-pose does not find it, --calibrate-mounting does",
+    )
+    p.add_argument(
+        "--calibrate-mounting",
+        action="store_true",
+        help="after the T-pose, the person turns the head, circles the wrists and ankles and rolls the "
+        "hips for 15 s, and the calibration finds each tracker's mounting translation from it, as the "
+        "tracker bridge's ~/calibrate_mounting does (not with --skeleton oracle)",
     )
     p.add_argument(
         "--faulty",

@@ -41,6 +41,12 @@ def _free_udp_port() -> int:
         return s.getsockname()[1]
 
 
+def _vmc_bridge(port: int, tmp_path, ros_env, **parameters):
+    """The tracker bridge on four-point VMC trackers at port."""
+    base = {"source": "vmc", "sensors": "four_point", "vmc_port": port, "devices": VMC_DEVICES}
+    return start_node(BRIDGE, {**base, **parameters}, "sparse_body_tracker_bridge", tmp_path, ros_env)
+
+
 def to_unity(position, quat):
     """REP-103 -> Unity, the inverse of adapters.vmc.unity_to_rep103."""
     x, y, z = position
@@ -209,19 +215,7 @@ def test_calibration_service_measures_offsets_and_height_and_applies_them(ros_en
     grip = Rotation.from_euler("xy", [0.8, -0.3])  # how the left controller is held
     joints = {"head": J["head"], "left_hand": J["left_wrist"], "right_hand": J["right_wrist"], "pelvis": J["pelvis"]}
     port = _free_udp_port()
-    bridge = start_node(
-        BRIDGE,
-        {
-            "source": "vmc",
-            "sensors": "four_point",
-            "vmc_port": port,
-            "devices": VMC_DEVICES,
-            "calibration": str(tmp_path / "calibration.yaml"),
-        },
-        "sparse_body_tracker_bridge",
-        tmp_path,
-        ros_env,
-    )
+    bridge = _vmc_bridge(port, tmp_path, ros_env, calibration=str(tmp_path / "calibration.yaml"))
     listener = Listener(rclpy, {"/tf": TFMessage}, qos={"/tf": 500})
     client = SimpleUDPClient("127.0.0.1", port)
     calibrate = listener.node.create_client(Calibrate, "/sparse_body_tracker_bridge/calibrate")
@@ -269,23 +263,96 @@ def test_calibration_service_measures_offsets_and_height_and_applies_them(ros_en
     ).magnitude() < 0.01
 
 
+def test_mounting_calibration_finds_where_trackers_sit_and_publishes_them_as_configured(ros_env, tmp_path):
+    """A T-pose, then the head, wrists and hips turned over VMC: ~/calibrate_mounting finds
+    each tracker's mounting translation (worn 1-3 cm off the configuration's) and from then
+    on the bridge publishes positions as if each tracker sat where the configuration says."""
+    from pythonosc.udp_client import SimpleUDPClient
+    from scipy.spatial.transform import Rotation
+
+    from sparse_body.core.calibration import Calibration
+    from sparse_body.data.field_protocol import (
+        MOUNTING_PHASE_SECONDS,
+        Protocol,
+        mounted_as_worn,
+        mounting_motion,
+        tpose_motion,
+    )
+    from sparse_body.data.virtual_trackers import NO_NOISE
+    from sparse_body.srv import Calibrate
+
+    config = load_sensor_config("four_point")
+    rng = np.random.default_rng(7)
+    worn = mounted_as_worn(config, Protocol(mounting_translation_std=0.015), rng)
+    standing = tpose_motion(synthetic_walk(), Protocol(), rng)
+    moving = synthesize_trackers(mounting_motion(standing, rng), worn, NO_NOISE)
+    n = int(MOUNTING_PHASE_SECONDS * standing.fps)  # the head's, the wrists' and the hips' phases: no feet here
+    frames = [(moving, t) for t in [*range(2 * n), *range(4 * n, 5 * n)]]
+    tpose = synthesize_trackers(standing, worn, NO_NOISE)
+    port = _free_udp_port()
+    bridge = _vmc_bridge(port, tmp_path, ros_env, calibration=str(tmp_path / "calibration.yaml"))
+    listener = Listener(rclpy, {"/tf": TFMessage}, qos={"/tf": 500})
+    client = SimpleUDPClient("127.0.0.1", port)
+    node = "/sparse_body_tracker_bridge"
+    calibrate = listener.node.create_client(Calibrate, f"{node}/calibrate")
+    mounting = listener.node.create_client(Calibrate, f"{node}/calibrate_mounting")
+
+    def send(stream, t):
+        for s, site in enumerate(stream.sites):
+            p, q = to_unity(stream.positions[t, s], stream.orientations[t, s])
+            client.send_message(VMC_NAMES[site][0], [VMC_NAMES[site][1], *p, *q])
+
+    def during(future, frames, rate):
+        """Send the frames at this rate (skipping what a busy machine is late for) until done."""
+        start = time.monotonic()
+        while not future.done() and time.monotonic() < start + 40:
+            send(*frames[min(int((time.monotonic() - start) * rate), len(frames) - 1)])
+            listener.spin_for(0.002)
+
+    try:
+        assert calibrate.wait_for_service(timeout_sec=STARTUP_LIMIT), "no calibration service"
+        assert mounting.wait_for_service(timeout_sec=STARTUP_LIMIT), "no mounting calibration service"
+        first = mounting.call_async(Calibrate.Request(seconds=0.2))
+        during(first, [(tpose, len(tpose) - 1)], 60)  # refused: no T-pose yet
+        future = calibrate.call_async(Calibrate.Request(seconds=0.5))
+        during(future, [(tpose, len(tpose) - 1)], 60)
+        # twice the movement's pace; then it holds still until the 10 s are over
+        found = mounting.call_async(Calibrate.Request(seconds=10.0))
+        during(found, [(tpose, len(tpose) - 1)] * 15 + frames, 120)
+        listener.received["/tf"].clear()
+        for _ in range(30):
+            send(tpose, len(tpose) - 1)
+            listener.spin_for(1 / 60)
+    finally:
+        listener.destroy()
+        stop(bridge)
+    refused, response = first.result(), found.result()
+    assert not refused.success and "take a T-pose first" in refused.message
+    assert future.result().success, future.result().message
+    assert response.success and "mountings found" in response.message, response.message
+    saved = Calibration.load(tmp_path / "calibration.yaml")
+    for site in worn.sites:
+        nominal = np.array(config.site(site.site).offset_translation)
+        assert np.linalg.norm(nominal - site.offset_translation) > 0.005, site  # a shift to find
+        # found in the calibrated joint frame, which the T-pose's 2 degree wobble turns a little
+        turned = (Rotation.from_quat(saved.offsets[site.site]) * Rotation.from_quat(site.offset_rotation).inv()).apply(
+            site.offset_translation
+        )
+        assert np.linalg.norm(saved.translations[site.site] - turned) < 0.003, site
+    # each joint, placed from the published pose with the configuration's translation, is where it is
+    last = {tf.child_frame_id: tf.transform for m in listener.received["/tf"] for tf in m.transforms}
+    for site in config.sites:
+        got = last[site.frame_id]
+        position, quat = [got.translation.x, got.translation.y, got.translation.z], got.rotation
+        joint, _ = site.joint_pose(np.array(position), np.array([quat.x, quat.y, quat.z, quat.w]))
+        assert np.linalg.norm(joint - standing.positions[-1, site.joint_index]) < 0.003, site.site
+
+
 def test_calibration_requests_are_bounded_and_write_only_under_the_calibration_dir(ros_env, tmp_path):
     from sparse_body.srv import Calibrate
 
     (tmp_path / "cal").mkdir()
-    bridge = start_node(
-        BRIDGE,
-        {
-            "source": "vmc",
-            "sensors": "four_point",
-            "vmc_port": _free_udp_port(),
-            "devices": VMC_DEVICES,
-            "calibration_dir": str(tmp_path / "cal"),
-        },
-        "sparse_body_tracker_bridge",
-        tmp_path,
-        ros_env,
-    )
+    bridge = _vmc_bridge(_free_udp_port(), tmp_path, ros_env, calibration_dir=str(tmp_path / "cal"))
     listener = Listener(rclpy, {"/diagnostics": DiagnosticArray})
     calibrate = listener.node.create_client(Calibrate, "/sparse_body_tracker_bridge/calibrate")
 

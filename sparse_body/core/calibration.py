@@ -15,6 +15,11 @@ the fitted body, so every node and the offline tools use the same one.
 
 Applying a calibration turns a tracker orientation into its joint's orientation
 (q offset^-1); the bridge publishes that, so estimators see joint-aligned trackers.
+
+Mounting translations (optional, from a few seconds of movement after the T-pose:
+core.mounting): where each tracker really sits on its segment. The bridge then moves each
+published position by the difference to the configuration's translation, so estimators see
+trackers mounted as the configuration says, and the body is fitted with the found ones.
 """
 
 from __future__ import annotations
@@ -27,6 +32,7 @@ import yaml
 from scipy.spatial.transform import Rotation
 
 from .body_shape import arm_span, fit_skeleton, standing_height
+from .mounting import MAX_SHIFT, MountingFit, fit_mounting
 from .rotations import yaw_matrix
 from .skeleton import CANONICAL_HEIGHT, JOINT_NAMES, Skeleton
 
@@ -41,6 +47,7 @@ class Calibration:
     facing_yaw: float  # radians, the facing during calibration
     offsets: dict[str, np.ndarray] = field(default_factory=dict)  # site -> (4,) x y z w
     skeleton: Skeleton | None = None  # the fitted body (None: scale by height)
+    translations: dict[str, np.ndarray] = field(default_factory=dict)  # site -> (3,) found from movement
 
     def body(self) -> Skeleton:
         """The person's body: the fitted one, else the canonical body at their height."""
@@ -53,12 +60,23 @@ class Calibration:
             return np.asarray(quat, dtype=float)
         return (Rotation.from_quat(quat) * Rotation.from_quat(self.offsets[site]).inv()).as_quat()
 
+    def place(self, site: str, position: np.ndarray, joint_quat: np.ndarray, nominal: np.ndarray) -> np.ndarray:
+        """The position a tracker mounted at the configuration's translation (nominal, in its
+        joint's frame) would have: the found mounting's difference undone. joint_quat: the
+        joint's orientation (apply()'s); an uncalibrated site's position is unchanged."""
+        if site not in self.translations:
+            return np.asarray(position, dtype=float)
+        shift = np.asarray(self.translations[site], float) - np.asarray(nominal, float)
+        return np.asarray(position, dtype=float) - Rotation.from_quat(joint_quat).apply(shift)
+
     def save(self, path: str | Path) -> None:
         data = {
             "height": round(float(self.height), 4),
             "facing_yaw": round(float(self.facing_yaw), 6),
             "offsets": {s: [round(float(v), 8) for v in q] for s, q in self.offsets.items()},
         }
+        if self.translations:
+            data["translations"] = {s: [round(float(v), 5) for v in t] for s, t in self.translations.items()}
         if self.skeleton is not None:
             data["skeleton"] = {
                 n: [round(float(v), 5) for v in o] for n, o in zip(JOINT_NAMES, self.skeleton.offsets, strict=True)
@@ -67,12 +85,13 @@ class Calibration:
         Path(path).write_text(
             "# T-pose calibration written by sparse_body (rotation offsets x y z w:\n"
             "# the tracker's orientation in its joint's frame; skeleton: each joint's rest\n"
-            "# offset from its parent, metres)\n" + yaml.safe_dump(data, sort_keys=False)
+            "# offset from its parent, metres; translations: each tracker's mounting in its\n"
+            "# joint's frame, found from movement, metres)\n" + yaml.safe_dump(data, sort_keys=False)
         )
 
     @classmethod
     def load(cls, path: str | Path) -> Calibration:
-        from .sensors import SITE_JOINTS, read_yaml
+        from .sensors import read_yaml
 
         path = Path(path)
         data = read_yaml(path, CalibrationError)
@@ -84,24 +103,53 @@ class Calibration:
             raise CalibrationError(f"{path}: 'height' must be a number") from None
         if not 0.5 <= height <= 2.5:
             raise CalibrationError(f"{path}: height {height} m is not a person's")
-        offsets = {}
-        for site, q in (data.get("offsets") or {}).items():
-            if site not in SITE_JOINTS:
-                raise CalibrationError(f"{path}: unknown body site {site!r}")
-            try:
-                q = np.array([float(v) for v in q])
-            except (TypeError, ValueError):
-                q = np.zeros(0)
-            if q.shape != (4,) or not np.all(np.isfinite(q)) or abs(np.linalg.norm(q) - 1) > 1e-3:
-                raise CalibrationError(f"{path}: offset of {site!r} is not a unit quaternion x y z w")
-            offsets[site] = q
-        return cls(height, yaw, offsets, _read_skeleton(path, data.get("skeleton")))
+        offsets = _site_vectors(
+            path,
+            data.get("offsets") or {},
+            4,
+            "offset",
+            "a unit quaternion x y z w",
+            lambda q: abs(np.linalg.norm(q) - 1) < 1e-3,
+        )
+        translations = data.get("translations") or {}
+        if not isinstance(translations, dict):
+            raise CalibrationError(f"{path}: 'translations' must map body sites to x y z (metres)")
+        translations = _site_vectors(
+            path,
+            translations,
+            3,
+            "translation",
+            f"three finite numbers within {0.5 + MAX_SHIFT:g} m",
+            lambda t: np.linalg.norm(t) <= 0.5 + MAX_SHIFT,  # a configuration's translation is within half a metre
+        )
+        return cls(height, yaw, offsets, _read_skeleton(path, data.get("skeleton")), translations)
 
 
 def person_body(calibration: str | Path | None, height: float) -> Skeleton:
     """The body to estimate with: a calibration file's (its fitted body, else its height), or
     the canonical body at height when no file is given (the node, `process`, the launch file)."""
     return Calibration.load(calibration).body() if calibration else Skeleton.canonical(height)
+
+
+def _site_vectors(
+    path: Path, mapping: dict, size: int, what: str, description: str, plausible
+) -> dict[str, np.ndarray]:
+    """Each body site's vector from a calibration file's mapping; one line naming the site
+    when its value is not `description` (finite numbers of the right count, plausible)."""
+    from .sensors import SITE_JOINTS
+
+    vectors = {}
+    for site, value in mapping.items():
+        if site not in SITE_JOINTS:
+            raise CalibrationError(f"{path}: unknown body site {site!r}")
+        try:
+            v = np.array([float(x) for x in value])
+        except (TypeError, ValueError):
+            v = np.zeros(0)
+        if v.shape != (size,) or not np.all(np.isfinite(v)) or not plausible(v):
+            raise CalibrationError(f"{path}: {what} of {site!r} is not {description}")
+        vectors[site] = v
+    return vectors
 
 
 def _read_skeleton(path: Path, data) -> Skeleton | None:
@@ -187,3 +235,38 @@ def calibrate_tpose(
     if not 0.5 <= height <= 2.5:
         raise CalibrationError(f"{where}: not a standing person in a T-pose")
     return Calibration(height, yaw, offsets, fit_skeleton(joints, height))
+
+
+def calibrate_mounting(
+    tpose: dict[str, list[tuple[np.ndarray | None, np.ndarray | None]]],
+    movement: dict[str, list[tuple[float, np.ndarray | None, np.ndarray | None]]],
+    translations: dict[str, np.ndarray],
+    floor: float = 0.0,
+) -> tuple[Calibration, dict[str, MountingFit]]:
+    """The T-pose calibration again, with each tracker's mounting translation found from
+    movement taken after it (core.mounting) and the body fitted with those.
+
+    tpose: calibrate_tpose()'s samples; movement: site -> [(seconds, position, orientation)]
+    as the trackers report them (uncalibrated); translations: the configuration's. A tracker
+    with no position or no orientation, or that never turned about its joint, keeps the
+    configuration's translation."""
+    first = calibrate_tpose(tpose, floor, translations)
+    fits = {}
+    for site, samples in movement.items():
+        if site not in first.offsets or site not in translations:
+            continue
+        usable = [(t, p, q) for t, p, q in samples if p is not None and q is not None]
+        if len(usable) < 2:
+            continue
+        times = np.array([t for t, _, _ in usable], float)
+        quats = first.apply(site, np.array([q for _, _, q in usable], float))
+        fits[site] = fit_mounting(times, np.array([p for _, p, _ in usable], float), quats, translations[site])
+    found = {s: f.translation for s, f in fits.items() if f.windows}
+    if not found:
+        raise CalibrationError(
+            "no tracker turned about its joint during the movement: turn the head, circle the wrists "
+            "and the ankles and roll the hips, one at a time, the rest of the body still"
+        )
+    calibration = calibrate_tpose(tpose, floor, {**translations, **found})
+    calibration.translations = found
+    return calibration, fits

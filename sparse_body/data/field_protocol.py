@@ -11,7 +11,11 @@ field protocol gives it only what a user has:
 - feet trackers occluded in a share of the frames when asked (DTP's occlusion model; not by
   default), and hands out of view of a headset's cameras, lost or frozen (not by default);
 - the body the T-pose calibration fits: the person first stands in a T-pose (synthesized
-  in their own body, held a second, never quite exact), then moves as in the clip.
+  in their own body, held a second, never quite exact), then moves as in the clip;
+- with calibrate_mounting, between the two the person turns the head, circles the wrists
+  and each ankle and rolls the hips (mounting_motion), and the calibration finds each
+  tracker's mounting translation from it (core.mounting), as the bridge's
+  ~/calibrate_mounting does.
 The lab protocol is the one the papers report: the true skeleton, exact mounting, no noise.
 """
 
@@ -22,7 +26,7 @@ from dataclasses import asdict, dataclass, replace
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from ..core.calibration import Calibration, calibrate_tpose
+from ..core.calibration import Calibration, calibrate_mounting, calibrate_tpose
 from ..core.sensors import SensorConfig
 from ..core.skeleton import NUM_JOINTS, PARENTS, Skeleton
 from ..core.types import TrackerStream
@@ -41,6 +45,7 @@ class Protocol:
     mounting_translation_std: float = 0.0  # metres per axis, per site and clip
     tpose_wobble_deg: float = 2.0  # each segment of the calibration T-pose off by up to this
     tpose_seconds: float = 1.0
+    calibrate_mounting: bool = False  # find the mounting translations from movement after the T-pose
 
     def __post_init__(self) -> None:
         if self.skeleton not in SKELETONS:
@@ -74,12 +79,14 @@ class Protocol:
             faults += f", IMU heading drift up to {self.noise.yaw_drift:g} deg/min"
         name = (
             "field"
-            if replace(self, noise=VR_NOISE, mounting_translation_std=0.0) == FIELD
+            if replace(self, noise=VR_NOISE, mounting_translation_std=0.0, calibrate_mounting=False) == FIELD
             else f"{self.skeleton} skeleton"
         )
         mounting = (
             f", {self.mounting_translation_std * 1000:g} mm mounting error" if self.mounting_translation_std else ""
         )
+        if self.calibrate_mounting:
+            mounting += ", mounting calibrated from movement"
         noise = "no noise" if noise == "none" else f"{noise} noise"
         return f"{name}, {noise}{faults}{mounting}"
 
@@ -95,9 +102,11 @@ class Protocol:
         loss_mode: str = "lost",
         jumps_per_minute: float = 0.0,
         yaw_drift: float = 0.0,
+        calibrate_mounting: bool = False,
     ) -> Protocol:
         """The protocol of `sparse-body eval --skeleton S --noise N --faulty P --mounting-error M
-        --occlusion O --hand-loss L --hand-loss-mode MODE --jumps J --yaw-drift D`: an oracle
+        --occlusion O --hand-loss L --hand-loss-mode MODE --jumps J --yaw-drift D
+        [--calibrate-mounting]`: an oracle
         skeleton comes with the true mounting (the lab's), the others with a user's."""
         if noise not in NOISE_MODELS:
             raise ValueError(f"noise must be one of {', '.join(NOISE_MODELS)}, got {noise!r}")
@@ -113,10 +122,10 @@ class Protocol:
         if yaw_drift:
             model = model.drifting(yaw_drift)
         if skeleton == "oracle":
-            if mounting_error:
-                raise ValueError("an oracle skeleton comes with the true mounting: no mounting error")
+            if mounting_error or calibrate_mounting:
+                raise ValueError("an oracle skeleton comes with the true mounting: no mounting error or calibration")
             return cls("oracle", model, 0.0, 0.0, 0.0)
-        return cls(skeleton, model, mounting_translation_std=mounting_error)
+        return cls(skeleton, model, mounting_translation_std=mounting_error, calibrate_mounting=calibrate_mounting)
 
     def to_json(self) -> dict:
         """Every field, so that a results file says exactly what its estimators were given."""
@@ -180,30 +189,94 @@ def tpose_motion(motion: Motion, protocol: Protocol, rng: np.random.Generator) -
     return Motion("tpose", motion.fps, motion.skeleton, quats, root)
 
 
-def calibrate_from_tpose(stream: TrackerStream, sensors: SensorConfig) -> Calibration:
-    """The bridge's ~/calibrate on a recorded T-pose."""
+# The calibration movement: (joints, each one's two axes in its frame and their amplitudes in
+# degrees), one phase each, a joint circling about the two axes while the rest stands still.
+MOUNTING_PHASES = (
+    ((15,), ((0, 0, 1), 40.0), ((0, 1, 0), 25.0)),  # the head turned and nodded
+    ((20, 21), ((0, 0, 1), 40.0), ((1, 0, 0), 30.0)),  # both wrists circled, arms out
+    ((7,), ((0, 1, 0), 25.0), ((1, 0, 0), 15.0)),  # the left ankle circled, foot lifted
+    ((8,), ((0, 1, 0), 25.0), ((1, 0, 0), 15.0)),  # the right ankle
+    ((0,), ((0, 0, 1), 20.0), ((0, 1, 0), 15.0)),  # the hips rolled, upper body and legs kept
+)
+MOUNTING_PHASE_SECONDS = 3.0  # two circles a phase
+SWAY_METRES = 0.01  # nobody stands still: the body drifts this much, slowly, throughout
+
+
+def mounting_motion(tpose: Motion, rng: np.random.Generator) -> Motion:
+    """The calibration movement after the T-pose (MOUNTING_PHASES), in the T-pose's body and
+    wobble, each circle's phase and the sway's direction drawn by rng."""
+    n = int(round(MOUNTING_PHASE_SECONDS * tpose.fps))
+    t = np.arange(n) / tpose.fps
+    envelope = np.sin(np.pi * t / MOUNTING_PHASE_SECONDS)  # each phase starts and ends at rest
+    quats = []
+    for joints, (axis1, deg1), (axis2, deg2) in MOUNTING_PHASES:
+        angle = 2 * np.pi * (2 / MOUNTING_PHASE_SECONDS) * t + rng.uniform(0, 2 * np.pi)
+        rotvec = envelope[:, None] * (
+            np.outer(np.cos(angle), np.deg2rad(deg1) * np.array(axis1, float))
+            + np.outer(np.sin(angle), np.deg2rad(deg2) * np.array(axis2, float))
+        )
+        turn = Rotation.from_rotvec(rotvec)
+        phase = np.tile(tpose.local_quats[-1], (n, 1, 1))
+        for j in joints:
+            phase[:, j] = (Rotation.from_quat(phase[:, j]) * turn).as_quat()
+        if joints == (0,):  # the spine and hips turn back: only the pelvis rolls
+            for child in (1, 2, 3):
+                phase[:, child] = (turn.inv() * Rotation.from_quat(phase[:, child])).as_quat()
+        quats.append(phase)
+    quats = np.concatenate(quats)
+    T = len(quats)
+    heading = rng.uniform(0, 2 * np.pi)
+    sway = SWAY_METRES * np.sin(2 * np.pi * 0.2 * np.arange(T) / tpose.fps)
+    root = tpose.root_positions[-1] + np.outer(sway, [np.cos(heading), np.sin(heading), 0.0])
+    return Motion("mounting", tpose.fps, tpose.skeleton, quats, root)
+
+
+def _samples(stream: TrackerStream, sensors: SensorConfig) -> dict[str, list]:
+    """Each site's (seconds, position or None, orientation or None) samples, as the bridge
+    collects them."""
     samples = {}
     for s, site in enumerate(stream.sites):
         spec = sensors.site(site)
-        ok = stream.valid[:, s]
         samples[site] = [
             (
+                float(stream.times[t]),
                 stream.positions[t, s] if spec.has_position else None,
                 stream.orientations[t, s] if spec.has_orientation else None,
             )
-            for t in np.flatnonzero(ok)
+            for t in np.flatnonzero(stream.valid[:, s])
         ]
-    return calibrate_tpose(samples, translations={s.site: np.array(s.offset_translation) for s in sensors.sites})
+    return samples
 
 
-def calibrated_stream(stream: TrackerStream, calibration: Calibration) -> TrackerStream:
-    """Tracker orientations turned into their joints' (what the bridge publishes)."""
-    orientations = stream.orientations.copy()
+def _translations(sensors: SensorConfig) -> dict[str, np.ndarray]:
+    return {s.site: np.array(s.offset_translation) for s in sensors.sites}
+
+
+def calibrate_from_tpose(stream: TrackerStream, sensors: SensorConfig) -> Calibration:
+    """The bridge's ~/calibrate on a recorded T-pose."""
+    samples = {site: [(p, q) for _, p, q in v] for site, v in _samples(stream, sensors).items()}
+    return calibrate_tpose(samples, translations=_translations(sensors))
+
+
+def calibrate_from_movement(tpose: TrackerStream, movement: TrackerStream, sensors: SensorConfig) -> Calibration:
+    """The bridge's ~/calibrate, then ~/calibrate_mounting on recorded movement."""
+    samples = {site: [(p, q) for _, p, q in v] for site, v in _samples(tpose, sensors).items()}
+    return calibrate_mounting(samples, _samples(movement, sensors), _translations(sensors))[0]
+
+
+def calibrated_stream(stream: TrackerStream, calibration: Calibration, sensors: SensorConfig) -> TrackerStream:
+    """Tracker orientations turned into their joints', positions moved to where the
+    configuration's mounting puts them (what the bridge publishes)."""
+    orientations, positions = stream.orientations.copy(), stream.positions.copy()
+    nominal = _translations(sensors)
     for s, site in enumerate(stream.sites):
         if site in calibration.offsets:
             ok = np.all(np.isfinite(orientations[:, s]), axis=1)
             orientations[ok, s] = calibration.apply(site, orientations[ok, s])
-    return TrackerStream(stream.sites, stream.times, stream.positions, orientations, stream.valid, stream.lost)
+            if site in calibration.translations and sensors.site(site).has_position:
+                ok &= np.all(np.isfinite(positions[:, s]), axis=1)
+                positions[ok, s] = calibration.place(site, positions[ok, s], orientations[ok, s], nominal[site])
+    return TrackerStream(stream.sites, stream.times, positions, orientations, stream.valid, stream.lost)
 
 
 def user_view(motion: Motion, sensors: SensorConfig, protocol: Protocol = FIELD, seed: int = 0) -> UserView:
@@ -214,9 +287,15 @@ def user_view(motion: Motion, sensors: SensorConfig, protocol: Protocol = FIELD,
     worn = mounted_as_worn(sensors, protocol, rng)
     # the T-pose is taken standing in full view of the base stations: no foot occluded
     visible = replace(protocol.noise, occlusion_probability=0.0, loss_probability=0.0)
-    tpose = synthesize_trackers(tpose_motion(motion, protocol, rng), worn, visible, seed + 1)
-    calibration = calibrate_from_tpose(tpose, sensors)
-    stream = calibrated_stream(synthesize_trackers(motion, worn, protocol.noise, seed), calibration)
+    if protocol.calibrate_mounting:
+        standing = tpose_motion(motion, protocol, rng)
+        tpose = synthesize_trackers(standing, worn, visible, seed + 1)
+        movement = synthesize_trackers(mounting_motion(standing, rng), worn, visible, seed + 2)
+        calibration = calibrate_from_movement(tpose, movement, sensors)
+    else:
+        tpose = synthesize_trackers(tpose_motion(motion, protocol, rng), worn, visible, seed + 1)
+        calibration = calibrate_from_tpose(tpose, sensors)
+    stream = calibrated_stream(synthesize_trackers(motion, worn, protocol.noise, seed), calibration, sensors)
     # the calibration has absorbed the mounting rotations: the user's configuration keeps
     # only the nominal translations
     user_sensors = replace(

@@ -12,7 +12,11 @@
 
 A T-pose calibration (service ~/calibrate) measures each tracker's rotation offset and the
 person's height; from then on (and at start, from the `calibration` file) the bridge
-publishes joint-aligned orientations.
+publishes joint-aligned orientations. A mounting calibration after it (service
+~/calibrate_mounting: for `seconds`, 15 by default, the person turns the head, circles the
+wrists and each ankle and rolls the hips) finds where each tracker sits on its segment; the
+bridge then publishes positions as if each tracker were mounted where the sensor
+configuration says, and the body is fitted again with the found mountings.
 
 A lifecycle node, as the estimator is: configure reads the parameters, opens the source
 (ros/tracker_sources.py: the bag is read, a port is bound) and makes the publishers and the
@@ -41,7 +45,7 @@ from rclpy.service import Service
 from rclpy.timer import Timer
 
 from ..adapters.vmc import DEFAULT_PORT
-from ..core.calibration import Calibration, CalibrationError, calibrate_tpose
+from ..core.calibration import Calibration, CalibrationError, calibrate_mounting, calibrate_tpose
 from ..core.sensors import SensorConfig, SensorConfigError, load_sensor_config
 from ..io.bagio import BagError
 from .messages import to_time
@@ -78,6 +82,7 @@ PARAMETERS = {
     "autostart": (True, "configure and activate on start-up (false: wait for a lifecycle manager)"),
 }
 MAX_CALIBRATION_SECONDS = 30.0
+MOUNTING_SECONDS = 15.0  # ~/calibrate_mounting's default: three seconds for each of five movements
 
 
 class TrackerBridge(LifecycleNode):
@@ -88,6 +93,7 @@ class TrackerBridge(LifecycleNode):
     pub: LifecyclePublisher | None = None
     pub_diag: Publisher | None = None
     service: Service | None = None
+    mounting_service: Service | None = None
     diag_timer: Timer | None = None
 
     def __init__(self, **kwargs) -> None:
@@ -96,7 +102,8 @@ class TrackerBridge(LifecycleNode):
             self.declare_parameter(name, default, ParameterDescriptor(description=text))
         self.params: dict = {}
         self.calibration: Calibration | None = None
-        self._collect: dict[str, list] | None = None
+        self._collect: dict[str, list] | None = None  # site -> [(stamp, position, orientation)]
+        self._tpose: dict[str, list] | None = None  # the last T-pose's samples, for ~/calibrate_mounting
         self._lock = threading.Lock()  # the calibration and the collection, shared with the source's thread
         self._counts_lock = threading.Lock()
         self.published = 0
@@ -109,11 +116,12 @@ class TrackerBridge(LifecycleNode):
             if p["source"] not in SOURCES:
                 raise ValueError(f"parameter 'source' must be one of {', '.join(SOURCES)}, got {p['source']!r}")
             sensors = load_sensor_config(p["sensors"])
-            self.calibration = None
+            self.calibration, self._tpose = None, None
             if p["calibration"] and Path(p["calibration"]).exists():
                 self.calibration = Calibration.load(p["calibration"])
                 self.get_logger().info(f"applying the calibration in {p['calibration']}")
             self.params, self.sensors = p, sensors
+            self._nominal = {s.site: np.array(s.offset_translation) for s in sensors.sites}
             self.source = self._make_source(p, sensors)
         except (ValueError, BagError, SensorConfigError, CalibrationError, OSError) as err:
             self.get_logger().error(f"configure failed: {err}")
@@ -127,8 +135,10 @@ class TrackerBridge(LifecycleNode):
         self.pub_diag = self.create_publisher(DiagnosticArray, "/diagnostics", QoSProfile(depth=10))
         # its own callback group: the service waits while samples arrive, the rest (diagnostics)
         # goes on in the executor's other thread
-        self.service = self.create_service(
-            Calibrate, "~/calibrate", self._on_calibrate, callback_group=MutuallyExclusiveCallbackGroup()
+        group = MutuallyExclusiveCallbackGroup()  # one calibration at a time
+        self.service = self.create_service(Calibrate, "~/calibrate", self._on_calibrate, callback_group=group)
+        self.mounting_service = self.create_service(
+            Calibrate, "~/calibrate_mounting", self._on_calibrate_mounting, callback_group=group
         )
         self.diag_timer = self.create_timer(1.0, self._publish_diagnostics)
         return TransitionCallbackReturn.SUCCESS
@@ -186,11 +196,13 @@ class TrackerBridge(LifecycleNode):
             self.destroy_timer(self.diag_timer)
         if self.service is not None:
             self.destroy_service(self.service)
+        if self.mounting_service is not None:
+            self.destroy_service(self.mounting_service)
         if self.pub is not None:
             self.destroy_lifecycle_publisher(self.pub)
         if self.pub_diag is not None:
             self.destroy_publisher(self.pub_diag)
-        self.source = self.pub = self.pub_diag = self.service = self.diag_timer = None
+        self.source = self.pub = self.pub_diag = self.service = self.mounting_service = self.diag_timer = None
 
     def destroy_node(self) -> None:
         self._release()  # the source's thread must be out of publish() before the participant goes
@@ -225,10 +237,12 @@ class TrackerBridge(LifecycleNode):
             with self._lock:
                 if self._collect is not None:
                     self._collect.setdefault(site, []).append(
-                        (None if position is None else np.asarray(position, float), quat)
+                        (stamp, None if position is None else np.asarray(position, float), quat)
                     )
                 if self.calibration is not None and np.all(np.isfinite(quat)) and np.linalg.norm(quat) > 0.5:
                     quat = self.calibration.apply(site, quat)
+                    if position is not None and site in self._nominal:
+                        position = self.calibration.place(site, position, quat, self._nominal[site])
         m = TransformStamped()
         m.header.frame_id, m.child_frame_id = parent or self.sensors.fixed_frame, frame_id
         m.header.stamp = to_time(stamp)
@@ -261,43 +275,75 @@ class TrackerBridge(LifecycleNode):
         return path
 
     def _on_calibrate(self, request, response):
-        seconds = float(request.seconds) if request.seconds != 0 else 1.0
+        """The T-pose: rotation offsets, height and body."""
+        prepared = self._prepare(request, response, 1.0)
+        if prepared is None:
+            return response
+        collected = self._gather(prepared[0])
+        tpose = {site: [(p, q) for _, p, q in v] for site, v in collected.items()}
+        try:
+            calibration = calibrate_tpose(tpose, translations=self._nominal)
+        except CalibrationError as err:
+            return self._refuse(response, str(err), "calibration failed: ")
+        self._tpose = tpose
+        return self._adopt(calibration, prepared[1], response, f"calibrated {', '.join(sorted(calibration.offsets))}")
+
+    def _on_calibrate_mounting(self, request, response):
+        """Movement after the T-pose: each tracker's mounting translation (core.mounting)."""
+        prepared = self._prepare(request, response, MOUNTING_SECONDS)
+        if prepared is None:
+            return response
+        if self._tpose is None:
+            return self._refuse(response, "take a T-pose first (~/calibrate)", "calibration refused: ")
+        movement = self._gather(prepared[0])
+        try:
+            calibration, fits = calibrate_mounting(self._tpose, movement, self._nominal)
+        except CalibrationError as err:
+            return self._refuse(response, str(err), "calibration failed: ")
+        found = ", ".join(f"{s} {np.linalg.norm(f.shift) * 1000:.0f} mm" for s, f in sorted(fits.items()) if f.windows)
+        kept = sorted(s for s, f in fits.items() if not f.windows)
+        what = f"mountings found ({found} from the configuration's)" + (
+            f"; {', '.join(kept)} kept the configuration's (not turned)" if kept else ""
+        )
+        return self._adopt(calibration, prepared[1], response, what)
+
+    def _prepare(self, request, response, default_seconds: float) -> tuple[float, Path | None] | None:
+        """The request's seconds and save path, or None with the response refused."""
+        seconds = float(request.seconds) if request.seconds != 0 else default_seconds
         try:
             if not 0 < seconds <= MAX_CALIBRATION_SECONDS:  # also NaN and inf
                 raise CalibrationError(
                     f"seconds must be between 0 and {MAX_CALIBRATION_SECONDS:g}, got {request.seconds}"
                 )
-            path = self._save_path(request.save_path)
+            return seconds, self._save_path(request.save_path)
         except CalibrationError as err:
-            response.success, response.message = False, str(err)
-            self.get_logger().warn(f"calibration refused: {err}")
-            return response
+            self._refuse(response, str(err), "calibration refused: ")
+            return None
+
+    def _gather(self, seconds: float) -> dict[str, list]:
         with self._lock:
             self._collect = {}
         time.sleep(seconds)  # samples arrive on the source's thread meanwhile
         with self._lock:
             collected, self._collect = self._collect, None
-        try:
-            calibration = calibrate_tpose(
-                collected, translations={s.site: np.array(s.offset_translation) for s in self.sensors.sites}
-            )
-        except CalibrationError as err:
-            response.success, response.message = False, str(err)
-            self.get_logger().warn(f"calibration failed: {err}")
-            return response
+        return collected
+
+    def _refuse(self, response, message: str, log_prefix: str = ""):
+        response.success, response.message = False, message
+        self.get_logger().warn(log_prefix + message)
+        return response
+
+    def _adopt(self, calibration: Calibration, path: Path | None, response, what: str):
+        """Save (when asked) and apply a new calibration; the response says what it found."""
         if path:
             try:
                 calibration.save(path)
             except OSError as err:
-                response.success, response.message = False, f"calibration not saved to {path}: {err.strerror or err}"
-                self.get_logger().warn(response.message)
-                return response
+                return self._refuse(response, f"calibration not saved to {path}: {err.strerror or err}")
         with self._lock:
             self.calibration = calibration
         response.success, response.height, response.sites = True, float(calibration.height), sorted(calibration.offsets)
-        response.message = f"calibrated {', '.join(sorted(calibration.offsets))}; height {calibration.height:.2f} m" + (
-            f"; saved to {path}" if path else ""
-        )
+        response.message = f"{what}; height {calibration.height:.2f} m" + (f"; saved to {path}" if path else "")
         self.get_logger().info(response.message)
         return response
 

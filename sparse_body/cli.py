@@ -39,6 +39,7 @@ def cmd_eval(args) -> int:
         format_table,
         run_evaluation,
         split_items,
+        untrained_categories,
     )
     from .core.sensors import load_sensor_config
     from .data.field_protocol import Protocol
@@ -116,6 +117,10 @@ def cmd_eval(args) -> int:
         print(groups)
     if results[0].subject_units() is not None:  # each person's own figure: the spread behind the mean
         print(format_groups(results, label="person", by="subject"))
+    if not args.motion and len(set(results[0].categories)) > 1:  # each kind of motion, unseen ones marked
+        notes = untrained_categories(_mocap(args), results[0].categories)
+        for metric in ("MPJPE [cm]", "Lower PE [cm]"):
+            print(format_groups(results, metric, label="motion", by="category", notes=notes))
     print(f"written {out}")
     skipped = {s["clip"]: s["reason"] for r in results for s in r.skipped}
     if skipped:

@@ -223,3 +223,28 @@ def test_intervals_beside_every_mean_and_each_person_s_own_figure():
     assert persons[0].startswith("MPJPE [cm] by person")
     assert persons[1].startswith("16 (3 clips)") and " 1.00 [" in persons[1]
     assert persons[2].startswith("43 (3 clips)") and " 3.00 [" in persons[2]
+
+
+def test_each_kind_of_motion_has_its_figure_and_those_no_training_clip_has_are_marked():
+    from sparse_body.apps.evaluation import EvalResult, format_groups
+
+    per_clip = [{"MPJPE [cm]": v, "Lower PE [cm]": 2 * v} for v in (1.0, 1.2, 3.0, 3.2)]
+    kinds = ["locomotion", "locomotion", "dance", "dance"]
+    result = EvalResult("ik", "four_point", "validation", [f"c{k}" for k in range(4)], [100] * 4, per_clip)
+    result.categories = kinds
+    assert EvalResult.from_json(result.to_json()).categories == kinds
+    rows = format_groups([result], "Lower PE [cm]", "motion", "category", {"dance": ", not in training"}).splitlines()
+    assert rows[0].startswith("Lower PE [cm] by motion")
+    assert rows[1].startswith("dance, not in training (2 clips)") and " 6.20 [" in rows[1]
+    assert rows[2].startswith("locomotion (2 clips)") and " 2.20 [" in rows[2]
+
+
+def test_untrained_categories_are_those_of_no_training_clip(mocap_root):
+    from sparse_body.apps.evaluation import untrained_categories
+    from sparse_body.data.catalog import split_clips
+
+    trained = {c.category for c in split_clips(mocap_root, "train")}
+    validation = [c.category for c in split_clips(mocap_root, "validation")]
+    notes = untrained_categories(mocap_root, validation)
+    assert notes and set(notes) == set(validation) - trained  # CMU's split: dance is only in validation
+    assert not set(notes) & trained

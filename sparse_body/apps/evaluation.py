@@ -51,6 +51,7 @@ class EvalItem:
     source: str = ""
     check_plausible: bool = False  # a user's file: say when its skeleton does not fit the motion
     subject: str = ""  # the person (a CMU clip's subject): intervals drawn by person
+    category: str = ""  # the kind of motion (a CMU clip's category in clips.tsv)
 
 
 @dataclass
@@ -70,6 +71,7 @@ class EvalResult:
     settings: dict = field(default_factory=dict)  # what a resumed run must share
     protocol_spec: dict = field(default_factory=dict)  # Protocol.to_json(): what `view` re-runs
     subjects: list[str] = field(default_factory=list)  # each clip's person, where known
+    categories: list[str] = field(default_factory=list)  # each clip's kind of motion, where known
 
     @property
     def summary(self) -> dict[str, float]:
@@ -83,11 +85,13 @@ class EvalResult:
         self.groups.append(item.group)
         self.sources.append(item.source)
         self.subjects.append(item.subject)
+        self.categories.append(item.category)
 
     def by_group(self, by: str = "group") -> dict[str, EvalResult]:
-        """The clips of each group (by="group": folder or prefix; by="subject": person)."""
+        """The clips of each group (by="group": folder or prefix; by="subject": person;
+        by="category": kind of motion)."""
         out: dict[str, EvalResult] = {}
-        keys = self.groups if by == "group" else self.subjects
+        keys = {"group": self.groups, "subject": self.subjects, "category": self.categories}[by]
         for k, group in enumerate(keys if len(keys) == len(self.clips) else []):
             if group:
                 part = out.setdefault(
@@ -103,7 +107,13 @@ class EvalResult:
         would otherwise redo 1000 draws per group after every clip)."""
         interval = clip_interval if intervals else (lambda *_, **__: {})
         clips = [{"clip": c, "frames": n, **m} for c, n, m in zip(self.clips, self.frames, self.per_clip, strict=True)]
-        extras = (("key", self.keys), ("group", self.groups), ("source", self.sources), ("subject", self.subjects))
+        extras = (
+            ("key", self.keys),
+            ("group", self.groups),
+            ("source", self.sources),
+            ("subject", self.subjects),
+            ("category", self.categories),
+        )
         for extra, values in extras:
             if len(values) == len(clips):
                 for row, v in zip(clips, values, strict=True):
@@ -142,7 +152,7 @@ class EvalResult:
 
     @classmethod
     def from_json(cls, data: dict) -> EvalResult:
-        info = ("clip", "frames", "key", "group", "source", "subject")
+        info = ("clip", "frames", "key", "group", "source", "subject", "category")
         rows = data.get("clips", [])
         return cls(
             data["estimator"],
@@ -160,6 +170,7 @@ class EvalResult:
             dict(data.get("settings", {})),
             dict(data.get("protocol_spec", {})),  # absent from files written before it
             [r.get("subject", "") for r in rows],
+            [r.get("category", "") for r in rows],  # absent from files written before it
         )
 
 
@@ -282,9 +293,25 @@ def split_items(mocap_root: Path, split: str, fps: float = DEFAULT_FPS, limit: i
     """The clips of a part of the CMU split (or of an imported folder's), seeded by their place
     in the split (the split's order is fixed, so the draws are too)."""
     return [
-        EvalItem(c.clip_id, c.clip_id, k, lambda c=c: load_clip(c, fps), c.subject, str(c.path), subject=c.subject)
+        EvalItem(
+            c.clip_id,
+            c.clip_id,
+            k,
+            lambda c=c: load_clip(c, fps),
+            c.subject,
+            str(c.path),
+            subject=c.subject,
+            category=c.category,
+        )
         for k, c in enumerate(split_clips(mocap_root, split, limit))
     ]
+
+
+def untrained_categories(mocap_root: Path, categories: list[str]) -> dict[str, str]:
+    """A note for each kind of motion of which no training clip has one: on those, a learned
+    estimator meets motion it never saw (the split is by person, not by motion)."""
+    trained = {c.category for c in split_clips(mocap_root, "train")}
+    return {c: ", not in training" for c in set(categories) if c and c not in trained}
 
 
 def file_items(inputs: list[MotionInput], fps: float = DEFAULT_FPS, amc_fps: float = AMC_FPS) -> list[EvalItem]:
@@ -499,21 +526,26 @@ def _intervals(results: list[EvalResult], metric: str = "MPJPE [cm]") -> list[st
 
 
 def format_groups(
-    results: list[EvalResult], metric: str = "MPJPE [cm]", label: str = "group", by: str = "group"
+    results: list[EvalResult],
+    metric: str = "MPJPE [cm]",
+    label: str = "group",
+    by: str = "group",
+    notes: dict[str, str] | None = None,
 ) -> str:
-    """One metric by group (by="group": folder or actor prefix; by="subject": person): the
-    frame-weighted mean of each result with its 95 % clip-bootstrap interval, and the group's
-    clip count."""
+    """One metric by group (by="group": folder or actor prefix; by="subject": person;
+    by="category": kind of motion): the frame-weighted mean of each result with its 95 %
+    clip-bootstrap interval, and the group's clip count; notes: a word after a group's name."""
     parts = [r.by_group(by) for r in results]
     names = sorted({g for p in parts for g in p})
     if not names:
         return ""
     columns = [f"{r.estimator}/{r.sensors}" for r in results]
-    width = max(len(label) + len(metric) + 4, *(len(g) + 12 for g in names))
+    notes = notes or {}
+    named = {g: f"{g}{notes.get(g, '')} ({max(len(p[g].clips) for p in parts if g in p)} clips)" for g in names}
+    width = max(len(label) + len(metric) + 5, *(len(n) + 1 for n in named.values()))
     colw = max(22, *(len(c) + 2 for c in columns))
     lines = [f"{metric} by {label}".ljust(width) + "".join(c.rjust(colw) for c in columns)]
     for g in names:
-        clips = max(len(p[g].clips) for p in parts if g in p)
         cells = []
         for p in parts:
             r = p.get(g)
@@ -523,7 +555,7 @@ def format_groups(
             if interval and np.isfinite(mean):
                 text += f" [{interval[0]:.2f}, {interval[1]:.2f}]"
             cells.append(text.rjust(colw))
-        lines.append(f"{g} ({clips} clips)".ljust(width) + "".join(cells))
+        lines.append(named[g].ljust(width) + "".join(cells))
     lines.append("(frame-weighted mean [95 % interval, clips drawn with replacement])")
     return "\n".join(lines)
 

@@ -157,21 +157,21 @@ def cmd_train(args) -> int:
 
     import torch
 
-    from .train.harness import beside, with_earlier_runs
+    from .train.harness import TrainRun, beside, with_earlier_runs
 
     parts = _trainers(args)
     if args.ablate_augment:
         torch.set_num_threads(args.threads)
         _ablate_augmentation(args, parts)
         return 0
-    if not args.card_only:
+    if not (args.card_only or args.render_only):
         torch.set_num_threads(args.threads)
         configs = [_config(config_class, args) for config_class, *_ in parts]  # errors before training
         for config, (_, train, out, report_path) in zip(configs, parts, strict=True):
             checkpoint = beside(report_path, ".checkpoint.npz")
             earlier = json.loads(report_path.read_text()) if args.resume and report_path.is_file() else None
             report = train(
-                config, _mocap(args), out, seed=args.seed, limit=args.limit, checkpoint=checkpoint, resume=args.resume
+                config, TrainRun(_mocap(args), out, args.seed, args.limit, checkpoint=checkpoint, resume=args.resume)
             )
             if not args.keep_checkpoint:
                 checkpoint.unlink(missing_ok=True)  # the model is exported: nothing left to resume
@@ -183,7 +183,8 @@ def cmd_train(args) -> int:
     if not args.no_card:
         from .methods import METHODS
 
-        card = METHODS[args.method].training.card(parts[0][2], _mocap(args), args.limit)
+        mocap = None if args.render_only else _mocap(args)  # rendering reads only the measured JSON
+        card = METHODS[args.method].training.card(parts[0][2], mocap, args.limit, not args.render_only)
         print(f"written {card}")
     return 0
 
@@ -224,7 +225,7 @@ def _ablate_augmentation(args, parts) -> None:
     import tempfile
 
     from .train.augment import Augmentation
-    from .train.harness import beside
+    from .train.harness import TrainRun, beside
 
     for config_class, train, out, report_path in parts:
         kinds = Augmentation.parse(args.augment or config_class.named(args.config).augment).kinds
@@ -239,7 +240,7 @@ def _ablate_augmentation(args, parts) -> None:
                 if out.is_dir():  # what an earlier part left there (the predictor trains in the VAE's space)
                     shutil.copytree(out, tmp, dirs_exist_ok=True)
                 target = Path(tmp) / out.name if out.suffix == ".onnx" else Path(tmp)
-                report = train(config, _mocap(args), target, seed=args.seed, limit=args.limit)
+                report = train(config, TrainRun(_mocap(args), target, args.seed, args.limit))
             runs.append(
                 {
                     "augment": spec,
@@ -841,7 +842,17 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--limit", type=_positive_int, help="only the first N clips of each split (smoke runs)")
     p.add_argument("--mocap", help="the CMU folder")
     p.add_argument("--no-card", action="store_true", help="skip the test-split evaluation and model card")
-    p.add_argument("--card-only", action="store_true", help="only rewrite the model card of an existing model")
+    p.add_argument(
+        "--card-only",
+        action="store_true",
+        help="only rewrite the model card of an existing model: its test-split evaluations again "
+        "(<model>.eval.json), then the card from them",
+    )
+    p.add_argument(
+        "--render-only",
+        action="store_true",
+        help="only rewrite the model card from the measured <model>.eval.json as it is, evaluating nothing",
+    )
     p.add_argument(
         "--resume",
         action="store_true",

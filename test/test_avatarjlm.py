@@ -35,15 +35,13 @@ def tiny_models(tmp_path_factory, mocap_root):
     """Tiny three- and four-point models trained for a few steps by the real training code."""
     from sparse_body.methods.avatarjlm.model import AvatarJlmConfig
     from sparse_body.methods.avatarjlm.train import train
+    from sparse_body.train.harness import TrainRun
 
     folder = tmp_path_factory.mktemp("avatarjlm")
     for sensors in ("three_point", "four_point"):
         train(
             replace(AvatarJlmConfig.named("tiny"), sensors=sensors),
-            mocap_root,
-            folder / f"{sensors}.onnx",
-            limit=2,
-            log=lambda *_: None,
+            TrainRun(mocap_root, folder / f"{sensors}.onnx", limit=2, log=lambda *_: None),
         )
     return folder
 
@@ -343,10 +341,11 @@ def test_estimator_node_runs_avatarjlm_over_dds(tiny_models, tmp_path, clip, ros
     assert all(np.all(np.isfinite(m.position)) for m in listener.received["joint_states"])
 
 
-def test_leg_term_judges_the_legs_own_swing_not_the_root(clip):
+def test_leg_term_judges_the_legs_own_swing_not_the_root(clip, tmp_path):
     from sparse_body.core.rotations import matrix_to_6d
     from sparse_body.methods.avatarjlm.model import AvatarJlmConfig, AvatarJlmNet, leg_positions
     from sparse_body.methods.avatarjlm.train import train
+    from sparse_body.train.harness import TrainRun
 
     net = AvatarJlmNet(AvatarJlmConfig.named("tiny"))
     local = clip.local_rotations[:10].copy()
@@ -360,4 +359,4 @@ def test_leg_term_judges_the_legs_own_swing_not_the_root(clip):
     assert torch.allclose(legs[0], legs[1], atol=1e-5)  # the root's turn is not the legs'
     assert (legs[0] - legs[2]).norm(dim=-1).max() > 0.05  # a bent knee moves the foot
     with pytest.raises(ValueError, match="train_noise must be one of"):
-        train(replace(AvatarJlmConfig.named("tiny"), train_noise="loud"), None, None)
+        train(replace(AvatarJlmConfig.named("tiny"), train_noise="loud"), TrainRun(None, tmp_path / "unused.onnx"))

@@ -35,18 +35,19 @@ torch = pytest.importorskip("torch")
 def tiny_vae(tmp_path_factory, mocap_root):
     from sparse_body.methods.dragposer.vae_model import VaeConfig
     from sparse_body.methods.dragposer.vae_train import train_vae
+    from sparse_body.train.harness import TrainRun
 
     out = tmp_path_factory.mktemp("dragposer")
     config = VaeConfig.named("tiny")
     config.hidden, config.steps = 64, 20
-    train_vae(config, mocap_root, out, limit=2, log=lambda *_: None)
+    train_vae(config, TrainRun(mocap_root, out, limit=2, log=lambda *_: None))
     from sparse_body.methods.dragposer.temporal_model import TemporalConfig
     from sparse_body.methods.dragposer.temporal_train import train_temporal
 
-    train_temporal(TemporalConfig.named("tiny"), mocap_root, out, limit=2, log=lambda *_: None)
+    train_temporal(TemporalConfig.named("tiny"), TrainRun(mocap_root, out, limit=2, log=lambda *_: None))
     from sparse_body.methods.dragposer.tracker_prior_train import TrackerPriorConfig, train_tracker_prior
 
-    train_tracker_prior(TrackerPriorConfig.named("tiny"), mocap_root, out, limit=2, log=lambda *_: None)
+    train_tracker_prior(TrackerPriorConfig.named("tiny"), TrainRun(mocap_root, out, limit=2, log=lambda *_: None))
     return out
 
 

@@ -33,12 +33,13 @@ def tiny_models(tmp_path_factory, mocap_root):
     """Tiny online and lookahead models trained for a few steps by the real training code."""
     from sparse_body.methods.dtp.model import DtpConfig
     from sparse_body.methods.dtp.train import train
+    from sparse_body.train.harness import TrainRun
 
     folder = tmp_path_factory.mktemp("dtp")
     online = DtpConfig.named("tiny")
     lookahead = replace(DtpConfig.named("tiny"), future=2)
     reports = {
-        name: train(config, mocap_root, folder / f"{name}.onnx", limit=2, log=lambda *_: None)
+        name: train(config, TrainRun(mocap_root, folder / f"{name}.onnx", limit=2, log=lambda *_: None))
         for name, config in (("online", online), ("lookahead", lookahead))
     }
     return folder, reports
@@ -239,6 +240,7 @@ def test_train_dtp_is_one_command(tmp_path, mocap_root):
 def test_resume_after_the_pre_training_goes_on_with_the_fine_tuning(tmp_path, mocap_root, monkeypatch):
     import sparse_body.methods.dtp.train as dtp_train
     from sparse_body.methods.dtp.model import DtpConfig
+    from sparse_body.train.harness import TrainRun
 
     config = replace(DtpConfig.named("tiny"), finetune_steps=4)
     checkpoint, out, fit = tmp_path / "dtp.checkpoint.npz", tmp_path / "dtp.onnx", dtp_train.fit
@@ -253,12 +255,13 @@ def test_resume_after_the_pre_training_goes_on_with_the_fine_tuning(tmp_path, mo
 
     monkeypatch.setattr(dtp_train, "fit", interrupted_in_the_fine_tuning)
     with pytest.raises(KeyboardInterrupt):
-        dtp_train.train(config, mocap_root, out, limit=1, checkpoint=checkpoint, log=lambda *_: None)
+        dtp_train.train(config, TrainRun(mocap_root, out, limit=1, checkpoint=checkpoint, log=lambda *_: None))
     assert (tmp_path / "dtp.pretrained.onnx").is_file() and not out.is_file()
     calls.clear()
     monkeypatch.setattr(dtp_train, "fit", fit)
     lines = []
-    report = dtp_train.train(config, mocap_root, out, limit=1, checkpoint=checkpoint, resume=True, log=lines.append)
+    run = TrainRun(mocap_root, out, limit=1, checkpoint=checkpoint, resume=True, log=lines.append)
+    report = dtp_train.train(config, run)
     assert any("pretrain: finished before" in line for line in lines)
     assert any("finetune: resumed" in line and "at step 2" in line for line in lines)
     assert report["stages"]["pretrain"]["steps"] == config.steps and report["stages"]["finetune"]["steps"] == 4

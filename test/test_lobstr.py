@@ -41,9 +41,10 @@ def tiny_model(tmp_path_factory, mocap_root):
     """A tiny model trained for a few steps by the real training code on two clips."""
     from sparse_body.methods.lobstr.model import LobstrConfig
     from sparse_body.methods.lobstr.train import train
+    from sparse_body.train.harness import TrainRun
 
     out = tmp_path_factory.mktemp("lobstr") / "tiny.onnx"
-    report = train(LobstrConfig.named("tiny"), mocap_root, out, limit=2, log=lambda *_: None)
+    report = train(LobstrConfig.named("tiny"), TrainRun(mocap_root, out, limit=2, log=lambda *_: None))
     return out, report
 
 

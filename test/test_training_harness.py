@@ -10,6 +10,7 @@ import pytest
 
 from sparse_body.methods.lobstr.model import LobstrConfig
 from sparse_body.methods.lobstr.train import train
+from sparse_body.train.harness import TrainRun
 
 
 def quiet(*_):
@@ -23,7 +24,7 @@ def tiny():
 
 def test_an_interrupted_training_resumes_from_its_checkpoint(tmp_path, mocap_root, tiny):
     checkpoint = tmp_path / "lobstr.checkpoint.npz"
-    first = train(tiny, mocap_root, tmp_path / "a.onnx", limit=2, log=quiet, checkpoint=checkpoint)
+    first = train(tiny, TrainRun(mocap_root, tmp_path / "a.onnx", limit=2, log=quiet, checkpoint=checkpoint))
     assert [h["step"] for h in first["history"]] == [2, 4]
     with np.load(checkpoint, allow_pickle=False) as saved:  # plain arrays and a JSON state, no pickle
         state = json.loads(str(saved["state"]))
@@ -31,12 +32,7 @@ def test_an_interrupted_training_resumes_from_its_checkpoint(tmp_path, mocap_roo
     lines = []
     second = train(
         replace(tiny, steps=8),
-        mocap_root,
-        tmp_path / "b.onnx",
-        limit=2,
-        log=lines.append,
-        checkpoint=checkpoint,
-        resume=True,
+        TrainRun(mocap_root, tmp_path / "b.onnx", limit=2, log=lines.append, checkpoint=checkpoint, resume=True),
     )
     assert any("resumed" in line and "step 4" in line for line in lines)
     assert second["steps"] == 8
@@ -52,23 +48,18 @@ def test_an_interrupted_training_resumes_from_its_checkpoint(tmp_path, mocap_roo
 
 def test_without_resume_a_checkpoint_is_overwritten_not_read(tmp_path, mocap_root, tiny):
     checkpoint = tmp_path / "lobstr.checkpoint.npz"
-    train(tiny, mocap_root, tmp_path / "a.onnx", limit=2, log=quiet, checkpoint=checkpoint)
-    again = train(tiny, mocap_root, tmp_path / "b.onnx", limit=2, log=quiet, checkpoint=checkpoint)
+    train(tiny, TrainRun(mocap_root, tmp_path / "a.onnx", limit=2, log=quiet, checkpoint=checkpoint))
+    again = train(tiny, TrainRun(mocap_root, tmp_path / "b.onnx", limit=2, log=quiet, checkpoint=checkpoint))
     assert [h["step"] for h in again["history"]] == [2, 4]
 
 
 def test_a_checkpoint_of_another_configuration_is_refused_by_name(tmp_path, mocap_root, tiny):
     checkpoint = tmp_path / "lobstr.checkpoint.npz"
-    train(tiny, mocap_root, tmp_path / "a.onnx", limit=2, log=quiet, checkpoint=checkpoint)
+    train(tiny, TrainRun(mocap_root, tmp_path / "a.onnx", limit=2, log=quiet, checkpoint=checkpoint))
     with pytest.raises(ValueError, match="lobstr.checkpoint.npz: the checkpoint does not fit"):
         train(
             replace(tiny, hidden=24),
-            mocap_root,
-            tmp_path / "b.onnx",
-            limit=2,
-            log=quiet,
-            checkpoint=checkpoint,
-            resume=True,
+            TrainRun(mocap_root, tmp_path / "b.onnx", limit=2, log=quiet, checkpoint=checkpoint, resume=True),
         )
 
 
@@ -83,3 +74,59 @@ def test_the_dragposer_card_renders_its_runtime_choices_from_the_measured_file(t
     assert f"| `dragposer` | {len(default['clips'])} | {default['summary'][RUNTIME_METRICS[0]]:.2f} |" in table
     assert "validation split" in table
     assert "missing" in runtime_choices_table(tmp_path / "dragposer.runtime.json")
+
+
+def test_the_lobstr_card_is_rendered_from_its_measured_file_alone(tmp_path):
+    """With <model>.eval.json there, the card's tables come from it and nothing is evaluated
+    (no motion capture is read): what the measured file says is what the card says."""
+    import shutil
+
+    from sparse_body.apps.evaluation import EvalResult
+    from sparse_body.core.resources import models_dir
+    from sparse_body.methods.lobstr.card import FIELD_RUNS, LAB_RUNS, write_lobstr_card
+    from sparse_body.train.model_card import NOISE_SETUPS
+
+    def run(spec: str, scale: float, protocol: str = "field, vr noise") -> dict:
+        metrics = ("MPJPE [cm]", "MPJVE [cm/s]", "Jitter [100m/s3]", "End-effector PE [cm]", "Skate [cm/s]")
+        per_clip = [{m: scale * (k + 1) for k, m in enumerate(metrics)}] * 2
+        return EvalResult(spec, "four_point", "test", ["a", "b"], [10, 10], per_clip, protocol=protocol).to_json()
+
+    measured = {"field": [run(s, 1.0 + k) for k, s in enumerate(FIELD_RUNS)]}
+    measured["lab"] = [run(s, 0.5, "lab") for s in LAB_RUNS]
+    noise = {setup: [run("lobstr", 1.0 + k), run("ik", 2.0 + k)] for k, (setup, *_) in enumerate(NOISE_SETUPS)}
+    measured["noise"] = {"four_point": noise}
+    onnx = tmp_path / "lobstr.onnx"
+    shutil.copy(models_dir() / "lobstr.train.json", tmp_path / "lobstr.train.json")
+    (tmp_path / "lobstr.eval.json").write_text(json.dumps(measured))
+    report = json.loads((tmp_path / "lobstr.train.json").read_text())
+    text = write_lobstr_card(onnx, report, mocap_root=None, evaluate=False).read_text()
+    assert "Skate with contact IK: 5.00 cm/s; without: 10.00 cm/s" in text  # field runs 1 and 2, Skate = 5 x scale
+    assert "| lobstr/four_point | clean | 1.00 | 2.00 | 3.00 | 4.00 |" in text
+    assert "| | ratio | 3.00x | 3.00x | 3.00x | 3.00x |" in text  # smoothed (scale 3) over clean (1)
+    assert "| ik/four_point | clean | 2.00 | 4.00 | 6.00 | 8.00 |" in text
+    assert "lobstr:learned_upper=false" in text and "(lab)" in text
+    assert write_lobstr_card(onnx, report, mocap_root=None, evaluate=False).read_text() == text
+
+
+@pytest.mark.parametrize(
+    "method, out, card",
+    [
+        ("lobstr", "lobstr.onnx", "lobstr.md"),
+        ("dtp", "dtp.onnx", "dtp.md"),
+        ("avatarjlm", "avatarjlm.onnx", "avatarjlm.md"),
+    ],
+)
+def test_each_shipped_card_is_what_its_measured_json_renders_to(tmp_path, method, out, card):
+    """`sparse-body train M --render-only` on copies of the shipped reports and measured JSON
+    writes the shipped card again, character for character: every figure in a card is one in
+    its <model>.eval.json (or another report beside it), and no motion capture is read."""
+    import shutil
+
+    from sparse_body.cli import build_parser
+    from sparse_body.core.resources import models_dir
+
+    for path in models_dir().glob("*.json"):
+        shutil.copy(path, tmp_path / path.name)
+    args = build_parser().parse_args(["train", method, "--render-only", "--out", str(tmp_path / out)])
+    assert args.func(args) == 0
+    assert (tmp_path / card).read_text() == (models_dir() / card).read_text()

@@ -23,7 +23,7 @@ class TrainPart:
 
     name: str
     config: str  # "module:Class", a train.presets.Presets dataclass
-    train: str  # "module:function": train(config, mocap, out, seed, limit, checkpoint, resume) -> report
+    train: str  # "module:function": train(config, train.harness.TrainRun) -> report
     report: Callable[[Path], Path]
 
 
@@ -33,7 +33,9 @@ class Training:
     # the default output under the package's models/, given a function making the (first
     # trained part's) configuration: a .onnx file, or "" (the folder) for several files
     output: Callable[[Callable[[], Any]], str]
-    card: Callable[[Path, Any, int | None], Path]  # card(out, mocap, limit) -> the card's path
+    # card(out, mocap, limit, evaluate) -> the card's path: evaluate on the test split into
+    # <model>.eval.json (unless evaluate=False and it is there), then render the card from it
+    card: Callable[..., Path]
     config_help: str  # the presets, for `train --config`
     out_help: str  # what --out names
 

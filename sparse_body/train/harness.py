@@ -2,8 +2,10 @@
 validation and the best weights kept, a resumable checkpoint without pickle, ONNX metadata,
 and the facts a model card reports about the machine.
 
-A trainer supplies its own step (a batch -> its loss terms), its validation (-> figures) and
-the figure that picks the checkpoint; fit() does the rest in the same order for all of them.
+A trainer is train(config, run): its configuration (a method's dataclass) and a TrainRun
+(where the motion capture is, where the model goes, the seed, the checkpoint), the same for
+all. It supplies its own step (a batch -> its loss terms), its validation (-> figures) and the
+figure that picks the checkpoint; fit() does the rest in the same order for all of them.
 """
 
 from __future__ import annotations
@@ -19,12 +21,47 @@ import numpy as np
 import torch
 
 
+@dataclass(frozen=True)
+class TrainRun:
+    """One training run's where and how, beside the method's configuration."""
+
+    mocap_root: Path | None  # the motion capture (catalog.find_mocap_root)
+    out: Path  # the .onnx file, or the folder of a method that writes several
+    seed: int = 0  # torch's and the data's random draws
+    limit: int | None = None  # only the first clips of each split (tests)
+    log: Callable[[str], None] = print
+    checkpoint: Path | None = None  # a .npz written at every check, to resume from
+    resume: bool = False  # start from the checkpoint when it is there
+
+    def start(self) -> np.random.Generator:
+        """Seed torch; the run's numpy generator."""
+        torch.manual_seed(self.seed)
+        return np.random.default_rng(self.seed)
+
+
 @dataclass
 class Fitted:
     steps: int
     minutes: float
     validation: dict[str, float]  # of the weights kept
     history: list[dict] = field(default_factory=list)
+
+    def report(self, config, run: TrainRun, **extra) -> dict:
+        """What a model card reads of a training: the configuration, the budget spent, the kept
+        weights' validation and the history, the train clips, then extra and the machine."""
+        from ..data.catalog import split_clips
+
+        return {
+            "config": config.to_dict(),
+            "steps": self.steps,
+            "minutes": self.minutes,
+            "validation": self.validation,
+            "history": self.history,
+            "train_clips": len(split_clips(run.mocap_root, "train", run.limit)),
+            "augment": config.augment,
+            **extra,
+            **machine(),
+        }
 
 
 def fit(
@@ -38,9 +75,7 @@ def fit(
     minutes: float,
     check_every: int,
     after_check: Callable[[], None] | None = None,
-    checkpoint: Path | None = None,
-    resume: bool = False,
-    log: Callable[[str], None] = print,
+    run: TrainRun,
 ) -> Fitted:
     """Train model until `steps` steps or `minutes` minutes (0: no time limit); every
     check_every steps (and at the last) validate, keep the weights with the lowest score, and
@@ -48,13 +83,14 @@ def fit(
     after_check (e.g. a learning-rate schedule) runs before each validation. The kept
     weights are loaded into model, which is left in eval mode.
 
-    checkpoint: a .npz written at every check (the weights now and the best so far, the step,
-    the history); resume=True starts from it, with `steps` counting from the start of the first
+    run.checkpoint: a .npz written at every check (the weights now and the best so far, the
+    step, the history); run.resume starts from it, with `steps` counting from the start of the first
     run and `minutes` from this one. Weights only: the optimiser (its moments, its learning-rate
     schedule) starts afresh."""
     best, best_state, history = float("inf"), None, []
     start, done = time.perf_counter(), 0
-    if resume and checkpoint is not None and Path(checkpoint).is_file():
+    checkpoint, log = run.checkpoint, run.log
+    if run.resume and checkpoint is not None and Path(checkpoint).is_file():
         done, best, best_state, history = _restore(model, Path(checkpoint))
         log(f"resumed from {checkpoint} at step {done}")
     while done < steps and not (minutes and time.perf_counter() - start > 60 * minutes):

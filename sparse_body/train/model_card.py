@@ -120,33 +120,61 @@ def evaluate_jobs(jobs: list[tuple], workers: int = 2) -> list:
 
 
 NOISE_METRICS = ("MPJPE [cm]", "MPJVE [cm/s]", "Jitter [100m/s3]", "End-effector PE [cm]")
+# a noise table's three runs of each estimator: clean trackers, LoBSTr's noise through the live
+# filter, and the same smoothed offline (setup name, --noise, extra estimator options)
+NOISE_SETUPS = (("clean", "none", {}), ("noisy", "lobstr", {}), ("smoothed", "lobstr", {"smooth": True}))
 
 
-def noise_results_table(runs: list[tuple[str, dict]], sensors, mocap_root: Path, limit: int | None) -> str:
-    """A Markdown table: each estimator on the test split, field protocol, clean trackers
-    against LoBSTr's noise (through the live filter, and smoothed offline), and the ratios the
-    noise brings."""
-    from ..apps.evaluation import evaluate
+def noise_jobs(runs: list[tuple[str, dict]], sensors_name: str, mocap_root: Path, limit: int | None) -> list[tuple]:
+    """evaluate_jobs() jobs of a noise table: each (estimator spec, options) under each of
+    NOISE_SETUPS, tagged with the setup's name."""
     from ..data.field_protocol import Protocol
 
+    return [
+        (setup, spec, sensors_name, Protocol.named(noise=noise), mocap_root, limit, {**options, **extra})
+        for spec, options in runs
+        for setup, noise, extra in NOISE_SETUPS
+    ]
+
+
+def noise_table(measured: dict[str, list[dict]]) -> str:
+    """A Markdown table from noise_jobs()' results ({setup: [eval JSON of each estimator]}):
+    each estimator clean, with LoBSTr's noise live and smoothed, and the ratios the noise brings."""
     rows = ["| estimator | trackers | " + " | ".join(NOISE_METRICS) + " |", "|---|---|" + "---|" * len(NOISE_METRICS)]
-    for spec, options in runs:
-        clean, live, smoothed = (
-            evaluate(
-                spec,
-                sensors,
-                mocap_root,
-                "test",
-                protocol=Protocol.named(noise=noise),
-                limit=limit,
-                progress=False,
-                **options,
-                **extra,
-            ).summary
-            for noise, extra in (("none", {}), ("lobstr", {}), ("lobstr", {"smooth": True}))
+    for k, run in enumerate(measured["clean"]):
+        clean = run["summary"]
+        rows.append(
+            f"| {run['estimator']}/{run['sensors']} | clean | "
+            + " | ".join(f"{clean[m]:.2f}" for m in NOISE_METRICS)
+            + " |"
         )
-        rows.append(f"| {spec}/{sensors.name} | clean | " + " | ".join(f"{clean[m]:.2f}" for m in NOISE_METRICS) + " |")
-        for label, noisy in (("LoBSTr noise, live filter", live), ("LoBSTr noise, smoothed offline", smoothed)):
+        for label, setup in (("LoBSTr noise, live filter", "noisy"), ("LoBSTr noise, smoothed offline", "smoothed")):
+            noisy = measured[setup][k]["summary"]
             rows.append(f"| | {label} | " + " | ".join(f"{noisy[m]:.2f}" for m in NOISE_METRICS) + " |")
             rows.append("| | ratio | " + " | ".join(f"{noisy[m] / clean[m]:.2f}x" for m in NOISE_METRICS) + " |")
     return "\n".join(rows)
+
+
+def by_setup(jobs: list[tuple], results: list) -> dict[str, list[dict]]:
+    """evaluate_jobs()' results as {setup tag: [eval JSON, in job order]}: a card's measured JSON."""
+    measured: dict[str, list[dict]] = {}
+    for job, result in zip(jobs, results, strict=True):
+        measured.setdefault(job[0], []).append(result.to_json())
+    return measured
+
+
+def measure_card(path: Path, jobs: list[tuple], noise: dict[str, list[tuple]], workers: int = 2) -> Path:
+    """Evaluate a card's jobs and its noise tables' (noise: sensors -> noise_jobs()), `workers`
+    processes at a time, and write path, the card's measured JSON: {setup: [eval JSON of each
+    run]}, and under "noise" {sensors: {setup: [eval JSON]}}."""
+    import json
+
+    noisy = [job for part in noise.values() for job in part]
+    results = evaluate_jobs(jobs + noisy, workers)
+    measured: dict = by_setup(jobs, results[: len(jobs)])
+    measured["noise"], done = {}, len(jobs)
+    for sensors_name, part in noise.items():
+        measured["noise"][sensors_name] = by_setup(part, results[done : done + len(part)])
+        done += len(part)
+    path.write_text(json.dumps(measured, indent=1))
+    return path

@@ -8,10 +8,11 @@ from pathlib import Path
 from ..record import Method, Training, TrainPart
 
 
-def _card(out: Path, mocap, limit: int | None) -> Path:
+def _card(out: Path, mocap, limit: int | None, evaluate: bool = True) -> Path:
     from .card import write_avatarjlm_card
 
-    return write_avatarjlm_card(out.with_name("avatarjlm.onnx"), mocap, limit=limit)  # one card: both models
+    # one card: both models
+    return write_avatarjlm_card(out.with_name("avatarjlm.onnx"), mocap, limit=limit, evaluate=evaluate)
 
 
 def _output(config) -> str:

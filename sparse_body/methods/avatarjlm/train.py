@@ -23,8 +23,8 @@ from ...core.skeleton import Skeleton, body_scale
 from ...data.catalog import load_clip, split_clips
 from ...data.virtual_trackers import LOBSTR_NOISE, NOISE_MODELS, TrackerNoise, _random_rotations
 from ...train.augment import NO_AUGMENTATION, Augmentation, variants
+from ...train.harness import TrainRun, fit
 from ...train.harness import export_onnx as export
-from ...train.harness import fit, machine
 from ...train.torch_body import sixd_to_matrix
 from .features import input_joints, reference, sequence_features
 from .model import HANDS, TOKENS, AvatarJlmConfig, AvatarJlmNet, StreamingStep, losses, world_positions
@@ -154,29 +154,20 @@ def export_onnx(net: AvatarJlmNet, path: Path, metadata: dict) -> None:
     )
 
 
-def train(
-    config: AvatarJlmConfig,
-    mocap_root: Path,
-    out: Path,
-    seed: int = 0,
-    limit: int | None = None,
-    log=print,
-    checkpoint: Path | None = None,
-    resume: bool = False,
-) -> dict:
+def train(config: AvatarJlmConfig, run: TrainRun) -> dict:
     """Train, export out (an .onnx path) and return what the model card reports."""
     if config.train_noise not in NOISE_MODELS:
         raise ValueError(f"train_noise must be one of {', '.join(NOISE_MODELS)}, got {config.train_noise!r}")
-    torch.manual_seed(seed)
-    rng = np.random.default_rng(seed)
+    rng = run.start()
+    out = run.out
     t0 = time.perf_counter()
-    train_frames = load_frames(mocap_root, "train", config, rng, limit)
-    val_frames = load_frames(mocap_root, "validation", config, rng, limit)
+    train_frames = load_frames(run.mocap_root, "train", config, rng, run.limit)
+    val_frames = load_frames(run.mocap_root, "validation", config, rng, run.limit)
     sampler = WindowSampler(train_frames, config)
     val_windows = WindowSampler(val_frames, config).sample(
-        min(1024, 64 * config.batch), np.random.default_rng(seed + 1), clean=True
+        min(1024, 64 * config.batch), np.random.default_rng(run.seed + 1), clean=True
     )
-    log(
+    run.log(
         f"data: {train_frames.x.shape[1]} train frames x {train_frames.x.shape[0]} copies, "
         f"{val_frames.x.shape[1]} validation frames, {time.perf_counter() - t0:.0f} s"
     )
@@ -209,9 +200,7 @@ def train(
         minutes=config.minutes,
         check_every=config.steps_per_check,
         after_check=after_check,
-        checkpoint=checkpoint,
-        resume=resume,
-        log=log,
+        run=run,
     )
     metadata = {
         "method": "avatarjlm",
@@ -222,15 +211,9 @@ def train(
         "validation": fitted.validation,
     }
     export_onnx(net, out, metadata)
-    return {
-        "config": config.to_dict(),
-        "steps": fitted.steps,
-        "minutes": fitted.minutes,
-        "validation": fitted.validation,
-        "history": fitted.history,
-        "train_clips": len(split_clips(mocap_root, "train", limit)),
-        "augment": config.augment,
-        "train_frames": int(train_frames.x.shape[1]),
-        "validation_frames": int(val_frames.x.shape[1]),
-        **machine(),
-    }
+    return fitted.report(
+        config,
+        run,
+        train_frames=int(train_frames.x.shape[1]),
+        validation_frames=int(val_frames.x.shape[1]),
+    )

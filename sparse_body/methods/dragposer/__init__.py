@@ -8,10 +8,10 @@ from pathlib import Path
 from ..record import Method, Training, TrainPart
 
 
-def _card(out: Path, mocap, limit: int | None) -> Path:
+def _card(out: Path, mocap, limit: int | None, evaluate: bool = True) -> Path:
     from .card import write_dragposer_card
 
-    return write_dragposer_card(out, mocap, limit=limit)
+    return write_dragposer_card(out, mocap, limit=limit, evaluate=evaluate)
 
 
 def _paper(mpjpe: float, mpjre: float, mpjve: float, end_effector: float) -> dict[str, float]:

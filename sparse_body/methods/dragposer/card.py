@@ -1,17 +1,16 @@
-"""DragPoser's model card: the paper's Table 2 setups with the Table 3 ablation and the IK baseline, and the refinement of other estimators."""
+"""DragPoser's model card: the paper's Table 2 setups with the Table 3 ablation and the IK
+baseline, and the refinement of other estimators. Its evaluations are written to measured
+JSON (models/dragposer.eval.json), then rendered with the training reports into
+models/dragposer.md."""
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
-from ...core.sensors import load_sensor_config
 from ...data.catalog import load_split
-from ...train.model_card import (
-    augmentation_table,
-    evaluate_jobs,
-    noise_results_table,
-    runtime_choices_table,
-)
+from ...train.model_card import augmentation_table, measure_card, measured_results, noise_jobs, noise_table
+from ...train.model_card import runtime_choices_table as choices_table
 
 ROOT_PRIOR_COMMAND = (
     "sparse-body eval --split validation --no-compare --sensors three_point --estimator dragposer "
@@ -43,41 +42,51 @@ ABLATION_SETUPS = set(DRAGPOSER_SETUPS)  # every setup also runs without the tem
 REFINED_BASES = ["ik", "lobstr"]  # refined on four-point
 
 
-def dragposer_results(model_dir: str, mocap_root: Path, limit: int | None = None, workers: int = 2):
-    """The card's evaluations, `workers` processes at a time: {(sensors, faulty): [results]} for
-    the setups (field protocol, the lab's beside it), and [base, refined base, ...] on four-point."""
+NOISE_SENSORS = ("six_point", "four_point")
+
+
+def setup_key(sensors_name: str, faulty: float) -> str:
+    """A setup's key in the measured JSON."""
+    return f"{sensors_name}, faulty {faulty:g} %" if faulty else sensors_name
+
+
+def evaluate_dragposer(onnx_path: Path, mocap_root: Path, limit: int | None = None, workers: int = 2) -> Path:
+    """Run the card's evaluations (test split) `workers` processes at a time and write them to
+    dragposer.eval.json beside onnx_path (the models' folder): {setup: [sparse-body eval JSON
+    of each run]} for the setups (field protocol, the lab's beside it), "refined" ([base,
+    refined base, ...] on four-point) and "noise" ({sensors: noise_jobs()' setups})."""
     from ...data.field_protocol import Protocol
 
-    mine = {"model_dir": model_dir}
+    out_dir = Path(onnx_path).parent
+    mine = {"model_dir": str(out_dir.resolve())}
     jobs = []
     for setup in DRAGPOSER_SETUPS:
         sensors_name, faulty = setup
+        key = setup_key(sensors_name, faulty)
         field, lab = Protocol.named("calibrated", "vr", faulty), Protocol.named("oracle", "none", faulty)
         specs = ["dragposer"] + (["dragposer:temporal_weight=0"] if setup in ABLATION_SETUPS else [])
-        jobs += [(setup, spec, sensors_name, field, mocap_root, limit, mine) for spec in specs]
-        jobs.append((setup, "ik", sensors_name, field, mocap_root, limit, {}))
+        jobs += [(key, spec, sensors_name, field, mocap_root, limit, mine) for spec in specs]
+        jobs.append((key, "ik", sensors_name, field, mocap_root, limit, {}))
         jobs += [
-            (setup, "dragposer", sensors_name, lab, mocap_root, limit, mine),
-            (setup, "ik", sensors_name, lab, mocap_root, limit, {}),
+            (key, "dragposer", sensors_name, lab, mocap_root, limit, mine),
+            (key, "ik", sensors_name, lab, mocap_root, limit, {}),
         ]
     field = Protocol.named()
-    for base in REFINED_BASES:
+    for base in REFINED_BASES:  # the refinement's other estimators come from the package (lobstr.onnx)
         jobs += [
             ("refined", base, "four_point", field, mocap_root, limit, {}),
             ("refined", f"refined:base={base}", "four_point", field, mocap_root, limit, mine),
         ]
-    results = evaluate_jobs(jobs, workers)
-    tables = {setup: [r for j, r in zip(jobs, results, strict=True) if j[0] == setup] for setup in DRAGPOSER_SETUPS}
-    return tables, [r for j, r in zip(jobs, results, strict=True) if j[0] == "refined"]
+    noise = {name: noise_jobs([("dragposer", mine), ("ik", {})], name, mocap_root, limit) for name in NOISE_SENSORS}
+    return measure_card(out_dir / "dragposer.eval.json", jobs, noise, workers)
 
 
-def write_dragposer_card(out_dir: Path, mocap_root: Path, limit: int | None = None) -> Path:
-    """Evaluate the pose VAE + temporal predictor + optimiser on the test split for the paper's
-    Table 2 setups (with the Table 3 ablation and the IK baseline), and the refinement of other
-    estimators; write dragposer.md."""
-    import json
-
-    from ...apps.evaluation import format_table
+def write_dragposer_card(out_dir: Path, mocap_root: Path, limit: int | None = None, evaluate: bool = True) -> Path:
+    """Evaluate (unless evaluate=False and dragposer.eval.json exists: the pose VAE + temporal
+    predictor + optimiser on the test split for the paper's Table 2 setups, with the Table 3
+    ablation and the IK baseline, and the refinement of other estimators) and write
+    dragposer.md."""
+    from ...apps.evaluation import EvalResult, format_table
     from .. import paper_figures
 
     out_dir = Path(out_dir)
@@ -86,16 +95,13 @@ def write_dragposer_card(out_dir: Path, mocap_root: Path, limit: int | None = No
     tracker = json.loads((out_dir / "dragposer_tracker_prior.train.json").read_text())
     from .estimator import TRACKER_PRIOR_WEIGHT
 
-    # the refinement's other estimators come from the package (lobstr.onnx)
-    tables, refined = dragposer_results(str(out_dir.resolve()), mocap_root, limit)
-    mine = {"model_dir": str(out_dir.resolve())}
-    noise_tables = [
-        noise_results_table([("dragposer", mine), ("ik", {})], load_sensor_config(name), mocap_root, limit)
-        for name in ("six_point", "four_point")
-    ]
+    measured = measured_results(out_dir / "dragposer.onnx", evaluate_dragposer, mocap_root, limit, evaluate)
+    refined = [EvalResult.from_json(r) for r in measured["refined"]]
+    noise_tables = [noise_table(measured["noise"][name]) for name in NOISE_SENSORS]
     text_tables = []
-    for (sensors_name, faulty), results in tables.items():
-        title = f"{sensors_name}" + (f", faulty {faulty:g} %" if faulty else "")
+    for sensors_name, faulty in DRAGPOSER_SETUPS:
+        title = setup_key(sensors_name, faulty)
+        results = [EvalResult.from_json(r) for r in measured[title]]
         text_tables.append(
             f"### {title}\n\n```\n{format_table(results, paper_figures('dragposer', sensors_name, faulty))}\n```\n"
         )
@@ -103,9 +109,9 @@ def write_dragposer_card(out_dir: Path, mocap_root: Path, limit: int | None = No
     cfg, val = vae["config"], vae["validation"]
     tcfg, tval = temporal["config"], temporal["validation"]
     vae_augmentation = augmentation_table(out_dir / "dragposer.train.json", VAE_VALIDATION)
-    runtime_table = runtime_choices_table(out_dir / "dragposer.runtime.json")
+    runtime_table = choices_table(out_dir / "dragposer.runtime.json")
     pelvis_tables = "\n\n".join(
-        runtime_choices_table(
+        choices_table(
             out_dir / f"dragposer.pelvis_{name}.json",
             f"sparse-body eval --split validation --no-compare --sensors {name} --estimator dragposer "
             f"--estimator dragposer:pelvis_orientation=false --output models/dragposer.pelvis_{name}.json",
@@ -113,14 +119,14 @@ def write_dragposer_card(out_dir: Path, mocap_root: Path, limit: int | None = No
         )
         for name in ("six_point", "four_point")
     )
-    root_prior_table = runtime_choices_table(
+    root_prior_table = choices_table(
         out_dir / "dragposer.root_prior.json",
         ROOT_PRIOR_COMMAND,
         ("MPJPE [cm]", "MPJRE [deg]", "Lower PE [cm]", "Root PE [cm]", "MPJVE [cm/s]", "Jitter [100m/s3]"),
     )
     temporal_augmentation = augmentation_table(out_dir / "dragposer_temporal.train.json", TEMPORAL_VALIDATION)
     tracker_tables = "\n\n".join(
-        runtime_choices_table(
+        choices_table(
             out_dir / f"dragposer.tracker_prior_{name}.json",
             TRACKER_PRIOR_COMMAND.format(sensors=name),
             ("MPJPE [cm]", "MPJRE [deg]", "Lower PE [cm]", "MPJVE [cm/s]", "Jitter [100m/s3]", "Ground [cm]"),

@@ -24,7 +24,7 @@ from ...core.contacts import estimate_floor
 from ...core.skeleton import JOINT_INDEX, Skeleton, body_scale
 from ...data.catalog import load_clip, split_clips
 from ...train.augment import NO_AUGMENTATION, Augmentation, variants
-from ...train.harness import export_onnx, fit, machine
+from ...train.harness import TrainRun, export_onnx, fit
 from .estimator import PoseVaeRuntime
 from .pose import HEIGHT_JOINTS, LIMBS, split_heading, temporal_context
 from .temporal_model import TemporalConfig, TemporalPredictor, loss
@@ -144,27 +144,18 @@ def load_clips(
     ]
 
 
-def train_temporal(
-    config: TemporalConfig,
-    mocap_root: Path,
-    out_dir: Path,
-    seed: int = 0,
-    limit: int | None = None,
-    log=print,
-    checkpoint: Path | None = None,
-    resume: bool = False,
-) -> dict:
+def train_temporal(config: TemporalConfig, run: TrainRun) -> dict:
     """Needs the pose VAE in out_dir (dragposer_encoder.onnx): the predictor lives in its space."""
-    torch.manual_seed(seed)
-    rng = np.random.default_rng(seed)
+    rng = run.start()
+    out_dir = run.out
     t0 = time.perf_counter()
     vae = PoseVaeRuntime(out_dir, threads=torch.get_num_threads())
     augmentation = Augmentation.parse(config.augment, config.variants)
-    train_clips = load_clips(mocap_root, "train", limit, augmentation=augmentation, rng=rng)
-    val_clips = load_clips(mocap_root, "validation", limit)
+    train_clips = load_clips(run.mocap_root, "train", run.limit, augmentation=augmentation, rng=rng)
+    val_clips = load_clips(run.mocap_root, "validation", run.limit)
     train = sequences(train_clips, vae, config, rng)
     val = sequences(val_clips, vae, config, rng, noisy=False, phases=[0])
-    log(
+    run.log(
         f"data: {len(train_clips)} train clips, {len(train['starts'])} windows; {len(val['starts'])} validation "
         f"windows; {time.perf_counter() - t0:.0f} s"
     )
@@ -186,9 +177,7 @@ def train_temporal(
         steps=config.steps,
         minutes=config.minutes,
         check_every=config.steps_per_check,
-        checkpoint=checkpoint,
-        resume=resume,
-        log=log,
+        run=run,
     )
     export(
         model,
@@ -200,17 +189,11 @@ def train_temporal(
             "validation": fitted.validation,
         },
     )
-    return {
-        "config": config.to_dict(),
-        "steps": fitted.steps,
-        "minutes": fitted.minutes,
-        "validation": fitted.validation,
-        "history": fitted.history,
-        "train_clips": len(split_clips(mocap_root, "train", limit)),
-        "train_sequences": len(train_clips),
-        "augment": config.augment,
-        "train_windows": int(len(train["starts"])),
-        "validation_clips": len(val_clips),
-        "parameters": sum(p.numel() for p in model.parameters()),
-        **machine(),
-    }
+    return fitted.report(
+        config,
+        run,
+        train_sequences=len(train_clips),
+        train_windows=int(len(train["starts"])),
+        validation_clips=len(val_clips),
+        parameters=sum(p.numel() for p in model.parameters()),
+    )

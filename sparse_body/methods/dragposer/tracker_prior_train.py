@@ -31,7 +31,7 @@ from ...core.skeleton import JOINT_INDEX, LOWER_BODY, Skeleton, body_scale, join
 from ...data.catalog import load_clip, split_clips
 from ...data.virtual_trackers import _random_rotations
 from ...train.augment import NO_AUGMENTATION, Augmentation, variants
-from ...train.harness import export_onnx, fit, machine
+from ...train.harness import TrainRun, export_onnx, fit
 from ...train.presets import Presets
 from ...train.torch_body import forward_kinematics as torch_fk
 from .estimator import PoseVaeRuntime
@@ -221,23 +221,14 @@ def export(net: TrackerPriorNet, path: Path, metadata: dict) -> None:
     )
 
 
-def train_tracker_prior(
-    config: TrackerPriorConfig,
-    mocap_root: Path,
-    out_dir: Path,
-    seed: int = 0,
-    limit: int | None = None,
-    log=print,
-    checkpoint: Path | None = None,
-    resume: bool = False,
-) -> dict:
+def train_tracker_prior(config: TrackerPriorConfig, run: TrainRun) -> dict:
     """Needs the pose VAE in out_dir (dragposer_encoder.onnx): the prior guesses its latents."""
-    torch.manual_seed(seed)
-    rng = np.random.default_rng(seed)
+    rng = run.start()
+    out_dir = run.out
     t0 = time.perf_counter()
     vae = PoseVaeRuntime(out_dir, threads=torch.get_num_threads())
-    train_clips = load_clips(mocap_root, "train", config, vae, rng, limit)
-    val_clips = load_clips(mocap_root, "validation", config, vae, rng, limit)
+    train_clips = load_clips(run.mocap_root, "train", config, vae, rng, run.limit)
+    val_clips = load_clips(run.mocap_root, "validation", config, vae, rng, run.limit)
     x = np.concatenate([c[0] for c in train_clips], axis=1)
     z = np.concatenate([c[1] for c in train_clips])
     body = np.concatenate([c[2] for c in train_clips])
@@ -249,7 +240,7 @@ def train_tracker_prior(
             starts.append(offset + np.arange(len(target) - config.chunk + 1))
         offset += len(target)
     starts = np.concatenate(starts)
-    log(
+    run.log(
         f"data: {len(train_clips)} train clips ({len(z)} frames x {len(x)} copies), {len(val_clips)} validation "
         f"clips, {time.perf_counter() - t0:.0f} s"
     )
@@ -281,26 +272,18 @@ def train_tracker_prior(
         steps=config.steps,
         minutes=config.minutes,
         check_every=config.steps_per_check,
-        checkpoint=checkpoint,
-        resume=resume,
-        log=log,
+        run=run,
     )
     export(
         net,
         Path(out_dir) / FILE,
         {"method": "dragposer", "part": "tracker_prior", "config": config.to_dict(), "validation": fitted.validation},
     )
-    return {
-        "config": config.to_dict(),
-        "steps": fitted.steps,
-        "minutes": fitted.minutes,
-        "validation": fitted.validation,
-        "history": fitted.history,
-        "train_clips": len(split_clips(mocap_root, "train", limit)),
-        "train_sequences": len(train_clips),
-        "augment": config.augment,
-        "train_frames": int(len(z)),
-        "validation_clips": len(val_clips),
-        "parameters": sum(p.numel() for p in net.parameters()),
-        **machine(),
-    }
+    return fitted.report(
+        config,
+        run,
+        train_sequences=len(train_clips),
+        train_frames=int(len(z)),
+        validation_clips=len(val_clips),
+        parameters=sum(p.numel() for p in net.parameters()),
+    )

@@ -20,7 +20,7 @@ from ...core.rotations import angle_between, matrix_to_6d
 from ...core.skeleton import Skeleton, body_scale
 from ...data.catalog import load_clip, split_clips
 from ...train.augment import NO_AUGMENTATION, Augmentation, variants
-from ...train.harness import export_onnx, fit, machine
+from ...train.harness import TrainRun, export_onnx, fit
 from ...train.torch_body import sixd_to_matrix
 from .pose import dual_quaternions, split_heading
 from .vae_model import Decoder, Encoder, PoseVae, VaeConfig, losses
@@ -75,23 +75,18 @@ def export(vae: PoseVae, out_dir: Path, metadata: dict) -> None:
         )
 
 
-def train_vae(
-    config: VaeConfig,
-    mocap_root: Path,
-    out_dir: Path,
-    seed: int = 0,
-    limit: int | None = None,
-    log=print,
-    checkpoint: Path | None = None,
-    resume: bool = False,
-) -> dict:
-    torch.manual_seed(seed)
-    rng = np.random.default_rng(seed)
+def train_vae(config: VaeConfig, run: TrainRun) -> dict:
+    rng = run.start()
+    out_dir = run.out
     t0 = time.perf_counter()
     train_clips = load_frames(
-        mocap_root, "train", limit=limit, augmentation=Augmentation.parse(config.augment, config.variants), rng=rng
+        run.mocap_root,
+        "train",
+        limit=run.limit,
+        augmentation=Augmentation.parse(config.augment, config.variants),
+        rng=rng,
     )
-    val_clips = load_frames(mocap_root, "validation", limit=limit)
+    val_clips = load_frames(run.mocap_root, "validation", limit=run.limit)
     dq = np.concatenate([c[0] for c in train_clips])
     pose = np.concatenate([c[1] for c in train_clips])
     # an example is frame i with i+1 in the same clip
@@ -100,7 +95,7 @@ def train_vae(
         starts.append(offset + np.arange(len(c[0]) - 1))
         offset += len(c[0])
     starts = np.concatenate(starts)
-    log(
+    run.log(
         f"data: {len(train_clips)} train clips ({len(dq)} frames), {len(val_clips)} validation clips, "
         f"{time.perf_counter() - t0:.0f} s"
     )
@@ -122,25 +117,17 @@ def train_vae(
         steps=config.steps,
         minutes=config.minutes,
         check_every=config.steps_per_check,
-        checkpoint=checkpoint,
-        resume=resume,
-        log=log,
+        run=run,
     )
     export(
         vae,
         out_dir,
         {"method": "dragposer", "part": "pose_vae", "config": config.to_dict(), "validation": fitted.validation},
     )
-    return {
-        "config": config.to_dict(),
-        "steps": fitted.steps,
-        "minutes": fitted.minutes,
-        "validation": fitted.validation,
-        "history": fitted.history,
-        "train_clips": len(split_clips(mocap_root, "train", limit)),
-        "train_sequences": len(train_clips),
-        "augment": config.augment,
-        "train_frames": int(len(dq)),
-        "validation_clips": len(val_clips),
-        **machine(),
-    }
+    return fitted.report(
+        config,
+        run,
+        train_sequences=len(train_clips),
+        train_frames=int(len(dq)),
+        validation_clips=len(val_clips),
+    )

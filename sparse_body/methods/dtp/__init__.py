@@ -8,10 +8,11 @@ from pathlib import Path
 from ..record import Method, Training, TrainPart
 
 
-def _card(out: Path, mocap, limit: int | None) -> Path:
+def _card(out: Path, mocap, limit: int | None, evaluate: bool = True) -> Path:
     from .card import write_dtp_card
 
-    return write_dtp_card(out.with_name("dtp.onnx"), mocap, limit=limit)  # one card: online, lookahead, pre-trained
+    # one card: online, lookahead, pre-trained
+    return write_dtp_card(out.with_name("dtp.onnx"), mocap, limit=limit, evaluate=evaluate)
 
 
 METHOD = Method(

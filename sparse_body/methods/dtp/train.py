@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import json
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -27,8 +27,8 @@ from ...core.skeleton import Skeleton, body_scale
 from ...data.catalog import load_clip, split_clips
 from ...data.virtual_trackers import LOBSTR_NOISE, _random_rotations
 from ...train.augment import NO_AUGMENTATION, Augmentation, variants
+from ...train.harness import TrainRun, fit, load_best, machine
 from ...train.harness import export_onnx as export
-from ...train.harness import fit, load_best, machine
 from ...train.torch_body import sixd_to_matrix
 from .features import FOOT_LEAVES, INPUT_JOINTS, leaf_features, window_features
 from .model import DtpConfig, DtpNet, body_positions, losses
@@ -175,30 +175,21 @@ def pretrained_path(out: Path) -> Path:
     return out.with_name(out.stem + ".pretrained.onnx")
 
 
-def train(
-    config: DtpConfig,
-    mocap_root: Path,
-    out: Path,
-    seed: int = 0,
-    limit: int | None = None,
-    log=print,
-    checkpoint: Path | None = None,
-    resume: bool = False,
-) -> dict:
+def train(config: DtpConfig, run: TrainRun) -> dict:
     """Pre-train, export the pre-trained model, fine-tune on occluded feet, export out (an
     .onnx path) and return what the model card reports."""
-    torch.manual_seed(seed)
-    rng = np.random.default_rng(seed)
+    rng = run.start()
+    out = run.out
     t0 = time.perf_counter()
-    train_frames = load_frames(mocap_root, "train", config, rng, limit)
-    val_frames = load_frames(mocap_root, "validation", config, rng, limit)
+    train_frames = load_frames(run.mocap_root, "train", config, rng, run.limit)
+    val_frames = load_frames(run.mocap_root, "validation", config, rng, run.limit)
     sampler, val_sampler = WindowSampler(train_frames, config), WindowSampler(val_frames, config)
     n_val = min(2048, 64 * config.batch)  # fixed validation windows (tiny configurations: fewer)
     val_batches = [
-        val_sampler.sample(n_val, np.random.default_rng(seed + 1), clean=True),
-        val_sampler.sample(n_val, np.random.default_rng(seed + 1), occluded_share=1.0, clean=True),
+        val_sampler.sample(n_val, np.random.default_rng(run.seed + 1), clean=True),
+        val_sampler.sample(n_val, np.random.default_rng(run.seed + 1), occluded_share=1.0, clean=True),
     ]
-    log(
+    run.log(
         f"data: {len(train_frames.pose)} train frames x {train_frames.leaves.shape[0]} copies, "
         f"{len(val_frames.pose)} validation frames, {time.perf_counter() - t0:.0f} s"
     )
@@ -228,12 +219,12 @@ def train(
 
         # each stage keeps its checkpoint, and a finished stage its report, until both are done:
         # --resume after the pre-training has finished goes straight on with the fine-tuning
-        stage_checkpoint = checkpoint.with_name(f"{checkpoint.stem}.{stage}.npz") if checkpoint else None
-        finished = stage_checkpoint.with_suffix(".json") if checkpoint else None
-        if resume and finished is not None and finished.is_file() and stage_checkpoint.is_file():
+        stage_checkpoint = run.checkpoint.with_name(f"{run.checkpoint.stem}.{stage}.npz") if run.checkpoint else None
+        finished = stage_checkpoint.with_suffix(".json") if run.checkpoint else None
+        if run.resume and finished is not None and finished.is_file() and stage_checkpoint.is_file():
             stages[stage] = json.loads(finished.read_text())
             load_best(net, stage_checkpoint)
-            log(f"{stage}: finished before, its best weights taken from {stage_checkpoint}")
+            run.log(f"{stage}: finished before, its best weights taken from {stage_checkpoint}")
             continue
         fitted = fit(
             net,
@@ -245,9 +236,7 @@ def train(
             minutes=minutes,
             check_every=config.steps_per_check,
             after_check=sched.step,
-            checkpoint=stage_checkpoint,
-            resume=resume,
-            log=lambda m, s=stage: log(f"{s}: {m}"),
+            run=replace(run, checkpoint=stage_checkpoint, log=lambda m, s=stage: run.log(f"{s}: {m}")),
         )
         stages[stage] = {
             "steps": fitted.steps,
@@ -268,8 +257,12 @@ def train(
         if finished is not None:
             finished.write_text(json.dumps(stages[stage]))
     for path in (
-        [checkpoint.with_name(f"{checkpoint.stem}.{stage}{suffix}") for stage in stages for suffix in (".npz", ".json")]
-        if checkpoint
+        [
+            run.checkpoint.with_name(f"{run.checkpoint.stem}.{stage}{suffix}")
+            for stage in stages
+            for suffix in (".npz", ".json")
+        ]
+        if run.checkpoint
         else []
     ):
         path.unlink(missing_ok=True)
@@ -279,7 +272,7 @@ def train(
         "validation": stages["finetune"]["validation"],
         "steps": sum(s["steps"] for s in stages.values()),
         "minutes": sum(s["minutes"] for s in stages.values()),
-        "train_clips": len(split_clips(mocap_root, "train", limit)),
+        "train_clips": len(split_clips(run.mocap_root, "train", run.limit)),
         "augment": config.augment,
         "train_frames": int(len(train_frames.pose)),
         "validation_frames": int(len(val_frames.pose)),

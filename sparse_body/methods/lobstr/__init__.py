@@ -9,10 +9,11 @@ from pathlib import Path
 from ..record import Method, Training, TrainPart
 
 
-def _card(out: Path, mocap, limit: int | None) -> Path:
+def _card(out: Path, mocap, limit: int | None, evaluate: bool = True) -> Path:
     from .card import write_lobstr_card
 
-    return write_lobstr_card(out, json.loads(out.with_suffix(".train.json").read_text()), mocap, limit=limit)
+    report = json.loads(out.with_suffix(".train.json").read_text())
+    return write_lobstr_card(out, report, mocap, limit=limit, evaluate=evaluate)
 
 
 METHOD = Method(

@@ -1,12 +1,20 @@
-"""LoBSTr's model card: the shipped GRU on the test split beside IK, without its contact IK and the paper's figures."""
+"""LoBSTr's model card: the shipped GRU on the test split beside IK, without its contact IK and
+the paper's figures. Its evaluations are written to measured JSON (models/lobstr.eval.json),
+then rendered with the training report into models/lobstr.md."""
 
 from __future__ import annotations
 
 from pathlib import Path
 
-from ...core.sensors import load_sensor_config
 from ...data.catalog import load_split
-from ...train.model_card import augmentation_table, noise_results_table, runtime_choices_table
+from ...train.model_card import (
+    augmentation_table,
+    measure_card,
+    measured_results,
+    noise_jobs,
+    noise_table,
+    runtime_choices_table,
+)
 
 LOBSTR_VALIDATION = {
     "lower_rot_error_deg": "val leg rot [deg]",
@@ -30,31 +38,41 @@ LOBSTR_RUNTIME_METRICS = (
 )
 
 
-def write_lobstr_card(onnx_path: Path, report: dict, mocap_root: Path, limit: int | None = None) -> Path:
-    """Evaluate the model on the test split (four-point) beside the IK baseline, without its
-    contact IK and the paper's figures: field protocol, lab protocol beside it, and LoBSTr's
-    tracker noise against none; write <model>.md."""
-    augmentation = augmentation_table(Path(onnx_path).with_suffix(".train.json"), LOBSTR_VALIDATION)
-    from ...apps.evaluation import evaluate, format_table
+# (setup, estimator spec): the field protocol's runs, then the lab protocol's
+FIELD_RUNS = ("lobstr", "lobstr:contact_ik=false", "lobstr:learned_upper=false", "ik")
+LAB_RUNS = ("lobstr", "ik")
+
+
+def evaluate_lobstr(onnx_path: Path, mocap_root: Path, limit: int | None = None, workers: int = 2) -> Path:
+    """Run the card's evaluations (four-point, test split) two processes at a time and write
+    them to <model>.eval.json: {setup: [sparse-body eval JSON of each run]}."""
     from ...data.field_protocol import FIELD, LAB
+
+    onnx_path = Path(onnx_path)
+    model = {"model_path": str(onnx_path.resolve())}
+    jobs = [
+        (setup, spec, "four_point", protocol, mocap_root, limit, model if spec.startswith("lobstr") else {})
+        for setup, protocol, specs in (("field", FIELD, FIELD_RUNS), ("lab", LAB, LAB_RUNS))
+        for spec in specs
+    ]
+    noise = {"four_point": noise_jobs([("lobstr", model), ("ik", {})], "four_point", mocap_root, limit)}
+    return measure_card(onnx_path.with_suffix(".eval.json"), jobs, noise, workers)
+
+
+def write_lobstr_card(
+    onnx_path: Path, report: dict, mocap_root: Path, limit: int | None = None, evaluate: bool = True
+) -> Path:
+    """Evaluate (unless evaluate=False and <model>.eval.json exists: the model beside IK,
+    without its contact IK and the paper's figures, field protocol and lab protocol beside it,
+    LoBSTr's tracker noise against none) and write <model>.md."""
+    augmentation = augmentation_table(Path(onnx_path).with_suffix(".train.json"), LOBSTR_VALIDATION)
+    from ...apps.evaluation import EvalResult, format_table
     from .. import paper_figures
 
-    sensors = load_sensor_config("four_point")
-    model = {"model_path": str(Path(onnx_path).resolve())}
-    runs = [
-        ("lobstr", FIELD, model),
-        ("lobstr:contact_ik=false", FIELD, model),
-        ("lobstr:learned_upper=false", FIELD, model),
-        ("ik", FIELD, {}),
-        ("lobstr", LAB, model),
-        ("ik", LAB, {}),
-    ]
-    results = [
-        evaluate(spec, sensors, mocap_root, "test", protocol=protocol, limit=limit, progress=False, **options)
-        for spec, protocol, options in runs
-    ]
+    measured = measured_results(Path(onnx_path), evaluate_lobstr, mocap_root, limit, evaluate)
+    results = [EvalResult.from_json(r) for r in measured["field"] + measured["lab"]]
     table = format_table(results, paper_figures("lobstr", "four_point"))
-    noise_table = noise_results_table([("lobstr", model), ("ik", {})], sensors, mocap_root, limit)
+    noise = noise_table(measured["noise"]["four_point"])
     split = load_split()
     cfg, val = report["config"], report["validation"]
     history = report.get("history", [])
@@ -127,7 +145,7 @@ filter). No live filter can take this noise out without lag: on the tracked poin
 best one leaves about 51 cm/s of velocity error (`scripts/noise_floor.py`; the README's
 "Offline smoothing").
 
-{noise_table}
+{noise}
 
 The paper's figures come from its own data (PFNN, CMU and MHAD locomotion at 45 fps) and
 protocol: a guide, not a like-for-like comparison.

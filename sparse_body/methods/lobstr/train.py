@@ -22,8 +22,8 @@ from ...core.skeleton import Skeleton, body_scale
 from ...data.catalog import load_clip, split_clips
 from ...data.virtual_trackers import LOBSTR_NOISE, _random_rotations
 from ...train.augment import NO_AUGMENTATION, Augmentation, variants
+from ...train.harness import TrainRun, fit
 from ...train.harness import export_onnx as export
-from ...train.harness import fit, machine
 from ...train.torch_body import sixd_to_matrix
 from .features import (
     INPUT_JOINTS,
@@ -164,24 +164,15 @@ def load_clips(mocap_root: Path, split: str, config: LobstrConfig, rng, limit: i
     ]
 
 
-def train(
-    config: LobstrConfig,
-    mocap_root: Path,
-    out: Path,
-    seed: int = 0,
-    limit: int | None = None,
-    log=print,
-    checkpoint: Path | None = None,
-    resume: bool = False,
-) -> dict:
+def train(config: LobstrConfig, run: TrainRun) -> dict:
     """Train, export out (an .onnx path) and return what the model card reports."""
-    torch.manual_seed(seed)
-    rng = np.random.default_rng(seed)
+    rng = run.start()
+    out = run.out
     t0 = time.perf_counter()
-    train_clips = load_clips(mocap_root, "train", config, rng, limit)
-    val_clips = load_clips(mocap_root, "validation", config, rng, limit)
+    train_clips = load_clips(run.mocap_root, "train", config, rng, run.limit)
+    val_clips = load_clips(run.mocap_root, "validation", config, rng, run.limit)
     sampler = ChunkSampler(train_clips, config.chunk)
-    log(
+    run.log(
         f"data: {len(train_clips)} train clips ({len(sampler.legs)} frames x {sampler.x.shape[0]} copies), "
         f"{len(val_clips)} validation clips, {time.perf_counter() - t0:.0f} s"
     )
@@ -218,9 +209,7 @@ def train(
         minutes=config.minutes,
         check_every=config.steps_per_epoch,
         after_check=sched.step,
-        checkpoint=checkpoint,
-        resume=resume,
-        log=log,
+        run=run,
     )
     metadata = {
         "method": "lobstr",
@@ -231,16 +220,10 @@ def train(
         "validation": fitted.validation,
     }
     export_onnx(net, out, metadata)
-    return {
-        "config": config.to_dict(),
-        "steps": fitted.steps,
-        "minutes": fitted.minutes,
-        "validation": fitted.validation,
-        "history": fitted.history,
-        "train_clips": len(split_clips(mocap_root, "train", limit)),
-        "train_sequences": len(train_clips),
-        "augment": config.augment,
-        "train_frames": int(len(sampler.legs)),
-        "validation_clips": len(val_clips),
-        **machine(),
-    }
+    return fitted.report(
+        config,
+        run,
+        train_sequences=len(train_clips),
+        train_frames=int(len(sampler.legs)),
+        validation_clips=len(val_clips),
+    )

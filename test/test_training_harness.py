@@ -114,6 +114,7 @@ def test_the_lobstr_card_is_rendered_from_its_measured_file_alone(tmp_path):
         ("lobstr", "lobstr.onnx", "lobstr.md"),
         ("dtp", "dtp.onnx", "dtp.md"),
         ("avatarjlm", "avatarjlm.onnx", "avatarjlm.md"),
+        ("dragposer", "", "dragposer.md"),
     ],
 )
 def test_each_shipped_card_is_what_its_measured_json_renders_to(tmp_path, method, out, card):

@@ -65,15 +65,16 @@ def test_a_checkpoint_of_another_configuration_is_refused_by_name(tmp_path, moca
 
 def test_the_dragposer_card_renders_its_runtime_choices_from_the_measured_file(tmp_path):
     from sparse_body.core.resources import models_dir
-    from sparse_body.train.model_card import RUNTIME_METRICS, runtime_choices_table
+    from sparse_body.methods.dragposer.card import RUNTIME_COMMAND, RUNTIME_METRICS
+    from sparse_body.train.model_card import runtime_choices_table
 
     measured = json.loads((models_dir() / "dragposer.runtime.json").read_text())
-    table = runtime_choices_table(models_dir() / "dragposer.runtime.json")
+    table = runtime_choices_table(models_dir() / "dragposer.runtime.json", RUNTIME_COMMAND, RUNTIME_METRICS)
     assert table.count("\n| `dragposer") == len(measured) >= 2
     default = next(r for r in measured if r["estimator"] == "dragposer")
     assert f"| `dragposer` | {len(default['clips'])} | {default['summary'][RUNTIME_METRICS[0]]:.2f} |" in table
     assert "validation split" in table
-    assert "missing" in runtime_choices_table(tmp_path / "dragposer.runtime.json")
+    assert "missing" in runtime_choices_table(tmp_path / "dragposer.runtime.json", RUNTIME_COMMAND, RUNTIME_METRICS)
 
 
 def test_the_lobstr_card_is_rendered_from_its_measured_file_alone(tmp_path):

@@ -34,14 +34,7 @@ def augmentation_table(report_path: Path, columns: dict[str, str]) -> str:
     )
 
 
-RUNTIME_METRICS = ("MPJPE [cm]", "MPJVE [cm/s]", "Jitter [100m/s3]", "Toe PE [cm]")
-RUNTIME_COMMAND = (
-    "sparse-body eval --sensors four_point --split validation --no-compare "
-    "--output models/dragposer.runtime.json --estimator dragposer:OPTIONS ..."
-)
-
-
-def runtime_choices_table(results_path: Path, command: str = RUNTIME_COMMAND, metrics=RUNTIME_METRICS) -> str:
+def runtime_choices_table(results_path: Path, command: str, metrics: tuple[str, ...]) -> str:
     """The runtime options compared in one `sparse-body eval --output` file (written by
     `command`), as a Markdown table (estimator specs as rows), or a line saying how to
     measure them."""

@@ -12,6 +12,11 @@ from ...data.catalog import load_split
 from ...train.model_card import augmentation_table, measure_card, measured_results, noise_jobs, noise_table
 from ...train.model_card import runtime_choices_table as choices_table
 
+RUNTIME_METRICS = ("MPJPE [cm]", "MPJVE [cm/s]", "Jitter [100m/s3]", "Toe PE [cm]")
+RUNTIME_COMMAND = (
+    "sparse-body eval --sensors four_point --split validation --no-compare "
+    "--output models/dragposer.runtime.json --estimator dragposer:OPTIONS ..."
+)
 ROOT_PRIOR_COMMAND = (
     "sparse-body eval --split validation --no-compare --sensors three_point --estimator dragposer "
     "--estimator dragposer:root_prior=0 --estimator dragposer:root_prior=0.1 "
@@ -109,7 +114,7 @@ def write_dragposer_card(out_dir: Path, mocap_root: Path, limit: int | None = No
     cfg, val = vae["config"], vae["validation"]
     tcfg, tval = temporal["config"], temporal["validation"]
     vae_augmentation = augmentation_table(out_dir / "dragposer.train.json", VAE_VALIDATION)
-    runtime_table = choices_table(out_dir / "dragposer.runtime.json")
+    runtime_table = choices_table(out_dir / "dragposer.runtime.json", RUNTIME_COMMAND, RUNTIME_METRICS)
     pelvis_tables = "\n\n".join(
         choices_table(
             out_dir / f"dragposer.pelvis_{name}.json",

@@ -21,6 +21,8 @@ RUNTIME_COMMAND = (
     "--output models/dtp.runtime[_occluded].json --estimator dtp:OPTIONS ..."
 )
 
+RUNTIME_METRICS = ("MPJPE [cm]", "MPJVE [cm/s]", "Jitter [100m/s3]", "Toe PE [cm]")
+
 OCCLUSION_PERCENT = 20.0
 VALIDATION = {
     "clean_mpjpe_cm": "val MPJPE [cm]",
@@ -177,9 +179,9 @@ the feet whose trackers agree with the network onto their trackers, and they tak
 trackers' orientation. Its options were chosen
 on the validation split, clean and with feet occluded (the test people were not looked at):
 
-{runtime_choices_table(onnx_path.with_name("dtp.runtime.json"), RUNTIME_COMMAND)}
+{runtime_choices_table(onnx_path.with_name("dtp.runtime.json"), RUNTIME_COMMAND, RUNTIME_METRICS)}
 
-{runtime_choices_table(onnx_path.with_name("dtp.runtime_occluded.json"), RUNTIME_COMMAND)}
+{runtime_choices_table(onnx_path.with_name("dtp.runtime_occluded.json"), RUNTIME_COMMAND, RUNTIME_METRICS)}
 
 ## Limits
 - Trained on CMU only; the pelvis tracker must be there (it carries the root).

@@ -30,8 +30,8 @@ eval: setup
 
 bench: setup-dev
 	$(VENV)/bin/sparse-body bench
-	$(VENV)/bin/sparse-body bench --network
-	$(VENV)/bin/sparse-body bench --dragposer
+	$(VENV)/bin/sparse-body bench --runtime lobstr
+	$(VENV)/bin/sparse-body bench --runtime dragposer
 
 # A million generated inputs into each parser of outside input: the serial stream, VMC
 # datagrams, BVH and ASF/AMC motion files, sensor configuration and calibration YAML.

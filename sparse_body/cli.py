@@ -462,13 +462,11 @@ def cmd_view(args) -> int:
 
 
 def cmd_bench(args) -> int:
-    from .apps.bench import bench_dragposer, bench_network, run, run_goals
+    from .apps.bench import run, run_goals
+    from .methods import METHODS, load
 
-    if args.network:
-        bench_network()
-        return 0
-    if args.dragposer:
-        bench_dragposer()
+    if args.runtime:
+        load(METHODS[args.runtime].runtime_bench)()
         return 0
     if args.estimator:
         run(args.estimator, args.sensors, latency=not args.no_latency)
@@ -808,13 +806,12 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.add_argument("--sensors", default="six_point")
     p.add_argument("--no-latency", action="store_true", help="only the offline speed (no ROS needed)")
+    benched = {name: m for name, m in METHODS.items() if m.runtime_bench}
     p.add_argument(
-        "--network", action="store_true", help="only LoBSTr's network step: torch against ONNX Runtime on one core"
-    )
-    p.add_argument(
-        "--dragposer",
-        action="store_true",
-        help="only DragPoser's optimiser: ONNX Runtime Gauss-Newton against the torch reference",
+        "--runtime",
+        choices=sorted(benched),
+        metavar="METHOD",
+        help="only that method's runtime against its torch reference, on one core",
     )
     p.set_defaults(func=cmd_bench)
 

@@ -47,11 +47,23 @@ def test_paper_figures_are_looked_up_by_sensors_and_faulty_share():
 
 def test_the_commands_and_the_evaluation_hold_no_per_method_branches():
     names = "|".join(TRAINABLE)
-    branch = re.compile(rf"(==|!=|\bin\b)\s*\(?\s*\"({names})\"|\"({names})\"\s*(==|!=)")
+    # a comparison with a method's name, or a flag named after one (`bench --dragposer` was)
+    branch = re.compile(rf"(==|!=|\bin\b)\s*\(?\s*\"({names})\"|\"({names})\"\s*(==|!=)|args\.({names})\b")
     for path in [ROOT / "cli.py", ROOT / "apps" / "evaluation.py", ROOT / "train", ROOT / "ros"]:
         for file in [path] if path.is_file() else sorted(path.glob("*.py")):
             found = [line for line in file.read_text().splitlines() if branch.search(line)]
             assert not found, (file.name, found)
+
+
+def test_runtime_benches_are_registered_and_load():
+    from sparse_body.cli import build_parser
+
+    benched = sorted(name for name, m in METHODS.items() if m.runtime_bench)
+    assert benched == ["dragposer", "lobstr"]
+    assert all(callable(load(METHODS[name].runtime_bench)) for name in benched)
+    assert build_parser().parse_args(["bench", "--runtime", "lobstr"]).runtime == "lobstr"
+    with pytest.raises(SystemExit):
+        build_parser().parse_args(["bench", "--runtime", "ik"])  # no runtime of its own to time
 
 
 @pytest.mark.parametrize("name", sorted(METHODS))

@@ -50,3 +50,6 @@ class Method:
     # papers' own data and protocols, a guide rather than a like-for-like comparison
     paper_figures: dict[Any, dict[str, dict[str, float]]] = field(default_factory=dict)
     training: Training | None = None
+    # "module:function" timing its runtime against its reference implementation (no arguments;
+    # it prints), run by `sparse-body bench --runtime NAME`
+    runtime_bench: str | None = None

@@ -59,4 +59,5 @@ METHOD = Method(
         config_help="small (30 minutes a part) or tiny, and paper for its temporal predictor",
         out_help="the folder for its encoder, decoder, temporal predictor and tracker prior",
     ),
+    runtime_bench="sparse_body.apps.bench:bench_dragposer",
 )

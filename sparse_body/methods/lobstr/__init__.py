@@ -37,4 +37,5 @@ METHOD = Method(
         config_help="paper, small (under an hour on 2 CPU cores) or tiny",
         out_help="the .onnx file",
     ),
+    runtime_bench="sparse_body.apps.bench:bench_network",
 )

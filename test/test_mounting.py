@@ -150,6 +150,7 @@ def test_a_movement_where_nothing_turned_is_refused_in_one_line():
         "right_hand": [(np.array([0.0, -0.8, 1.4]), np.array([0, 0, 0, 1.0]))] * 10,
     }
     still = {s: [(i / 60, p, q) for i, (p, q) in enumerate(v * 30)] for s, v in tpose.items()}
+    tpose = {s: [(i / 60, p, q) for i, (p, q) in enumerate(v)] for s, v in tpose.items()}
     nominal = {"head": np.array([0.1, 0, 0.14]), "left_hand": np.zeros(3), "right_hand": np.zeros(3)}
     with pytest.raises(CalibrationError, match="no tracker turned about its joint") as err:
         calibrate_mounting(tpose, still, nominal)

@@ -237,20 +237,28 @@ def calibrate_tpose(
     return Calibration(height, yaw, offsets, fit_skeleton(joints, height))
 
 
+Samples = dict[str, list[tuple[float, np.ndarray | None, np.ndarray | None]]]
+
+
+def untimed(samples: Samples) -> dict[str, list[tuple[np.ndarray | None, np.ndarray | None]]]:
+    """calibrate_tpose()'s samples from timed ones (site -> [(seconds, position, orientation)])."""
+    return {site: [(p, q) for _, p, q in v] for site, v in samples.items()}
+
+
 def calibrate_mounting(
-    tpose: dict[str, list[tuple[np.ndarray | None, np.ndarray | None]]],
-    movement: dict[str, list[tuple[float, np.ndarray | None, np.ndarray | None]]],
+    tpose: Samples,
+    movement: Samples,
     translations: dict[str, np.ndarray],
     floor: float = 0.0,
 ) -> tuple[Calibration, dict[str, MountingFit]]:
     """The T-pose calibration again, with each tracker's mounting translation found from
     movement taken after it (core.mounting) and the body fitted with those.
 
-    tpose: calibrate_tpose()'s samples; movement: site -> [(seconds, position, orientation)]
-    as the trackers report them (uncalibrated); translations: the configuration's. A tracker
+    tpose, movement: site -> [(seconds, position or None, orientation or None)] as the
+    trackers report them (uncalibrated); translations: the configuration's. A tracker
     with no position or no orientation, or that never turned about its joint, keeps the
     configuration's translation."""
-    first = calibrate_tpose(tpose, floor, translations)
+    first = calibrate_tpose(untimed(tpose), floor, translations)
     fits = {}
     for site, samples in movement.items():
         if site not in first.offsets or site not in translations:
@@ -267,6 +275,6 @@ def calibrate_mounting(
             "no tracker turned about its joint during the movement: turn the head, circle the wrists "
             "and the ankles and roll the hips, one at a time, the rest of the body still"
         )
-    calibration = calibrate_tpose(tpose, floor, {**translations, **found})
+    calibration = calibrate_tpose(untimed(tpose), floor, {**translations, **found})
     calibration.translations = found
     return calibration, fits

@@ -26,7 +26,7 @@ from dataclasses import asdict, dataclass, replace
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from ..core.calibration import Calibration, calibrate_mounting, calibrate_tpose
+from ..core.calibration import Calibration, calibrate_mounting, calibrate_tpose, untimed
 from ..core.sensors import SensorConfig
 from ..core.skeleton import NUM_JOINTS, PARENTS, Skeleton
 from ..core.types import TrackerStream
@@ -252,15 +252,14 @@ def _translations(sensors: SensorConfig) -> dict[str, np.ndarray]:
     return {s.site: np.array(s.offset_translation) for s in sensors.sites}
 
 
-def calibrate_from_tpose(stream: TrackerStream, sensors: SensorConfig) -> Calibration:
-    """The bridge's ~/calibrate on a recorded T-pose."""
-    samples = {site: [(p, q) for _, p, q in v] for site, v in _samples(stream, sensors).items()}
-    return calibrate_tpose(samples, translations=_translations(sensors))
-
-
-def calibrate_from_movement(tpose: TrackerStream, movement: TrackerStream, sensors: SensorConfig) -> Calibration:
-    """The bridge's ~/calibrate, then ~/calibrate_mounting on recorded movement."""
-    samples = {site: [(p, q) for _, p, q in v] for site, v in _samples(tpose, sensors).items()}
+def calibrate_from_tpose(
+    stream: TrackerStream, sensors: SensorConfig, movement: TrackerStream | None = None
+) -> Calibration:
+    """The bridge's ~/calibrate on a recorded T-pose, then, given movement after it,
+    ~/calibrate_mounting."""
+    samples = _samples(stream, sensors)
+    if movement is None:
+        return calibrate_tpose(untimed(samples), translations=_translations(sensors))
     return calibrate_mounting(samples, _samples(movement, sensors), _translations(sensors))[0]
 
 
@@ -287,14 +286,14 @@ def user_view(motion: Motion, sensors: SensorConfig, protocol: Protocol = FIELD,
     worn = mounted_as_worn(sensors, protocol, rng)
     # the T-pose is taken standing in full view of the base stations: no foot occluded
     visible = replace(protocol.noise, occlusion_probability=0.0, loss_probability=0.0)
-    if protocol.calibrate_mounting:
-        standing = tpose_motion(motion, protocol, rng)
-        tpose = synthesize_trackers(standing, worn, visible, seed + 1)
-        movement = synthesize_trackers(mounting_motion(standing, rng), worn, visible, seed + 2)
-        calibration = calibrate_from_movement(tpose, movement, sensors)
-    else:
-        tpose = synthesize_trackers(tpose_motion(motion, protocol, rng), worn, visible, seed + 1)
-        calibration = calibrate_from_tpose(tpose, sensors)
+    standing = tpose_motion(motion, protocol, rng)
+    tpose = synthesize_trackers(standing, worn, visible, seed + 1)
+    movement = (
+        synthesize_trackers(mounting_motion(standing, rng), worn, visible, seed + 2)
+        if protocol.calibrate_mounting
+        else None
+    )
+    calibration = calibrate_from_tpose(tpose, sensors, movement)
     stream = calibrated_stream(synthesize_trackers(motion, worn, protocol.noise, seed), calibration, sensors)
     # the calibration has absorbed the mounting rotations: the user's configuration keeps
     # only the nominal translations

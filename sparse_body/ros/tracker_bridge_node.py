@@ -45,7 +45,7 @@ from rclpy.service import Service
 from rclpy.timer import Timer
 
 from ..adapters.vmc import DEFAULT_PORT
-from ..core.calibration import Calibration, CalibrationError, calibrate_mounting, calibrate_tpose
+from ..core.calibration import Calibration, CalibrationError, calibrate_mounting, calibrate_tpose, untimed
 from ..core.sensors import SensorConfig, SensorConfigError, load_sensor_config
 from ..io.bagio import BagError
 from .messages import to_time
@@ -279,10 +279,9 @@ class TrackerBridge(LifecycleNode):
         prepared = self._prepare(request, response, 1.0)
         if prepared is None:
             return response
-        collected = self._gather(prepared[0])
-        tpose = {site: [(p, q) for _, p, q in v] for site, v in collected.items()}
+        tpose = self._gather(prepared[0])
         try:
-            calibration = calibrate_tpose(tpose, translations=self._nominal)
+            calibration = calibrate_tpose(untimed(tpose), translations=self._nominal)
         except CalibrationError as err:
             return self._refuse(response, str(err), "calibration failed: ")
         self._tpose = tpose

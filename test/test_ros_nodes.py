@@ -152,8 +152,16 @@ def test_replayed_bag_gives_one_valid_estimate_per_tracker_frame_with_small_end_
     played = [m for m in during_playback(listener, "joint_states") if stamp_key(m.header.stamp) not in no_input]
     keys = [stamp_key(m.header.stamp) for m in played]
     tracker = set(listener.tracker_stamps)
-    # (a float round trip inside the node may move a stamp across a 10 us rounding edge)
-    assert all({k - 1, k, k + 1} & tracker for k in keys), [k for k in keys if not {k - 1, k, k + 1} & tracker]
+    # Every valid estimate is of a tracker frame. (A pose held while a filter lag fills, after
+    # the start or a restart, is stamped its frame's stamp less the lag: with the bag restamped
+    # at playback, not a tracker stamp. A float round trip inside the node may move a stamp
+    # across a 10 us rounding edge.)
+    valid = {stamp_key(s.header.stamp) for s in listener.received["estimate_status"] if s.valid}
+    estimated = [k for k in keys if k in valid]
+    assert len(estimated) >= 0.9 * len(keys)
+    assert all({k - 1, k, k + 1} & tracker for k in estimated), [
+        k for k in estimated if not {k - 1, k, k + 1} & tracker
+    ]
     assert len(keys) == len(set(keys))
     statuses = during_playback(listener, "estimate_status")
     assert sum(s.valid for s in statuses) >= 0.95 * len(statuses), {s.message for s in statuses if not s.valid}

@@ -51,18 +51,19 @@ def cmd_eval(args) -> int:
         for name in args.estimator:
             compare = METHODS[name].compare_with if name in METHODS else ()
             specs += [s for s in compare if s not in specs]
-            reference.update(paper_figures(name, sensors.name, args.faulty, args.occlusion))
-    protocol = Protocol.named(
-        args.skeleton,
-        args.noise,
-        args.faulty,
-        args.mounting_error,
-        args.occlusion,
-        args.hand_loss,
-        args.hand_loss_mode,
-        args.jumps,
-        args.yaw_drift,
-        args.calibrate_mounting,
+            reference.update(paper_figures(name, sensors.name, args.faulty or 0.0, args.occlusion or 0.0))
+    protocol = Protocol.preset(
+        args.protocol,
+        skeleton=args.skeleton,
+        noise=args.noise,
+        faulty_percent=args.faulty,
+        mounting_error=args.mounting_error,
+        occluded_percent=args.occlusion,
+        lost_percent=args.hand_loss,
+        loss_mode=args.hand_loss_mode,
+        jumps_per_minute=args.jumps,
+        yaw_drift=args.yaw_drift,
+        calibrate_mounting=args.calibrate_mounting,
     )
     if args.motion:  # the files are found and every AMC paired with its ASF before any work
         from .data.motion_inputs import balanced, find_inputs
@@ -576,8 +577,17 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--split", default="test", choices=["train", "validation", "test"])
     p.add_argument("--fps", type=_fps, default=60.0, help="frame rate the clips are resampled to")
     p.add_argument(
+        "--protocol",
+        default="field",
+        choices=["field", "field-exact", "lab"],
+        help="what the estimators are given (each value below overrides the protocol's own): field, a "
+        "user's session (calibrated body, VR noise, trackers worn 1.5 cm off and found by the mounting "
+        "calibration, hands lost 3 %%, a Lighthouse jump a minute, IMU heading drift up to 2 deg/min); "
+        "field-exact, the same with exact mounting and no failures (docs tables measured before "
+        "2026-12); lab, the true skeleton without noise (the papers')",
+    )
+    p.add_argument(
         "--skeleton",
-        default="calibrated",
         choices=["calibrated", "height", "oracle"],
         help="the body the estimator gets: fitted by a T-pose calibration (trackers mounted as a user "
         "wears them), the canonical body at the calibrated height, or the subject's true skeleton "
@@ -585,29 +595,27 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.add_argument(
         "--noise",
-        default="vr",
         choices=["vr", "lobstr", "none"],
         help="tracker noise: a VR system's (1 mm, 0.5 deg on average), LoBSTr's (1 cm, 1.5 deg) or none",
     )
     p.add_argument(
         "--mounting-error",
         type=_between(0.0, 0.5, "metres"),
-        default=0.0,
         metavar="METRES",
         help="an error in each tracker's mounting translation, unknown to the user (std per axis, per "
-        "clip; not with --skeleton oracle); the T-pose does not find it, --calibrate-mounting does",
+        "clip; not with --skeleton oracle; field: 0.015); the T-pose does not find it, "
+        "--calibrate-mounting does",
     )
     p.add_argument(
         "--calibrate-mounting",
-        action="store_true",
+        action=argparse.BooleanOptionalAction,
         help="after the T-pose, the person turns the head, circles the wrists and ankles and rolls the "
         "hips for 15 s, and the calibration finds each tracker's mounting translation from it, as the "
-        "tracker bridge's ~/calibrate_mounting does (not with --skeleton oracle)",
+        "tracker bridge's ~/calibrate_mounting does (not with --skeleton oracle; field: on)",
     )
     p.add_argument(
         "--faulty",
         type=_percent,
-        default=0.0,
         metavar="PERCENT",
         help="DragPoser's faulty sensors: each frame, with this probability (%%), one tracker "
         "disconnects for 100 frames",
@@ -615,7 +623,6 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument(
         "--occlusion",
         type=_percent,
-        default=0.0,
         metavar="PERCENT",
         help="DTP's foot occlusion: in about this share (%%) of the frames one or both foot trackers "
         "lose sight for half a second and report the origin with the identity rotation or noise "
@@ -624,32 +631,28 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument(
         "--hand-loss",
         type=_percent,
-        default=0.0,
         metavar="PERCENT",
         help="a headset losing its controllers: each hand out of view in about this share (%%) of the "
-        "frames, 0.2-2 s at a time; adds the hands' error while lost and their recovery jump",
+        "frames, 0.2-2 s at a time (field: 3); adds the hands' error while lost and their recovery jump",
     )
     p.add_argument(
         "--hand-loss-mode",
         choices=("lost", "frozen"),
-        default="lost",
-        help="how a lost hand is reported: no sample (lost) or its last sample repeated (frozen)",
+        help="how a lost hand is reported: no sample (lost, the default) or its last sample repeated (frozen)",
     )
     p.add_argument(
         "--jumps",
         type=_jumps_per_minute,
-        default=0.0,
         metavar="PER_MINUTE",
         help="Lighthouse reflections: about this many times a minute each tracked position jumps "
-        "2-8 cm in a random direction for 2-8 frames",
+        "2-8 cm in a random direction for 2-8 frames (field: 1)",
     )
     p.add_argument(
         "--yaw-drift",
         type=_degrees_per_minute,
-        default=0.0,
         metavar="DEG_PER_MINUTE",
         help="IMUs without a magnetometer: each orientation-only sensor's heading drifts at a steady "
-        "rate drawn per clip up to this (degrees a minute)",
+        "rate drawn per clip up to this (degrees a minute; field: 2)",
     )
     p.add_argument(
         "--limit",

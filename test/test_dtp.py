@@ -14,7 +14,7 @@ from sparse_body.core.resources import models_dir
 from sparse_body.core.rotations import yaw_matrix
 from sparse_body.core.sensors import load_sensor_config
 from sparse_body.data.catalog import load_clip
-from sparse_body.data.field_protocol import FIELD, Protocol, user_view
+from sparse_body.data.field_protocol import FIELD_EXACT, Protocol, user_view
 from sparse_body.data.virtual_trackers import NO_NOISE, VR_NOISE, synthesize_trackers
 from sparse_body.estimators import create_estimator
 from sparse_body.methods.dtp.features import INPUT_JOINTS, leaf_features, window_features
@@ -204,7 +204,7 @@ def test_occlusion_protocol_occludes_the_share_asked_one_or_both_feet_both_ways(
     occluded = Protocol.named(occluded_percent=20)
     assert "feet occluded in 20 % of frames" in occluded.label
     assert user_view(motion, SIX, occluded, seed=4).skeleton.offsets == pytest.approx(
-        user_view(motion, SIX, FIELD, seed=4).skeleton.offsets
+        user_view(motion, SIX, FIELD_EXACT, seed=4).skeleton.offsets
     )
     with pytest.raises(ValueError, match="occluded share"):
         VR_NOISE.occluding(100)

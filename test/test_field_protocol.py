@@ -15,7 +15,7 @@ from sparse_body.core.skeleton import JOINT_INDEX as J
 from sparse_body.core.skeleton import Skeleton
 from sparse_body.core.tracker_filter import NO_FILTER, FilterConfig, TrackerFilter
 from sparse_body.core.types import TrackerFrame
-from sparse_body.data.field_protocol import FIELD, LAB, Protocol, user_view
+from sparse_body.data.field_protocol import FIELD, FIELD_EXACT, LAB, Protocol, user_view
 from sparse_body.data.synthetic import synthetic_walk
 from sparse_body.data.virtual_trackers import LOBSTR_NOISE, NO_NOISE
 
@@ -183,10 +183,33 @@ def test_lab_protocol_is_the_true_skeleton_and_exact_mounting():
     field = user_view(motion, config, FIELD)
     assert field.calibration is not None and not np.allclose(field.skeleton.offsets, motion.skeleton.offsets)
     assert all(s.offset_rotation == (0.0, 0.0, 0.0, 1.0) for s in field.sensors.sites)  # calibrated away
-    assert Protocol.named("oracle", "none") == LAB and Protocol.named() == FIELD
-    assert FIELD.label == "field, vr noise" and LAB.label == "lab"
+    assert Protocol.named("oracle", "none") == LAB and Protocol.named() == FIELD_EXACT
+    assert FIELD_EXACT.label == "field, vr noise" and LAB.label == "lab"
     with pytest.raises(ValueError, match="noise must be one of"):
         Protocol.named(noise="loud")
+
+
+def test_the_field_preset_is_a_users_session_with_failures_and_worn_mounting_and_each_value_can_be_overridden():
+    assert FIELD.skeleton == "calibrated" and FIELD.mounting_translation_std == 0.015 and FIELD.calibrate_mounting
+    assert FIELD.noise.loss_probability > 0 and FIELD.noise.jump_probability > 0 and FIELD.noise.yaw_drift == 2.0
+    assert FIELD.noise.lost_percent == pytest.approx(3.0)
+    assert FIELD.label == (
+        "field, vr noise, hands lost in 3 % of frames, 1 position jumps a minute, IMU heading drift up to "
+        "2 deg/min, 15 mm mounting error, mounting calibrated from movement"
+    )
+    # each flag overrides its own value only; None keeps the preset's
+    quiet = Protocol.preset("field", lost_percent=0.0, jumps_per_minute=None)
+    assert quiet.noise.loss_probability == 0 and quiet.noise.jump_probability == FIELD.noise.jump_probability
+    assert Protocol.preset("field", lost_percent=0, jumps_per_minute=0, yaw_drift=0, mounting_error=0,
+                           calibrate_mounting=False) == FIELD_EXACT  # fmt: skip
+    # an oracle skeleton asked of the field comes with the true mounting (named() refuses a mounting error there)
+    oracle = Protocol.preset("field", skeleton="oracle", noise="none")
+    assert oracle.mounting_translation_std == 0 and not oracle.calibrate_mounting and oracle.noise.loss_probability > 0
+    with pytest.raises(ValueError, match="an oracle skeleton comes with the true mounting"):
+        Protocol.preset("field", skeleton="oracle", mounting_error=0.01)
+    with pytest.raises(ValueError, match="protocol must be one of field, field-exact, lab"):
+        Protocol.preset("kind")
+    assert Protocol.preset("lab") == LAB and Protocol.preset("field-exact") == FIELD_EXACT
 
 
 def test_six_point_ik_in_the_field_keeps_its_end_effectors_on_the_trackers():
@@ -225,17 +248,18 @@ def test_eval_command_runs_the_field_protocol_by_default_and_the_lab_on_request(
     ]
     field = subprocess.run(common + ["--output", str(tmp_path / "f.json")], capture_output=True, text=True, timeout=600)
     lab = subprocess.run(
-        common + ["--skeleton", "oracle", "--noise", "none", "--output", str(tmp_path / "l.json")],
+        common + ["--protocol", "lab", "--output", str(tmp_path / "l.json")],
         capture_output=True,
         text=True,
         timeout=600,
     )
     assert field.returncode == 0 and lab.returncode == 0, field.stderr + lab.stderr
-    assert "field, vr noise protocol" in field.stdout and "lab protocol" in lab.stdout
+    assert f"{FIELD.label} protocol" in field.stdout and "lab protocol" in lab.stdout
     import json
 
     field, lab = (json.loads((tmp_path / n).read_text())[0] for n in ("f.json", "l.json"))
-    assert field["protocol"] == "field, vr noise" and lab["protocol"] == "lab"
+    assert field["protocol"] == FIELD.label and lab["protocol"] == "lab"
+    assert Protocol.from_json(field["protocol_spec"]) == FIELD
     assert field["summary"]["MPJPE [cm]"] > lab["summary"]["MPJPE [cm]"]
     assert lab["summary"]["End-effector PE [cm]"] < 0.2
 

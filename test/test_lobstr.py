@@ -167,7 +167,9 @@ def test_estimator_gives_one_finite_pose_per_frame_and_survives_bad_samples(tiny
     stream = synthesize_trackers(clip, config, TrackerNoise(drop_probability=0.05), seed=3)
     stream.positions[100:110, 1] = np.nan  # a headset reporting NaN
     stream.orientations[200, 0] = [0, 0, 0, 0]  # a degenerate pelvis quaternion
-    est = create_estimator("lobstr", config, clip.skeleton, model_path=str(path))
+    # a missing tracker missing (not carried with the others): its frames have no new pose
+    missing = {"filter_carry_lost": 0.0, "filter_reacquire_speed": 0.0}
+    est = create_estimator("lobstr", config, clip.skeleton, model_path=str(path), **missing)
     poses = est.process(stream)
     assert len(poses) == len(stream)
     assert all(p.is_finite() for p in poses)
@@ -176,6 +178,17 @@ def test_estimator_gives_one_finite_pose_per_frame_and_survives_bad_samples(tiny
     bad[200] = True
     valid = np.array([p.valid for p in poses])
     assert not valid[bad].any() and valid[~bad].all()
+    # by default a missing tracker is carried with the head: frames missing another tracker
+    # have a valid pose, but for some right after the head itself came back (each carried
+    # tracker keeps the anchor it was lost with)
+    carried = create_estimator("lobstr", config, clip.skeleton, model_path=str(path)).process(stream)
+    head = stream.sites.index("head")
+    head_usable = stream.valid[:, head] & np.isfinite(stream.positions[:, head]).all(axis=1)
+    head_usable[200] &= head != 0  # the degenerate quaternion is site 0's
+    valid = np.array([p.valid for p in carried])
+    assert all(p.is_finite() for p in carried)
+    others_lost = bad & head_usable
+    assert valid[others_lost].sum() >= 0.8 * others_lost.sum() > 10, (valid[others_lost].sum(), others_lost.sum())
     # the upper body follows the hands exactly (IK); the legs are the network's
     local = quat_to_matrix(poses[50].local_quats)
     _, pos = forward_kinematics(local, poses[50].root_position, clip.skeleton.offsets)

@@ -10,7 +10,7 @@ from scipy.spatial.transform import Rotation
 from sparse_body.core.calibration import Calibration, CalibrationError, calibrate_mounting
 from sparse_body.core.mounting import MAX_SHIFT, fit_mounting
 from sparse_body.core.sensors import load_sensor_config
-from sparse_body.data.field_protocol import FIELD, Protocol, mounted_as_worn, user_view
+from sparse_body.data.field_protocol import FIELD, FIELD_EXACT, Protocol, mounted_as_worn, user_view
 from sparse_body.data.synthetic import synthetic_walk
 from sparse_body.data.virtual_trackers import NO_NOISE
 
@@ -82,7 +82,7 @@ def test_non_finite_and_denormalised_samples_are_skipped():
     assert empty.windows == 0 and np.array_equal(empty.translation, nominal)
 
 
-def test_the_field_protocol_calibration_finds_each_worn_mounting_and_keeps_the_default_unchanged():
+def test_the_field_protocol_calibration_finds_each_worn_mounting():
     config = load_sensor_config("six_point")
     motion = synthetic_walk()
     worn_protocol = Protocol(mounting_translation_std=0.015, calibrate_mounting=True)
@@ -95,8 +95,9 @@ def test_the_field_protocol_calibration_finds_each_worn_mounting_and_keeps_the_d
             errors.append(np.linalg.norm(view.calibration.translations[site.site] - site.offset_translation))
             before.append(np.linalg.norm(nominal - site.offset_translation))
     assert np.mean(before) > 0.015 and max(errors) < 0.008 and np.mean(errors) < 0.004, (before, errors)
-    # without the movement the calibration finds no translation, and the default protocol is as it was
-    assert user_view(motion, config, FIELD, 0).calibration.translations == {}
+    # without the movement the calibration finds no translation; the field protocol has both
+    assert user_view(motion, config, FIELD_EXACT, 0).calibration.translations == {}
+    assert replace(FIELD, noise=worn_protocol.noise) == worn_protocol
     assert worn_protocol.label == "field, vr noise, 15 mm mounting error, mounting calibrated from movement"
     assert Protocol.from_json(worn_protocol.to_json()) == worn_protocol
     with pytest.raises(ValueError, match="oracle"):

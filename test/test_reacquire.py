@@ -69,6 +69,22 @@ def test_a_frozen_controller_resuming_is_a_leap_and_eased_and_nothing_changes_wh
         np.testing.assert_allclose(p[HAND], expected, atol=1e-12)
 
 
+def test_where_frozen_samples_are_caught_a_leap_is_passed_on_as_given_and_a_return_still_eased():
+    """With frozen_after on, a leap is a tracker going wrong more often than one resuming (an
+    occluded foot at the origin): the method gets the sample itself, as it was trained to."""
+    shown = np.zeros((22, 3))
+    shown[15], shown[21] = [0.0, 0.0, 1.7], [0.2, 0.0, 1.0]
+    treat = Reacquisition(speed=2.0, carry=0.0, leaps=False)
+    for i, x in enumerate([0.2, 0.2, 0.2, 0.5]):
+        t, p, r, k = _frame(i / FPS, np.array([0.0, 0.0, 1.7]), 0.0, np.array([x, 0.0, 1.0]))
+        treat.apply(t, p, r, k, (POSE,), JOINTS, lambda: shown)
+    np.testing.assert_allclose(p[HAND], [0.5, 0.0, 1.0], atol=1e-12)  # the leap as given
+    for i in range(4, 8):  # lost for three frames, then back 30 cm from where it was shown
+        t, p, r, k = _frame(i / FPS, np.array([0.0, 0.0, 1.7]), 0.0, None if i < 7 else np.array([0.5, 0.0, 1.0]))
+        treat.apply(t, p, r, k, (POSE,), JOINTS, lambda: shown)
+    np.testing.assert_allclose(p[HAND], shown[21], atol=1e-12)  # the return starts at the shown hand
+
+
 @pytest.mark.parametrize("mode", ["lost", "frozen"])
 def test_carried_and_eased_hands_never_snap_back_for_any_three_point_method(mode):
     """A walk with hands out of view 20 % of the time, reported lost or frozen: with the
@@ -84,12 +100,16 @@ def test_carried_and_eased_hands_never_snap_back_for_any_three_point_method(mode
     sensors = load_sensor_config("three_point")
     protocol = Protocol.named(lost_percent=20, loss_mode=mode)
     eased = {"filter_reacquire_speed": 1.0, "filter_carry_lost": 2.0, "filter_frozen_after": 0.1}
+    off = {"filter_reacquire_speed": 0.0, "filter_carry_lost": 0.0}
     for name in ("ik", "avatarjlm", "dragposer"):
-        plain = evaluate_motion(motion, name, sensors, protocol)
+        plain = evaluate_motion(motion, name, sensors, protocol, **off)
         treated = evaluate_motion(motion, name, sensors, protocol, **eased)
         assert treated["Recovery jump [cm]"] < 5.0, (name, treated["Recovery jump [cm]"])
         assert treated["Recovery jump [cm]"] < 0.5 * plain["Recovery jump [cm]"]
         assert treated["Lost PE [cm]"] < 10.0  # carried with the body: near the true hand
+        if mode == "lost":  # the defaults carry and ease (a frozen hand is caught only with frozen_after)
+            default = evaluate_motion(motion, name, sensors, protocol)
+            assert default["Recovery jump [cm]"] < 5.0 and default["Lost PE [cm]"] < 10.0, (name, default)
 
 
 def test_a_sample_repeated_bit_for_bit_is_lost_after_frozen_after_and_a_live_one_never():

@@ -72,7 +72,11 @@ def test_the_dragposer_card_renders_its_runtime_choices_from_the_measured_file(t
     table = runtime_choices_table(models_dir() / "dragposer.runtime.json", RUNTIME_COMMAND, RUNTIME_METRICS)
     assert table.count("\n| `dragposer") == len(measured) >= 2
     default = next(r for r in measured if r["estimator"] == "dragposer")
-    assert f"| `dragposer` | {len(default['clips'])} | {default['summary'][RUNTIME_METRICS[0]]:.2f} |" in table
+    assert f"| `dragposer` | {len(default['clips'])} | {default['summary'][RUNTIME_METRICS[0]]:.2f} [" in table
+    # each mean with its clip-bootstrap interval, which holds the mean
+    cell = table.split("\n| `dragposer` | ")[1].split(" | ")[1]
+    low, high = (float(x) for x in cell.split("[")[1].rstrip("]").split(", "))
+    assert low <= default["summary"][RUNTIME_METRICS[0]] <= high and low < high
     assert "validation split" in table
     assert "missing" in runtime_choices_table(tmp_path / "dragposer.runtime.json", RUNTIME_COMMAND, RUNTIME_METRICS)
 
@@ -102,9 +106,13 @@ def test_the_lobstr_card_is_rendered_from_its_measured_file_alone(tmp_path):
     report = json.loads((tmp_path / "lobstr.train.json").read_text())
     text = write_lobstr_card(onnx, report, mocap_root=None, evaluate=False).read_text()
     assert "Skate with contact IK: 5.00 cm/s; without: 10.00 cm/s" in text  # field runs 1 and 2, Skate = 5 x scale
-    assert "| lobstr/four_point | clean | 1.00 | 2.00 | 3.00 | 4.00 |" in text
+    # two equal clips: each interval is the mean itself
+    assert (
+        "| lobstr/four_point | clean | 1.00 [1.00, 1.00] | 2.00 [2.00, 2.00] | 3.00 [3.00, 3.00] | 4.00 [4.00, 4.00] |"
+        in text
+    )
     assert "| | ratio | 3.00x | 3.00x | 3.00x | 3.00x |" in text  # smoothed (scale 3) over clean (1)
-    assert "| ik/four_point | clean | 2.00 | 4.00 | 6.00 | 8.00 |" in text
+    assert "| ik/four_point | clean | 2.00 [2.00, 2.00] | 4.00 [4.00, 4.00] |" in text
     assert "lobstr:learned_upper=false" in text and "(lab)" in text
     assert write_lobstr_card(onnx, report, mocap_root=None, evaluate=False).read_text() == text
 

@@ -25,6 +25,7 @@ from collections.abc import Callable
 import numpy as np
 
 from . import mat3
+from .mat3 import njit
 from .types import TrackerFrame
 
 # A tracked body part moving faster than this between two samples has not moved: its tracking
@@ -36,8 +37,11 @@ class Reacquisition:
     """Per site, in a frame's order: the last usable target, whether it is carried, and the
     offset a returning tracker's target still has."""
 
-    def __init__(self, speed: float, carry: float) -> None:
-        self.speed, self.carry = float(speed), float(carry)
+    def __init__(self, speed: float, carry: float, leaps: bool = True) -> None:
+        # leaps: a leap is a return too (a frozen tracker resuming). Off for a method that
+        # judges leaping samples itself: eased, an occluded foot's report at the origin would
+        # look like a plausible foot, hiding it from the network trained to recognise it (DTP)
+        self.speed, self.carry, self.leaps = float(speed), float(carry), bool(leaps)
         self.reset()
 
     @property
@@ -80,11 +84,22 @@ class Reacquisition:
             self._start(count)
         dt = 0.0 if self._stamp is None else max(0.0, stamp - self._stamp)
         self._stamp = stamp
+        max_step = JUMP_SPEED * dt if self.leaps and dt > 0 else -1.0
+        anchor = _pass_through(
+            positions, rotations, kinds, np.array(position_kinds, dtype=kinds.dtype), max_step,
+            self._last, self._given, self._last_rot, self._last_kind, self._lost_since,
+            self._usable, self._seen, self._offset,
+        )  # fmt: skip
+        if anchor >= -1:  # the common frame: nothing lost, returning or catching up; kept as given
+            self._anchor_last = (anchor, positions[anchor].copy(), rotations[anchor].copy()) if anchor >= 0 else None
+            return
         usable = np.isin(kinds, position_kinds)
+        steps = np.linalg.norm(positions - self._last, axis=-1)
+        leap = self._usable & (steps > max_step) if max_step >= 0 else np.zeros(count, dtype=bool)
+        back = usable & ((self._seen & ~self._usable) | leap)
+        easing = self._offset.any(axis=1)
         raw, raw_rot, raw_kinds = positions.copy(), rotations.copy(), kinds.copy()
-        steps = np.linalg.norm(raw - self._last, axis=-1)
-        back = usable & ((self._seen & ~self._usable) | (self._usable & (dt > 0) & (steps > JUMP_SPEED * dt)))
-        steady = np.flatnonzero(usable & ~back & ~self._offset.any(axis=1))
+        steady = np.flatnonzero(usable & ~back & ~easing)
         anchor = int(steady[0]) if len(steady) else -1  # the body's tracker this frame
         if back.any() and self.speed > 0:
             pose = shown()
@@ -116,7 +131,7 @@ class Reacquisition:
         self._anchor_last = (anchor, raw[anchor].copy(), raw_rot[anchor].copy()) if anchor >= 0 else None
         self._last[usable], self._given[usable] = raw[usable], positions[usable]
         self._last_rot[usable], self._last_kind[usable] = raw_rot[usable], raw_kinds[usable]
-        self._usable, self._seen = usable, self._seen | usable
+        self._usable[:], self._seen[:] = usable, self._seen | usable
 
 
 class FreezeGuard:
@@ -153,3 +168,42 @@ class FreezeGuard:
 def _equal(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """Rows equal bit for bit, a missing (NaN) value equal to a missing one."""
     return ((a == b) | (np.isnan(a) & np.isnan(b))).all(axis=1)
+
+
+# Most frames have every tracker and nothing to ease: checked and kept in one compiled call (in
+# numpy, the checks alone were a quarter of an IK step).
+@njit
+def _pass_through(
+    positions, rotations, kinds, position_kinds, max_step, last, given, last_rot, last_kind, lost_since, usable, seen,
+    offset,
+):  # fmt: skip
+    """When no site is lost, returning (after a loss, or leaping further than max_step; < 0:
+    no leaps) or catching up, keep the frame's usable targets and return the index of the
+    first (the body's tracker; -1 if none); else change nothing and return -2."""
+    n = positions.shape[0]
+    given_now = np.zeros(n, dtype=np.bool_)
+    for s in range(n):
+        for kind in position_kinds:
+            if kinds[s] == kind:
+                given_now[s] = True
+        if offset[s, 0] != 0.0 or offset[s, 1] != 0.0 or offset[s, 2] != 0.0:
+            return -2
+        if seen[s] and not (given_now[s] and usable[s]):
+            return -2  # lost now, or back after a loss
+        if given_now[s] and usable[s] and max_step >= 0.0:
+            d = positions[s] - last[s]
+            if np.sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]) > max_step:
+                return -2
+    anchor = -1
+    for s in range(n):
+        if given_now[s]:
+            if anchor < 0:
+                anchor = s
+            last[s] = positions[s]
+            given[s] = positions[s]
+            last_rot[s] = rotations[s]
+            last_kind[s] = kinds[s]
+            lost_since[s] = np.nan
+        usable[s] = given_now[s]
+        seen[s] = seen[s] or given_now[s]
+    return anchor

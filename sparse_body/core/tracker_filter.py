@@ -55,13 +55,18 @@ class FilterConfig:
     # newest, smoothed by the frames after it; 0: none (the filter alone, no added latency)
     lag: float = 0.0
     # a tracker that comes back (lost, or leaping) starts where the estimate had its joint and
-    # catches up at this speed, m/s (core/reacquire.py); 0: at once (the target snaps back)
-    reacquire_speed: float = 0.0
+    # catches up at this speed, m/s (core/reacquire.py); 0: at once (the target snaps back).
+    # 2 m/s: of 0.5, 1 and 2, the lowest MPJPE and the shortest settle for every method, with
+    # hands lost (validation, docs/methods.md#lost-trackers)
+    reacquire_speed: float = 2.0
     # a lost tracker's target is carried with the head (its position and heading) for up to this
-    # many seconds, so every method keeps estimating (core/reacquire.py); 0: it is missing
-    carry_lost: float = 0.0
+    # many seconds, so every method keeps estimating (core/reacquire.py); 0: it is missing.
+    # 2 s: a controller out of the cameras' view is back within that
+    carry_lost: float = 2.0
     # a tracker whose sample repeats bit for bit this many seconds is lost, not still (a runtime
-    # that freezes a controller it lost; core/reacquire.py); 0: a repeated sample is believed
+    # that freezes a controller it lost; core/reacquire.py); 0: a repeated sample is believed.
+    # Off by default: a still IMU whose output is quantised repeats its sample, and would be
+    # carried with the head as it turns
     frozen_after: float = 0.0
 
     def __post_init__(self) -> None:
@@ -78,7 +83,8 @@ class FilterConfig:
         return self.position_noise > 0 or self.rotation_noise > 0
 
 
-NO_FILTER = FilterConfig(position_noise=0.0, rotation_noise=0.0)
+# filter=false: the samples as they come, none carried or eased either
+NO_FILTER = FilterConfig(position_noise=0.0, rotation_noise=0.0, reacquire_speed=0.0, carry_lost=0.0)
 PREFIX = "filter_"  # how estimator options and node parameters name the fields
 
 

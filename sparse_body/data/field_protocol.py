@@ -3,13 +3,13 @@
 A user's estimator never sees the true skeleton or clean, perfectly mounted trackers. The
 field protocol gives it only what a user has:
 - trackers strapped on and held a little differently each session: each site's mounting
-  rotation turned by up to 20 degrees (the T-pose calibration has to find it). Mounting
-  translations are the sensor configuration's (the device geometry the user gives); an
-  error in them shows in every joint a tracker places, and can be added with
-  mounting_translation_std to measure what it costs;
+  rotation turned by up to 20 degrees (the T-pose calibration has to find it) and its
+  translation off from the sensor configuration's (the device geometry the user gives) by
+  mounting_translation_std per axis;
 - tracker noise of a VR system (Lighthouse / headset grade unless told otherwise);
-- feet trackers occluded in a share of the frames when asked (DTP's occlusion model; not by
-  default), and hands out of view of a headset's cameras, lost or frozen (not by default);
+- tracker failures: hands out of view of a headset's cameras, lost or frozen; Lighthouse
+  reflections that make a position jump; IMU heading drift; and, when asked, feet trackers
+  occluded in a share of the frames (DTP's occlusion model);
 - the body the T-pose calibration fits: the person first stands in a T-pose (synthesized
   in their own body, held a second, never quite exact), then moves as in the clip;
 - with calibrate_mounting, between the two the person turns the head, circles the wrists
@@ -17,6 +17,12 @@ field protocol gives it only what a user has:
   tracker's mounting translation from it (core.mounting), as the bridge's
   ~/calibrate_mounting does.
 The lab protocol is the one the papers report: the true skeleton, exact mounting, no noise.
+
+PRESETS names them (`sparse-body eval --protocol NAME`, each of its values overridden by its
+own flag): `field`, the default, a user's session with every failure at a realistic rate and
+the mounting found by the movement calibration; `field-exact`, the field before those (exact
+mounting translations, no failures: what docs tables measured before 2026-12 say they used);
+and `lab`.
 """
 
 from __future__ import annotations
@@ -31,7 +37,7 @@ from ..core.sensors import SensorConfig
 from ..core.skeleton import NUM_JOINTS, PARENTS, Skeleton
 from ..core.types import TrackerStream
 from .motion import Motion
-from .virtual_trackers import NO_NOISE, NOISE_MODELS, VR_NOISE, TrackerNoise, synthesize_trackers
+from .virtual_trackers import NOISE_MODELS, VR_NOISE, TrackerNoise, synthesize_trackers
 
 SKELETONS = ("calibrated", "height", "oracle")
 
@@ -79,7 +85,7 @@ class Protocol:
             faults += f", IMU heading drift up to {self.noise.yaw_drift:g} deg/min"
         name = (
             "field"
-            if replace(self, noise=VR_NOISE, mounting_translation_std=0.0, calibrate_mounting=False) == FIELD
+            if replace(self, noise=VR_NOISE, mounting_translation_std=0.0, calibrate_mounting=False) == FIELD_EXACT
             else f"{self.skeleton} skeleton"
         )
         mounting = (
@@ -127,6 +133,21 @@ class Protocol:
             return cls("oracle", model, 0.0, 0.0, 0.0)
         return cls(skeleton, model, mounting_translation_std=mounting_error, calibrate_mounting=calibrate_mounting)
 
+    @classmethod
+    def preset(cls, name: str, **overrides) -> Protocol:
+        """PRESETS[name] with some of its values replaced (Protocol.named's arguments; None:
+        the preset's). An oracle skeleton asked of the field comes with the true mounting, as
+        named() requires, unless a mounting is asked for too."""
+        if name not in PRESETS:
+            raise ValueError(f"the protocol must be one of {', '.join(PRESETS)}, got {name!r}")
+        given = {k: v for k, v in overrides.items() if v is not None}
+        values = {**PRESETS[name], **given}
+        if values.get("skeleton") == "oracle":
+            for key in ("mounting_error", "calibrate_mounting"):
+                if key not in given:
+                    values.pop(key, None)
+        return cls.named(**values)
+
     def to_json(self) -> dict:
         """Every field, so that a results file says exactly what its estimators were given."""
         return asdict(self)
@@ -137,8 +158,34 @@ class Protocol:
         return cls(**{**data, "noise": TrackerNoise(**noise)})
 
 
-FIELD = Protocol()
-LAB = Protocol("oracle", NO_NOISE, 0.0, 0.0, 0.0)
+# Presets as data: Protocol.named()'s arguments, one knob a line.
+PRESETS: dict[str, dict] = {
+    "field": {  # a user's session, the default of `eval` and of the cards' field tables
+        "skeleton": "calibrated",  # the body the T-pose calibration fits
+        "noise": "vr",  # a VR system's: 1 mm, 0.5 degrees on average
+        # a headset sits 1-2 cm differently on each head, a grip shifts on a controller, a strap
+        # on a belt or a shoe moves a few cm: 1.5 cm per axis (2.4 cm in 3D on average) ...
+        "mounting_error": 0.015,
+        "calibrate_mounting": True,  # ... which the movement after the T-pose finds
+        # each controller out of the headset's cameras' view (behind the back, close to the
+        # body) in 3 % of the frames, 0.2-2 s at a time, reported lost
+        "lost_percent": 3.0,
+        "jumps_per_minute": 1.0,  # a Lighthouse reflection about once a minute on each tracker
+        "yaw_drift": 2.0,  # a 6-axis IMU's heading after its gyro bias calibration: up to 2 deg/min
+    },
+    "field-exact": {  # the field before failures: exact mounting translations, no failures
+        "skeleton": "calibrated",
+        "noise": "vr",
+    },
+    "lab": {  # what the papers report: the true skeleton, exact mounting, no noise
+        "skeleton": "oracle",
+        "noise": "none",
+    },
+}
+
+FIELD = Protocol.preset("field")
+FIELD_EXACT = Protocol.preset("field-exact")
+LAB = Protocol.preset("lab")
 
 
 @dataclass

@@ -8,6 +8,8 @@ from pathlib import Path
 
 from ...data.catalog import load_split
 from ...train.model_card import (
+    FIELD_PROTOCOL,
+    LOSS_COLUMNS,
     augmentation_table,
     evaluate_jobs,
     measured_results,
@@ -23,6 +25,7 @@ COLUMNS = (
     "Hand PE [cm]",
     "Lower PE [cm]",
     "Toe PE [cm]",
+    *LOSS_COLUMNS,
 )
 VALIDATION = {
     "mpjpe_cm": "val MPJPE [cm]",
@@ -66,10 +69,10 @@ def _model_options(spec: str, sensors: str, onnx_path: Path) -> dict:
 def evaluate_avatarjlm(onnx_path: Path, mocap_root: Path, limit: int | None = None, workers: int = 2) -> Path:
     """Run the card's evaluations two processes at a time and write <model>.eval.json:
     {"sensors/protocol": [sparse-body eval JSON of each run]}."""
-    from ...data.field_protocol import LAB, Protocol
+    from ...data.field_protocol import FIELD, LAB
 
     onnx_path = Path(onnx_path)
-    protocols = {"field": Protocol.named(), "lab": LAB}
+    protocols = {"field": FIELD, "lab": LAB}
     jobs = [
         (
             f"{sensors}/{protocol}",
@@ -193,12 +196,11 @@ before the leg term.
 
 ## Test split, three-point (`sparse-body eval --estimator avatarjlm --sensors three_point`)
 
-Field protocol (the default: the body from a T-pose calibration, trackers mounted as a user
-wears them, a VR system's noise):
+{FIELD_PROTOCOL}:
 
 {table("three_point/field")}
 
-Lab protocol (`--skeleton oracle --noise none`, the papers' setting; the AvatarJLM paper reports
+Lab protocol (`--protocol lab`, the papers' setting; the AvatarJLM paper reports
 3.35 cm MPJPE, 2.90 deg MPJRE (axis-angle components: a third of our geodesic MPJRE for one-axis turns, docs/reference.md), 20.79 cm/s MPJVE on AMASS Protocol 1, trained on 90 % of CMU,
 BMLrub and HDM05, and 7.75 cm on CMU when trained on the other datasets, Protocol 2: a guide,
 not a like-for-like comparison):
@@ -207,7 +209,7 @@ not a like-for-like comparison):
 
 ## Test split, four-point (`--sensors four_point`: the pelvis tracker too)
 
-Field protocol (`avatarjlm:model=three_point` is the three-point model given the same
+Field protocol, as above (`avatarjlm:model=three_point` is the three-point model given the same
 trackers: what the pelvis input adds):
 
 {table("four_point/field")}

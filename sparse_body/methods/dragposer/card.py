@@ -9,7 +9,15 @@ import json
 from pathlib import Path
 
 from ...data.catalog import load_split
-from ...train.model_card import augmentation_table, measure_card, measured_results, noise_jobs, noise_table
+from ...train.model_card import (
+    FIELD_PROTOCOL,
+    NOISE_HEADING,
+    augmentation_table,
+    measure_card,
+    measured_results,
+    noise_jobs,
+    noise_table,
+)
 from ...train.model_card import runtime_choices_table as choices_table
 
 RUNTIME_METRICS = ("MPJPE [cm]", "MPJVE [cm/s]", "Jitter [100m/s3]", "Toe PE [cm]")
@@ -60,7 +68,7 @@ def evaluate_dragposer(onnx_path: Path, mocap_root: Path, limit: int | None = No
     dragposer.eval.json beside onnx_path (the models' folder): {setup: [sparse-body eval JSON
     of each run]} for the setups (field protocol, the lab's beside it), "refined" ([base,
     refined base, ...] on four-point) and "noise" ({sensors: noise_jobs()' setups})."""
-    from ...data.field_protocol import Protocol
+    from ...data.field_protocol import FIELD, Protocol
 
     out_dir = Path(onnx_path).parent
     mine = {"model_dir": str(out_dir.resolve())}
@@ -68,7 +76,9 @@ def evaluate_dragposer(onnx_path: Path, mocap_root: Path, limit: int | None = No
     for setup in DRAGPOSER_SETUPS:
         sensors_name, faulty = setup
         key = setup_key(sensors_name, faulty)
-        field, lab = Protocol.named("calibrated", "vr", faulty), Protocol.named("oracle", "none", faulty)
+        # the paper's faulty sensors on the field without other failures: its protocol, compared with its figures
+        field = Protocol.named("calibrated", "vr", faulty) if faulty else FIELD
+        lab = Protocol.named("oracle", "none", faulty)
         specs = ["dragposer"] + (["dragposer:temporal_weight=0"] if setup in ABLATION_SETUPS else [])
         jobs += [(key, spec, sensors_name, field, mocap_root, limit, mine) for spec in specs]
         jobs.append((key, "ik", sensors_name, field, mocap_root, limit, {}))
@@ -76,11 +86,10 @@ def evaluate_dragposer(onnx_path: Path, mocap_root: Path, limit: int | None = No
             (key, "dragposer", sensors_name, lab, mocap_root, limit, mine),
             (key, "ik", sensors_name, lab, mocap_root, limit, {}),
         ]
-    field = Protocol.named()
     for base in REFINED_BASES:  # the refinement's other estimators come from the package (lobstr.onnx)
         jobs += [
-            ("refined", base, "four_point", field, mocap_root, limit, {}),
-            ("refined", f"refined:base={base}", "four_point", field, mocap_root, limit, mine),
+            ("refined", base, "four_point", FIELD, mocap_root, limit, {}),
+            ("refined", f"refined:base={base}", "four_point", FIELD, mocap_root, limit, mine),
         ]
     noise = {name: noise_jobs([("dragposer", mine), ("ik", {})], name, mocap_root, limit) for name in NOISE_SENSORS}
     return measure_card(out_dir / "dragposer.eval.json", jobs, noise, workers)
@@ -276,7 +285,7 @@ weight 0.0002, feet above the floor; then the closed-form IK (core/body_ik.py) p
 pelvis and end effectors on their trackers. `dragposer:temporal_weight=0` is the paper's "no temporal
 predictor" ablation (only the previous latent's pull).
 
-Runtime choices, measured on the validation people (field protocol, four-point; the default is `dragposer`; `prior_weight=0` drops the previous latent's pull, `temporal_ramp=false` holds
+Runtime choices, measured on the validation people (field-exact protocol, four-point; the default is `dragposer`; `prior_weight=0` drops the previous latent's pull, `temporal_ramp=false` holds
 each prediction for the 4 frames instead of ramping to it):
 
 {runtime_table}
@@ -319,14 +328,14 @@ afresh differed from the same clip read back from the parse cache (float32 quate
 about 1e-7, and the optimiser's accept/refuse decisions grow that into such changes; clips now
 load exactly as the cache holds them, and repeated runs give identical figures.
 
-Each setup under the field protocol (the default: the body from a T-pose calibration, trackers
-mounted as a user wears them, a VR system's noise; see the README), and the lab protocol the
-papers use beside it (`--skeleton oracle --noise none`).
+Each setup under the {FIELD_PROTOCOL[0].lower() + FIELD_PROTOCOL[1:]}, and the lab protocol the
+papers use beside it (`--protocol lab`); with faulty sensors, the paper's faults alone on the
+field-exact protocol (`--protocol field-exact --faulty 1`).
 
 {chr(10).join(text_tables)}
 The paper's figures come from its own data and protocol (a guide, not a like-for-like comparison).
 
-## Tracker noise (field protocol, `--noise none` against `--noise lobstr`)
+{NOISE_HEADING}
 
 LoBSTr's noise (1 cm, 1.5 degrees) with the input filter set for it, and smoothed over the
 whole clip as `sparse-body process --smooth` does (`E:smooth=true`), against clean trackers (no

@@ -8,6 +8,7 @@ from pathlib import Path
 
 from ...data.catalog import load_split
 from ...train.model_card import (
+    FIELD_PROTOCOL,
     augmentation_table,
     evaluate_jobs,
     measured_results,
@@ -53,10 +54,12 @@ def _model_options(spec: str, onnx_path: Path) -> dict:
 def evaluate_dtp(onnx_path: Path, mocap_root: Path, limit: int | None = None, workers: int = 2) -> Path:
     """Run the card's evaluations (six-point, test split) two processes at a time and write
     them to <model>.eval.json: {setup: [sparse-body eval JSON of each run]}."""
-    from ...data.field_protocol import LAB, Protocol
+    from ...data.field_protocol import FIELD, LAB, Protocol
 
     onnx_path = Path(onnx_path)
-    protocols = {"field": Protocol.named(), "lab": LAB, "occluded": Protocol.named(occluded_percent=OCCLUSION_PERCENT)}
+    # the paper's occlusion on the field without other failures: DTP's protocol, compared with its figures
+    occluded = Protocol.named(occluded_percent=OCCLUSION_PERCENT)
+    protocols = {"field": FIELD, "lab": LAB, "occluded": occluded}
     jobs = [
         (setup, spec, "six_point", protocols[setup], mocap_root, limit, _model_options(spec, onnx_path))
         for setup, specs in SETUPS.items()
@@ -152,19 +155,18 @@ together), so they show the early effect; read small differences with care.
 
 ## Test split, six-point (`sparse-body eval --estimator dtp --sensors six_point`)
 
-Field protocol (the default: the body from a T-pose calibration, trackers mounted as a user
-wears them, a VR system's noise):
+{FIELD_PROTOCOL}:
 
 {results_table(measured["field"])}
 
 `dtp:polish=false` is the paper's method as it is (the network's rotations, no IK after it).
-Lab protocol (`--skeleton oracle --noise none`, the papers' setting; the DTP paper reports
+Lab protocol (`--protocol lab`, the papers' setting; the DTP paper reports
 1.04 cm position error with the root aligned, 4.22 deg global rotation error, jitter 2.31
 (100 m/s^3) on TotalCapture, trained on most of AMASS: a guide, not a like-for-like comparison):
 
 {results_table(measured["lab"])}
 
-## Feet occluded (`--occlusion {OCCLUSION_PERCENT:g}`, field protocol)
+## Feet occluded (`--protocol field-exact --occlusion {OCCLUSION_PERCENT:g}`: the paper's occlusion alone)
 
 In about {OCCLUSION_PERCENT:g} % of the frames one or both foot trackers lose sight for half a second and
 report the origin with the identity rotation or noise within a leg's length (both ways, equal

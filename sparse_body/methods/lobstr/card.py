@@ -8,6 +8,8 @@ from pathlib import Path
 
 from ...data.catalog import load_split
 from ...train.model_card import (
+    FIELD_PROTOCOL,
+    NOISE_HEADING,
     augmentation_table,
     measure_card,
     measured_results,
@@ -123,9 +125,8 @@ Validation (exported weights): contact {val["contact_accuracy_pct"]:.1f} %, leg 
 
 ## Test split (`sparse-body eval --estimator lobstr --sensors four_point`)
 
-Field protocol (the default: the body from a T-pose calibration, trackers mounted as a user
-wears them, a VR system's noise; see the README) and, beside it, the lab protocol the papers
-use (`--skeleton oracle --noise none`: the subject's true skeleton, clean trackers).
+{FIELD_PROTOCOL} and, beside it, the lab protocol the papers use (`--protocol lab`: the
+subject's true skeleton, clean trackers).
 
 ```
 {table}
@@ -137,7 +138,7 @@ Skate with contact IK: {results[0].summary["Skate [cm/s]"]:.2f} cm/s; without: {
 
 {runtime_choices_table(Path(onnx_path).with_name("lobstr.runtime.json"), LOBSTR_RUNTIME_COMMAND, LOBSTR_RUNTIME_METRICS)}
 
-## Tracker noise (field protocol, `--noise none` against `--noise lobstr`)
+{NOISE_HEADING}
 
 LoBSTr's noise (1 cm, 1.5 degrees) with the input filter set for it, and smoothed over the
 whole clip as `sparse-body process --smooth` does (`E:smooth=true`), against clean trackers (no

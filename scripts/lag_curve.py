@@ -99,13 +99,73 @@ def _spec(name: str, lag: int) -> str:
     return name if lag == 0 else f"{name}:filter_lag={lag / FPS:.4f}"
 
 
+def _cell(summary: dict, interval: dict, metric: str, digits: int) -> str:
+    low_high = interval.get(metric)
+    spread = f" [{low_high[0]:.{digits}f}, {low_high[1]:.{digits}f}]" if low_high else ""
+    return f"{summary[metric]:.{digits}f}{spread}"
+
+
+def table(results: list[dict], floor: dict, split: str) -> list[str]:
+    """The Markdown table: each estimator's MPJVE / jitter at each lag with its 95 % interval
+    (clips drawn), and the floor (the tracked points, over all frames: no interval)."""
+    found = {(r["estimator"], r["sensors"], r["noise"]): r for r in results}
+    lines = [
+        f"Validation split ({split}, {results[0]['frames']} frames at {FPS:g} fps; {results[0]['protocol']} "
+        "protocol); MPJVE [cm/s] / jitter [100 m/s^3], each with its 95 % interval, clips drawn; floor: the "
+        "tracked points' own figures at that lag; bar: MPJVE <= 1.5 x floor and jitter <= 2 x clean.",
+        "",
+        "| estimator | noise | clean (no noise) | "
+        + " | ".join(f"lag {1000 * k / FPS:.0f} ms" for k in LAG_FRAMES)
+        + " |",
+        "|---|---|---|" + "---|" * len(LAG_FRAMES),
+    ]
+    for name, sensors in RUNS:
+        clean = found[(name, sensors, "none")]["summary"]
+        for noise in NOISES:
+            cells = []
+            for lag in LAG_FRAMES:
+                run = found[(_spec(name, lag), sensors, noise)]
+                s, f = run["summary"], floor[(sensors, noise)][str(lag)]
+                met = (
+                    s["MPJVE [cm/s]"] <= 1.5 * f["MPJVE [cm/s]"]
+                    and s["Jitter [100m/s3]"] <= 2 * clean["Jitter [100m/s3]"]
+                )
+                interval = run.get("interval_95", {})
+                cells.append(
+                    f"{_cell(s, interval, 'MPJVE [cm/s]', 1)} / {_cell(s, interval, 'Jitter [100m/s3]', 2)}"
+                    + (" (bar met)" if met else "")
+                )
+            lines.append(
+                f"| {name}/{sensors} | {noise} | {clean['MPJVE [cm/s]']:.1f} / {clean['Jitter [100m/s3]']:.2f} | "
+                + " | ".join(cells)
+                + " |"
+            )
+    for (sensors, noise), by_lag in floor.items():
+        lines.append(
+            f"| floor: {sensors} tracked points | {noise} | | "
+            + " | ".join(
+                f"{by_lag[str(k)]['MPJVE [cm/s]']:.1f} / {by_lag[str(k)]['Jitter [100m/s3]']:.2f}" for k in LAG_FRAMES
+            )
+            + " |"
+        )
+    return lines
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--split", default="validation")
     parser.add_argument("--limit", type=int, default=None)
     parser.add_argument("--workers", type=int, default=2)
     parser.add_argument("--output", type=Path, default=Path("docs/lag_curve.json"))
+    parser.add_argument(
+        "--render", action="store_true", help="print the table of --output as measured, measuring nothing"
+    )
     args = parser.parse_args()
+    if args.render:
+        data = json.loads(args.output.read_text())
+        floor = {(f["sensors"], f["noise"]): f["by_lag"] for f in data["floor"]}
+        print("\n".join(table(data["runs"], floor, data["split"])))
+        return
     started = time.time()
     jobs = [
         (_spec(name, lag), sensors, noise, args.split, args.limit)
@@ -118,41 +178,11 @@ def main() -> None:
     with ProcessPoolExecutor(args.workers) as pool:
         floor_results = list(pool.map(_floor, floors))
         results = list(pool.map(_evaluate, jobs))
+    # JSON keys are strings: the floor keyed so as it is read back
+    for f in floor_results:
+        f["by_lag"] = {str(k): v for k, v in f["by_lag"].items()}
     floor = {(f["sensors"], f["noise"]): f["by_lag"] for f in floor_results}
-    found = {(r["estimator"], r["sensors"], r["noise"]): r for r in results}
-    lines = [
-        f"Validation split ({args.split}, {results[0]['frames']} frames at {FPS:g} fps; field protocol); "
-        "MPJVE [cm/s] / jitter [100 m/s^3]; floor: the tracked points' own figures at that lag; "
-        "bar: MPJVE <= 1.5 x floor and jitter <= 2 x clean.",
-        "",
-        "| estimator | noise | clean (no noise) | "
-        + " | ".join(f"lag {1000 * k / FPS:.0f} ms" for k in LAG_FRAMES)
-        + " |",
-        "|---|---|---|" + "---|" * len(LAG_FRAMES),
-    ]
-    for name, sensors in RUNS:
-        clean = found[(name, sensors, "none")]["summary"]
-        for noise in NOISES:
-            cells = []
-            for lag in LAG_FRAMES:
-                s = found[(_spec(name, lag), sensors, noise)]["summary"]
-                f = floor[(sensors, noise)][lag]
-                met = (
-                    s["MPJVE [cm/s]"] <= 1.5 * f["MPJVE [cm/s]"]
-                    and s["Jitter [100m/s3]"] <= 2 * clean["Jitter [100m/s3]"]
-                )
-                cells.append(f"{s['MPJVE [cm/s]']:.1f} / {s['Jitter [100m/s3]']:.2f}{' (bar met)' if met else ''}")
-            lines.append(
-                f"| {name}/{sensors} | {noise} | {clean['MPJVE [cm/s]']:.1f} / {clean['Jitter [100m/s3]']:.2f} | "
-                + " | ".join(cells)
-                + " |"
-            )
-    for (sensors, noise), by_lag in floor.items():
-        lines.append(
-            f"| floor: {sensors} tracked points | {noise} | | "
-            + " | ".join(f"{by_lag[k]['MPJVE [cm/s]']:.1f} / {by_lag[k]['Jitter [100m/s3]']:.2f}" for k in LAG_FRAMES)
-            + " |"
-        )
+    lines = table(results, floor, args.split)
     print("\n".join(lines))
     args.output.write_text(
         json.dumps(

@@ -100,3 +100,38 @@ def test_the_filter_lag_option_delays_each_pose_by_its_frames_and_is_range_check
     for bad in (0.6, -0.1):
         with pytest.raises(ValueError, match="filter lag must be from 0 to 0.5 .seconds.|>= 0"):
             create_estimator("ik", sensors, Skeleton.canonical(), filter_lag=bad)
+
+
+def test_the_readme_lag_table_is_what_the_measured_curve_renders_to():
+    """The README's lag rows (each figure with its clip-bootstrap interval) come from
+    docs/lag_curve.json as `scripts/lag_curve.py --render` prints it, measuring nothing."""
+    import re
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parents[1]
+    rendered = subprocess.run(
+        [
+            sys.executable,
+            str(root / "scripts" / "lag_curve.py"),
+            "--render",
+            "--output",
+            str(root / "docs/lag_curve.json"),
+        ],
+        capture_output=True,
+        text=True,
+        timeout=120,
+        check=True,
+    ).stdout
+    readme = (root / "README.md").read_text()
+    rows = {
+        "ik, six-point": "ik/six_point",
+        "dtp, six-point": "dtp/six_point",
+        "lobstr, four-point": "lobstr/four_point",
+    }
+    for shown, name in rows.items():
+        cells = re.search(rf"^\| {shown} \| (.*) \|$", readme, re.M).group(1).split(" | ")
+        measured = re.search(rf"^\| {name} \| vr \| [^|]* \| (.*) \|$", rendered, re.M).group(1)
+        assert [c.replace(" (bar met)", "") for c in measured.split(" | ")] == cells, shown
+        assert all("[" in c for c in cells)  # each with its interval

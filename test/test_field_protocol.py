@@ -194,7 +194,7 @@ def test_the_field_preset_is_a_users_session_with_failures_and_worn_mounting_and
     assert FIELD.noise.loss_probability > 0 and FIELD.noise.jump_probability > 0 and FIELD.noise.yaw_drift == 2.0
     assert FIELD.noise.lost_percent == pytest.approx(3.0)
     assert FIELD.label == (
-        "field, vr noise, hands lost in 3 % of frames, 1 position jumps a minute, IMU heading drift up to "
+        "field, vr noise, hands lost in 3 % of frames, 1 position jump a minute, IMU heading drift up to "
         "2 deg/min, 15 mm mounting error, mounting calibrated from movement"
     )
     # each flag overrides its own value only; None keeps the preset's

@@ -1,5 +1,5 @@
 """What a method is given while a tracker is lost and when it comes back (the filter options
-`filter_carry_lost`, seconds, and `filter_reacquire_speed`, m/s).
+`filter_carry_lost`, seconds, `filter_reacquire_speed` and `filter_leap_speed`, m/s).
 
 Carried: a lost tracker's last joint target moves on with the body, rigidly with the first
 tracker still followed (the head in every shipped configuration: its position and its
@@ -7,8 +7,9 @@ heading), for up to carry_lost seconds. A method that needs every tracker (Avata
 keeps estimating instead of freezing the whole body, and every method sees the hand where a
 user expects it: where it was, relative to them.
 
-Eased: when a tracker comes back (after a loss, or when its samples leap further in a frame
-than a body part moves, as a frozen controller's do when tracking resumes), its joint target
+Eased: when a tracker comes back (after a loss, or, with leap_speed, when its samples leap
+faster than that between two frames, as a frozen controller's do when tracking resumes), its
+joint target
 starts where the last estimate had that joint and catches up with the tracker at
 reacquire_speed: the offset shrinks by speed x dt a frame, so the joint's step is its
 tracker's own step plus at most that. The user sees a hand glide back rather than snap.
@@ -28,20 +29,15 @@ from . import mat3
 from .mat3 import njit
 from .types import TrackerFrame
 
-# A tracked body part moving faster than this between two samples has not moved: its tracking
-# jumped (a frozen controller resuming, a relocalisation). Hands peak near 5-7 m/s in a swing.
-JUMP_SPEED = 10.0  # m/s
-
 
 class Reacquisition:
     """Per site, in a frame's order: the last usable target, whether it is carried, and the
     offset a returning tracker's target still has."""
 
-    def __init__(self, speed: float, carry: float, leaps: bool = True) -> None:
-        # leaps: a leap is a return too (a frozen tracker resuming). Off for a method that
-        # judges leaping samples itself: eased, an occluded foot's report at the origin would
-        # look like a plausible foot, hiding it from the network trained to recognise it (DTP)
-        self.speed, self.carry, self.leaps = float(speed), float(carry), bool(leaps)
+    def __init__(self, speed: float, carry: float, leap_speed: float = 0.0) -> None:
+        # leap_speed > 0: a sample that leaps faster than this is a return too (a frozen tracker
+        # resuming); 0: a leap is given as it is (see FilterConfig.leap_speed)
+        self.speed, self.carry, self.leap_speed = float(speed), float(carry), float(leap_speed)
         self.reset()
 
     @property
@@ -84,7 +80,7 @@ class Reacquisition:
             self._start(count)
         dt = 0.0 if self._stamp is None else max(0.0, stamp - self._stamp)
         self._stamp = stamp
-        max_step = JUMP_SPEED * dt if self.leaps and dt > 0 else -1.0
+        max_step = self.leap_speed * dt if self.leap_speed > 0 and dt > 0 else -1.0
         anchor = _pass_through(
             positions, rotations, kinds, np.array(position_kinds, dtype=kinds.dtype), max_step,
             self._last, self._given, self._last_rot, self._last_kind, self._lost_since,

@@ -80,7 +80,8 @@ class Protocol:
         if self.noise.loss_probability:
             faults += f", hands {self.noise.loss_mode} in {self.noise.lost_percent:.3g} % of frames"
         if self.noise.jump_probability:
-            faults += f", {self.noise.jump_probability * 3600:.3g} position jumps a minute"
+            jumps = self.noise.jump_probability * 3600
+            faults += f", {jumps:.3g} position jump{'' if f'{jumps:.3g}' == '1' else 's'} a minute"
         if self.noise.yaw_drift:
             faults += f", IMU heading drift up to {self.noise.yaw_drift:g} deg/min"
         name = (

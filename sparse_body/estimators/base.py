@@ -102,9 +102,6 @@ class Estimator(ABC):
     required_sites: ClassVar[frozenset[str]] = frozenset()
     # The closed interval each numeric option must lie in (options.py; every one has one).
     option_ranges: ClassVar[dict[str, Range]] = {}
-    # The method tells a tracker's leaping sample from a true one itself, so the reacquisition
-    # (core/reacquire.py) passes leaps on as given and eases only returns from a loss.
-    judges_leaps: ClassVar[bool] = False
 
     @classmethod
     def options(cls) -> dict[str, Option]:
@@ -138,7 +135,7 @@ class Estimator(ABC):
             self.input_filter = FixedLagSmoother(config, round(config.lag * self.fps))
         else:
             self.input_filter = TrackerFilter(config, self.sensors.site_names)
-        self.reacquisition = Reacquisition(config.reacquire_speed, config.carry_lost, leaps=not self.judges_leaps)
+        self.reacquisition = Reacquisition(config.reacquire_speed, config.carry_lost, config.leap_speed)
         self.freeze_guard = FreezeGuard(config.frozen_after) if config.frozen_after > 0 else None
         self.smooth = smooth
 

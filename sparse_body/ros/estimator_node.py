@@ -103,6 +103,11 @@ PARAMETERS = {
         "seconds after which a tracker sample repeated bit for bit counts as lost (a runtime "
         "that freezes a lost controller); 0: repeated samples are believed",
     ),
+    "filter_leap_speed": (
+        FILTER_DEFAULTS.leap_speed,
+        "m/s: a tracker sample leaping faster than this between two frames has come back (a "
+        "frozen controller resuming) and is eased like a return; 0: a leap is given as it is",
+    ),
     "filter_reacquire_speed": (
         FILTER_DEFAULTS.reacquire_speed,
         "m/s: a tracker that comes back starts where the estimate had its joint and catches up "

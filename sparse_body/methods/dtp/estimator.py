@@ -92,10 +92,6 @@ class Sample:
 class DtpEstimator(Estimator):
     name = "dtp"
     required_sites = frozenset(INPUT_SITES)
-    # fine-tuned on feet that report the origin or noise when occluded, and foot_speed below:
-    # eased toward such a sample, a foot would look plausible (validation, --occlusion 20:
-    # 2.68 cm MPJPE with leaps given, 2.99 eased)
-    judges_leaps = True
     option_ranges = {
         "foot_trust": Range(0.0, 5.0, "metres between tracker and network foot fully trusted"),
         "foot_speed": Range(0.0, 100.0, "m/s: a foot tracker jumping faster is not followed"),

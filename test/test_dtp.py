@@ -179,6 +179,33 @@ def test_lookahead_sees_the_frames_after_each_one_offline(tiny_models, clip):
     assert not np.allclose(live[30].local_quats, offline[30].local_quats, atol=1e-6)
 
 
+def test_lookahead_offline_eases_a_returning_hand_as_a_live_step_does(tiny_models, clip):
+    """Offline, the lookahead model's frames are sampled ahead of its poses; each pose is made
+    once the frames after it are sampled, so a returning hand starts from where the last pose
+    had it (filter_reacquire_speed) instead of snapping from wherever the method guessed."""
+    from sparse_body.core.kinematics import forward_kinematics
+    from sparse_body.core.rotations import quat_to_matrix
+    from sparse_body.core.skeleton import JOINT_INDEX
+
+    folder, _ = tiny_models
+    stream = synthesize_trackers(clip.slice(0, 120), SIX, seed=2)
+    hand = stream.sites.index("left_hand")
+    stream.valid[40:70, hand] = False
+    stream.positions[40:, hand] += [0.0, 0.3, 0.0]  # it comes back 30 cm from where it was lost
+    wrist = JOINT_INDEX["left_wrist"]
+
+    def largest_step_after_return(**options) -> float:
+        est = create_estimator("dtp", SIX, clip.skeleton, model_path=str(folder / "lookahead.onnx"), **options)
+        poses = est.process(stream)
+        joints = [
+            forward_kinematics(quat_to_matrix(p.local_quats), p.root_position, clip.skeleton.offsets)[1] for p in poses
+        ]
+        return max(np.linalg.norm(joints[t][wrist] - joints[t - 1][wrist]) for t in range(70, 80))
+
+    eased, snapped = largest_step_after_return(), largest_step_after_return(filter_reacquire_speed=0.0)
+    assert snapped > 0.15 and eased < 0.1, (eased, snapped)
+
+
 def test_occlusion_protocol_occludes_the_share_asked_one_or_both_feet_both_ways(clip_index):
     noise = NO_NOISE.occluding(20)
     assert noise.occluded_percent == pytest.approx(20.0)

@@ -239,32 +239,41 @@ class DtpEstimator(Estimator):
 
     def process(self, stream: TrackerStream | Iterable[TrackerFrame]) -> list[BodyPose]:
         """One pose per frame; with a lookahead model each frame also sees the `future`
-        frames after it (offline), else as step() does."""
+        frames after it (offline), else as step() does. Each frame's pose is made as soon as
+        the frames after it are sampled, so that sampling sees the poses before it (a
+        returning tracker is eased from where the last pose had its joint)."""
         if not self.model.future:
             return super().process(stream)
         self.reset()
         frames = list(stream)
-        samples = [self.sample(f) for f in self.filtered(frames)]
-        # runs of usable frames without a gap longer than max_gap: a window stays within one
-        run_of, run = [], 0
-        for i, s in enumerate(samples):
-            if (
-                s is not None
-                and i
-                and (samples[i - 1] is None or not 0 < frames[i].stamp - frames[i - 1].stamp <= self.max_gap)
-            ):
-                run += 1
-            run_of.append(run if s is not None else -1)
-        poses = []
-        for i, (frame, s) in enumerate(zip(frames, samples, strict=True)):
+        samples: list[Sample | None] = []
+        run_of: list[int] = []  # runs of usable frames without a gap longer than max_gap: a window stays within one
+        poses: list[BodyPose] = []
+
+        def pose_of(i: int) -> BodyPose:
+            s = samples[i]
             if s is None:
-                poses.append(self._checked(frame.stamp, None))
-                continue
+                return self._checked(frames[i].stamp, None)
             lo, hi = i, i
             while lo > i - self.model.past and lo > 0 and run_of[lo - 1] == run_of[i]:
                 lo -= 1
-            while hi < i + self.model.future and hi + 1 < len(frames) and run_of[hi + 1] == run_of[i]:
+            while hi < i + self.model.future and hi + 1 < len(samples) and run_of[hi + 1] == run_of[i]:
                 hi += 1
             x = self._features(cast(list[Sample], samples[lo : hi + 1]), i - lo)  # one run: no gaps
-            poses.append(self._checked(frame.stamp, self._pose(s, self.model.run(x, i - lo))))
+            return self._checked(frames[i].stamp, self._pose(s, self.model.run(x, i - lo)))
+
+        run = 0
+        for j, frame in enumerate(self.filtered(frames)):
+            s = self.sample(frame)
+            if (
+                s is not None
+                and j
+                and (samples[j - 1] is None or not 0 < frames[j].stamp - frames[j - 1].stamp <= self.max_gap)
+            ):
+                run += 1
+            samples.append(s)
+            run_of.append(run if s is not None else -1)
+            if j >= self.model.future:
+                poses.append(pose_of(j - self.model.future))
+        poses += [pose_of(i) for i in range(len(poses), len(frames))]
         return poses

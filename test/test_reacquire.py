@@ -37,6 +37,22 @@ def test_a_lost_hand_moves_and_turns_with_the_head_for_carry_seconds_then_is_mis
     assert all(kind == NONE for _, _, kind, _ in carried[62:])  # past carry_lost (1 s): missing
 
 
+def test_a_lost_foot_is_not_carried_it_stays_missing():
+    """A foot stays planted while the body moves on, or swings on its own: carried rigidly
+    with the head it was a worse guess than none."""
+    from sparse_body.core.skeleton import JOINT_INDEX
+
+    foot = np.array([15, JOINT_INDEX["left_foot"]])  # the second site on a foot
+    for joints, carried in ((foot, NONE), (JOINTS, POSE)):  # the same on a hand: carried
+        treat = Reacquisition(speed=0.0, carry=1.0)
+        t, p, r, k = _frame(0.0, np.array([0.0, 0.0, 1.7]), 0.0, np.array([0.1, 0.1, 0.05]))
+        treat.apply(t, p, r, k, (POSE,), joints, lambda: None)
+        for i in range(1, 10):
+            t, p, r, k = _frame(i / FPS, np.array([i / FPS, 0.0, 1.7]), 0.0, None)
+            treat.apply(t, p, r, k, (POSE,), joints, lambda: None)
+            assert k[HAND] == carried
+
+
 def test_a_returning_hand_starts_where_it_was_shown_and_catches_up_at_the_speed():
     treat = Reacquisition(speed=1.0, carry=0.0)
     shown = np.zeros((22, 3))

@@ -34,15 +34,21 @@ def augmentation_table(report_path: Path, columns: dict[str, str]) -> str:
     )
 
 
-def with_interval(run: dict, metric: str) -> str:
-    """A results file's mean of metric with its 95 % interval, clips drawn ("7.83 [7.12, 8.55]"),
-    from the per-clip figures the file keeps."""
+def _interval(run: dict, metric: str, by_person: bool = False) -> list[float] | None:
+    """A results file's 95 % bootstrap interval of metric from the per-clip figures it keeps:
+    clips drawn, or people drawn with all their clips (a person's clips move together)."""
     from ..apps.evaluation import clip_interval
 
+    rows = [c for c in run["clips"] if metric in c and (c.get("subject") or not by_person)]
+    units = [c["subject"] for c in rows] if by_person else None
+    return clip_interval([{metric: c[metric]} for c in rows], [int(c["frames"]) for c in rows], units=units).get(metric)
+
+
+def with_interval(run: dict, metric: str) -> str:
+    """A results file's mean of metric with its 95 % interval, clips drawn ("7.83 [7.12, 8.55]")."""
     if metric not in run["summary"]:
         return "-"
-    rows = [c for c in run["clips"] if metric in c]
-    interval = clip_interval([{metric: c[metric]} for c in rows], [int(c["frames"]) for c in rows]).get(metric)
+    interval = _interval(run, metric)
     return f"{run['summary'][metric]:.2f}" + (f" [{interval[0]:.2f}, {interval[1]:.2f}]" if interval else "")
 
 
@@ -108,22 +114,14 @@ def measured_results(onnx_path: Path, evaluate_model, mocap_root: Path, limit: i
 
 def results_table(results: list[dict], columns=COLUMNS) -> str:
     """`sparse-body eval` JSON results as a Markdown table, one estimator a row."""
-    from ..apps.evaluation import clip_interval
-
     rows = ["| estimator | " + " | ".join(columns) + " |", "|---|" + "---:|" * len(columns)]
     for r in results:
         rows.append(f"| `{r['estimator']}` | " + " | ".join(with_interval(r, c) for c in columns) + " |")
-    first = results[0]
-    people = []
-    for r in results:  # a person's clips move together: the honest interval when few people are tested
-        rows_ = [c for c in r["clips"] if c.get("subject")]
-        units = [c["subject"] for c in rows_]
-        metric = columns[0]
-        interval = clip_interval([{metric: c[metric]} for c in rows_], [int(c["frames"]) for c in rows_], units=units)
-        if metric in interval:
-            low, high = interval[metric]
-            people.append(f"`{r['estimator']}` [{low:.2f}, {high:.2f}]")
-    by_person = f"; {columns[0]} with people drawn ({len(set(units))} people): " + ", ".join(people) if people else ""
+    first, metric = results[0], columns[0]
+    people = [(r["estimator"], _interval(r, metric, by_person=True)) for r in results]
+    shown = [f"`{name}` [{low_high[0]:.2f}, {low_high[1]:.2f}]" for name, low_high in people if low_high]
+    count = len({c["subject"] for c in first["clips"] if c.get("subject")})
+    by_person = f"; {metric} with people drawn ({count} people): " + ", ".join(shown) if shown else ""
     return (
         "\n".join(rows)
         + f"\n\n({len(first['clips'])} clips, {first['frames']} frames; {first['protocol']} protocol; {INTERVAL_NOTE[1:-1]}"

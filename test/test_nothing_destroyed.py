@@ -89,6 +89,25 @@ def test_overwrite_replaces_a_bag_this_package_wrote(bag, tmp_path, capsys):
     assert (out / "notes.txt").read_text() == "mine now"
 
 
+def test_a_signal_during_the_write_probe_waits_until_the_probe_is_gone(tmp_path, monkeypatch):
+    """The probe of the output's folder is made and removed with SIGINT and SIGTERM held:
+    a Ctrl-C landing between the two left a hidden folder in the user's folder."""
+    import sparse_body.io.bagio as bagio
+
+    seen, remove = [], os.rmdir
+
+    def rmdir(path):  # what the probe's removal runs under
+        seen.append(signal.pthread_sigmask(signal.SIG_BLOCK, []))
+        remove(path)
+
+    monkeypatch.setattr(bagio.os, "rmdir", rmdir)
+    check_output(tmp_path / "walk")
+    monkeypatch.undo()
+    assert seen and {signal.SIGINT, signal.SIGTERM} <= seen[0]
+    assert signal.SIGINT not in signal.pthread_sigmask(signal.SIG_BLOCK, [])  # held no longer
+    assert list(tmp_path.iterdir()) == []
+
+
 def test_sigterm_during_process_leaves_nothing_behind(tmp_path):
     bag = tmp_path / "long"
     make_bag(synthetic_walk(60.0), load_sensor_config("six_point"), bag)

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import os
 import shutil
+import signal
 import tempfile
 from contextlib import contextmanager
 from pathlib import Path
@@ -146,8 +147,23 @@ def check_output(path: Path, overwrite: bool = False, inputs: tuple[Path, ...] =
     if not parent.is_dir():
         raise OutputError(f"{path}: {parent} is not an existing folder")
     # a folder we may not write in (read-only, another's, full) fails now, not after the work
-    shutil.rmtree(tempfile.mkdtemp(prefix=f".{path.name}.probe-", dir=parent))
+    _probe_writable(parent, path.name)
     return path
+
+
+# the signals the command line turns into exceptions (SIGINT, SIGTERM)
+_INTERRUPTS = frozenset({signal.SIGINT, signal.SIGTERM})
+
+
+def _probe_writable(parent: Path, name: str) -> None:
+    """Make and remove an empty hidden folder in `parent` (OSError where we may not write).
+    Ctrl-C and SIGTERM wait until it is gone: landing between the two, they left the probe
+    behind in a user's folder (test_batch's Ctrl-C test, once on a loaded machine)."""
+    held = signal.pthread_sigmask(signal.SIG_BLOCK, _INTERRUPTS)
+    try:
+        os.rmdir(tempfile.mkdtemp(prefix=f".{name}.probe-", dir=parent))
+    finally:
+        signal.pthread_sigmask(signal.SIG_SETMASK, held)  # a signal held meanwhile is delivered now
 
 
 def _partial(path: Path, pid: int | str) -> Path:

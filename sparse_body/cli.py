@@ -948,6 +948,20 @@ def _terminate(signum, frame):
     raise Terminated
 
 
+def _stop_behind(err: BaseException) -> KeyboardInterrupt | None:
+    """The Ctrl-C or SIGTERM an error stands for, if any: an interrupt inside compiled code
+    comes back wrapped (numba's dispatcher turns it into a SystemError whose cause is the
+    KeyboardInterrupt), and it is still the user's stop, not a failure."""
+    seen: set[int] = set()
+    cause: BaseException | None = err
+    while cause is not None and id(cause) not in seen:
+        if isinstance(cause, KeyboardInterrupt):
+            return cause
+        seen.add(id(cause))
+        cause = cause.__cause__ or cause.__context__
+    return None
+
+
 def main(argv: list[str] | None = None) -> None:
     """Run a subcommand; every error a user can cause ends in one line on stderr and its own
     exit code, never a traceback."""
@@ -961,14 +975,17 @@ def main(argv: list[str] | None = None) -> None:
         args = build_parser().parse_args(argv)
         command = f"sparse-body {args.command}"
         sys.exit(args.func(args))
-    except Terminated:
-        print(f"{command}: terminated; {_left_when_stopped}", file=sys.stderr)
-        sys.exit(EXIT_TERMINATED)
-    except KeyboardInterrupt:  # partial output was removed on the way out
-        print(f"{command}: interrupted; {_left_when_stopped}", file=sys.stderr)
-        sys.exit(EXIT_INTERRUPTED)
-    except (ValueError, OSError, EOFError, YAMLError, MemoryError, RecursionError) as err:
+    except (KeyboardInterrupt, Exception) as err:  # (SystemExit passes: argparse's, ours)
+        stop = _stop_behind(err)
+        if isinstance(stop, Terminated):
+            print(f"{command}: terminated; {_left_when_stopped}", file=sys.stderr)
+            sys.exit(EXIT_TERMINATED)
+        if stop is not None:  # partial output was removed on the way out
+            print(f"{command}: interrupted; {_left_when_stopped}", file=sys.stderr)
+            sys.exit(EXIT_INTERRUPTED)
         # ValueError includes MotionFileError, BagError, OutputError, SensorConfigError, CalibrationError
+        if not isinstance(err, (ValueError, OSError, EOFError, YAMLError, MemoryError, RecursionError)):
+            raise  # a bug, not something the user caused: its traceback is what we need
         print(f"{command}: {_one_line(err)}", file=sys.stderr)
         sys.exit(_exit_code(err))
 

@@ -11,8 +11,9 @@ from pathlib import Path
 
 import pytest
 
+from sparse_body import cli
 from sparse_body.apps.offline import make_bag
-from sparse_body.cli import EXIT_INPUT, EXIT_OS, EXIT_OUTPUT, EXIT_TERMINATED, EXIT_USAGE, main
+from sparse_body.cli import EXIT_INPUT, EXIT_INTERRUPTED, EXIT_OS, EXIT_OUTPUT, EXIT_TERMINATED, EXIT_USAGE, main
 from sparse_body.core.sensors import load_sensor_config
 from sparse_body.data.synthetic import synthetic_walk
 from sparse_body.io.bagio import OutputError, check_output, written_by_us
@@ -177,6 +178,42 @@ def test_ctrl_c_at_any_moment_ends_in_one_line(tmp_path, delay):
     assert "Traceback" not in err and len(err.strip().splitlines()) == 1, err
     assert "interrupted; nothing written" in err
     assert sorted(p.name for p in tmp_path.iterdir()) == before
+
+
+def _fails_inside_a_kernel(stop: BaseException | None):
+    """A command whose compiled kernel returns with an error set, as numba's dispatcher does
+    when SIGINT lands in it (CI, beside 4 burners: a SystemError traceback, exit 1)."""
+
+    def command(args):
+        try:
+            if stop is not None:
+                raise stop
+            raise ZeroDivisionError
+        except BaseException as cause:
+            raise SystemError("CPUDispatcher(<function kernel>) returned a result with an exception set") from cause
+
+    return command
+
+
+@pytest.mark.parametrize(
+    "stop,code,said",
+    [
+        (KeyboardInterrupt(), EXIT_INTERRUPTED, "interrupted; nothing written"),
+        (cli.Terminated(), EXIT_TERMINATED, "terminated; nothing written"),
+    ],
+)
+def test_a_stop_wrapped_by_compiled_code_is_still_the_users_stop(bag, tmp_path, capsys, monkeypatch, stop, code, said):
+    monkeypatch.setattr(cli, "cmd_process", _fails_inside_a_kernel(stop))
+    with pytest.raises(SystemExit) as ended:
+        main(["process", str(bag), str(tmp_path / "out")])
+    assert ended.value.code == code
+    assert capsys.readouterr().err.strip().splitlines() == [f"sparse-body process: {said}"]
+
+
+def test_a_bug_inside_compiled_code_keeps_its_traceback(bag, tmp_path, monkeypatch):
+    monkeypatch.setattr(cli, "cmd_process", _fails_inside_a_kernel(None))
+    with pytest.raises(SystemError):  # not the user's doing: hiding it would hide the bug
+        main(["process", str(bag), str(tmp_path / "out")])
 
 
 def _nested_yaml(path: Path) -> Path:

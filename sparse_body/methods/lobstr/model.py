@@ -45,7 +45,7 @@ class LobstrConfig(Presets):
     KIND = "LoBSTr"
     PRESETS: ClassVar[dict[str, dict]] = {
         "paper": {},
-        "small": {  # 52 minutes on one core of the 2-core developer machine
+        "small": {  # 50 minutes on one core of the 2-core developer machine (beside another run)
             "hidden": 256,
             "batch": 64,
             "steps_per_epoch": 100,

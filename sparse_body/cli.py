@@ -967,6 +967,8 @@ def main(argv: list[str] | None = None) -> None:
     exit code, never a traceback."""
     import signal
 
+    global _left_when_stopped
+    _left_when_stopped = "nothing written"  # (a batch run earlier in this process said otherwise)
     command, YAMLError = "sparse-body", ValueError  # (yaml's own until it is imported)
     try:  # from the first statement: Ctrl-C while starting is one line too
         signal.signal(signal.SIGTERM, _terminate)

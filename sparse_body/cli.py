@@ -358,8 +358,7 @@ def cmd_process(args) -> int:
     inputs = [Path(p) for p in args.bag_in]
     many = len(inputs) > 1 or (inputs[0].is_dir() and not is_bag(inputs[0]))
     if many or args.cluster:  # OUT is a folder
-        global _left_when_stopped
-        _left_when_stopped = (
+        args.left_when_stopped = (  # what main() says on a stop
             f"the bags finished are kept (see {Path(args.bag_out) / SUMMARY}), the ones being written were "
             "removed; the same command resumes"
         )
@@ -940,10 +939,6 @@ def _one_line(err: BaseException) -> str:
     return " ".join(str(err).split()) or type(err).__name__
 
 
-# what a stop (Ctrl-C, SIGTERM) leaves: a command that keeps finished parts says so
-_left_when_stopped = "nothing written"
-
-
 def _terminate(signum, frame):
     raise Terminated
 
@@ -967,9 +962,8 @@ def main(argv: list[str] | None = None) -> None:
     exit code, never a traceback."""
     import signal
 
-    global _left_when_stopped
-    _left_when_stopped = "nothing written"  # (a batch run earlier in this process said otherwise)
     command, YAMLError = "sparse-body", ValueError  # (yaml's own until it is imported)
+    args = None
     try:  # from the first statement: Ctrl-C while starting is one line too
         signal.signal(signal.SIGTERM, _terminate)
         from yaml import YAMLError
@@ -979,11 +973,13 @@ def main(argv: list[str] | None = None) -> None:
         sys.exit(args.func(args))
     except (KeyboardInterrupt, Exception) as err:  # (SystemExit passes: argparse's, ours)
         stop = _stop_behind(err)
+        # what a stop leaves: a command that keeps finished parts says so on its own args
+        left = getattr(args, "left_when_stopped", "nothing written")
         if isinstance(stop, Terminated):
-            print(f"{command}: terminated; {_left_when_stopped}", file=sys.stderr)
+            print(f"{command}: terminated; {left}", file=sys.stderr)
             sys.exit(EXIT_TERMINATED)
         if stop is not None:  # partial output was removed on the way out
-            print(f"{command}: interrupted; {_left_when_stopped}", file=sys.stderr)
+            print(f"{command}: interrupted; {left}", file=sys.stderr)
             sys.exit(EXIT_INTERRUPTED)
         # ValueError includes MotionFileError, BagError, OutputError, SensorConfigError, CalibrationError
         if not isinstance(err, (ValueError, OSError, EOFError, YAMLError, MemoryError, RecursionError)):

@@ -150,3 +150,32 @@ def test_leftovers_of_killed_writers_go_and_nothing_else(tmp_path):
     remove_leftovers(out)
     assert not ours.exists() and out.is_dir()
     assert (someone / "notes.txt").read_text() == "mine" and link.is_symlink()
+
+
+def test_a_bag_that_took_its_name_as_the_run_was_stopped_is_in_the_summary(tmp_path, monkeypatch):
+    # CI once caught a worker ended by the stop after its bag was in place but before its
+    # result came back: the bag was kept and the summary did not list it. Here the stop comes
+    # at that moment on purpose: one bag written for real, then Ctrl-C before its result.
+    from sparse_body.apps import batch
+    from sparse_body.io.tf_guards import TfGuards
+
+    config = _bags(tmp_path / "bags", 2.0, 3)
+    out = tmp_path / "out"
+    out.mkdir()
+    process_bag(tmp_path / "bags" / "walk2", out / "walk2", "ik", config, _skeleton(), progress=False)  # an earlier run
+
+    def stopped_after_one_bag(tasks, settings, jobs, record):
+        i, bag, target = tasks[0]
+        process_bag(bag, target, "ik", config, _skeleton(), progress=False)
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(batch, "_run_here", stopped_after_one_bag)
+    settings = batch.Settings("ik", {}, config, _skeleton(), 30.0, TfGuards())
+    with pytest.raises(KeyboardInterrupt):
+        batch.process_many([tmp_path / "bags"], out, settings, jobs=2, progress=False)
+    summary = json.loads((out / SUMMARY).read_text())
+    listed = {os.path.basename(b["output"]): b for b in summary["bags"]}
+    assert set(listed) == {"walk0", "walk2"} and listed["walk2"]["status"] == "skipped"
+    assert listed["walk0"]["status"] == "done" and listed["walk0"]["error"] == batch.FINISHED_AT_STOP
+    assert listed["walk0"]["frames"] == len([m for m in _messages(out / "walk0") if m[0] == "/joint_states"]) > 0
+    assert summary["pending"] == [str(tmp_path / "bags" / "walk1")]

@@ -15,6 +15,7 @@ never takes the output's name (bagio.bag_writer), and its leftover is removed he
 
 from __future__ import annotations
 
+import contextlib
 import json
 import multiprocessing
 import os
@@ -27,7 +28,7 @@ from pathlib import Path
 
 from ..core.sensors import SensorConfig
 from ..core.skeleton import Skeleton
-from ..io.bagio import BagError, OutputError, remove_leftovers, written_by_us
+from ..io.bagio import BagError, OutputError, joint_state_count, remove_leftovers, written_by_us
 from ..io.tf_guards import TfGuards
 
 SUMMARY = "sparse_body_summary.json"  # beside the outputs; replaced only when it is ours
@@ -190,18 +191,41 @@ def process_many(
             bar.set_postfix(frames=sum(r.frames for r in results.values()))
         _write_summary(summary, bags, results)
 
+    tasks = [(i, bags[i], output_for(bags[i], out_dir)) for i in todo]
+    before = {i: _identity(out) for i, _, out in tasks}  # what each output was when the run began
     try:
-        tasks = [(i, bags[i], output_for(bags[i], out_dir)) for i in todo]
         if cluster is None:
             _run_here(tasks, settings, jobs, record)
         else:
             _run_on_cluster(tasks, settings, cluster, record)
+    except BaseException:
+        # a stop can end a worker after its bag took the output's name but before its result
+        # came back: the bag is complete and kept, so the summary must list it as well
+        for i, bag, out in tasks:
+            if i not in results and written_by_us(out) and _identity(out) != before[i]:
+                result = BagResult(str(bag), str(out), "done", error=FINISHED_AT_STOP)
+                with contextlib.suppress(OSError, ValueError):  # the count is only for the summary
+                    result.frames = joint_state_count(out)
+                record(i, result)
+        raise
     finally:
         if bar is not None:
             bar.close()  # before the command's last line
     ordered = [results[i] for i in range(len(bags))]
     _write_summary(summary, bags, results)
     return ordered
+
+
+FINISHED_AT_STOP = "finished as the run was stopped: its invalid and refused counts did not come back"
+
+
+def _identity(path: Path) -> tuple[int, int] | None:
+    """Which directory entry `path` is (a bag moved into place is a new one), None if none."""
+    try:
+        stat = path.stat(follow_symlinks=False)
+    except OSError:
+        return None
+    return stat.st_ino, stat.st_mtime_ns
 
 
 Task = tuple[int, Path, Path]  # the bag's place in the run, the bag, its output

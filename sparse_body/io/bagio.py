@@ -115,6 +115,12 @@ def written_by_us(path: Path) -> bool:
     return ours and present <= listed and all((path / f).is_file() and not (path / f).is_symlink() for f in present)
 
 
+def joint_state_count(path: Path) -> int:
+    """How many estimates a complete bag of ours holds, from its metadata (no message is read)."""
+    with Reader(path) as reader:
+        return sum(c.msgcount for c in reader.connections if c.topic == JOINT_STATES_TOPIC)
+
+
 def _same_or_inside(a: Path, b: Path) -> bool:
     a, b = a.resolve(), b.resolve()
     return a == b or b in a.parents or a in b.parents

@@ -61,10 +61,13 @@ OPTION_NAMES = [
     "bogus",
     "base",
     "model",
+    "weight",
+    "agree_within",
+    "first",
 ]
 ESTIMATOR = st.builds(
     lambda name, opts: name + (":" + ",".join(f"{k}={v}" for k, v in opts) if opts else ""),
-    st.sampled_from(["ik", "reference", "dtp", "lobstr", "refined", "bogus", ""]),
+    st.sampled_from(["ik", "reference", "dtp", "lobstr", "refined", "blend", "bogus", ""]),
     st.lists(st.tuples(st.sampled_from(OPTION_NAMES), NUMBERS), max_size=3),
 )
 FILE = st.tuples(

@@ -19,6 +19,7 @@ NAMES = (
     "lobstr",
     "dragposer",
     "refined",
+    "blend",
     "dtp",
     "avatarjlm",
 )

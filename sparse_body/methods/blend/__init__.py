@@ -1,0 +1,5 @@
+"""Two estimators' poses averaged, joint by joint (blend:first=avatarjlm,second=dragposer)."""
+
+from ..record import Method
+
+METHOD = Method("blend", "sparse_body.methods.blend.estimator:BlendEstimator")

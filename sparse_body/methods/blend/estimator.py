@@ -1,0 +1,105 @@
+"""Two estimators run side by side, their poses averaged: `blend:first=E1,second=E2,weight=W`.
+
+A network that meets motion it never saw guesses the legs; a search in a pose prior (DragPoser)
+errs differently there. Where two methods' errors differ, their mean is nearer the truth than
+either (issue 33: motions the models never saw). Each local rotation is slerped (weight: the
+second's share), the root moved along the line between the two; the foot contacts are the
+first's. Both see this estimator's filtered targets and run with their own defaults and
+shipped models (options are not passed on to them).
+
+The hand-over: where the two disagree about the legs by more than `agree_within` (mean leg
+joint distance), the second's share falls, to nothing at `disagree_from`. On the validation
+people a disagreement that large was the search failing (cartwheels, hanging on ropes:
+DragPoser 2x AvatarJLM's error), while on dance, which no training clip has, the two stay
+within 15 cm. The share follows its target with time constant `settle`, so the hand-over
+never jumps.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ...core.kinematics import forward_kinematics
+from ...core.rotations import quat_to_matrix
+from ...core.skeleton import LOWER_BODY, joint_indices
+from ...core.tracker_filter import NO_FILTER
+from ...core.types import BodyPose
+from ...estimators.base import Estimator, create_estimator
+from ...estimators.options import Range
+
+
+def slerp(a: np.ndarray, b: np.ndarray, t: float) -> np.ndarray:
+    """Row by row, unit quaternions (x y z w) a -> b at t: the shorter arc."""
+    dot = np.sum(a * b, axis=-1, keepdims=True)
+    b = np.where(dot < 0.0, -b, b)
+    dot = np.clip(np.abs(dot), 0.0, 1.0)
+    angle = np.arccos(dot)
+    sin = np.sin(angle)
+    near = sin < 1e-6  # the same rotation: the line is the arc
+    wa = np.where(near, 1.0 - t, np.sin((1.0 - t) * angle) / np.where(near, 1.0, sin))
+    wb = np.where(near, t, np.sin(t * angle) / np.where(near, 1.0, sin))
+    q = wa * a + wb * b
+    return q / np.linalg.norm(q, axis=-1, keepdims=True)
+
+
+class BlendEstimator(Estimator):
+    name = "blend"
+    option_ranges = {
+        "weight": Range(0.0, 1.0, "the second estimator's share while the two agree"),
+        "agree_within": Range(0.0, 10.0, "metres of leg disagreement with the full share"),
+        "disagree_from": Range(0.0, 10.0, "metres of leg disagreement with no share"),
+        "settle": Range(0.0, 10.0, "seconds: the share's time constant"),
+    }
+
+    def __init__(
+        self,
+        sensors,
+        skeleton,
+        fps: float = 60.0,
+        first: str = "avatarjlm",
+        second: str = "dragposer",
+        weight: float = 0.7,
+        agree_within: float = 0.15,
+        disagree_from: float = 0.25,
+        settle: float = 0.1,
+    ) -> None:
+        super().__init__(sensors, skeleton, fps)
+        if "blend" in (first, second):
+            raise ValueError("a blend's estimators cannot be 'blend'")
+        if disagree_from <= agree_within:
+            raise ValueError(f"disagree_from ({disagree_from}) must be above agree_within ({agree_within})")
+        self.weight, self.agree_within, self.disagree_from = float(weight), float(agree_within), float(disagree_from)
+        self.keep = float(np.exp(-1.0 / (settle * fps))) if settle > 0 else 0.0  # of the share, a frame
+        self.share = self.weight
+        self.legs = joint_indices(LOWER_BODY)
+        self.parts = [create_estimator(name, sensors, skeleton, fps) for name in (first, second)]
+        for inner in self.parts:
+            inner.use_filter(NO_FILTER)  # this estimator's filter has done it
+            inner.read_targets_from(self)
+
+    def _reset(self) -> None:
+        for inner in self.parts:
+            inner.reset()
+        self.share = self.weight
+
+    def disagreement(self, a: BodyPose, b: BodyPose) -> float:
+        """Metres: the mean distance between the two poses' leg joints."""
+        offsets = self.skeleton.offsets
+        _, pa = forward_kinematics(quat_to_matrix(a.local_quats), a.root_position, offsets)
+        _, pb = forward_kinematics(quat_to_matrix(b.local_quats), b.root_position, offsets)
+        return float(np.linalg.norm(pa[self.legs] - pb[self.legs], axis=-1).mean())
+
+    def _estimate(self, frame):
+        a, b = (inner.step(frame) for inner in self.parts)
+        if not (a.valid and b.valid):  # one alone would jump on the way in and out
+            return None
+        trust = (self.disagree_from - self.disagreement(a, b)) / (self.disagree_from - self.agree_within)
+        target = self.weight * min(1.0, max(0.0, trust))
+        self.share = t = self.keep * self.share + (1.0 - self.keep) * target
+        return BodyPose(
+            frame.stamp,
+            slerp(a.local_quats, b.local_quats, t),
+            (1.0 - t) * a.root_position + t * b.root_position,
+            a.contact_probability.copy(),
+            a.contact.copy(),
+        )

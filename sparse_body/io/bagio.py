@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 import yaml
 from rosbags.interfaces import Qos, QosDurability, QosHistory, QosLiveliness, QosReliability, QosTime
-from rosbags.rosbag2 import Reader, StoragePlugin, Writer
+from rosbags.rosbag2 import Reader, ReaderError, StoragePlugin, Writer
 from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 
 from .. import __version__
@@ -117,8 +117,11 @@ def written_by_us(path: Path) -> bool:
 
 def joint_state_count(path: Path) -> int:
     """How many estimates a complete bag of ours holds, from its metadata (no message is read)."""
-    with Reader(path) as reader:
-        return sum(c.msgcount for c in reader.connections if c.topic == JOINT_STATES_TOPIC)
+    try:
+        with Reader(path) as reader:
+            return sum(c.msgcount for c in reader.connections if c.topic == JOINT_STATES_TOPIC)
+    except ReaderError as err:  # (not a ValueError)
+        raise BagError(f"{path}: cannot be read ({err})") from None
 
 
 def _same_or_inside(a: Path, b: Path) -> bool:

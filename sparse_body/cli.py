@@ -20,10 +20,9 @@ def _mocap(args) -> Path:
     from .data.catalog import find_mocap_root
 
     root = find_mocap_root(args.mocap)
-    if root is None:
-        sys.exit(
-            "sparse-body: no motion capture found; pass --mocap DIR or set SPARSE_BODY_MOCAP "
-            "(the CMU folder of ../shared/mocap)"
+    if root is None:  # main() makes it one line with the input error's exit code
+        raise ValueError(
+            "no motion capture found; pass --mocap DIR or set SPARSE_BODY_MOCAP (the CMU folder of ../shared/mocap)"
         )
     return root
 

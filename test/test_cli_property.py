@@ -182,3 +182,21 @@ def test_generated_command_lines_end_cleanly_and_write_nothing_on_error(
             ]
             assert len(lines) == 1, (argv, err)
             assert after == before, (argv, err)
+
+
+@pytest.mark.parametrize(
+    "argv", [["make-bag", "OUT", "--clip", "02_01"], ["eval", "--estimator", "ik", "--split", "validation"]]
+)
+def test_no_motion_capture_is_one_line_with_the_input_errors_exit_code(argv, tmp_path, monkeypatch, capsys):
+    # found by the generated command lines on a checkout without ../shared: the message came
+    # through sys.exit(str), which exits 1 without the command's name or its own exit code
+    from sparse_body.cli import EXIT_INPUT
+    from sparse_body.data import catalog
+
+    monkeypatch.setattr(catalog, "find_mocap_root", lambda explicit=None: None)
+    monkeypatch.chdir(tmp_path)  # eval's default output folder would be here
+    with pytest.raises(SystemExit) as ended:
+        main([str(tmp_path / a) if a == "OUT" else a for a in argv])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert ended.value.code == EXIT_INPUT and len(err) == 1 and "no motion capture found" in err[0], err
+    assert err[0].startswith(f"sparse-body {argv[0]}: ") and not list(tmp_path.iterdir())

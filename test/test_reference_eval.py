@@ -48,7 +48,8 @@ def test_unknown_estimator_and_missing_sites_are_clear_errors():
     config = load_sensor_config("three_point")
     with pytest.raises(
         ValueError,
-        match="unknown estimator 'lobstr2'; available: avatarjlm, dragposer, dtp, ik, lobstr, reference, refined",
+        match="unknown estimator 'lobstr2'; available: avatarjlm, blend, dragposer, dtp, ik, lobstr, reference, "
+        "refined",
     ):
         create_estimator("lobstr2", config, synthetic_walk(0.1).skeleton)
     hands = config.subset(["left_hand", "right_hand"])

@@ -353,7 +353,7 @@ def cmd_process(args) -> int:
     if args.smooth:
         options["smooth"] = True
     body = person_body(args.calibration, args.height)
-    guards = TfGuards(clock_window=args.clock_window, play_radius=args.play_radius)
+    guards = TfGuards(clock_window=args.clock_window, future_window=args.future_window, play_radius=args.play_radius)
     inputs = [Path(p) for p in args.bag_in]
     many = len(inputs) > 1 or (inputs[0].is_dir() and not is_bag(inputs[0]))
     if many or args.cluster:  # OUT is a folder
@@ -455,7 +455,7 @@ def cmd_view(args) -> int:
             raise ValueError("view needs something to show: an estimate bag, a motion file or --clip ID")
         motion = _motion(args)
         parts, fps, name = {"truth": motion.positions}, motion.fps, motion.name
-    page = write_body_page(Path(args.output or f"{name}.html"), fps, title=title or name, **parts)
+    page = write_body_page(Path(args.output or f"{name}.html"), fps, args.overwrite, title=title or name, **parts)
     print(f"written {page}: open it in a browser (no network needed)")
     return 0
 
@@ -768,6 +768,12 @@ def build_parser() -> argparse.ArgumentParser:
         "0: no check, for a bag recorded with simulated time",
     )
     p.add_argument(
+        "--future-window",
+        type=_between(0.001, 60.0, "s"),
+        default=TfGuards.future_window,
+        help="refuse /tf stamps further than this ahead of the bag's receive times",
+    )
+    p.add_argument(
         "--play-radius",
         type=_between(0.1, 1e6, "m"),
         default=TfGuards.play_radius,
@@ -794,6 +800,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--estimator", help="which estimator's result, where a results file holds several for the clip")
     p.add_argument("--mocap", help="the CMU folder")
     p.add_argument("--output", "-o", help="the page (default: NAME.html here)")
+    p.add_argument("--overwrite", action="store_true", help="replace the page if it is one `view` wrote")
     p.add_argument("--fps", type=_fps, default=60.0, help="a motion file's frame rate where it has none")
     p.add_argument("--seconds", type=float, default=10.0, help="how long to record a live view (at most 600)")
     p.set_defaults(func=cmd_view, motion=None)
@@ -915,8 +922,8 @@ EXIT_INTERRUPTED, EXIT_TERMINATED = 130, 143
 
 def _exit_code(err: BaseException) -> int:
     """The exit code of an error the command ends with (see the constants above)."""
+    from .core.file_output import OutputError
     from .core.textfile import FileTooLarge
-    from .io.bagio import OutputError
 
     if isinstance(err, OutputError):
         return EXIT_OUTPUT

@@ -311,7 +311,18 @@ def test_bad_tracker_input_is_reported_and_never_gives_non_finite_output(ros_env
                     float, rot
                 )
                 msgs.append(m)
+            if 5.2 < t < 5.4:  # a headset whose clock runs 9 s ahead: refused, never an estimate's stamp
+                msgs[0].header.stamp = to_time(stamp + 9.0)
             pub.publish(TFMessage(transforms=msgs))
+            if i % 45 == 0:  # values whose square overflows a float: on another frame, then on the headset
+                hostile = [TransformStamped(), msgs[0]] if msgs else [TransformStamped()]
+                hostile[0].header.frame_id, hostile[0].child_frame_id = "world", "someone_elses_frame"
+                hostile[0].header.stamp = to_time(stamp)
+                hostile[0].transform.rotation.x = 2e154
+                pub.publish(TFMessage(transforms=hostile[:1]))
+                if len(hostile) > 1:
+                    hostile[1].transform.rotation.w = 1e300
+                    pub.publish(TFMessage(transforms=hostile[1:]))
             if i % 30 == 0:  # bytes that are no TFMessage: a count that lies, a message cut short
                 pub.publish(
                     b"\x00\x01\x00\x00\xff\xff\xff\x7f"
@@ -329,6 +340,8 @@ def test_bad_tracker_input_is_reported_and_never_gives_non_finite_output(ros_env
     assert alive, (tmp_path / "sparse_body_estimator.log").read_text()
     states = listener.received["joint_states"]
     assert len(states) > 60 and all(np.all(np.isfinite(m.position)) for m in states)
+    latest = max(m.header.stamp.sec + m.header.stamp.nanosec * 1e-9 for m in states)
+    assert latest < time.time() + 0.5, "an estimate stamped in the future"
     statuses = listener.received["estimate_status"]
     invalid = [s for s in statuses if not s.valid]
     assert invalid and any("head" in s.message and "pelvis" in s.message for s in invalid)
@@ -339,7 +352,11 @@ def test_bad_tracker_input_is_reported_and_never_gives_non_finite_output(ros_env
         for st in d.status:
             messages.append(st.message)
             values.update({kv.key: kv.value for kv in st.values})
-    assert int(values["rejected samples: non-finite"]) > 0
+            # the level is a byte: OK only while estimating, WARN with stale trackers
+            expected = b"\x00" if st.message == "estimating" else b"\x01" if "stale" in st.message else b"\x02"
+            assert st.level == expected, (st.level, st.message)
+    assert int(values["rejected samples: non-finite or absurd value"]) > 0
+    assert int(values["rejected samples: stamp ahead of the clock"]) > 0
     assert int(values["rejected samples: out of order"]) > 0
     assert int(values["rejected samples: malformed message"]) > 0
     assert int(values["clock jumps back"]) >= 1

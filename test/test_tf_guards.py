@@ -158,6 +158,40 @@ def test_a_tracker_outside_the_play_space_is_refused_and_counted(position):
     assert wide.sample(CONFIG, T0, 0.1)[0].valid[0]
 
 
+@pytest.mark.parametrize(
+    "xyz, q",
+    [
+        ((0.0, 0.0, 1.0), (2e154, 0.0, 0.0, 1.0)),  # its square overflowed: OverflowError stopped the node
+        ((1e300, 0.0, 1.0), (0.0, 0.0, 0.0, 1.0)),
+        ((0.0, 0.0, 1.0), (1e-320, 0.0, 0.0, 1e-320)),  # denormals: a degenerate quaternion
+        ((0.0, 0.0, 1.0), (-1.7e308, 1.7e308, 0.0, 1.0)),
+    ],
+)
+@pytest.mark.parametrize("child", ["someone_elses_frame", TRACKERS[0]])
+def test_absurd_values_are_refused_and_counted_never_raised(xyz, q, child):
+    cache = TfCache(TRACKERS)
+    cache.ingest([*trackers_at(T0)], now=T0)
+    result = cache.ingest([tf("world", child, T0 + 0.01, xyz, q)], now=T0 + 0.01)
+    assert sum(cache.refused.values()) == 1
+    assert cache.refused[Accepted.NON_FINITE] + cache.refused[Accepted.BAD_QUATERNION] == 1
+    frame, _ = cache.sample(CONFIG, T0 + 0.01, 0.1)
+    assert frame.valid.all() and np.isfinite(frame.positions).all()  # the earlier sample still holds
+    assert result.refused == ({child} if child in TRACKERS else set())
+
+
+def test_a_stamp_ahead_of_the_clock_is_refused_unless_the_clock_is_not_judged():
+    head = TRACKERS[0]
+    cache = TfCache(TRACKERS)
+    cache.ingest(trackers_at(T0), now=T0)
+    cache.ingest([tf("world", head, T0 + 9.0)], now=T0 + 0.01)  # a headset 9 s ahead
+    assert cache.refused[Accepted.AHEAD_OF_CLOCK] == 1 and cache.newest_tracker_stamp() == T0
+    cache.ingest([tf("world", head, T0 + 0.3)], now=T0 + 0.01)  # within the window: a clock a little ahead
+    assert cache.refused[Accepted.AHEAD_OF_CLOCK] == 1 and cache.newest_tracker_stamp() == T0 + 0.3
+    unjudged = TfCache(TRACKERS, TfGuards(clock_window=0.0))  # simulated time: no clock check at all
+    unjudged.ingest([tf("world", head, T0 + 9.0)], now=T0)
+    assert unjudged.newest_tracker_stamp() == T0 + 9.0
+
+
 def test_a_bag_with_poisoned_tf_gives_valid_estimates_offline(tmp_path):
     """The same ingest offline: `process` on a bag with an unrelated frame going back, a head
     stamped 0 at 10 Hz and a far-away frame; the bag's receive times are the clock."""
@@ -188,6 +222,8 @@ def test_a_bag_with_poisoned_tf_gives_valid_estimates_offline(tmp_path):
                 msgs.append(
                     [_transform_msg(store, 0.0, "world", CONFIG.sites[0].frame_id, np.zeros(3), [0, 0, 0, 1.0])]
                 )
+            if i == 10:  # one value whose square overflows (it refused the whole bag)
+                msgs.append([_transform_msg(store, t, "world", "other", np.zeros(3), [2e154, 0, 0, 1.0])])
             for k, transforms in enumerate(msgs):
                 data = store.serialize_cdr(store.types[TF_TYPE](transforms=transforms), TF_TYPE)
                 writer.write(conn, int(t * 1e9) + k, data)
@@ -198,3 +234,4 @@ def test_a_bag_with_poisoned_tf_gives_valid_estimates_offline(tmp_path):
     assert len(poses) == len(stream) + len(range(3, len(stream), 6))  # the head-at-0 messages are input frames too
     assert sum(p.valid for p in poses) >= len(stream)  # every real frame valid
     assert refused["stamp far from the clock"] == len(range(3, len(stream), 6))
+    assert refused["non-finite or absurd value"] == 1

@@ -192,6 +192,7 @@ def run_demo(
         page = write_body_page(
             out_dir / "demo.html",
             motion.fps,
+            True,  # an earlier demo's page is replaced; any other file there is refused
             estimate=pos,
             truth=motion.positions,
             trackers=stream_trackers(stream, sensors),

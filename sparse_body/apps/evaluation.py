@@ -579,29 +579,16 @@ def is_results_file(path: Path) -> bool:
 
 def check_results_path(path: Path) -> Path:
     """Refuse, before any evaluation, a results path that is not ours to write: an existing
-    file other than an earlier results file, a folder, a device; its folder must exist."""
-    from ..io.bagio import OutputError
+    file other than an earlier results file, a folder, a link, a device; its folder must exist."""
+    from ..core.file_output import check_target
 
-    path = Path(path)
-    if (path.exists() or path.is_symlink()) and not is_results_file(path):
-        raise OutputError(
-            f"{path}: exists and is not a results file of `sparse-body eval`; it is never "
-            f"replaced, choose another --output"
-        )
-    if not path.absolute().parent.is_dir():
-        raise OutputError(f"{path}: {path.absolute().parent} is not an existing folder")
-    return path
+    return check_target(Path(path), is_results_file, True, "results file")
 
 
 def write_json(results: list[EvalResult], path: Path, intervals: bool = True) -> None:
-    """The results as JSON, written under a temporary name and moved into place."""
-    import os
+    """The results as JSON, written through io/file_output.py: only an earlier results file
+    is replaced (each write after a clip replaces the one before)."""
+    from ..core.file_output import write_file
 
-    path = check_results_path(path)
-    tmp = path.with_name(f".{path.name}.partial-{os.getpid()}")
-    try:
-        tmp.write_text(json.dumps([r.to_json(intervals) for r in results], indent=1, allow_nan=True))
-        check_results_path(path)
-        os.replace(tmp, path)
-    finally:
-        tmp.unlink(missing_ok=True)
+    text = json.dumps([r.to_json(intervals) for r in results], indent=1, allow_nan=True)
+    write_file(path, text, is_results_file, overwrite=True, what="results file")

@@ -210,18 +210,17 @@ def stream_trackers(stream: TrackerStream, sensors: SensorConfig) -> np.ndarray:
     return np.where(shown[..., None], stream.positions, np.nan)
 
 
-def write_body_page(path: Path, fps: float, **parts) -> Path:
-    """body_page written to path (a new file, or one this command wrote: an HTML page)."""
-    path = Path(path)
-    html = body_page(fps, **parts)
-    if path.exists() and (
-        path.is_dir() or path.suffix != ".html" or "plotly" not in path.read_text(errors="replace")[:200_000]
-    ):
-        raise ViewError(f"{path}: exists and is not a page this command wrote; choose another name")
-    tmp = path.with_name(f".{path.name}.partial")
-    tmp.write_text(html)
-    tmp.replace(path)
-    return path
+# In every page's <head>: what proves a page is one this command wrote (and may replace).
+PAGE_MARKER = '<meta name="generator" content="sparse_body view">'
+
+
+def write_body_page(path: Path, fps: float, overwrite: bool = False, **parts) -> Path:
+    """body_page written to path: a new file, or with overwrite a page this command wrote
+    (io/file_output.py's rules: a user's file, a link or a device is never replaced)."""
+    from ..core.file_output import marker_in_head, write_file
+
+    html = body_page(fps, **parts).replace("<head>", "<head>" + PAGE_MARKER, 1)
+    return write_file(Path(path), html, marker_in_head(PAGE_MARKER.encode()), overwrite, "page")
 
 
 def bag_bodies(bag: Path) -> tuple[np.ndarray, np.ndarray | None, float]:

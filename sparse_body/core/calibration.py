@@ -36,6 +36,9 @@ from .mounting import MAX_SHIFT, MountingFit, fit_mounting
 from .rotations import yaw_matrix
 from .skeleton import CANONICAL_HEIGHT, JOINT_NAMES, Skeleton
 
+# the first line of every calibration file this package writes: what lets a new one replace it
+CALIBRATION_MARKER = "# T-pose calibration written by sparse_body"
+
 
 class CalibrationError(ValueError):
     pass
@@ -81,12 +84,18 @@ class Calibration:
             data["skeleton"] = {
                 n: [round(float(v), 5) for v in o] for n, o in zip(JOINT_NAMES, self.skeleton.offsets, strict=True)
             }
-        Path(path).parent.mkdir(parents=True, exist_ok=True)
-        Path(path).write_text(
-            "# T-pose calibration written by sparse_body (rotation offsets x y z w:\n"
+        from .file_output import marker_in_head, write_file
+
+        # an earlier calibration is replaced; a user's file, a link, a FIFO or a device never is
+        write_file(
+            Path(path),
+            CALIBRATION_MARKER + " (rotation offsets x y z w:\n"
             "# the tracker's orientation in its joint's frame; skeleton: each joint's rest\n"
             "# offset from its parent, metres; translations: each tracker's mounting in its\n"
-            "# joint's frame, found from movement, metres)\n" + yaml.safe_dump(data, sort_keys=False)
+            "# joint's frame, found from movement, metres)\n" + yaml.safe_dump(data, sort_keys=False),
+            marker_in_head(CALIBRATION_MARKER.encode()),
+            overwrite=True,
+            what="calibration",
         )
 
     @classmethod

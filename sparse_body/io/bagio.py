@@ -21,6 +21,7 @@ from rosbags.rosbag2 import Reader, ReaderError, StoragePlugin, Writer
 from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 
 from .. import __version__
+from ..core.file_output import OutputError as FileOutputError
 from ..core.resources import share_dir
 from ..core.sensors import SensorConfig
 from ..core.skeleton import NUM_JOINTS, Skeleton
@@ -49,7 +50,7 @@ class BagError(ValueError):
     """A bag that cannot be read or written; the message names it and the problem."""
 
 
-class OutputError(BagError):
+class OutputError(BagError, FileOutputError):
     """An output path refused: it would replace an input, a user's file, folder or device."""
 
 

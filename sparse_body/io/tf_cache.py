@@ -9,13 +9,16 @@ hands each message to its buffer, so live and offline judge samples alike.
 
 /tf is open to every process on the ROS domain, so what arrives is checked (TfGuards) and
 what is refused is counted by reason (`refused`):
-- non-finite values and degenerate quaternions;
+- non-finite or absurd values (any number beyond `MAX_VALUE`: squaring 2e154 overflowed and
+  stopped the node) and degenerate quaternions;
 - a stamp older than the one held: out of order within `jump_back`; further back, that
   frame alone starts again (one wrong frame cannot clear the others). The input as a whole
   starts again (a looping bag, a restarted simulation) when most trackers have jumped back;
   the consumer is told (`jumped_back`) so it can reset its estimator;
-- dynamic stamps further than `clock_window` from the clock (the node's, or a bag's receive
-  time): a head stamped 0, a replay with its recorded stamps on a live clock;
+- dynamic stamps further than `clock_window` behind the clock (the node's, or a bag's receive
+  time): a head stamped 0, a replay with its recorded stamps on a live clock; or further than
+  `future_window` ahead of it: a sample from the future would make every estimate after it
+  carry that stamp, valid and seconds ahead of every consumer's clock;
 - a tracker further than `play_radius` from the fixed frame's origin, and a parent chain
   longer than `max_depth` (looked up each sample: a 2000-frame chain costs 16 steps);
 - memory stays bounded whatever arrives: only tracker frames and their ancestors are kept
@@ -36,14 +39,21 @@ from scipy.spatial.transform import Rotation
 
 from .tf_guards import TfGuards
 
+# Any value (metres, quaternion components, seconds) beyond this is refused before arithmetic
+# on it: squares and sums of squares of values within it stay finite (2e154 squared overflowed
+# Python's float power and stopped the node). Positions this far are refused later anyway,
+# by the play space, and counted there.
+MAX_VALUE = 1e150
+
 
 class Accepted(Enum):
     OK = "ok"
-    NON_FINITE = "non-finite"
+    NON_FINITE = "non-finite or absurd value"
     BAD_QUATERNION = "degenerate quaternion"
     OUT_OF_ORDER = "out of order"
     JUMPED_BACK = "clock jumped back"  # accepted: the frame starts again
     FAR_FROM_CLOCK = "stamp far from the clock"
+    AHEAD_OF_CLOCK = "stamp ahead of the clock"
     OUT_OF_PLAY_SPACE = "outside the play space"
     TOO_DEEP = "parent chain too deep"
     MALFORMED = "malformed message"  # a whole /tf message that cannot be read (live: any peer can send one)
@@ -155,14 +165,18 @@ class TfCache:
 
     def _check(self, held: Edge | None, stamp: float, values: tuple, static: bool, now: float | None) -> Accepted:
         """values: x y z qx qy qz qw."""
-        # a sum is finite when every term is (and values near 1e308 are absurd anyway)
-        if not math.isfinite(stamp + sum(values)):
+        # bounded first (NaN fails every comparison): no product below can overflow
+        if not (-MAX_VALUE <= stamp <= MAX_VALUE and all(-MAX_VALUE <= v <= MAX_VALUE for v in values)):
             return Accepted.NON_FINITE
-        if not 0.81 < values[3] ** 2 + values[4] ** 2 + values[5] ** 2 + values[6] ** 2 < 1.21:
+        qx, qy, qz, qw = values[3:]
+        if not 0.81 < qx * qx + qy * qy + qz * qz + qw * qw < 1.21:
             return Accepted.BAD_QUATERNION
         window = self.guards.clock_window
-        if not static and now is not None and window > 0 and abs(stamp - now) > window:
-            return Accepted.FAR_FROM_CLOCK
+        if not static and now is not None and window > 0:
+            if now - stamp > window:
+                return Accepted.FAR_FROM_CLOCK
+            if stamp - now > min(window, self.guards.future_window):
+                return Accepted.AHEAD_OF_CLOCK
         if held is not None and not static and stamp < held.stamp:
             return Accepted.OUT_OF_ORDER if held.stamp - stamp <= self.guards.jump_back else Accepted.JUMPED_BACK
         return Accepted.OK

@@ -133,6 +133,12 @@ PARAMETERS = {
         "a /tf stamp further than this many seconds from this node's clock is refused and counted "
         "(a frame stamped 0; a bag replayed with its recorded stamps without use_sim_time); 0: no check",
     ),
+    "future_window": (
+        TfGuards.future_window,
+        "a /tf stamp more than this many seconds ahead of this node's clock is refused and counted "
+        "(a sender whose clock runs ahead: its estimates would be stamped in the future); only "
+        "while clock_window is above 0",
+    ),
     "play_radius": (
         TfGuards.play_radius,
         "a tracker further than this many metres from the fixed frame's origin is refused",
@@ -159,6 +165,7 @@ RANGES = {
     "stale_timeout": (0.001, 10.0),
     "tracker_timeout": (0.01, 60.0),
     "clock_window": (0.0, 1e9),
+    "future_window": (0.001, 60.0),
     "play_radius": (0.1, 1e6),
     "foxglove_port": (0, 65535),
 }
@@ -283,7 +290,9 @@ class EstimatorNode(LifecycleNode):
         self.sensors, self.params = sensors, p
         self._frames = [s.frame_id for s in sensors.sites]
         own = {p["frame_prefix"] + name for name in JOINT_NAMES}  # the body's links, as body_table names them
-        guards = TfGuards(clock_window=p["clock_window"], play_radius=p["play_radius"])
+        guards = TfGuards(
+            clock_window=p["clock_window"], future_window=p["future_window"], play_radius=p["play_radius"]
+        )
         self.tf_in = TfReader(
             self, set(self._frames), own, self._tracker_arrived, guards, also=self._looked_up_frames(p)
         )
@@ -557,7 +566,7 @@ class EstimatorNode(LifecycleNode):
         values["/tf messages caught up"] = str(self.tf_in.drained)  # taken at once by a node running behind
         values["own /tf messages skipped"] = str(self.tf_in.own_skipped)  # known by their bytes, not read
         status = DiagnosticStatus(
-            level=level,
+            level=bytes([level]),  # a `byte` field: an int there was sent as a random byte
             name=f"{self.get_name()}: estimator",
             message=message,
             hardware_id=self._method(),

@@ -46,6 +46,7 @@ from rclpy.timer import Timer
 
 from ..adapters.vmc import DEFAULT_PORT
 from ..core.calibration import Calibration, CalibrationError, calibrate_mounting, calibrate_tpose, untimed
+from ..core.file_output import OutputError
 from ..core.sensors import SensorConfig, SensorConfigError, load_sensor_config
 from ..io.bagio import BagError
 from .messages import to_time
@@ -337,8 +338,10 @@ class TrackerBridge(LifecycleNode):
         if path:
             try:
                 calibration.save(path)
-            except OSError as err:
-                return self._refuse(response, f"calibration not saved to {path}: {err.strerror or err}")
+            except (OSError, OutputError) as err:  # a FIFO, a link or a user's file there is refused
+                return self._refuse(
+                    response, f"calibration not saved to {path}: {getattr(err, 'strerror', None) or err}"
+                )
         with self._lock:
             self.calibration = calibration
         response.success, response.height, response.sites = True, float(calibration.height), sorted(calibration.offsets)

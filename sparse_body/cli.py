@@ -22,7 +22,8 @@ def _mocap(args) -> Path:
     root = find_mocap_root(args.mocap)
     if root is None:  # main() makes it one line with the input error's exit code
         raise ValueError(
-            "no motion capture found; pass --mocap DIR or set SPARSE_BODY_MOCAP (the CMU folder of ../shared/mocap)"
+            "no motion capture found; index one with `sparse-body import-mocap FOLDER --out DIR`, "
+            "then pass --mocap DIR or set SPARSE_BODY_MOCAP"
         )
     return root
 
@@ -690,7 +691,7 @@ def build_parser() -> argparse.ArgumentParser:
         help="figures by group as well: the file's folder under the --motion folder, or its name up to "
         "the first _ or - (an actor; CMU's subject); default: folder for --motion",
     )
-    p.add_argument("--mocap", help="the CMU folder (default: ../shared/mocap/cmu or $SPARSE_BODY_MOCAP)")
+    p.add_argument("--mocap", help="an indexed motion capture folder (`import-mocap`; default: $SPARSE_BODY_MOCAP)")
     p.add_argument(
         "--output",
         help=f"where to write the JSON results (default: {RESULTS_DIR}/eval_ESTIMATOR_SENSORS.json); "
@@ -923,15 +924,18 @@ EXIT_INTERRUPTED, EXIT_TERMINATED = 130, 143
 def _exit_code(err: BaseException) -> int:
     """The exit code of an error the command ends with (see the constants above)."""
     from .core.file_output import OutputError
-    from .core.textfile import FileTooLarge
+    from .core.textfile import InputTooLarge
 
     if isinstance(err, OutputError):
         return EXIT_OUTPUT
-    if isinstance(err, (FileTooLarge, MemoryError, RecursionError)):
+    if isinstance(err, (InputTooLarge, MemoryError, RecursionError)):
         return EXIT_TOO_LARGE
     if isinstance(err, OSError):
         return EXIT_OS
     return EXIT_INPUT
+
+
+MAX_MESSAGE = 2000  # characters of an error's one line
 
 
 def _one_line(err: BaseException) -> str:
@@ -942,10 +946,19 @@ def _one_line(err: BaseException) -> str:
     if isinstance(err, OSError) and err.strerror:
         where = f"{err.filename}: " if err.filename else ""
         return f"{where}{err.strerror}"
-    return " ".join(str(err).split()) or type(err).__name__
+    text = " ".join(str(err).split()) or type(err).__name__
+    # an error quoting what it refused stays readable whatever that was (a value of megabytes)
+    return text if len(text) <= MAX_MESSAGE else text[: MAX_MESSAGE - 20] + " ... (cut short)"
+
+
+_sigterm_seen = False  # set by _terminate; main() clears it at its start
 
 
 def _terminate(signum, frame):
+    # remembered as well as raised: a library that catches the exception in its own wait can
+    # raise a plain KeyboardInterrupt in its place (Ray's ray.wait does), and it is still SIGTERM
+    global _sigterm_seen
+    _sigterm_seen = True
     raise Terminated
 
 
@@ -968,6 +981,8 @@ def main(argv: list[str] | None = None) -> None:
     exit code, never a traceback."""
     import signal
 
+    global _sigterm_seen
+    _sigterm_seen = False
     command, YAMLError = "sparse-body", ValueError  # (yaml's own until it is imported)
     args = None
     try:  # from the first statement: Ctrl-C while starting is one line too
@@ -981,7 +996,7 @@ def main(argv: list[str] | None = None) -> None:
         stop = _stop_behind(err)
         # what a stop leaves: a command that keeps finished parts says so on its own args
         left = getattr(args, "left_when_stopped", "nothing written")
-        if isinstance(stop, Terminated):
+        if isinstance(stop, Terminated) or (stop is not None and _sigterm_seen):
             print(f"{command}: terminated; {left}", file=sys.stderr)
             sys.exit(EXIT_TERMINATED)
         if stop is not None:  # partial output was removed on the way out

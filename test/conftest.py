@@ -7,10 +7,16 @@ from sparse_body.data.catalog import find_mocap_root, read_index
 
 
 @pytest.fixture(scope="session")
+NO_MOCAP = (
+    "no motion capture indexed: download CMU's ASF/AMC files (allasfamc.zip on mocap.cs.cmu.edu), "
+    "run `sparse-body import-mocap FOLDER --out DIR`, then SPARSE_BODY_MOCAP=DIR make test"
+)
+
+
 def mocap_root() -> Path:
     root = find_mocap_root()
     if root is None:
-        pytest.skip("no ../shared/mocap (set SPARSE_BODY_MOCAP to run tests on real motion capture)")
+        pytest.skip(NO_MOCAP)
     return root
 
 
@@ -52,8 +58,7 @@ def pytest_collection_modifyitems(config, items):
     if find_mocap_root() is not None:
         return
     skip = pytest.mark.skip(
-        reason="no motion capture: ../shared/mocap is absent and SPARSE_BODY_MOCAP unset "
-        "(`sparse-body import-mocap` makes one from a CMU download)"
+        reason=NO_MOCAP
     )
     for item in items:
         if "mocap" in item.keywords:

@@ -162,11 +162,11 @@ def test_a_bag_that_took_its_name_as_the_run_was_stopped_is_in_the_summary(tmp_p
     config = _bags(tmp_path / "bags", 2.0, 3)
     out = tmp_path / "out"
     out.mkdir()
-    process_bag(tmp_path / "bags" / "walk2", out / "walk2", "ik", config, _skeleton(), progress=False)  # an earlier run
+    process_bag(tmp_path / "bags" / "walk2", out / "walk2", "ik", config, _skeleton(), 30.0, progress=False)  # earlier
 
     def stopped_after_one_bag(tasks, settings, jobs, record):
         i, bag, target = tasks[0]
-        process_bag(bag, target, "ik", config, _skeleton(), progress=False)
+        process_bag(bag, target, "ik", config, _skeleton(), 30.0, progress=False)
         raise KeyboardInterrupt
 
     monkeypatch.setattr(batch, "_run_here", stopped_after_one_bag)
@@ -179,3 +179,29 @@ def test_a_bag_that_took_its_name_as_the_run_was_stopped_is_in_the_summary(tmp_p
     assert listed["walk0"]["status"] == "done" and listed["walk0"]["error"] == batch.FINISHED_AT_STOP
     assert listed["walk0"]["frames"] == len([m for m in _messages(out / "walk0") if m[0] == "/joint_states"]) > 0
     assert summary["pending"] == [str(tmp_path / "bags" / "walk1")]
+
+
+def test_a_resumed_run_never_mixes_bags_of_other_settings(tmp_path, capsys):
+    """A folder of bags finished with ik, resumed with another estimator: refused at the start
+    (it skipped them and mixed the two silently); the summary says what made its bags."""
+    from sparse_body.cli import EXIT_OUTPUT
+
+    _bags(tmp_path / "bags", 1.0, 2)
+    out = tmp_path / "out"
+
+    def run(*extra) -> tuple[int, str]:
+        with pytest.raises(SystemExit) as ended:
+            main(["process", str(tmp_path / "bags"), str(out), "--quiet", *extra])
+        return ended.value.code, capsys.readouterr().err
+
+    assert run()[0] == 0
+    summary = json.loads((out / SUMMARY).read_text())
+    assert summary["settings"]["estimator"] == "ik" and summary["settings"]["sensors"] == "six_point"
+    before = {p.name: p.stat().st_mtime_ns for p in out.rglob("*")}
+    code, err = run("--estimator", "reference")
+    assert code == EXIT_OUTPUT and "other settings" in err and "ik" in err and len(err.strip().splitlines()) == 1
+    assert {p.name: p.stat().st_mtime_ns for p in out.rglob("*")} == before  # nothing touched
+    assert run()[0] == 0  # the same settings resume (every bag skipped)
+    assert [b["status"] for b in json.loads((out / SUMMARY).read_text())["bags"]] == ["skipped", "skipped"]
+    assert run("--estimator", "reference", "--overwrite")[0] == 0
+    assert json.loads((out / SUMMARY).read_text())["settings"]["estimator"] == "reference"

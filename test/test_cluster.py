@@ -134,6 +134,17 @@ def test_bags_on_a_cluster_survive_a_killed_worker_and_equal_one_process(tmp_pat
         assert tasks, "no bag ran on the cluster: " + (tmp_path / "driver.log").read_text()
         os.kill(tasks[0], signal.SIGKILL)  # a worker dies in the middle of a bag
         assert driver.wait(timeout=LIMIT) == 0, (tmp_path / "driver.log").read_text()
+        # SIGTERM to a run on the cluster: the command's one line and 143 (Ray's own handler
+        # printed a stack dump and exited with 1)
+        command = process_on(tmp_path, address)
+        command[3] = str(tmp_path / "stopped")
+        stopped = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        while not in_sessions(sessions, b"ray::_process_one") and stopped.poll() is None and time.monotonic() < end:
+            time.sleep(0.05)
+        stopped.send_signal(signal.SIGTERM)
+        _, err = stopped.communicate(timeout=LIMIT)
+        assert stopped.returncode == 143 and err.strip().splitlines() == [err.strip()], err
+        assert "terminated" in err
     finally:
         if driver is not None and driver.poll() is None:
             driver.kill()
@@ -159,5 +170,8 @@ def test_a_cluster_that_is_not_there_is_a_one_line_error(tmp_path):
     make_bag(synthetic_walk(1.0), config, tmp_path / "in" / "walk")
     (port,) = free_ports(1)
     done = subprocess.run(process_on(tmp_path, f"127.0.0.1:{port}"), capture_output=True, text=True, timeout=LIMIT)
-    assert done.returncode != 0 and "no Ray cluster there" in done.stderr, done.stderr
+    assert done.returncode == 1 and "no Ray cluster there" in done.stderr, (
+        done.stderr
+    )  # bad input, not "output refused"
     assert len(done.stderr.strip().splitlines()) == 1, done.stderr
+    assert not (tmp_path / "out").exists()  # nothing made before the cluster answered

@@ -17,6 +17,7 @@ from sparse_body.core.skeleton import Skeleton
 from sparse_body.data.synthetic import synthetic_walk
 from sparse_body.data.virtual_trackers import TrackerNoise, synthesize_trackers
 from sparse_body.estimators import create_estimator
+from sparse_body.estimators.onnx_model import ModelMissing
 from sparse_body.methods.dragposer.constraints import (
     AboveFloor,
     AngleLimit,
@@ -188,7 +189,7 @@ def test_user_constraints_are_added_and_removed_at_runtime(tiny_vae):
 
 
 def test_missing_model_is_a_clear_error(tmp_path):
-    with pytest.raises(FileNotFoundError, match="train one with `sparse-body train dragposer`"):
+    with pytest.raises(ModelMissing, match="train one with `sparse-body train dragposer`"):
         create_estimator("dragposer", load_sensor_config("six_point"), Skeleton.canonical(), model_dir=str(tmp_path))
 
 
@@ -475,9 +476,9 @@ def test_polish_puts_end_effectors_on_their_trackers_without_moving_the_latent()
 def test_missing_temporal_predictor_names_the_file_and_the_way_out(tiny_vae, tmp_path):
     for part in ("encoder", "decoder"):
         (tmp_path / f"dragposer_{part}.onnx").write_bytes((tiny_vae / f"dragposer_{part}.onnx").read_bytes())
-    with pytest.raises(FileNotFoundError, match="dragposer_temporal.onnx.*temporal_weight to 0"):
+    with pytest.raises(ModelMissing, match="dragposer_temporal.onnx.*temporal_weight to 0"):
         create_estimator("dragposer", load_sensor_config("six_point"), Skeleton.canonical(), model_dir=str(tmp_path))
-    with pytest.raises(FileNotFoundError, match="dragposer_tracker_prior.onnx.*tracker_prior to 0"):
+    with pytest.raises(ModelMissing, match="dragposer_tracker_prior.onnx.*tracker_prior to 0"):
         create_estimator(
             "dragposer",
             load_sensor_config("six_point"),

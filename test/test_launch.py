@@ -23,7 +23,10 @@ pytest.importorskip(
     reason="launch_testing is not installed (make setup installs "
     "it from ../shared/ros; on a ROS install: ros-$ROS_DISTRO-launch-testing-ros)",
 )
-pytest.importorskip("launch_ros", reason="launch_ros is not installed (make setup installs it from ../shared/ros)")
+pytest.importorskip(
+    "launch_ros",
+    reason="launch_ros is not installed (a ROS install gives it: apt install ros-$ROS_DISTRO-launch-testing-ros)",
+)
 launch_testing_ros = pytest.importorskip("launch_testing_ros", reason="launch_testing_ros is not installed")
 ament_index = pytest.importorskip("ament_index_python.packages")
 try:

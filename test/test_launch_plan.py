@@ -8,10 +8,12 @@ from pathlib import Path
 import pytest
 
 pytest.importorskip(
-    "launch_ros", reason="launch_ros is not installed (make setup installs it from ../shared/ros; or a ROS install)"
+    "launch_ros",
+    reason="launch_ros is not installed (a ROS install gives it: apt install ros-$ROS_DISTRO-launch-testing-ros)",
 )
 pytest.importorskip(
-    "launch.actions", reason="launch is not installed (make setup installs it from ../shared/ros; or a ROS install)"
+    "launch.actions",
+    reason="launch is not installed (a ROS install gives it: apt install ros-$ROS_DISTRO-launch-testing-ros)",
 )
 pytest.importorskip("ament_index_python.packages", reason="ament_index_python is not installed (make setup)")
 

@@ -173,7 +173,7 @@ def test_user_motion_files_upper_case_and_unknown_layouts(tmp_path, mocap_root):
 
     subject = mocap_root / "asfamc" / "subjects" / "02"
     if not subject.is_dir():
-        pytest.skip("the CMU ASF/AMC subject 02 is not in ../shared/mocap")
+        pytest.skip("the CMU ASF/AMC subject 02 is not in the indexed motion capture")
     shutil.copy(subject / "02.asf", tmp_path / "02.ASF")
     (tmp_path / "02_05.AMC").write_bytes(gzip.decompress((subject / "02_05.amc.gz").read_bytes()))
     assert [i.path for i in find_inputs([tmp_path])] == [tmp_path / "02_05.AMC"]

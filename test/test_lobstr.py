@@ -17,6 +17,7 @@ from sparse_body.core.skeleton import Skeleton, standing_pose
 from sparse_body.data.catalog import load_clip
 from sparse_body.data.virtual_trackers import TrackerNoise, synthesize_trackers
 from sparse_body.estimators import create_estimator
+from sparse_body.estimators.onnx_model import ModelMissing
 from sparse_body.methods.lobstr.contact_ik import ContactHold, release_weight
 from sparse_body.methods.lobstr.features import (
     INPUT_JOINTS,
@@ -234,7 +235,7 @@ def test_learned_upper_body_is_the_networks_put_on_the_trackers_and_false_is_the
 
 def test_estimator_refuses_a_missing_or_foreign_model(tmp_path, clip, tiny_model):
     config = load_sensor_config("four_point")
-    with pytest.raises(FileNotFoundError, match="train one"):
+    with pytest.raises(ModelMissing, match="train one"):
         create_estimator("lobstr", config, clip.skeleton, model_path=str(tmp_path / "none.onnx"))
     (tmp_path / "junk.onnx").write_bytes(b"not a model")
     with pytest.raises(ValueError, match="junk.onnx"):

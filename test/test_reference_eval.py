@@ -161,7 +161,7 @@ def test_eval_takes_a_users_own_motion_files(tmp_path, mocap_root, capsys):
 
     subject = mocap_root / "asfamc" / "subjects" / "02"
     if not subject.is_dir():
-        pytest.skip("the CMU ASF/AMC subject 02 is not in ../shared/mocap")
+        pytest.skip("the CMU ASF/AMC subject 02 is not in the indexed motion capture")
     with pytest.raises(SystemExit) as ended:
         main(
             [

@@ -21,7 +21,7 @@ def run_cli(capsys, *argv):
 def test_a_cmu_download_becomes_a_motion_folder(mocap_root, tmp_path, capsys):
     subjects = mocap_root / "asfamc" / "subjects"
     if not (subjects / "02").is_dir():
-        pytest.skip("the CMU ASF/AMC subjects are not in ../shared/mocap")
+        pytest.skip("the CMU ASF/AMC subjects are not in the indexed motion capture")
     download = tmp_path / "allasfamc" / "all_asfamc" / "subjects"  # as CMU's zip unpacks
     for subject in ("02", "05", "06", "07", "08", "09", "10", "12"):
         if (subjects / subject).is_dir():

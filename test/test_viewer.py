@@ -161,3 +161,49 @@ def test_a_live_view_that_is_not_there_is_a_one_line_error(capsys):
             main(["view", f"ws://127.0.0.1:{port}", *extra])
         err = capsys.readouterr().err
         assert ended.value.code != 0 and said in err and len(err.strip().splitlines()) == 1, err
+
+
+def test_a_live_view_that_closes_mid_recording_or_sends_unexpected_json_keeps_what_came(tmp_path, capsys):
+    """A server (a real WebSocket one on this machine) that sends JSON of other shapes and text
+    that is no JSON, then some bodies on /tf, then closes the connection: the page holds the
+    bodies that came (ConnectionClosedError and a KeyError were tracebacks)."""
+    import struct
+    import threading
+
+    from websockets.sync.server import serve
+
+    from sparse_body.apps.live_record import MESSAGE_DATA, SUBPROTOCOL
+    from sparse_body.cli import main
+    from sparse_body.core.skeleton import NUM_JOINTS, Skeleton
+    from sparse_body.io import cdr
+    from sparse_body.io.output import body_table
+
+    skeleton = Skeleton.canonical()
+    quats = np.tile([0.0, 0.0, 0.0, 1.0], (30, NUM_JOINTS, 1))
+    table = body_table(quats, np.tile([0.0, 0.0, 1.0], (30, 1)), skeleton, "world")
+    bodies = cdr.tf_messages(1e9 + np.arange(30) / 60, table.parents, table.children, table.values)
+
+    def handler(ws):
+        for text in (
+            "[1, 2]",
+            '{"op": "advertise", "channels": "x"}',
+            "not json",
+            '{"op": "advertise", "channels": [{"topic": "/tf", "encoding": "cdr"}]}',
+            '{"channels": [null]}',
+        ):
+            ws.send(text)
+        ws.send('{"op": "advertise", "channels": [{"id": 7, "topic": "/tf", "encoding": "cdr"}]}')
+        ws.recv(timeout=5)  # the subscription
+        for body in bodies:
+            ws.send(struct.pack("<BIQ", MESSAGE_DATA, 1, 0) + body)
+        ws.socket.close()  # the node stops: no closing handshake
+
+    with serve(handler, "127.0.0.1", 0, subprotocols=[SUBPROTOCOL]) as server:
+        threading.Thread(target=server.serve_forever, daemon=True).start()
+        port = server.socket.getsockname()[1]
+        with pytest.raises(SystemExit) as ended:
+            main(["view", f"ws://127.0.0.1:{port}", "--seconds", "5", "-o", str(tmp_path / "live.html")])
+        server.shutdown()
+    captured = capsys.readouterr()
+    assert ended.value.code == 0, captured.err
+    assert "30 estimates" in captured.out and (tmp_path / "live.html").is_file()

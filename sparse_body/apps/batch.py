@@ -28,7 +28,7 @@ from pathlib import Path
 
 from ..core.sensors import SensorConfig
 from ..core.skeleton import Skeleton
-from ..io.bagio import BagError, OutputError, joint_state_count, remove_leftovers, written_by_us
+from ..io.bagio import BagError, OutputError, joint_state_count, made_with, remove_leftovers, written_by_us
 from ..io.tf_guards import TfGuards
 
 SUMMARY = "sparse_body_summary.json"  # beside the outputs; replaced only when it is ours
@@ -81,7 +81,9 @@ def expand_inputs(given: list[Path]) -> list[Path]:
         if is_bag(path) or not path.is_dir():
             bags.append(path)
             continue
-        found = sorted(p for p in path.iterdir() if is_bag(p) and not p.name.startswith("."))
+        # a folder named like an MCAP file is an input too: it fails, saying why, instead of
+        # being left out without a word
+        found = sorted(p for p in path.iterdir() if (is_bag(p) or p.suffix == ".mcap") and not p.name.startswith("."))
         if not found:
             raise BagError(f"{path}: a folder with no bags in it")
         bags.extend(found)
@@ -162,22 +164,45 @@ def process_many(
     """Process every input bag into out_dir with `jobs` worker processes, or as tasks on the Ray
     cluster at `cluster` ("auto": the one this machine is part of); returns one result a bag,
     in input order, and writes them to out_dir / SUMMARY."""
+    from .offline import settings_record
+
     bags = expand_inputs(inputs)
     target = out_dir.resolve()
     for given in inputs:  # the outputs would land among (or inside) the inputs
         if target == given.resolve() or given.resolve() in target.parents:
             raise OutputError(f"{out_dir}: is (or is inside) the input {given}; choose another output folder")
-    out_dir.mkdir(exist_ok=True)
-    summary = out_dir / SUMMARY
-    _check_summary(summary)
+    record_of_run = settings_record(
+        settings.estimator, settings.options, settings.sensors, settings.skeleton, settings.fps
+    )
     results: dict[int, BagResult] = {}
-    todo = []
+    todo, other = [], []
     for i, bag in enumerate(bags):
         out = output_for(bag, out_dir)
         if written_by_us(out) and not settings.overwrite:
             results[i] = BagResult(str(bag), str(out), "skipped", error="finished before (--overwrite redoes it)")
+            if made_with(out) != record_of_run:
+                other.append(out)
         else:
             todo.append(i)
+    if other:  # resuming would mix estimates of two settings in one folder
+        theirs = made_with(other[0])
+        said = json.loads(theirs)["estimator"] if theirs else "an earlier version"
+        raise OutputError(
+            f"{out_dir}: {len(other)} finished bag(s) there were made with other settings ({other[0].name}: "
+            f"{said}); choose another output folder, or --overwrite to redo them"
+        )
+    connection = _connect(cluster) if cluster is not None else None  # before anything is made
+    created = not out_dir.exists()
+    out_dir.mkdir(exist_ok=True)
+    try:
+        summary = out_dir / SUMMARY
+        _check_summary(summary)
+    except BaseException:
+        if created:
+            out_dir.rmdir()
+        if connection is not None:
+            connection.shutdown()
+        raise
     bar = None
     if progress:
         from tqdm import tqdm
@@ -189,7 +214,7 @@ def process_many(
         if bar is not None:
             bar.update(1)
             bar.set_postfix(frames=sum(r.frames for r in results.values()))
-        _write_summary(summary, bags, results)
+        _write_summary(summary, bags, results, record_of_run)
 
     tasks = [(i, bags[i], output_for(bags[i], out_dir)) for i in todo]
     before = {i: _identity(out) for i, _, out in tasks}  # what each output was when the run began
@@ -197,7 +222,7 @@ def process_many(
         if cluster is None:
             _run_here(tasks, settings, jobs, record)
         else:
-            _run_on_cluster(tasks, settings, cluster, record)
+            _run_on_cluster(tasks, settings, connection, record)
     except BaseException:
         # a stop can end a worker after its bag took the output's name but before its result
         # came back: the bag is complete and kept, so the summary must list it as well
@@ -212,7 +237,7 @@ def process_many(
         if bar is not None:
             bar.close()  # before the command's last line
     ordered = [results[i] for i in range(len(bags))]
-    _write_summary(summary, bags, results)
+    _write_summary(summary, bags, results, record_of_run)
     return ordered
 
 
@@ -261,29 +286,47 @@ def _run_here(tasks: list[Task], settings: Settings, jobs: int, record) -> None:
             raise
 
 
-def _run_on_cluster(tasks: list[Task], settings: Settings, address: str, record) -> None:
-    """One Ray task a bag. A task that ends because its worker process or node died is sent
-    again, up to RETRIES times; one that raises (a bug: _process_one reports every error a
-    bag can cause) fails its bag with the error, and the others go on."""
+class ClusterError(ValueError):
+    """--cluster names no Ray cluster that answers, or Ray is not installed (exit code 1)."""
+
+
+def _connect(address: str):
+    """The ray module, connected to the cluster at `address` (before any output is made).
+    Ray's driver installs its own SIGTERM handler (a stack dump, exit 1): the command line's
+    is put back, so SIGTERM still ends the run in one line with 143."""
+    handlers = {s: signal.getsignal(s) for s in (signal.SIGINT, signal.SIGTERM)}
     try:
         import ray
-        from ray import exceptions as ray_errors
     except ImportError:
-        raise OutputError("--cluster needs Ray: pip install 'ray>=2.40' (make setup installs it)") from None
+        raise ClusterError("--cluster needs Ray: pip install 'ray>=2.40' (make setup installs it)") from None
     host, _, port = address.rpartition(":")
     if address != "auto":  # Ray itself retries an address nobody answers for minutes
         if not port.isdigit():
-            raise OutputError(f"--cluster {address}: not HOST:PORT (the address `ray start --head` gives) or auto")
+            raise ClusterError(f"--cluster {address}: not HOST:PORT (the address `ray start --head` gives) or auto")
         try:
             socket.create_connection((host.strip("[]") or "127.0.0.1", int(port)), timeout=CONNECT_TIMEOUT).close()
         except OSError as err:
-            raise OutputError(
+            raise ClusterError(
                 f"--cluster {address}: no Ray cluster there ({err}; HOST:PORT of `ray start --head`)"
             ) from None
     try:
         ray.init(address=address, logging_level="ERROR", log_to_driver=False, configure_logging=False)
     except (ConnectionError, RuntimeError, ValueError) as err:
-        raise OutputError(f"--cluster {address}: no Ray cluster there ({' '.join(str(err).split())})") from None
+        raise ClusterError(f"--cluster {address}: no Ray cluster there ({' '.join(str(err).split())})") from None
+    finally:
+        for number, handler in handlers.items():
+            if handler is not None:
+                signal.signal(number, handler)
+    return ray
+
+
+def _run_on_cluster(tasks: list[Task], settings: Settings, ray, record) -> None:
+    """One Ray task a bag (`ray`: connected by _connect). A task that ends because its worker
+    process or node died is sent again, up to RETRIES times; one that raises (a bug:
+    _process_one reports every error a bag can cause) fails its bag with the error, and the
+    others go on."""
+    from ray import exceptions as ray_errors
+
     by_ref: dict = {}
     try:
         remote = ray.remote(num_cpus=1, max_retries=0)(_process_one)  # retried here, to record why
@@ -330,13 +373,14 @@ def _is_our_summary(path: Path) -> bool:
         return False
 
 
-def _write_summary(path: Path, bags: list[Path], results: dict[int, BagResult]) -> None:
+def _write_summary(path: Path, bags: list[Path], results: dict[int, BagResult], settings_json: str) -> None:
     """The run so far, replaced as a whole (a reader never sees half a file)."""
+    from ..core.file_output import write_file
+
     body = {
         SUMMARY_KEY: "one entry per input bag of the last run: done, skipped (finished before) or failed",
+        "settings": json.loads(settings_json),
         "bags": [asdict(results[i]) for i in sorted(results)],
         "pending": [str(bags[i]) for i in range(len(bags)) if i not in results],
     }
-    tmp = path.with_name(f".{path.name}.{os.getpid()}")
-    tmp.write_text(json.dumps(body, indent=1) + "\n")
-    os.replace(tmp, path)
+    write_file(path, json.dumps(body, indent=1) + "\n", _is_our_summary, overwrite=True, what="summary")

@@ -49,14 +49,15 @@ async def _record(url: str, seconds: float) -> tuple[list[list[TfRow]], int]:
                 frame = await asyncio.wait_for(ws.recv(), timeout=left)
             except TimeoutError:
                 break
+            except websockets.exceptions.ConnectionClosed:  # the node stopped: keep what came
+                break
             if isinstance(frame, str):
-                op = json.loads(frame)
-                tf = [c for c in op.get("channels", ()) if c.get("topic") == "/tf" and c.get("encoding") == "cdr"]
-                if op.get("op") == "advertise" and tf and subscription is None:
+                channel = _advertised_tf(frame)
+                if channel is None:
+                    malformed += not _is_json_object(frame)  # another op is fine; a broken text is not
+                elif subscription is None:
                     subscription = 1
-                    await ws.send(
-                        json.dumps({"op": "subscribe", "subscriptions": [{"id": 1, "channelId": tf[0]["id"]}]})
-                    )
+                    await ws.send(json.dumps({"op": "subscribe", "subscriptions": [{"id": 1, "channelId": channel}]}))
             elif len(frame) > 13 and frame[0] == MESSAGE_DATA and struct.unpack_from("<I", frame, 1)[0] == subscription:
                 try:
                     messages.append(read_tf(bytes(frame[13:])))
@@ -65,3 +66,31 @@ async def _record(url: str, seconds: float) -> tuple[list[list[TfRow]], int]:
     if subscription is None:
         raise ViewError(f"{url}: the live view offered no /tf in {seconds:g} s")
     return messages, malformed
+
+
+def _is_json_object(text: str) -> bool:
+    try:
+        return isinstance(json.loads(text), dict)
+    except (ValueError, RecursionError):
+        return False
+
+
+def _advertised_tf(text: str) -> int | None:
+    """The channel id of a CDR /tf channel that a text frame advertises, None for anything else
+    (another op, JSON of another shape, no JSON at all: a server is not trusted to be ours)."""
+    try:
+        op = json.loads(text)
+    except (ValueError, RecursionError):
+        return None
+    if not isinstance(op, dict) or op.get("op") != "advertise" or not isinstance(op.get("channels"), list):
+        return None
+    for channel in op["channels"]:
+        if (
+            isinstance(channel, dict)
+            and channel.get("topic") == "/tf"
+            and channel.get("encoding") == "cdr"
+            and isinstance(channel.get("id"), int)
+            and not isinstance(channel.get("id"), bool)
+        ):
+            return channel["id"]
+    return None

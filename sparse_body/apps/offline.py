@@ -74,5 +74,19 @@ def process_bag(
         overwrite=overwrite,
         inputs=(Path(bag_in),),
         trackers=(sensors, stream),
+        made_with=settings_record(estimator, options, sensors, skeleton, fps),
     )
     return poses
+
+
+def settings_record(estimator: str, options: dict, sensors: SensorConfig, skeleton: Skeleton, fps: float) -> str:
+    """What an estimate bag was made with, as one JSON line (kept in the bag's metadata): two
+    bags are comparable only when it is the same."""
+    import hashlib
+    import json
+
+    import numpy as np
+
+    body = hashlib.sha256(np.asarray(skeleton.offsets, np.float64).tobytes()).hexdigest()[:12]
+    record = {"estimator": estimator, "options": options, "sensors": sensors.name, "fps": fps, "body": body}
+    return json.dumps(record, sort_keys=True, default=str)

@@ -178,18 +178,17 @@ def load_sensor_config(name_or_path: str | Path) -> SensorConfig:
 
 def read_yaml(path: Path, error: type[Exception] = ValueError):
     """A YAML file's content, or error naming the file and what is wrong with it (unreadable,
-    over the size limit of core/textfile.py, not UTF-8, not YAML, nested too deeply)."""
-    from .textfile import FileTooLarge, read_limited
+    not UTF-8, not YAML; over a limit of core/textfile.py: its size, its values with aliases
+    expanded, its nesting, then also an InputTooLarge)."""
+    from .textfile import InputTooLarge, load_yaml, read_limited, too_large
 
     try:
-        return yaml.safe_load(read_limited(path, "yaml"))
+        return load_yaml(read_limited(path, "yaml"))
     except OSError as err:
         raise error(f"{path}: cannot be read ({err.strerror or err})") from None
-    except FileTooLarge as err:
-        raise error(str(err)) from None
+    except InputTooLarge as err:
+        raise too_large(error)(f"{path}: {err}" if str(path) not in str(err) else str(err)) from None
     except UnicodeDecodeError as err:
         raise error(f"{path}: not UTF-8 text ({err.reason} at byte {err.start})") from None
     except yaml.YAMLError as err:
         raise error(f"{path}: not valid YAML ({' '.join(str(err).split())})") from None
-    except RecursionError:
-        raise error(f"{path}: nested too deeply to be a configuration") from None

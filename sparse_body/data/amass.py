@@ -29,12 +29,16 @@ def _load_npz(path: Path, keys: tuple[str, ...]) -> dict[str, np.ndarray]:
     path = Path(path)
     if path.suffix == ".pkl":
         raise MotionFileError(path, "pickled model files are not loaded; use the .npz version of the model")
+    from ..core.textfile import FileTooLarge, open_npz, too_large
+
     try:
-        with np.load(path, allow_pickle=False) as z:
+        with open_npz(path) as z:
             missing = [k for k in keys if k not in z.files]
             if missing:
                 raise MotionFileError(path, f"lacks {', '.join(missing)}")
             return {k: z[k] for k in z.files if k in keys or k in ("betas", "mocap_framerate", "mocap_frame_rate")}
+    except FileTooLarge as err:
+        raise too_large(MotionFileError)(path, str(err).removeprefix(f"{path}: ")) from None
     except (OSError, ValueError) as err:
         raise MotionFileError(path, f"not a readable .npz ({err})") from None
 

@@ -10,18 +10,23 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
-import yaml
 
 from ..core.resources import config_dir
+from ..core.textfile import load_yaml, read_limited
 from . import MotionFileError
 from .asf_amc import load_amc, load_asf
 from .bvh import load_bvh
 from .motion import Motion
 from .retarget import retarget
 
+
+class MocapFolderError(ValueError):
+    """A motion capture folder that is not an indexed one, or lacks clips its split names."""
+
+
 DEFAULT_FPS = 60.0
 # Bump when loading or retargeting changes, so stale cache entries are not used.
-CACHE_VERSION = 2
+CACHE_VERSION = 3  # 3: absurd values refused at load (a cached motion of 2 may hold them)
 SPLITS = ("train", "validation", "test")
 
 
@@ -66,7 +71,10 @@ def find_mocap_root(explicit: str | os.PathLike | None = None) -> Path | None:
         if c and (Path(c) / "cmu" / "clips.tsv").is_file():
             return Path(c) / "cmu"
     if explicit:
-        raise FileNotFoundError(f"{explicit}: no clips.tsv there (expected the CMU folder of ../shared/mocap)")
+        raise MocapFolderError(
+            f"{explicit}: no clips.tsv there; index a motion capture folder first "
+            f"(`sparse-body import-mocap FOLDER --out DIR`, then --mocap DIR)"
+        )
     return None
 
 
@@ -140,8 +148,7 @@ def split_yaml(parts: dict[str, list[str]], header: str) -> str:
 
 def load_split(path: Path | None = None) -> dict[str, list[str]]:
     path = Path(path or split_path())
-    with open(path) as f:
-        data = yaml.safe_load(f)
+    data = load_yaml(read_limited(path, "yaml"))
     if not isinstance(data, dict) or not all(isinstance(data.get(s), list) for s in SPLITS):
         raise ValueError(f"{path}: a split file needs the lists {', '.join(SPLITS)}")
     return {s: [str(c) for c in data[s]] for s in SPLITS}
@@ -153,7 +160,7 @@ def split_clips(mocap_root: Path, split: str, limit: int | None = None) -> list[
     wanted = load_split(split_path(mocap_root))[split]
     missing = [c for c in wanted if c not in index]
     if missing:
-        raise FileNotFoundError(f"{mocap_root}: clips of the {split} split are missing: {', '.join(missing[:5])}")
+        raise MocapFolderError(f"{mocap_root}: clips of the {split} split are missing: {', '.join(missing[:5])}")
     return [index[c] for c in (wanted[:limit] if limit else wanted)]
 
 
@@ -217,11 +224,32 @@ def cached_motion(cached: Path | None, parse, name: str) -> Motion:
 MOTION_SUFFIXES = (".bvh", ".amc", ".npz")
 
 
+# metres: no capture volume is near this; a value beyond (1e308 in a file) is not a motion
+MAX_COORDINATE = 1e5
+
+
 def _retargeted(path: Path, source, fps: float) -> Motion:
+    import warnings
+
+    if not all(
+        np.all(np.isfinite(v)) and np.all(np.abs(v) <= MAX_COORDINATE * 100)  # (cm and other units)
+        for v in (source.positions, source.rest_positions)
+    ):
+        raise MotionFileError(
+            path, f"holds positions that are not finite or beyond {MAX_COORDINATE:g} m (an overflow, or not a motion)"
+        )
     try:
-        return retarget(source, fps)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", RuntimeWarning)  # overflow of absurd values, refused below
+            motion = retarget(source, fps)
     except ValueError as err:  # a skeleton layout with no joint map: say which file
         raise MotionFileError(path, str(err)) from None
+    values = (motion.root_positions, motion.local_quats, motion.skeleton.offsets)
+    if not all(np.all(np.isfinite(v)) and np.all(np.abs(v) <= MAX_COORDINATE) for v in values):
+        raise MotionFileError(
+            path, f"holds values that are not finite or beyond {MAX_COORDINATE:g} m (an overflow, or not a motion)"
+        )
+    return motion
 
 
 def load_motion_file(
@@ -243,8 +271,11 @@ def load_motion_file(
     if name.endswith(".npz"):
         import numpy as np
 
-        with np.load(path, allow_pickle=False) as z:
-            keys = set(z.files)
+        try:
+            with np.load(path, allow_pickle=False) as z:  # the directory only: no member is read
+                keys = set(z.files)
+        except (OSError, ValueError) as err:
+            raise MotionFileError(path, f"not a readable .npz ({err})") from None
         if {"local_quats", "root_positions"} <= keys:
             return Motion.load(path).resampled(fps)
         raise MotionFileError(path, "an AMASS .npz needs the SMPL model: use sparse_body.data.amass.load_amass")

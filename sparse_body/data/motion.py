@@ -89,8 +89,10 @@ class Motion:
 
     @classmethod
     def load(cls, path: Path) -> Motion:
+        from ..core.textfile import FileTooLarge, open_npz, too_large
+
         try:
-            with np.load(path, allow_pickle=False) as z:
+            with open_npz(path) as z:
                 return cls(
                     str(z["name"]),
                     float(z["fps"]),
@@ -98,5 +100,7 @@ class Motion:
                     z["local_quats"].astype(np.float64),
                     z["root_positions"],
                 )
+        except FileTooLarge as err:
+            raise too_large(MotionFileError)(path, str(err).removeprefix(f"{path}: ")) from None
         except (OSError, KeyError, ValueError) as err:
             raise MotionFileError(path, f"not a sparse_body motion file ({err})") from None

@@ -39,7 +39,7 @@ class SourceMotion:
 def read_text(path: Path) -> str:
     """The text of a motion file, gzip-compressed (.gz) or plain, within the motion size limit
     (core/textfile.py); bytes that are not UTF-8 are replaced (comments in other encodings)."""
-    from ..core.textfile import FileTooLarge, read_limited
+    from ..core.textfile import FileTooLarge, read_limited, too_large
 
     path = Path(path)
     if not path.is_file():
@@ -49,7 +49,7 @@ def read_text(path: Path) -> str:
     except UnicodeDecodeError as err:
         with_replacement = err.object.decode("utf-8", errors="replace")
     except FileTooLarge as err:
-        raise MotionFileError(path, str(err).removeprefix(f"{path}: ")) from None
+        raise too_large(MotionFileError)(path, str(err).removeprefix(f"{path}: ")) from None
     except (OSError, EOFError) as err:  # a truncated .gz raises EOFError
         raise MotionFileError(path, f"cannot be read ({err})") from None
     return with_replacement

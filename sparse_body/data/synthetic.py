@@ -13,7 +13,11 @@ from .motion import Motion
 def synthetic_walk(
     seconds: float = 4.0, fps: float = 60.0, skeleton: Skeleton | None = None, speed: float = 1.0, cadence: float = 0.9
 ) -> Motion:
-    """Walk forward along +x: legs swing about y, knees bend in swing, arms counter-swing."""
+    """Walk forward along +x: legs swing about y, knees bend in swing, arms counter-swing.
+    After STRAIGHT metres the walk turns onto a circle of that circumference and goes round
+    it, so however long it is, it stays within 47 m of where it began (a
+    5-minute walk went 300 m away, beyond the default play space, and every estimate of it was
+    refused)."""
     skeleton = skeleton or Skeleton.canonical()
     t = np.arange(int(round(seconds * fps))) / fps
     phase = 2 * np.pi * cadence * t
@@ -36,5 +40,17 @@ def synthetic_walk(
     rot[:, JOINT_INDEX["head"]] = about("z", np.deg2rad(10) * np.sin(0.3 * phase))
     rest = skeleton.rest_positions()
     stand = -rest[:, 2].min() + 0.03 - 0.02  # toes (3 cm above the sole) on the floor, knees bent a little
-    root = np.stack([speed * t, 0.02 * np.sin(phase), stand + 0.015 * np.cos(2 * phase)], axis=-1)
+    walked = speed * t
+    radius = STRAIGHT / (2 * np.pi)
+    heading = np.clip(walked - STRAIGHT, 0.0, None) / radius  # 0 on the straight, then round the circle
+    along = np.stack([np.minimum(walked, STRAIGHT) + radius * np.sin(heading), radius * (1 - np.cos(heading))], axis=-1)
+    sway = 0.02 * np.sin(phase)  # sideways, in the walker's own frame
+    root = np.stack(
+        [along[:, 0] - sway * np.sin(heading), along[:, 1] + sway * np.cos(heading), stand + 0.015 * np.cos(2 * phase)],
+        axis=-1,
+    )
+    rot[:, 0] = about("z", heading) @ rot[:, 0]
     return Motion("synthetic_walk", fps, skeleton, matrix_to_quat(rot), root)
+
+
+STRAIGHT = 40.0  # m walked straight before the walk turns round a circle

@@ -19,6 +19,7 @@ from ..core.reacquire import FreezeGuard, Reacquisition
 from ..core.rotations import matrix_to_quat, quat_to_matrix
 from ..core.sensors import SensorConfig
 from ..core.skeleton import Skeleton, standing_pose
+from ..core.textfile import load_yaml
 from ..core.tracker_filter import FilterConfig, TrackerFilter, filter_config
 from ..core.tracker_smoother import smooth_frames
 from ..core.types import BodyPose, TrackerFrame, TrackerStream
@@ -305,8 +306,8 @@ def parse_estimator_spec(spec: str) -> tuple[str, dict]:
         if not eq or not key:
             raise ValueError(f"estimator option {item!r} in {spec!r} is not key=value")
         try:
-            options[key.strip()] = yaml.safe_load(value)
-        except (yaml.YAMLError, RecursionError):
+            options[key.strip()] = load_yaml(value)
+        except (yaml.YAMLError, ValueError):  # (InputTooLarge: nested, or aliases expanded too far)
             raise ValueError(f"estimator option {item!r} in {spec!r}: the value is not a plain YAML scalar") from None
     return name.strip(), options
 

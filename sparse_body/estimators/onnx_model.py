@@ -11,6 +11,10 @@ import json
 from pathlib import Path
 
 
+class ModelMissing(ValueError):
+    """No model file where one is expected: bad input (exit code 1), not the operating system's refusal."""
+
+
 def load_model(
     path: str | Path, kind: tuple[str, str], inputs: dict[str, int | None], missing_hint: str, threads: int = 1
 ):
@@ -22,7 +26,7 @@ def load_model(
 
     path = Path(path)
     if not path.is_file():
-        raise FileNotFoundError(f"{path}: no model there; {missing_hint}")
+        raise ModelMissing(f"{path}: no model there; {missing_hint}")
     options = ort.SessionOptions()
     options.intra_op_num_threads, options.inter_op_num_threads = threads, 1
     try:

@@ -25,7 +25,7 @@ from ..core.file_output import OutputError as FileOutputError
 from ..core.resources import share_dir
 from ..core.sensors import SensorConfig
 from ..core.skeleton import NUM_JOINTS, Skeleton
-from ..core.textfile import read_limited
+from ..core.textfile import load_yaml, read_limited
 from ..core.types import BodyPose, TrackerStream
 from . import cdr
 from .output import (
@@ -107,13 +107,27 @@ def written_by_us(path: Path) -> bool:
     if path.is_symlink() or not path.is_dir() or meta.is_symlink() or not meta.is_file():
         return False
     try:
-        info = yaml.safe_load(read_limited(meta, "yaml"))["rosbag2_bagfile_information"]
+        info = load_yaml(read_limited(meta, "yaml"))["rosbag2_bagfile_information"]
         ours = WRITER_KEY in (info.get("custom_data") or {})
         listed = {"metadata.yaml", *(str(f) for f in info.get("relative_file_paths") or [])}
     except (OSError, ValueError, yaml.YAMLError, KeyError, TypeError, AttributeError, RecursionError):
         return False
     present = {entry.name for entry in path.iterdir()}
     return ours and present <= listed and all((path / f).is_file() and not (path / f).is_symlink() for f in present)
+
+
+# What an estimate bag was made with (estimator, options, sensors...: apps/offline.py's
+# settings_record), so that a resumed batch run never mixes bags of other settings.
+MADE_WITH_KEY = "sparse_body.made_with"
+
+
+def made_with(path: Path) -> str:
+    """The settings record of a bag of ours ("" for one written before it was recorded)."""
+    try:
+        info = load_yaml(read_limited(Path(path) / "metadata.yaml", "yaml"))["rosbag2_bagfile_information"]
+        return str((info.get("custom_data") or {}).get(MADE_WITH_KEY, ""))
+    except (OSError, ValueError, yaml.YAMLError, KeyError, TypeError, AttributeError):
+        return ""
 
 
 def joint_state_count(path: Path) -> int:
@@ -190,7 +204,7 @@ def remove_leftovers(path: Path) -> None:
 
 
 @contextmanager
-def bag_writer(path: Path, overwrite: bool = False, inputs: tuple[Path, ...] = ()):
+def bag_writer(path: Path, overwrite: bool = False, inputs: tuple[Path, ...] = (), made_with: str = ""):
     """A rosbag2 (MCAP) Writer on a temporary name beside `path`, moved into place only when
     the block ends without an error (SIGINT and SIGTERM included: the command line turns both
     into exceptions): an interrupted or failed write leaves nothing behind. `path` is checked
@@ -205,6 +219,8 @@ def bag_writer(path: Path, overwrite: bool = False, inputs: tuple[Path, ...] = (
     try:
         with Writer(tmp, version=8, storage_plugin=StoragePlugin.MCAP) as writer:
             writer.set_custom_data(WRITER_KEY, f"sparse_body {__version__}")
+            if made_with:
+                writer.set_custom_data(MADE_WITH_KEY, made_with)
             yield writer
         check_output(path, overwrite, inputs)  # nothing else may have appeared meanwhile
         if path.exists():
@@ -355,6 +371,7 @@ def write_estimate_bag(
     overwrite: bool = False,
     inputs: tuple[Path, ...] = (),
     trackers: tuple[SensorConfig, TrackerStream] | None = None,
+    made_with: str = "",
 ) -> None:
     """Per pose: one JointState, one FootContacts, one EstimateStatus and one /tf message;
     once, first: the body's URDF on /robot_description. So that a viewer draws the bag as it
@@ -380,7 +397,7 @@ def write_estimate_bag(
             which, cdr.tf_messages(stamps[which], table.parents, table.children, table.values), strict=True
         ):
             tf[i] = data
-    with bag_writer(path, overwrite, inputs) as writer:
+    with bag_writer(path, overwrite, inputs, made_with) as writer:
         c_js = writer.add_connection(JOINT_STATES_TOPIC, "sensor_msgs/msg/JointState", typestore=store)
         c_fc = writer.add_connection(CONTACTS_TOPIC, "sparse_body/msg/FootContacts", typestore=store)
         c_st = writer.add_connection(STATUS_TOPIC, "sparse_body/msg/EstimateStatus", typestore=store)

@@ -5,14 +5,13 @@ import pytest
 
 from sparse_body.data.catalog import find_mocap_root, read_index
 
-
-@pytest.fixture(scope="session")
 NO_MOCAP = (
     "no motion capture indexed: download CMU's ASF/AMC files (allasfamc.zip on mocap.cs.cmu.edu), "
     "run `sparse-body import-mocap FOLDER --out DIR`, then SPARSE_BODY_MOCAP=DIR make test"
 )
 
 
+@pytest.fixture(scope="session")
 def mocap_root() -> Path:
     root = find_mocap_root()
     if root is None:
@@ -57,9 +56,7 @@ def pytest_collection_modifyitems(config, items):
     alone skips nothing)."""
     if find_mocap_root() is not None:
         return
-    skip = pytest.mark.skip(
-        reason=NO_MOCAP
-    )
+    skip = pytest.mark.skip(reason=NO_MOCAP)
     for item in items:
         if "mocap" in item.keywords:
             item.add_marker(skip)

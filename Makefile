@@ -34,9 +34,10 @@ bench: setup-dev
 	$(VENV)/bin/sparse-body bench --runtime dragposer
 
 # A million generated inputs into each parser of outside input: the serial stream, VMC
-# datagrams, BVH and ASF/AMC motion files, sensor configuration and calibration YAML.
+# datagrams, /tf messages through the TF ingest, BVH and ASF/AMC motion files, sensor
+# configuration and calibration YAML.
 fuzz: setup-dev
-	for target in serial vmc bvh asf_amc yaml; do $(VENV)/bin/python -m sparse_body.apps.fuzz $$target 1000000 || exit 1; done
+	for target in serial vmc tf bvh asf_amc yaml; do $(VENV)/bin/python -m sparse_body.apps.fuzz $$target 1000000 || exit 1; done
 
 # The release of the test-split tables: every shipped model measured again on the test split
 # (models/<model>.eval.json, each run's per-clip figures) and its card rendered from that; the

@@ -787,3 +787,90 @@ def test_the_bridge_is_a_lifecycle_node_whose_transitions_start_and_stop_the_sam
         stop(proc)
     log = (failing / "sparse_body_tracker_bridge.log").read_text()
     assert "configure failed" in log and "no_such_bag" in log, log
+
+
+def test_generated_tf_messages_never_stop_the_node_nor_give_a_non_finite_joint(ros_env, tmp_path):
+    """Hypothesis writes /tf messages of any doubles (NaN, infinities, 1e308, 2e154, denormals),
+    any frame names (ours among them) and any stamps; each goes to the live node between frames
+    of well-formed trackers. The node stays up and every JointState it publishes is finite."""
+    from geometry_msgs.msg import TransformStamped
+    from hypothesis import HealthCheck, given, settings
+    from hypothesis import strategies as st
+
+    from sparse_body.data.virtual_trackers import synthesize_trackers
+    from sparse_body.ros.messages import to_time
+
+    config = load_sensor_config("four_point")
+    stream = synthesize_trackers(synthetic_walk(4.0), config)
+    frames = [s.frame_id for s in config.sites]
+    est = start_node(
+        ESTIMATOR,
+        {"sensors": "four_point", "estimator": "ik", "autostart": True},
+        "sparse_body_estimator",
+        tmp_path,
+        ros_env,
+    )
+    listener = Listener(rclpy, {"joint_states": JointState})
+    pub = listener.node.create_publisher(TFMessage, "/tf", 100)
+    sent = [0]
+
+    def trackers_now() -> TFMessage:
+        i = sent[0] % len(stream)
+        stamp = to_time(listener.node.get_clock().now().nanoseconds * 1e-9)
+        msgs = []
+        for s, frame in enumerate(frames):
+            m = TransformStamped()
+            m.header.frame_id, m.child_frame_id, m.header.stamp = "world", frame, stamp
+            t, q = m.transform.translation, m.transform.rotation
+            t.x, t.y, t.z = map(float, stream.positions[i, s])
+            q.x, q.y, q.z, q.w = map(float, stream.orientations[i, s])
+            msgs.append(m)
+        sent[0] += 1
+        return TFMessage(transforms=msgs)
+
+    doubles = st.floats(allow_nan=True, allow_infinity=True, allow_subnormal=True) | st.sampled_from(
+        [1e308, -1e308, 2e154, 5e-324, 0.0, 1.0]
+    )
+    names = st.sampled_from([*frames, "world", "sparse_body/pelvis", "pelvis"]) | st.text(
+        st.characters(blacklist_categories=("Cs",), blacklist_characters="\x00"), max_size=12
+    )
+    transform = st.tuples(
+        names,
+        names,
+        st.integers(-(2**31), 2**31 - 1),
+        st.integers(0, 2**32 - 1),
+        st.lists(doubles, min_size=7, max_size=7),
+    )
+
+    @settings(max_examples=300, deadline=None, database=None, suppress_health_check=list(HealthCheck))
+    @given(st.lists(transform, min_size=1, max_size=5))
+    def send(transforms):
+        msgs = []
+        for parent, child, sec, nanosec, v in transforms:
+            m = TransformStamped()
+            m.header.frame_id, m.child_frame_id = parent, child
+            m.header.stamp.sec, m.header.stamp.nanosec = sec, nanosec
+            t, q = m.transform.translation, m.transform.rotation
+            t.x, t.y, t.z, q.x, q.y, q.z, q.w = v
+            msgs.append(m)
+        pub.publish(TFMessage(transforms=msgs))
+        pub.publish(trackers_now())
+        listener.spin_for(0.005)
+
+    try:
+        end = time.monotonic() + STARTUP_LIMIT
+        while not listener.received["joint_states"] and time.monotonic() < end:
+            pub.publish(trackers_now())
+            listener.spin_for(1.0 / 60)
+        assert listener.received["joint_states"], "estimator did not start"
+        send()
+        for _ in range(30):  # then plain trackers: it still estimates
+            pub.publish(trackers_now())
+            listener.spin_for(1.0 / 60)
+        alive = est.poll() is None
+    finally:
+        listener.destroy()
+        stop(est)
+    assert alive, (tmp_path / "sparse_body_estimator.log").read_text()[-3000:]
+    states = listener.received["joint_states"]
+    assert len(states) > 100 and all(np.all(np.isfinite(m.position)) for m in states)

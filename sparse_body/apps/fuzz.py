@@ -1,8 +1,12 @@
 """`python -m sparse_body.apps.fuzz TARGET RUNS`: coverage-guided fuzzing (atheris, libFuzzer) of
 every parser that reads what a user or a device hands us.
 
-Targets: serial (the tracker byte stream), vmc (one UDP datagram), bvh (a motion file),
-asf_amc (a skeleton and its motion), yaml (a sensor configuration and a calibration). The
+Targets: serial (the tracker byte stream), vmc (one UDP datagram), tf (a /tf message as any
+peer on the ROS domain can send it, through the ingest the live node and the bag reader
+share), bvh (a motion file), asf_amc (a skeleton and its motion), yaml (a sensor
+configuration and a calibration). tf: half the inputs are raw bytes, half a well-formed
+TFMessage of any doubles (NaN, infinities, 1e308, denormals) and frame names, so both the
+reader and the guards are reached; a tracker sample must come out finite or not at all. The
 corpus starts from well-formed input that libFuzzer then mutates. serial: the input is split
 into reads of sizes taken from the input itself and fed to one FrameDecoder, as a stream
 with garbage and torn frames. The file targets write the input to a file and load it: the
@@ -35,6 +39,8 @@ with atheris.instrument_imports():
     from sparse_body.data.asf_amc import load_amc, load_asf
     from sparse_body.data.bvh import load_bvh
     from sparse_body.data.samples import TINY_AMC, TINY_ASF, TINY_BVH
+    from sparse_body.io.cdr import MalformedMessage, read_tf, tf_messages
+    from sparse_body.io.tf_cache import TfCache
 
 
 def _check(orientation, position) -> None:
@@ -62,6 +68,36 @@ def serial_input(data: bytes) -> None:
 def vmc_input(data: bytes) -> None:
     for sample in _vmc.datagram(data, 0.0):
         _check(sample.orientation, sample.position)
+
+
+_TF_CONFIG = None
+_TF_FRAMES = ("hmd", "left_controller", "world", "other")
+
+
+def tf_input(data: bytes) -> None:
+    global _TF_CONFIG
+    if _TF_CONFIG is None:
+        _TF_CONFIG = load_sensor_config("four_point")
+    fdp = atheris.FuzzedDataProvider(data)
+    now = fdp.ConsumeFloat()
+    if fdp.ConsumeBool():
+        message = fdp.ConsumeBytes(fdp.remaining_bytes())
+    else:
+        count = fdp.ConsumeIntInRange(1, 4)
+        pick = [fdp.ConsumeIntInRange(0, len(_TF_FRAMES)) for _ in range(2 * count)]
+        names = [_TF_FRAMES[k] if k < len(_TF_FRAMES) else fdp.ConsumeUnicodeNoSurrogates(8) for k in pick]
+        values = np.array([[fdp.ConsumeFloat() for _ in range(7)] for _ in range(count)])
+        stamp = abs(fdp.ConsumeFloat()) % 4e9  # a stamp a Time can hold; its values are what is tried
+        message = tf_messages([stamp], names[::2], names[1::2], values[None])[0]
+    cache = TfCache([site.frame_id for site in _TF_CONFIG.sites])
+    try:
+        rows = read_tf(message)
+    except MalformedMessage:
+        return
+    cache.ingest_rows(rows, False, now if np.isfinite(now) else None)
+    frame, _ = cache.sample(_TF_CONFIG, cache.newest_tracker_stamp(), 0.1)
+    if not (np.all(np.isfinite(frame.positions[frame.valid])) and np.all(np.isfinite(frame.orientations[frame.valid]))):
+        raise AssertionError(f"a tracker sample that is not finite from {rows}")
 
 
 _DIR = Path(tempfile.mkdtemp(prefix="sparse_body_fuzz_files_"))
@@ -105,7 +141,14 @@ def yaml_input(data: bytes) -> None:
         assert "calibration.yaml" in str(err), err
 
 
-TARGETS = {"serial": serial_input, "vmc": vmc_input, "bvh": bvh_input, "asf_amc": asf_amc_input, "yaml": yaml_input}
+TARGETS = {
+    "serial": serial_input,
+    "vmc": vmc_input,
+    "tf": tf_input,
+    "bvh": bvh_input,
+    "asf_amc": asf_amc_input,
+    "yaml": yaml_input,
+}
 TEXT_TARGETS = {"bvh", "asf_amc", "yaml"}
 
 
@@ -142,6 +185,8 @@ def seeds() -> list[bytes]:
         for v in ["LHR-1", 0.1, 1.6, 0.2, 0.0, 0.0, 0.0, 1.0]:
             b.add_arg(v)
         out.append(b.build().dgram)
+    trackers = np.tile([0.1, 0.2, 1.6, 0.0, 0.0, 0.0, 1.0], (1, 2, 1))
+    out.append(tf_messages([1.7e9], ["world", "world"], ["hmd", "left_controller"], trackers)[0])
     bundle = OscBundleBuilder(IMMEDIATELY)
     bundle.add_content(OscMessageBuilder("/VMC/Ext/Hmd/Pos").build())
     out.append(bundle.build().dgram)

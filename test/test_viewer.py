@@ -207,3 +207,23 @@ def test_a_live_view_that_closes_mid_recording_or_sends_unexpected_json_keeps_wh
     captured = capsys.readouterr()
     assert ended.value.code == 0, captured.err
     assert "30 estimates" in captured.out and (tmp_path / "live.html").is_file()
+
+
+def test_reading_a_long_bag_for_the_page_holds_bodies_not_messages(tmp_path):
+    """bag_bodies reads /tf one message at a time: the rows of every message held at once cost
+    42 kB a frame (a 5-minute bag took 982 MB), the bodies about a quarter of that."""
+    import tracemalloc
+
+    from sparse_body.apps.viewer import bag_bodies
+
+    motion = synthetic_walk(10.0)
+    config = load_sensor_config("six_point")
+    make_bag(motion, config, tmp_path / "in")
+    process_bag(tmp_path / "in", tmp_path / "out", "ik", config, motion.skeleton, progress=False)
+    tracemalloc.start()
+    try:
+        positions, _, _ = bag_bodies(tmp_path / "out")
+        peak = tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+    assert len(positions) == 600 and peak / len(positions) < 20_000, f"{peak / len(positions):.0f} bytes a frame"

@@ -15,6 +15,7 @@ second drawn: every second frame of a 60 Hz recording, each shown twice as long)
 from __future__ import annotations
 
 import json
+from collections.abc import Iterable
 from pathlib import Path
 
 import numpy as np
@@ -233,15 +234,18 @@ def bag_bodies(bag: Path) -> tuple[np.ndarray, np.ndarray | None, float]:
     try:
         with Reader(Path(bag)) as reader:
             tf = [c for c in reader.connections if c.topic == TF_TOPIC]
-            messages = [read_tf(raw) for _, _, raw in reader.messages(connections=tf)]
+            # one message at a time: a recording's rows held whole cost 3 kB a frame (a
+            # 5-minute bag reached 982 MB), its bodies a few hundred bytes
+            return tf_bodies((read_tf(raw) for _, _, raw in reader.messages(connections=tf)), str(bag))
+    except ViewError:
+        raise
     except MalformedMessage as err:
         raise ViewError(f"{bag}: a /tf message that is not a TFMessage ({err})") from None
     except Exception as err:  # noqa: BLE001 - rosbags raises many kinds for a broken file
         raise ViewError(f"{bag}: cannot be read as a rosbag2 ({err})") from None
-    return tf_bodies(messages, str(bag))
 
 
-def tf_bodies(messages: list[list[TfRow]], source: str) -> tuple[np.ndarray, np.ndarray | None, float]:
+def tf_bodies(messages: Iterable[list[TfRow]], source: str) -> tuple[np.ndarray, np.ndarray | None, float]:
     """(joint positions (frames, 22, 3), trackers (frames, k, 3) or None, frame rate) of the
     /tf messages of an estimate (a bag, the live view): a frame per message with every body
     link (fixed frame -> pelvis -> ...); the trackers are the other frames directly under the

@@ -5,8 +5,8 @@
 Arguments: sensors, estimator, model_path, refine, height, calibration (a T-pose calibration
 file: its fitted body replaces the height-scaled one), bag (the tracker source; empty:
 trackers come from elsewhere on /tf), loop (replay the bag again and again), rviz,
-robot_state_publisher. The estimator is a lifecycle node; it is configured and activated
-here through its autostart parameter.
+robot_state_publisher, foxglove_port and foxglove_host (the live view). The estimator is a
+lifecycle node; it is configured and activated here through its autostart parameter.
 """
 
 import os
@@ -45,6 +45,7 @@ def _nodes(context):
             "calibration": arg("calibration"),
             "model_path": arg("model_path"),
             "foxglove_port": int(arg("foxglove_port")),
+            "foxglove_host": arg("foxglove_host"),
             "publish_link_tf": False,
             "autostart": True,
         },
@@ -136,6 +137,12 @@ def generate_launch_description():
                 "foxglove_port",
                 default_value="0",
                 description="serve the body live to the Foxglove app on this WebSocket port (0: off)",
+            ),
+            DeclareLaunchArgument(
+                "foxglove_host",
+                default_value="127.0.0.1",
+                description="address the live view listens on: 127.0.0.1, this machine only (the node logs "
+                "the address it serves); 0.0.0.0, every network",
             ),
             DeclareLaunchArgument(
                 "refine",

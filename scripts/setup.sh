@@ -192,7 +192,11 @@ if [ -d "$ROS_TOOLS/wheels" ] && ls "$ROS_TOOLS"/wheels/*.whl >/dev/null 2>&1; t
     say "ROS 2 launch tools up to date"
   fi
 else
-  say "no ROS 2 launch tools at $ROS_TOOLS: the launch tests will skip (see README, Install)"
+  if [ -n "${SPARSE_BODY_ROS_TOOLS:-}" ]; then
+    say "no wheels in $ROS_TOOLS/wheels: the launch tools are not installed, the launch tests will skip"
+  else
+    say "no launch tools (ros2 launch, launch tests): source a ROS 2 install, or SPARSE_BODY_ROS_TOOLS=FOLDER of their wheels (README, Install)"
+  fi
 fi
 
 pkg_hash=$(inputs_hash "$ROOT/pyproject.toml" "$STAMPS/deps")

@@ -36,6 +36,14 @@ def random_rotations(rng, shape):
     return Rotation.random(n, random_state=rng).as_matrix().reshape(tuple(shape) + (3, 3))
 
 
+def pytest_configure(config):
+    """DDS discovery on this machine only, for every node a test starts (a ROS program on
+    another machine of the network never hears the suite, nor the suite it)."""
+    import os
+
+    os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
+
+
 @pytest.fixture
 def ros_env(monkeypatch):
     """rclpy initialised on a DDS domain of this test's own; yields the environment for

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import os
 import random
+import socket
 import subprocess
 import sys
 import time
@@ -12,10 +13,36 @@ from pathlib import Path
 import numpy as np
 import yaml
 
+# The ROS_DOMAIN_ID exported when the suite started: whoever set it chose where the suite's
+# nodes talk (read at import, before any test sets its own).
+EXPORTED_DOMAIN = os.environ.get("ROS_DOMAIN_ID", "").strip()
+
 
 def isolated_domain() -> str:
-    """A DDS domain of its own, so concurrent test runs do not hear each other."""
-    return str(random.Random(os.getpid() + time.time_ns()).randint(1, 200))
+    """The exported ROS_DOMAIN_ID when there is one; otherwise a DDS domain of this test's own
+    that no participant on this machine uses, so neither another test run nor another ROS
+    program hears it (discovery stays on this machine: conftest.py sets
+    ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST)."""
+    if EXPORTED_DOMAIN:
+        return EXPORTED_DOMAIN
+    rng = random.Random(os.getpid() + time.time_ns())
+    for _ in range(100):
+        domain = rng.randint(1, 200)
+        if _unused(domain):
+            break
+    return str(domain)
+
+
+def _unused(domain: int) -> bool:
+    """No participant on this machine has bound the domain's discovery ports (RTPS: 7400 +
+    250 * domain, multicast, and the first unicast one, + 10)."""
+    for port in (7400 + 250 * domain, 7410 + 250 * domain):
+        with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as probe:
+            try:
+                probe.bind(("0.0.0.0", port))
+            except OSError:
+                return False
+    return True
 
 
 def start_node(

@@ -20,12 +20,13 @@ import pytest
 
 pytest.importorskip(
     "launch_testing",
-    reason="launch_testing is not installed (make setup installs "
-    "it from ../shared/ros; on a ROS install: ros-$ROS_DISTRO-launch-testing-ros)",
+    reason="launch_testing is not installed (a ROS install: ros-$ROS_DISTRO-launch-testing-ros; "
+    "or SPARSE_BODY_ROS_TOOLS=FOLDER of its wheels at make setup, README Install)",
 )
 pytest.importorskip(
     "launch_ros",
-    reason="launch_ros is not installed (a ROS install gives it: apt install ros-$ROS_DISTRO-launch-testing-ros)",
+    reason="launch_ros is not installed (a ROS install: ros-$ROS_DISTRO-launch-testing-ros; "
+    "or SPARSE_BODY_ROS_TOOLS=FOLDER of its wheels at make setup, README Install)",
 )
 launch_testing_ros = pytest.importorskip("launch_testing_ros", reason="launch_testing_ros is not installed")
 ament_index = pytest.importorskip("ament_index_python.packages")

@@ -9,11 +9,11 @@ import pytest
 
 pytest.importorskip(
     "launch_ros",
-    reason="launch_ros is not installed (a ROS install gives it: apt install ros-$ROS_DISTRO-launch-testing-ros)",
+    reason="launch_ros is not installed (a ROS install, or the wheels of README Install)",
 )
 pytest.importorskip(
     "launch.actions",
-    reason="launch is not installed (a ROS install gives it: apt install ros-$ROS_DISTRO-launch-testing-ros)",
+    reason="launch is not installed (a ROS install, or the wheels of README Install)",
 )
 pytest.importorskip("ament_index_python.packages", reason="ament_index_python is not installed (make setup)")
 
@@ -47,6 +47,7 @@ def test_a_missing_robot_state_publisher_is_said_and_nothing_is_started_for_it(m
         "refine": "false",
         "robot_state_publisher": "true",
         "foxglove_port": "0",
+        "foxglove_host": "127.0.0.1",
     }.items():
         context.launch_configurations[name] = value
     actions = module._nodes(context)
@@ -83,11 +84,13 @@ def test_a_calibration_file_is_the_body_of_the_estimator_and_of_robot_state_publ
         "refine": "false",
         "robot_state_publisher": "true",
         "foxglove_port": "0",
+        "foxglove_host": "0.0.0.0",
     }.items():
         context.launch_configurations[name] = value
     actions = module._nodes(context)
     estimator = next(kw for kind, kw in actions if kind == "lifecycle")
     assert estimator["parameters"][1]["calibration"] == str(tmp_path / "me.yaml")
+    assert estimator["parameters"][1]["foxglove_host"] == "0.0.0.0"  # it was silently ignored
     rsp = next(kw for kind, kw in actions if kind == "node" and kw["package"] == "robot_state_publisher")
     assert rsp["parameters"][0]["robot_description"] == body_urdf(Calibration.load(tmp_path / "me.yaml").body())
     assert rsp["parameters"][0]["robot_description"] != body_urdf(Skeleton.canonical(1.62))

@@ -13,7 +13,16 @@ import pytest
 
 from sparse_body import cli
 from sparse_body.apps.offline import make_bag
-from sparse_body.cli import EXIT_INPUT, EXIT_INTERRUPTED, EXIT_OS, EXIT_OUTPUT, EXIT_TERMINATED, EXIT_USAGE, main
+from sparse_body.cli import (
+    EXIT_INPUT,
+    EXIT_INTERRUPTED,
+    EXIT_OS,
+    EXIT_OUTPUT,
+    EXIT_TERMINATED,
+    EXIT_TOO_LARGE,
+    EXIT_USAGE,
+    main,
+)
 from sparse_body.core.sensors import load_sensor_config
 from sparse_body.data.synthetic import synthetic_walk
 from sparse_body.io.bagio import OutputError, check_output, written_by_us
@@ -249,12 +258,12 @@ def test_every_user_error_is_one_line_and_its_exit_code(bag, tmp_path, capsys, c
         "parent is a file": (["process", bag, bag / "metadata.yaml" / "out"], EXIT_OUTPUT, "input"),
         "nested sensors": (
             ["process", bag, out, "--sensors", _nested_yaml(tmp_path / "s.yaml")],
-            EXIT_INPUT,
+            EXIT_TOO_LARGE,  # the README's table: nested too deeply is 5
             "nested too deeply",
         ),
         "nested calibration": (
             ["process", bag, out, "--calibration", _nested_yaml(tmp_path / "c.yaml")],
-            EXIT_INPUT,
+            EXIT_TOO_LARGE,
             "nested too deeply",
         ),
         "yaml option": (["process", bag, out, "--estimator", "ik:filter=[[[["], EXIT_INPUT, "not a plain YAML"),
@@ -276,8 +285,8 @@ def test_every_user_error_is_one_line_and_its_exit_code(bag, tmp_path, capsys, c
             EXIT_INPUT,
             "iterations takes an integer",
         ),
-        "huge yaml": (["process", bag, out, "--sensors", tmp_path / "big.yaml"], EXIT_INPUT, "MiB allowed"),
-        "calibration device": (["process", bag, out, "--calibration", "/dev/zero"], EXIT_INPUT, "MiB allowed"),
+        "huge yaml": (["process", bag, out, "--sensors", tmp_path / "big.yaml"], EXIT_TOO_LARGE, "MiB allowed"),
+        "calibration device": (["process", bag, out, "--calibration", "/dev/zero"], EXIT_TOO_LARGE, "MiB allowed"),
         "bvh joints": (["make-bag", out, "--motion", tmp_path / "many.bvh"], EXIT_INPUT, "more than 1000 joints"),
     }[case]
     if case == "huge yaml":

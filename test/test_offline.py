@@ -116,7 +116,7 @@ def test_frames_whose_samples_were_all_refused_are_invalid_and_counted(tmp_path)
     )
     assert len(poses) == len(motion)
     assert not poses[50].valid and not poses[60].valid and poses[49].valid and poses[61].valid
-    assert refused == {"non-finite": 4, "degenerate quaternion": 4}
+    assert refused == {"non-finite or absurd value": 4, "degenerate quaternion": 4}
     stamps = [p.stamp for p in poses]
     assert len(set(stamps)) == len(stamps)  # each frame keeps its own stamp
 

@@ -302,11 +302,18 @@ def test_mounting_calibration_finds_where_trackers_sit_and_publishes_them_as_con
             p, q = to_unity(stream.positions[t, s], stream.orientations[t, s])
             client.send_message(VMC_NAMES[site][0], [VMC_NAMES[site][1], *p, *q])
 
-    def during(future, frames, rate):
-        """Send the frames at this rate (skipping what a busy machine is late for) until done."""
+    def during(future, frames, rate, lead_in=0.0):
+        """After lead_in seconds of the first frame, send every frame in turn, at most at this
+        rate, then the last until done. None is skipped: frames a loaded machine dropped (it
+        was late for them, or the bridge began gathering after they were sent) cost the fit
+        its precision (4.7 mm against the bound of 3 on a busy 2-core machine)."""
         start = time.monotonic()
+        k = 0
         while not future.done() and time.monotonic() < start + 40:
-            send(*frames[min(int((time.monotonic() - start) * rate), len(frames) - 1)])
+            now = time.monotonic() - start
+            if now >= lead_in and k < len(frames) - 1 and k < (now - lead_in) * rate:
+                k += 1
+            send(*frames[k if now >= lead_in else 0])
             listener.spin_for(0.002)
 
     try:
@@ -316,9 +323,11 @@ def test_mounting_calibration_finds_where_trackers_sit_and_publishes_them_as_con
         during(first, [(tpose, len(tpose) - 1)], 60)  # refused: no T-pose yet
         future = calibrate.call_async(Calibrate.Request(seconds=0.5))
         during(future, [(tpose, len(tpose) - 1)], 60)
-        # twice the movement's pace; then it holds still until the 10 s are over
+        # the T-pose held for 1.5 s (the bridge starts gathering some time after the call),
+        # then every movement frame at up to four times the movement's pace, then still until
+        # the 10 s are over
         found = mounting.call_async(Calibrate.Request(seconds=10.0))
-        during(found, [(tpose, len(tpose) - 1)] * 15 + frames, 120)
+        during(found, [(tpose, len(tpose) - 1)] + frames, 240, lead_in=1.5)
         listener.received["/tf"].clear()
         for _ in range(30):
             send(tpose, len(tpose) - 1)
@@ -338,8 +347,7 @@ def test_mounting_calibration_finds_where_trackers_sit_and_publishes_them_as_con
         turned = (Rotation.from_quat(saved.offsets[site.site]) * Rotation.from_quat(site.offset_rotation).inv()).apply(
             site.offset_translation
         )
-        # within 5 mm: a loaded machine drops movement frames (3.5 mm once beside four burners
-        # and a second suite, where 3 mm was the bound); test_mounting holds the solver tighter
+        # within 5 mm (test_mounting holds the solver itself tighter)
         assert np.linalg.norm(saved.translations[site.site] - turned) < 0.005, site
     # each joint, placed from the published pose with the configuration's translation, is where it is
     last = {tf.child_frame_id: tf.transform for m in listener.received["/tf"] for tf in m.transforms}

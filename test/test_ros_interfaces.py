@@ -1,7 +1,6 @@
 """The generated sparse_body interfaces over real rclpy and Fast DDS, between two processes."""
 
 import os
-import random
 import subprocess
 import sys
 import time
@@ -35,7 +34,9 @@ rclpy.shutdown()
 
 @pytest.fixture
 def ros_domain(monkeypatch):
-    domain = str(random.randint(1, 100))
+    from ros_helpers import isolated_domain
+
+    domain = isolated_domain()
     monkeypatch.setenv("ROS_DOMAIN_ID", domain)
     return domain
 

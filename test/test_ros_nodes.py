@@ -159,9 +159,22 @@ def test_replayed_bag_gives_one_valid_estimate_per_tracker_frame_with_small_end_
     valid = {stamp_key(s.header.stamp) for s in listener.received["estimate_status"] if s.valid}
     estimated = [k for k in keys if k in valid]
     assert len(estimated) >= 0.9 * len(keys)
-    assert all({k - 1, k, k + 1} & tracker for k in estimated), [
-        k for k in estimated if not {k - 1, k, k + 1} & tracker
-    ]
+    # A listener starved by a loaded machine loses some of the bridge's /tf messages (it kept
+    # 100): an estimate of a frame it lost lies in a gap of what it saw. Every other estimate
+    # must be stamped with a tracker frame it saw (a busy machine failed the plain check).
+    seen = np.array(sorted(tracker))
+    assert len(seen) >= 0.5 * len(motion), f"the listener saw {len(seen)} of {len(motion)} tracker frames"
+    gap = 1.5e5 / motion.fps  # 1.5 frames, in stamp_key's 10 us
+
+    def of_a_tracker_frame(k: int) -> bool:
+        if {k - 1, k, k + 1} & tracker:
+            return True
+        i = int(np.searchsorted(seen, k))
+        if 0 < i < len(seen):
+            return seen[i] - seen[i - 1] > gap  # a frame the listener lost lies between these
+        return len(seen) < len(motion)  # before or after all it saw, when it lost some
+
+    assert all(of_a_tracker_frame(k) for k in estimated), [k for k in estimated if not of_a_tracker_frame(k)]
     assert len(keys) == len(set(keys))
     statuses = during_playback(listener, "estimate_status")
     assert sum(s.valid for s in statuses) >= 0.95 * len(statuses), {s.message for s in statuses if not s.valid}
@@ -173,6 +186,12 @@ def test_replayed_bag_gives_one_valid_estimate_per_tracker_frame_with_small_end_
     assert contacts and [c.name for c in contacts[-1].contacts] == ["left_foot", "right_foot"]
     urdf = listener.received["robot_description"][0].data
     assert all(f'joint name="{n}"' in urdf for n in joint_state_names())
+    # every link of the URDF has a transform on /tf: RViz finds each one it draws
+    import xml.etree.ElementTree as ET
+
+    links = {link.get("name") for link in ET.fromstring(urdf).iter("link")}
+    on_tf = {tf.child_frame_id for m in listener.received["/tf"] for tf in m.transforms}
+    assert len(links) == 64 and not links - on_tf, sorted(links - on_tf)[:5]
 
     errors = _end_effector_errors(listener, config, Skeleton.canonical(height))
     assert np.mean(errors) < 0.02, f"mean end-effector error {np.mean(errors) * 100:.2f} cm"

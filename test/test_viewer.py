@@ -227,3 +227,27 @@ def test_reading_a_long_bag_for_the_page_holds_bodies_not_messages(tmp_path):
     finally:
         tracemalloc.stop()
     assert len(positions) == 600 and peak / len(positions) < 20_000, f"{peak / len(positions):.0f} bytes a frame"
+
+
+def test_the_urdf_draws_a_body_from_joint_to_joint_with_head_hands_and_feet():
+    """RViz draws the URDF's visuals: each body link a capsule to each child joint, the ends of
+    the body one along their bone (it drew 17 small spheres: no limbs, nothing at head, hands
+    or feet). The massless links inside each joint lie on their body link and draw nothing."""
+    from sparse_body.core.skeleton import JOINT_NAMES, PARENTS, Skeleton
+    from sparse_body.io.urdf import body_urdf
+
+    skeleton = Skeleton.canonical(1.6)
+    robot = ET.fromstring(body_urdf(skeleton))
+    links = {link.get("name"): link for link in robot.iter("link")}
+    assert set(JOINT_NAMES) <= set(links)
+    for j, name in enumerate(JOINT_NAMES):
+        cylinders = links[name].findall("visual/geometry/cylinder")
+        children = [c for c in range(len(JOINT_NAMES)) if PARENTS[c] == j and np.linalg.norm(skeleton.offsets[c]) > 0]
+        assert len(cylinders) == max(len(children), 1), name  # a bone to each child, or the end's own
+        for c, visual in zip(children, links[name].findall("visual")[1::2], strict=False):
+            length = float(visual.find("geometry/cylinder").get("length"))
+            assert length == pytest.approx(np.linalg.norm(skeleton.offsets[c]), abs=1e-4), (name, JOINT_NAMES[c])
+    top = links["head"].findall("visual/origin")[-1]  # the skull's far sphere: above the head joint
+    assert float(top.get("xyz").split()[2]) > 0.05
+    others = [n for n in links if n not in JOINT_NAMES]
+    assert len(others) == 42 and all(not links[n].findall("visual") for n in others)

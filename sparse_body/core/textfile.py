@@ -7,7 +7,6 @@ are larger raises them with the environment variables named in each error."""
 
 from __future__ import annotations
 
-import functools
 import gzip
 import os
 from pathlib import Path
@@ -30,13 +29,17 @@ class FileTooLarge(InputTooLarge):
     """A file over its size limit; the message names the file, the limit and how to raise it."""
 
 
-@functools.cache
 def too_large(error: type[Exception]) -> type[Exception]:
     """A domain error type that is also an InputTooLarge: `raise too_large(SensorConfigError)(...)`
     is caught as either."""
     if issubclass(InputTooLarge, error):  # ValueError, Exception: InputTooLarge is one already
         return InputTooLarge
-    return type(error.__name__, (error, InputTooLarge), {"__module__": error.__module__})
+    if error not in _TOO_LARGE:  # one class per error type, made once
+        _TOO_LARGE[error] = type(error.__name__, (error, InputTooLarge), {"__module__": error.__module__})
+    return _TOO_LARGE[error]
+
+
+_TOO_LARGE: dict[type[Exception], type[Exception]] = {}
 
 
 def open_npz(path: str | os.PathLike, kind: str = "motion"):

@@ -1,6 +1,8 @@
 """A URDF of the 22-joint body for a person's skeleton, whose joints are the JointState
 names: each body joint is three continuous joints (z, y, x) through two massless links, so
-robot_state_publisher and RViz show exactly the published estimate."""
+robot_state_publisher and RViz show exactly the published estimate. Each body link draws a
+capsule (cylinder and spheres) to each child joint, and the ends (head, hands, feet) one along
+their own bone, so a viewer shows a body, not 22 dots."""
 
 from __future__ import annotations
 
@@ -14,24 +16,77 @@ from .output import AXES, axis_link_name
 _AXIS_VECTORS = {"x": "1 0 0", "y": "0 1 0", "z": "0 0 1"}
 
 
-def _link(name: str, length: float) -> str:
-    radius = 0.03
-    if length <= 1e-6:
-        return f"  <link name={quoteattr(name)}/>\n"
+# Radius (m, for a 1.75 m body) of the limb a link draws towards its children: RViz and
+# Foxglove draw the URDF's visuals, so the body shows as capsules from joint to joint.
+_RADII = {
+    "pelvis": 0.07,
+    "hip": 0.06,
+    "knee": 0.045,
+    "ankle": 0.035,
+    "foot": 0.03,
+    "spine": 0.07,
+    "neck": 0.045,
+    "collar": 0.045,
+    "shoulder": 0.04,
+    "elbow": 0.035,
+    "wrist": 0.03,
+    "head": 0.045,
+}
+# The ends of the body, which no child link reaches: what each draws beyond its joint, along
+# the direction of its own bone (the head upwards): (length, radius) for 1.75 m.
+_ENDS = {"head": (0.2, 0.09), "wrist": (0.09, 0.035), "foot": (0.05, 0.03)}
+
+
+def _radius(name: str) -> float:
+    return next(r for key, r in _RADII.items() if key in name)
+
+
+def _cylinder(start: np.ndarray, end: np.ndarray, radius: float) -> str:
+    """A visual cylinder from start to end and a sphere at end: a capsule with the joint's sphere."""
+    from scipy.spatial.transform import Rotation
+
+    axis = end - start
+    length = float(np.linalg.norm(axis))
+    turn, _ = Rotation.align_vectors([axis / length], [[0.0, 0.0, 1.0]])  # the cylinder's z along the bone
+    roll, pitch, yaw = turn.as_euler("xyz")  # URDF rpy: fixed axes x, y, z
+    x, y, z = (start + end) / 2
+    ex, ey, ez = end
     return (
-        f"  <link name={quoteattr(name)}>\n"
-        f'    <visual><geometry><sphere radius="{radius}"/></geometry></visual>\n'
-        f"  </link>\n"
+        f'    <visual><origin xyz="{x:.5f} {y:.5f} {z:.5f}" rpy="{roll:.6f} {pitch:.6f} {yaw:.6f}"/>'
+        f'<geometry><cylinder radius="{radius:.4f}" length="{length:.5f}"/></geometry></visual>\n'
+        f'    <visual><origin xyz="{ex:.5f} {ey:.5f} {ez:.5f}"/>'
+        f'<geometry><sphere radius="{radius:.4f}"/></geometry></visual>\n'
     )
+
+
+def _link(name: str, skeleton: Skeleton | None = None, j: int = 0) -> str:
+    """A massless link inside a joint (skeleton None: no visual, it lies on its body link), or
+    body link j: a sphere at its joint and a capsule to each child joint, or for an end of the
+    body (head, hands, feet) a capsule along its own bone."""
+    if skeleton is None:
+        return f"  <link name={quoteattr(name)}/>\n"
+    scale = skeleton.height() / 1.75
+    radius = _radius(name) * scale
+    visuals = [f'    <visual><geometry><sphere radius="{radius:.4f}"/></geometry></visual>\n']
+    children = [c for c in range(1, NUM_JOINTS) if PARENTS[c] == j]
+    for c in children:
+        offset = np.asarray(skeleton.offsets[c], float)
+        if np.linalg.norm(offset) > 1e-6:
+            visuals.append(_cylinder(np.zeros(3), offset, min(radius, _radius(JOINT_NAMES[c]) * scale * 1.2)))
+    if not children:
+        end = next(key for key in _ENDS if key in name)
+        length, end_radius = _ENDS[end]
+        bone = np.asarray(skeleton.offsets[j], float)
+        direction = np.array([0.0, 0.0, 1.0]) if end == "head" else bone / np.linalg.norm(bone)
+        tip = direction * (length - end_radius) * scale
+        visuals.append(_cylinder(np.zeros(3), tip, end_radius * scale))
+    return f"  <link name={quoteattr(name)}>\n" + "".join(visuals) + "  </link>\n"
 
 
 def body_urdf(skeleton: Skeleton, name: str = "sparse_body") -> str:
     """Link and joint names are unprefixed; robot_state_publisher's frame_prefix adds one."""
-    lengths = np.zeros(NUM_JOINTS)
-    for j in range(1, NUM_JOINTS):
-        lengths[PARENTS[j]] = max(lengths[PARENTS[j]], float(np.linalg.norm(skeleton.offsets[j])))
     parts = [f'<?xml version="1.0"?>\n<robot name={quoteattr(name)}>\n']
-    parts.append(_link(JOINT_NAMES[0], 1.0))
+    parts.append(_link(JOINT_NAMES[0], skeleton, 0))
     for j in range(1, NUM_JOINTS):
         body = JOINT_NAMES[j]
         parent = JOINT_NAMES[PARENTS[j]]
@@ -45,7 +100,7 @@ def body_urdf(skeleton: Skeleton, name: str = "sparse_body") -> str:
                 f'    <origin xyz="{origin}" rpy="0 0 0"/><axis xyz="{_AXIS_VECTORS[axis]}"/>\n'
                 f"  </joint>\n"
             )
-            parts.append(_link(child, lengths[j] if k == len(AXES) - 1 else 0.0))
+            parts.append(_link(child, skeleton, j) if k == len(AXES) - 1 else _link(child))
             parent = child
     parts.append("</robot>\n")
     return "".join(parts)

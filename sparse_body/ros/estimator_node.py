@@ -43,7 +43,7 @@ from ..core.types import BodyPose
 from ..estimators import create_estimator
 from ..estimators.base import Estimator, parse_estimator_spec
 from ..io import cdr
-from ..io.output import HELD, body_table
+from ..io.output import HELD, axis_link_name, axis_link_table, body_table, joint_angles
 from ..io.tf_cache import TfGuards
 from ..io.urdf import body_urdf
 from ..methods import NAMES
@@ -290,6 +290,7 @@ class EstimatorNode(LifecycleNode):
         self.sensors, self.params = sensors, p
         self._frames = [s.frame_id for s in sensors.sites]
         own = {p["frame_prefix"] + name for name in JOINT_NAMES}  # the body's links, as body_table names them
+        own |= {axis_link_name(name, axis) for name in own for axis in ("z", "y")}  # and axis_link_table
         guards = TfGuards(
             clock_window=p["clock_window"], future_window=p["future_window"], play_radius=p["play_radius"]
         )
@@ -546,6 +547,8 @@ class EstimatorNode(LifecycleNode):
         self.pub_status.publish(status)
         quats, root = pose.local_quats[None], pose.root_position[None]
         links = body_table(quats, root, self.skeleton, frame_id, p["frame_prefix"], p["publish_link_tf"])
+        if p["publish_link_tf"]:  # the URDF's massless links too: RViz finds every link it draws
+            links = links + axis_link_table(joint_angles(quats), self.skeleton, p["frame_prefix"])
         tf = cdr.tf_messages([stamp], links.parents, links.children, links.values)[0]
         self.pub_tf.publish(tf)
         self.tf_in.published(tf)

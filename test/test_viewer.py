@@ -146,6 +146,11 @@ def test_the_page_of_an_estimate_bag_shows_the_body_and_plays_in_a_real_browser(
     start, played = body_pixels(tmp_path / "start.png"), body_pixels(tmp_path / "played.png")
     assert start.sum() > 100, "no body drawn"
     assert played.sum() > 100 and (start != played).sum() > 50, "the body did not move when played"
+    # the camera follows and frames the body: it fills at least a third of the view's height
+    # (the legend's blue line, at the left edge, is not the body)
+    for name, pixels in (("start", start), ("played", played)):
+        rows = np.flatnonzero(pixels[:, 150:].any(axis=1))
+        assert rows.max() - rows.min() >= pixels.shape[0] / 3, f"{name}: the body is {rows.max() - rows.min()} px tall"
 
 
 def test_a_live_view_that_is_not_there_is_a_one_line_error(capsys):

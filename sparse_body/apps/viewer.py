@@ -27,6 +27,8 @@ from ..io.cdr import TfRow
 
 MAX_FPS = 30.0  # frames drawn a second: WebGL redraws 3D scenes whole
 MAX_FRAMES = 9000  # five minutes at 30 frames a second; longer recordings are drawn sparser
+FOLLOW_HALF_WIDTH = 0.75  # of the body's height: the followed box reaches this far from the pelvis
+FOLLOW_HEIGHT = 1.1  # of the body's height: the box's top above the floor
 ERROR_RANGE_CM = 20.0  # the colour scale's top: an error this large is fully red
 BONES = [(PARENTS[j], j) for j in range(1, NUM_JOINTS)]
 
@@ -41,6 +43,31 @@ def _lines(positions: np.ndarray) -> np.ndarray:
     ends[:, :, 0] = positions[:, [p for p, _ in BONES]]
     ends[:, :, 1] = positions[:, [c for _, c in BONES]]
     return ends.reshape(len(positions), -1, 3)
+
+
+def _filled(xy: np.ndarray) -> np.ndarray:
+    """(frames, 2) with each non-finite row replaced by the nearest finite one before it (or
+    after it, at the start): where the camera stays while a body is missing."""
+    xy = np.array(xy, dtype=float)
+    good = np.all(np.isfinite(xy), axis=1)
+    if not good.any():
+        return np.zeros_like(xy)
+    index = np.where(good, np.arange(len(xy)), 0)
+    np.maximum.accumulate(index, out=index)
+    index[: np.argmax(good)] = np.argmax(good)
+    return xy[index]
+
+
+def _nested(flat: dict) -> dict:
+    """{"scene.xaxis.range": v} -> {"scene": {"xaxis": {"range": v}}}: a frame's layout."""
+    out: dict = {}
+    for key, value in flat.items():
+        *parents, last = key.split(".")
+        node = out
+        for part in parents:
+            node = node.setdefault(part, {})
+        node[last] = value
+    return out
 
 
 def _round(a: np.ndarray) -> list:
@@ -108,9 +135,24 @@ def body_page(
             name = "joints" + (" (error)" if error is not None else "")
             out.append(points(estimate[i], mode="markers", marker=marker, text=list(JOINT_NAMES), name=name))
         if trackers is not None:
-            marker = {"size": 6, "color": "#d62728", "symbol": "diamond"}
+            marker = {"size": 3, "color": "#d62728"}  # small: the body is what the page shows
             out.append(points(trackers[i], mode="markers", marker=marker, name="trackers"))
         return out
+
+    # The camera follows the body: each drawn frame moves the scene's box to be centred on
+    # the pelvis, a box a little larger than the body (the whole path in one box left a
+    # person 100 px tall at one end of a 7 m box). The path stays as a faint trail on the floor.
+    body = shown[0]
+    stature = float(np.nanmax(np.nanmax(body[..., 2], axis=1) - np.nanmin(body[..., 2], axis=1)))
+    stature = stature if np.isfinite(stature) and stature > 0.5 else 1.7
+    half = FOLLOW_HALF_WIDTH * stature
+    centre = _filled(body[:, 0, :2])
+
+    def box(i: int) -> dict:
+        return {
+            "scene.xaxis.range": [float(centre[i, 0] - half), float(centre[i, 0] + half)],
+            "scene.yaxis.range": [float(centre[i, 1] - half), float(centre[i, 1] + half)],
+        }
 
     margin = 0.3
     x = np.linspace(low[0] - margin, high[0] + margin, 9)
@@ -127,15 +169,25 @@ def body_page(
         hoverinfo="skip",
         name="floor",
     )
+    trail = go.Scatter3d(
+        x=_round(centre[:, 0]),
+        y=_round(centre[:, 1]),
+        z=[floor] * len(centre),
+        mode="lines",
+        line={"color": "#b0b0b0", "width": 2},
+        hoverinfo="skip",
+        name="path",
+    )
     duration = 1000.0 * step / fps  # ms a drawn frame stays: the recording's own speed
     first = traces(0)
-    moving = list(range(1, 1 + len(first)))  # every trace but the floor
+    moving = list(range(2, 2 + len(first)))  # every trace but the floor and the trail
     figure = go.Figure(
-        data=[floor_trace, *first], frames=[go.Frame(data=traces(i), traces=moving, name=str(i)) for i in picks]
+        data=[floor_trace, trail, *first],
+        frames=[go.Frame(data=traces(i), traces=moving, name=str(i), layout=_nested(box(i))) for i in picks],
     )
-    span = high - low + 2 * margin
-    ranges = [[float(low[k] - margin), float(high[k] + margin)] for k in range(2)]
-    ranges.append([floor, float(max(high[2], floor + 0.5) + margin)])
+    top = floor + FOLLOW_HEIGHT * stature
+    ranges = [box(0)["scene.xaxis.range"], box(0)["scene.yaxis.range"], [floor, top]]
+    span = np.array([2 * half, 2 * half, top - floor])
     figure.update_layout(
         title={
             "text": f"{title}: {frames / fps:.1f} s at {fps:g} Hz"
@@ -146,10 +198,8 @@ def body_page(
             "yaxis": {"range": ranges[1], "title": "y (m)"},
             "zaxis": {"range": ranges[2], "title": "z (m)"},
             "aspectmode": "manual",
-            "aspectratio": {
-                k: float(v / max(span)) for k, v in zip("xyz", [*span[:2], ranges[2][1] - floor], strict=True)
-            },
-            "camera": {"eye": {"x": 0.9, "y": -1.2, "z": 0.6}},
+            "aspectratio": {k: float(v / max(span)) for k, v in zip("xyz", span, strict=True)},
+            "camera": {"eye": {"x": 0.75, "y": -1.0, "z": 0.35}, "center": {"x": 0, "y": 0, "z": -0.05}},
         },
         legend={"x": 0.0, "y": 1.0},
         margin={"l": 0, "r": 0, "t": 40, "b": 0},

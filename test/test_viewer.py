@@ -169,7 +169,8 @@ def test_a_live_view_that_is_not_there_is_a_one_line_error(capsys):
 
 
 def test_a_live_view_that_closes_mid_recording_or_sends_unexpected_json_keeps_what_came(tmp_path, capsys):
-    """A server (a real WebSocket one on this machine) that sends JSON of other shapes and text
+    """A server (a real WebSocket one on this machine, speaking foxglove.websocket.v1 as
+    foxglove_bridge does) that sends JSON of other shapes and text
     that is no JSON, then some bodies on /tf, then closes the connection: the page holds the
     bodies that came (ConnectionClosedError and a KeyError were tracebacks)."""
     import struct
@@ -177,7 +178,7 @@ def test_a_live_view_that_closes_mid_recording_or_sends_unexpected_json_keeps_wh
 
     from websockets.sync.server import serve
 
-    from sparse_body.apps.live_record import MESSAGE_DATA, SUBPROTOCOL
+    from sparse_body.apps.live_record import LEGACY_SUBPROTOCOL, MESSAGE_DATA
     from sparse_body.cli import main
     from sparse_body.core.skeleton import NUM_JOINTS, Skeleton
     from sparse_body.io import cdr
@@ -203,7 +204,8 @@ def test_a_live_view_that_closes_mid_recording_or_sends_unexpected_json_keeps_wh
             ws.send(struct.pack("<BIQ", MESSAGE_DATA, 1, 0) + body)
         ws.socket.close()  # the node stops: no closing handshake
 
-    with serve(handler, "127.0.0.1", 0, subprotocols=[SUBPROTOCOL]) as server:
+    # a server that speaks only the older protocol name (foxglove_bridge's): it was refused
+    with serve(handler, "127.0.0.1", 0, subprotocols=[LEGACY_SUBPROTOCOL]) as server:
         threading.Thread(target=server.serve_forever, daemon=True).start()
         port = server.socket.getsockname()[1]
         with pytest.raises(SystemExit) as ended:

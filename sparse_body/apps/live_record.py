@@ -16,7 +16,9 @@ import time
 from ..io.cdr import MalformedMessage, TfRow, read_tf
 from .viewer import ViewError
 
-SUBPROTOCOL = "foxglove.sdk.v1"  # what foxglove-sdk's server speaks
+SUBPROTOCOL = "foxglove.sdk.v1"  # what foxglove-sdk's server speaks (the node's live view)
+# and what foxglove_bridge and older servers speak: the same advertise, subscribe and message ops
+LEGACY_SUBPROTOCOL = "foxglove.websocket.v1"
 MESSAGE_DATA = 1  # the binary opcode of a message: opcode, subscription id (u32), log time (u64), payload
 CONNECT_TIMEOUT = 10.0  # s
 MAX_SECONDS = 600.0  # a page holds at most this much (view's MAX_FRAMES at 30 frames drawn a second is 300 s)
@@ -38,7 +40,7 @@ async def _record(url: str, seconds: float) -> tuple[list[list[TfRow]], int]:
     messages: list[list[TfRow]] = []
     malformed = 0
     try:
-        ws = await websockets.connect(url, subprotocols=[SUBPROTOCOL], open_timeout=CONNECT_TIMEOUT)
+        ws = await websockets.connect(url, subprotocols=[SUBPROTOCOL, LEGACY_SUBPROTOCOL], open_timeout=CONNECT_TIMEOUT)
     except websockets.exceptions.WebSocketException as err:
         raise ViewError(f"{url}: not a Foxglove live view ({err})") from None
     async with ws:

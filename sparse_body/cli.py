@@ -916,7 +916,7 @@ class Terminated(KeyboardInterrupt):
     as for Ctrl-C."""
 
 
-# Exit codes: one per kind of error a user can cause (README "Exit codes").
+# Exit codes: one per kind of error a user can cause (docs/outputs.md, the table).
 EXIT_INPUT, EXIT_USAGE, EXIT_OUTPUT, EXIT_OS, EXIT_TOO_LARGE = 1, 2, 3, 4, 5
 EXIT_INTERRUPTED, EXIT_TERMINATED = 130, 143
 

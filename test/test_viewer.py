@@ -258,3 +258,33 @@ def test_the_urdf_draws_a_body_from_joint_to_joint_with_head_hands_and_feet():
     assert float(top.get("xyz").split()[2]) > 0.05
     others = [n for n in links if n not in JOINT_NAMES]
     assert len(others) == 42 and all(not links[n].findall("visual") for n in others)
+
+
+def test_the_foxglove_layout_shows_what_the_package_publishes():
+    """config/sparse_body.foxglove.json (Foxglove: Layouts > Import): every panel the layout
+    places is configured, the 3D panel follows a link of the URDF in the fixed frame, and each
+    topic and message field it names is one the node publishes."""
+    import json
+    import re
+
+    from sparse_body.core.resources import config_dir
+    from sparse_body.core.skeleton import Skeleton
+    from sparse_body.io.bagio import CONTACTS_TOPIC, DESCRIPTION_TOPIC, STATUS_TOPIC, typestore
+    from sparse_body.io.urdf import body_urdf
+
+    layout = json.loads((config_dir() / "sparse_body.foxglove.json").read_text())
+
+    def placed(node) -> list[str]:
+        return [node] if isinstance(node, str) else placed(node["first"]) + placed(node["second"])
+
+    assert set(placed(layout["layout"])) == set(layout["configById"])
+    body = layout["configById"]["3D!body"]
+    links = {link.get("name") for link in ET.fromstring(body_urdf(Skeleton.canonical())).iter("link")}
+    assert body["followTf"] in links and body["layers"]["grid"]["frameId"] == "world"
+    assert set(body["topics"]) == {DESCRIPTION_TOPIC}
+    assert layout["configById"]["RawMessages!status"]["topicPath"] == STATUS_TOPIC
+    store = typestore()
+    fields = {name for name, _ in store.fielddefs["sparse_body/msg/FootContact"][1]}
+    for path in layout["configById"]["Plot!contacts"]["paths"]:
+        topic, field = re.fullmatch(r"(/\w+)\.contacts\[\d\]\.(\w+)", path["value"]).groups()
+        assert topic == CONTACTS_TOPIC and field in fields

@@ -58,7 +58,8 @@ export _ROS_WHEELS_BOOTSTRAP_COMPLETE=1
 
 # uv (from PyPI, into the venv) downloads and installs in parallel: the runtime in seconds
 # where pip took minutes; its lines (each package added, the time taken) are the progress.
-# --native-tls: the system's certificate store, as pip uses it. --compile-bytecode: uv,
+# --system-certs (--native-tls before uv 0.9, which now warns on every install that it is
+# deprecated): the system's certificate store, as pip uses it. --compile-bytecode: uv,
 # unlike pip, leaves the .pyc files to the first import, and where Python may not write them
 # (PYTHONDONTWRITEBYTECODE, a read-only install) every process compiled its sources again at
 # start, numba's hundreds of modules among them (`sparse-body process` on a 60 s bag: 6.3 s
@@ -67,6 +68,11 @@ ensure_uv() {
   if [ ! -x "$VENV/bin/uv" ]; then
     "$VPY" -m pip install --progress-bar off "uv>=0.4" > >(grep -v '^Requirement already satisfied') \
       || die "installing uv (the installer) failed"
+  fi
+  if "$VENV/bin/uv" pip install --help 2>/dev/null | grep -q -- '--system-certs'; then
+    CERTS=--system-certs
+  else
+    CERTS=--native-tls
   fi
 }
 
@@ -80,7 +86,7 @@ install_requirements() {   # stamp name, then the requirement files
   say "installing Python dependencies ($stamp: $(cd "$ROOT" && basename -a "$@" | tr '\n' ' '))"
   local args=(); for f in "$@"; do args+=(-r "$f"); done
   ensure_uv
-  "$VENV/bin/uv" pip install --python "$VPY" --native-tls --compile-bytecode "${args[@]}" \
+  "$VENV/bin/uv" pip install --python "$VPY" "$CERTS" --compile-bytecode "${args[@]}" \
     || die "installing $(basename -a "$@" | tr '\n' ' ')failed"
   mark_done "$stamp" "$hash"
 }
@@ -160,7 +166,7 @@ if [ -d "$ROS_TOOLS/wheels" ] && ls "$ROS_TOOLS"/wheels/*.whl >/dev/null 2>&1; t
     # requirements-ros-tools.txt
     "$VENV/bin/uv" pip install --python "$VPY" --no-index --no-deps --compile-bytecode "$ROS_TOOLS"/wheels/*.whl \
       || die "installing the wheels of $ROS_TOOLS failed"
-    "$VENV/bin/uv" pip install --python "$VPY" --native-tls --compile-bytecode -r "$ROOT/requirements-ros-tools.txt" \
+    "$VENV/bin/uv" pip install --python "$VPY" "$CERTS" --compile-bytecode -r "$ROOT/requirements-ros-tools.txt" \
       || die "installing requirements-ros-tools.txt failed"
     # launch_ros imports composition_interfaces.srv; it comes as source, generated here
     say "generating composition_interfaces"

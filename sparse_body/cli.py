@@ -547,7 +547,7 @@ class _Parser(argparse.ArgumentParser):
 def build_parser() -> argparse.ArgumentParser:
     from .methods import METHODS, TRAINABLE
 
-    parser = _Parser(prog="sparse-body", description=__doc__, epilog=_choices_text())
+    parser = _Parser(prog="sparse-body", description=USER_DESCRIPTION, epilog=_choices_text())
     sub = parser.add_subparsers(dest="command", required=True)
     _add = sub.add_parser
     # every subcommand's --help shows the defaults and what can be chosen
@@ -909,6 +909,14 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--mocap", help="the CMU folder")
     p.set_defaults(func=cmd_split)
     return parser
+
+
+USER_DESCRIPTION = (
+    "A person's whole body from a few trackers (a headset, hand controllers, optionally pelvis "
+    "and feet), without ROS: make tracker bags from motion, process recordings into body "
+    "estimates, evaluate the estimators, view the results in a browser. "
+    "`sparse-body COMMAND --help` says more of each."
+)
 
 
 class Terminated(KeyboardInterrupt):

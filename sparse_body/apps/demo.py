@@ -81,7 +81,7 @@ def animate(
     low[2], high[2] = floor, max(high[2], floor + 1.0)
     extent = high - low  # metres along x, y, z: the box's shape
     fig = plt.figure(figsize=(size_px / 100, size_px / 100), dpi=100)
-    ax = fig.add_axes((0.0, 0.0, 1.0, 0.9), projection="3d")
+    ax = fig.add_axes((0.02, 0.04, 0.96, 0.86), projection="3d")
     grid = (
         np.arange(np.floor(low[0] * 2) / 2, high[0] + 0.5, 0.5),
         np.arange(np.floor(low[1] * 2) / 2, high[1] + 0.5, 0.5),
@@ -97,11 +97,13 @@ def animate(
         ax.set_xlim(low[0], high[0])
         ax.set_ylim(low[1], high[1])
         ax.set_zlim(low[2], high[2])
-        ax.set_box_aspect(tuple(extent), zoom=1.1)  # equal axes: a metre is a metre
+        # equal axes (a metre is a metre), zoomed so that the tick and axis labels stay inside
+        # the picture (at 1.1 the x label was cut off and the y ticks ran into it)
+        ax.set_box_aspect(tuple(extent), zoom=0.9)
         ax.grid(False)  # the floor grid below is the scale
-        ax.set_xlabel("x [m]", fontsize=7)
-        ax.set_ylabel("y [m]", fontsize=7)
-        ax.tick_params(labelsize=6)
+        ax.set_xlabel("x [m]", fontsize=7, labelpad=0)
+        ax.set_ylabel("y [m]", fontsize=7, labelpad=0)
+        ax.tick_params(labelsize=6, pad=0)
         ax.set_zticks([])
         for x in grid[0]:  # the floor, 0.5 m squares
             ax.plot([x, x], [grid[1][0], grid[1][-1]], [floor, floor], color="0.85", lw=0.6)

@@ -385,7 +385,7 @@ def write_estimate_bag(
     quats = np.array([p.local_quats for p in poses], dtype=np.float64).reshape(len(poses), NUM_JOINTS, 4)
     roots = np.array([p.root_position for p in poses], dtype=np.float64).reshape(len(poses), 3)
     angles = joint_angles(quats)
-    js, contacts, status = cdr.estimate_messages(poses, skeleton, fixed_frame)
+    js, contacts, status = cdr.estimate_messages(poses, skeleton, fixed_frame, angles=angles)
     body = body_table(quats, roots, skeleton, fixed_frame, prefix) + axis_link_table(angles, skeleton, prefix)
     tf: list[bytes] = [b""] * len(poses)
     shown = tracker_sites(*trackers) if trackers is not None else np.zeros((len(poses), 0), bool)

@@ -223,16 +223,22 @@ def same_rows(flags: np.ndarray) -> list[tuple[tuple[bool, ...], np.ndarray]]:
 
 
 def estimate_messages(
-    poses: list[BodyPose], skeleton: Skeleton, fixed_frame: str, held_message: str = HELD, stamps=None
+    poses: list[BodyPose],
+    skeleton: Skeleton,
+    fixed_frame: str,
+    held_message: str = HELD,
+    stamps=None,
+    angles: np.ndarray | None = None,
 ) -> tuple[list[bytes], list[bytes], list[bytes]]:
     """(JointState, FootContacts, EstimateStatus) per pose, stamped with the poses' stamps or
-    `stamps`: the one builder of the estimate bag and of the live node's messages."""
+    `stamps`: the one builder of the estimate bag and of the live node's messages. `angles`:
+    the poses' joint_angles when the caller has them already (the URDF's link TF needs them too)."""
     stamps = np.array([p.stamp for p in poses] if stamps is None else stamps, dtype=np.float64)
     quats = np.array([p.local_quats for p in poses], dtype=np.float64).reshape(len(poses), NUM_JOINTS, 4)
     roots = np.array([p.root_position for p in poses], dtype=np.float64).reshape(len(poses), 3)
     feet = len(FOOT_NAMES)
     return (
-        joint_state_messages(stamps, joint_state_names(), joint_angles(quats)),
+        joint_state_messages(stamps, joint_state_names(), joint_angles(quats) if angles is None else angles),
         foot_contact_messages(
             stamps,
             fixed_frame,

@@ -539,16 +539,17 @@ class EstimatorNode(LifecycleNode):
         frame_id, p = self.sensors.fixed_frame, self.params
         # the estimate bag's encoder (io/cdr.py), one pose at a time: the same bytes live and
         # offline, without building a Python message object per field
+        quats, root = pose.local_quats[None], pose.root_position[None]
+        angles = joint_angles(quats)  # once: the JointState and the URDF's massless links
         (joints,), (contacts,), (status,) = cdr.estimate_messages(
-            [pose], self.skeleton, frame_id, reason or HELD, stamps=[stamp]
+            [pose], self.skeleton, frame_id, reason or HELD, stamps=[stamp], angles=angles
         )
         self.pub_joints.publish(joints)
         self.pub_contacts.publish(contacts)
         self.pub_status.publish(status)
-        quats, root = pose.local_quats[None], pose.root_position[None]
         links = body_table(quats, root, self.skeleton, frame_id, p["frame_prefix"], p["publish_link_tf"])
         if p["publish_link_tf"]:  # the URDF's massless links too: RViz finds every link it draws
-            links = links + axis_link_table(joint_angles(quats), self.skeleton, p["frame_prefix"])
+            links = links + axis_link_table(angles, self.skeleton, p["frame_prefix"])
         tf = cdr.tf_messages([stamp], links.parents, links.children, links.values)[0]
         self.pub_tf.publish(tf)
         self.tf_in.published(tf)

@@ -354,8 +354,12 @@ def _run_on_cluster(tasks: list[Task], settings: Settings, ray, record) -> None:
                 remove_leftovers(out)  # no attempt of it runs any more
             record(i, result)
     except BaseException:
-        for ref in by_ref:
-            ray.cancel(ref)  # KeyboardInterrupt in the task: bag_writer removes its half-written bag
+        # KeyboardInterrupt in each task: bag_writer removes its half-written bag. The queued
+        # tasks first: a running task cancelled first frees its worker, a queued one is pushed
+        # to it as it is cancelled, and Ray's driver aborts on the reply ("Tried to complete
+        # task that was not pending", a failed check; once beside four burners)
+        for ref in reversed(list(by_ref)):
+            ray.cancel(ref)
         raise
     finally:
         ray.shutdown()

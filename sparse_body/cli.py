@@ -267,7 +267,7 @@ def cmd_split(args) -> int:
     subjects = {part: sorted({cid.split("_")[0] for cid in ids}, key=int) for part, ids in parts.items()}
     text = split_yaml(
         parts,
-        "Train / validation / test split of the CMU clips in ../shared/mocap, by subject: no\n"
+        "Train / validation / test split of the CMU motion capture clips, by subject: no\n"
         "test or validation subject has a take in training, so the test figures are those of\n"
         "people the models never saw. Written by `sparse-body split --write` (the rule is in\n"
         "sparse_body/data/catalog.py: compute_split). Every estimator trains and evaluates on it.\n"

@@ -61,6 +61,11 @@ def start_node(
         )
 
 
+def start_estimator(params: dict, tmp_path: Path, env: dict) -> subprocess.Popen:
+    """The estimator node (sparse_body_estimator) as a process with these parameters."""
+    return start_node("sparse_body.ros.estimator_node", params, "sparse_body_estimator", tmp_path, env)
+
+
 def stop(*procs: subprocess.Popen) -> None:
     for p in procs:
         if p.poll() is None:

@@ -14,7 +14,7 @@ rclpy = pytest.importorskip("rclpy", reason="rclpy is not installed (run the set
 pytest.importorskip("tf2_msgs.msg", reason="tf2_msgs is not available (run the setup command)")
 
 from diagnostic_msgs.msg import DiagnosticArray  # noqa: E402
-from ros_helpers import STARTUP_LIMIT, Listener, diagnostic_values, stamp_key, start_node, stop  # noqa: E402
+from ros_helpers import STARTUP_LIMIT, Listener, diagnostic_values, stamp_key, start_estimator, start_node, stop  # noqa: E402
 from sensor_msgs.msg import JointState  # noqa: E402
 from tf2_msgs.msg import TFMessage  # noqa: E402
 
@@ -24,7 +24,6 @@ from sparse_body.data.virtual_trackers import synthesize_trackers  # noqa: E402
 from sparse_body.msg import EstimateStatus  # noqa: E402
 
 pytestmark = pytest.mark.ros
-ESTIMATOR = "sparse_body.ros.estimator_node"
 BRIDGE = "sparse_body.ros.tracker_bridge_node"
 VMC_DEVICES = ["hmd:*=head", "con:LEFT=left_hand", "con:RIGHT=right_hand", "tra:WAIST=pelvis"]
 VMC_NAMES = {
@@ -61,13 +60,7 @@ def test_vmc_over_loopback_reaches_joint_states(ros_env, tmp_path):
     motion = synthetic_walk(6.0)
     stream = synthesize_trackers(motion, config)
     port = _free_udp_port()
-    est = start_node(
-        ESTIMATOR,
-        {"sensors": "four_point", "estimator": "ik", "autostart": True},
-        "sparse_body_estimator",
-        tmp_path,
-        ros_env,
-    )
+    est = start_estimator({"sensors": "four_point", "estimator": "ik", "autostart": True}, tmp_path, ros_env)
     bridge = start_node(
         BRIDGE,
         {"source": "vmc", "sensors": "four_point", "vmc_port": port, "devices": VMC_DEVICES},
@@ -125,13 +118,7 @@ def test_vmc_over_loopback_reaches_joint_states(ros_env, tmp_path):
 
 def test_serial_trackers_through_a_pty_reach_joint_states_across_a_reconnect(ros_env, tmp_path):
     link = tmp_path / "ttyTRACKERS"
-    est = start_node(
-        ESTIMATOR,
-        {"sensors": "four_point", "estimator": "ik", "autostart": True},
-        "sparse_body_estimator",
-        tmp_path,
-        ros_env,
-    )
+    est = start_estimator({"sensors": "four_point", "estimator": "ik", "autostart": True}, tmp_path, ros_env)
     bridge = start_node(
         BRIDGE,
         {"source": "serial", "sensors": "four_point", "serial_port": str(link)},

@@ -20,6 +20,7 @@ from ros_helpers import (  # noqa: E402
     during_playback,
     replay_bag,
     stamp_key,
+    start_estimator,
     start_node,
     stop,
 )
@@ -76,9 +77,7 @@ def _lifecycle(node, name: str):
 
 
 def test_lifecycle_transitions_gate_the_outputs(ros_env, tmp_path):
-    proc = start_node(
-        ESTIMATOR, {"sensors": "three_point", "estimator": "reference"}, "sparse_body_estimator", tmp_path, ros_env
-    )
+    proc = start_estimator({"sensors": "three_point", "estimator": "reference"}, tmp_path, ros_env)
     listener = Listener(rclpy, {"joint_states": JointState})
     try:
         node = listener.node
@@ -293,13 +292,7 @@ def test_bad_tracker_input_is_reported_and_never_gives_non_finite_output(ros_env
     config = load_sensor_config("four_point")
     motion = synthetic_walk(8.0)
     stream = synthesize_trackers(motion, config)
-    est = start_node(
-        ESTIMATOR,
-        {"sensors": "four_point", "estimator": "ik", "autostart": True},
-        "sparse_body_estimator",
-        tmp_path,
-        ros_env,
-    )
+    est = start_estimator({"sensors": "four_point", "estimator": "ik", "autostart": True}, tmp_path, ros_env)
     listener = Listener(
         rclpy, {"joint_states": JointState, "estimate_status": EstimateStatus, "/diagnostics": DiagnosticArray}
     )
@@ -522,13 +515,7 @@ def test_every_node_ends_cleanly_on_a_signal_while_data_flows(ros_env, tmp_path,
 
     config = load_sensor_config("four_point")
     make_bag(synthetic_walk(4.0), config, tmp_path / "trackers")
-    est = start_node(
-        ESTIMATOR,
-        {"sensors": "four_point", "estimator": "ik", "autostart": True},
-        "sparse_body_estimator",
-        tmp_path,
-        ros_env,
-    )
+    est = start_estimator({"sensors": "four_point", "estimator": "ik", "autostart": True}, tmp_path, ros_env)
     refiner = start_node(
         "sparse_body.ros.constraint_node",
         {"sensors": "four_point", "autostart": True},
@@ -631,13 +618,7 @@ def test_parameters_set_while_configured_apply_live_or_are_refused_with_the_reas
     from rcl_interfaces.msg import Parameter, ParameterType, ParameterValue
     from rcl_interfaces.srv import SetParameters
 
-    proc = start_node(
-        ESTIMATOR,
-        {"sensors": "three_point", "estimator": "reference", "autostart": True},
-        "sparse_body_estimator",
-        tmp_path,
-        ros_env,
-    )
+    proc = start_estimator({"sensors": "three_point", "estimator": "reference", "autostart": True}, tmp_path, ros_env)
     listener = Listener(rclpy, {"joint_states": JointState})
     try:
         node = listener.node
@@ -670,13 +651,7 @@ def test_trackers_on_a_static_chain_count_as_current(ros_env, tmp_path):
 
     config = load_sensor_config("three_point")
     stream = synthesize_trackers(synthetic_walk(1.0), config)
-    proc = start_node(
-        ESTIMATOR,
-        {"sensors": "three_point", "estimator": "ik", "autostart": True},
-        "sparse_body_estimator",
-        tmp_path,
-        ros_env,
-    )
+    proc = start_estimator({"sensors": "three_point", "estimator": "ik", "autostart": True}, tmp_path, ros_env)
     listener = Listener(rclpy, {"estimate_status": EstimateStatus})
     latched = QoSProfile(depth=10, durability=DurabilityPolicy.TRANSIENT_LOCAL)
     pub = listener.node.create_publisher(TFMessage, "/tf_static", latched)
@@ -719,12 +694,8 @@ def test_a_node_stopped_longer_than_tracker_timeout_is_late_not_invalid_when_it_
 
     config = load_sensor_config("six_point")
     make_bag(synthetic_walk(4.0), config, tmp_path / "trackers")
-    est = start_node(
-        ESTIMATOR,
-        {"sensors": "six_point", "estimator": "ik", "autostart": True, "tracker_timeout": 1.0},
-        "sparse_body_estimator",
-        tmp_path,
-        ros_env,
+    est = start_estimator(
+        {"sensors": "six_point", "estimator": "ik", "autostart": True, "tracker_timeout": 1.0}, tmp_path, ros_env
     )
     bridge = start_node(
         BRIDGE, {"bag": str(tmp_path / "trackers"), "loop": True}, "sparse_body_tracker_bridge", tmp_path, ros_env
@@ -822,13 +793,7 @@ def test_generated_tf_messages_never_stop_the_node_nor_give_a_non_finite_joint(r
     config = load_sensor_config("four_point")
     stream = synthesize_trackers(synthetic_walk(4.0), config)
     frames = [s.frame_id for s in config.sites]
-    est = start_node(
-        ESTIMATOR,
-        {"sensors": "four_point", "estimator": "ik", "autostart": True},
-        "sparse_body_estimator",
-        tmp_path,
-        ros_env,
-    )
+    est = start_estimator({"sensors": "four_point", "estimator": "ik", "autostart": True}, tmp_path, ros_env)
     listener = Listener(rclpy, {"joint_states": JointState})
     pub = listener.node.create_publisher(TFMessage, "/tf", 100)
     sent = [0]

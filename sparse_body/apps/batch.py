@@ -26,6 +26,7 @@ from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wai
 from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 
+from ..core.file_output import check_target, write_file
 from ..core.sensors import SensorConfig
 from ..core.skeleton import Skeleton
 from ..io.bagio import BagError, OutputError, joint_state_count, made_with, remove_leftovers, written_by_us
@@ -196,7 +197,7 @@ def process_many(
     out_dir.mkdir(exist_ok=True)
     try:
         summary = out_dir / SUMMARY
-        _check_summary(summary)
+        check_target(summary, _is_our_summary, True, "summary")  # the rules _write_summary writes by
     except BaseException:
         if created:
             out_dir.rmdir()
@@ -365,11 +366,6 @@ def _run_on_cluster(tasks: list[Task], settings: Settings, ray, record) -> None:
         ray.shutdown()
 
 
-def _check_summary(path: Path) -> None:
-    if path.is_symlink() or (path.exists() and not _is_our_summary(path)):
-        raise OutputError(f"{path}: exists and is not a summary sparse_body wrote; it is never replaced")
-
-
 def _is_our_summary(path: Path) -> bool:
     try:
         return path.is_file() and path.stat().st_size < 64 << 20 and SUMMARY_KEY in json.loads(path.read_text())
@@ -379,7 +375,6 @@ def _is_our_summary(path: Path) -> bool:
 
 def _write_summary(path: Path, bags: list[Path], results: dict[int, BagResult], settings_json: str) -> None:
     """The run so far, replaced as a whole (a reader never sees half a file)."""
-    from ..core.file_output import write_file
 
     body = {
         SUMMARY_KEY: "one entry per input bag of the last run: done, skipped (finished before) or failed",

@@ -178,7 +178,7 @@ Runtime and a damped Gauss-Newton step whose Jacobian comes from one batched dec
 no torch.
 
 ## Data
-- CMU motion capture from `../shared/mocap` (its README has the licence), retargeted onto the
+- CMU motion capture (allasfamc.zip from mocap.cs.cmu.edu: free use, no resale; indexed with `sparse-body import-mocap`), retargeted onto the
   22-joint body at 60 fps; rotations on the canonical body, root height scaled by leg length.
 - Split `config/splits/cmu.yaml` (by subject: no validation or test person in training):
   {len(split["train"])} train / {len(split["validation"])} validation / {len(split["test"])} test clips. Both networks train on the train clips

@@ -121,7 +121,7 @@ window each frame (`sparse_body/methods/dtp/estimator.py`); no torch.
   (`dtp:model=pretrained`).
 
 ## Data
-- CMU motion capture from `../shared/mocap` (its README has the licence), retargeted onto the
+- CMU motion capture (allasfamc.zip from mocap.cs.cmu.edu: free use, no resale; indexed with `sparse-body import-mocap`), retargeted onto the
   22-joint body at {cfg["fps"]:.0f} fps, positions scaled to the canonical leg length, floor at z = 0.
 - Split `config/splits/cmu.yaml` (by subject: no validation or test person in training):
   {len(split["train"])} train / {len(split["validation"])} validation / {len(split["test"])} test clips. Trained on {report["train_clips"]} train clips

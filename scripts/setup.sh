@@ -5,13 +5,16 @@
 # Re-running it only redoes the steps whose inputs changed.
 #
 #   scripts/setup.sh          the runtime: nodes, offline tools, demo (no torch)
-#   scripts/setup.sh --dev    and what training and the test suite need (torch: about 5 GB)
+#   scripts/setup.sh --test   and the test suite's tools (pytest, Hypothesis, lint, browser)
+#   scripts/setup.sh --train  and training (torch: PyPI's brings its CUDA libraries, about 5 GB)
+#                             (--dev: the same as --train)
 set -euo pipefail
 PROFILE=runtime
 case "${1:-}" in
   "") ;;
-  --dev) PROFILE=dev ;;
-  *) printf '[setup] error: unknown argument %s (expected --dev or nothing)\n' "$1" >&2; exit 2 ;;
+  --test) PROFILE=test ;;
+  --train|--dev) PROFILE=train ;;
+  *) printf '[setup] error: unknown argument %s (expected --test, --train or nothing)\n' "$1" >&2; exit 2 ;;
 esac
 
 ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
@@ -108,8 +111,11 @@ for path in glob.glob(f"{venv}/share/*/cmake/*.cmake"):
     if fixed != text:
         open(path, "w").write(fixed)
 PY
-if [ "$PROFILE" = dev ]; then
-  install_requirements deps-dev "$ROOT/requirements-train.txt" "$ROOT/requirements-test.txt"
+if [ "$PROFILE" = train ]; then
+  install_requirements deps-train "$ROOT/requirements-train.txt"
+fi
+if [ "$PROFILE" != runtime ]; then
+  install_requirements deps-test "$ROOT/requirements-test.txt"
   # The viewer's browser test drives Debian's chromium (playwright's own browsers come from a
   # CDN a CI machine may not reach). Installed where this runs as root with apt; elsewhere the
   # test skips and says so.

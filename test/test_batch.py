@@ -205,3 +205,36 @@ def test_a_resumed_run_never_mixes_bags_of_other_settings(tmp_path, capsys):
     assert [b["status"] for b in json.loads((out / SUMMARY).read_text())["bags"]] == ["skipped", "skipped"]
     assert run("--estimator", "reference", "--overwrite")[0] == 0
     assert json.loads((out / SUMMARY).read_text())["settings"]["estimator"] == "reference"
+
+
+def test_a_cluster_task_told_to_stop_removes_its_half_written_bag_and_returns(tmp_path):
+    """The way a stopped `--cluster` run ends its tasks (apps/batch: STOP_FILE), without Ray:
+    the task runs here in the main thread, as in a Ray worker."""
+    import threading
+
+    from sparse_body.apps.batch import STOP_FILE, Settings, _cluster_task
+    from sparse_body.core.calibration import person_body
+    from sparse_body.io.tf_guards import TfGuards
+
+    config = _bags(tmp_path / "bags", 120.0, 1)
+    out = tmp_path / "out"
+    out.mkdir()
+    settings = Settings("ik", {}, config, person_body(None, 1.75), 60.0, TfGuards())
+    stop = out / STOP_FILE
+    start = time.perf_counter()
+    whole = _cluster_task(tmp_path / "bags" / "walk0", out / "whole", settings, stop)
+    took = time.perf_counter() - start
+    assert whole.status == "done" and written_by_us(out / "whole")
+
+    timer = threading.Timer(0.3 * took, stop.write_text, ("stop\n",))
+    timer.start()
+    start = time.perf_counter()
+    stopped = _cluster_task(tmp_path / "bags" / "walk0", out / "walk0", settings, stop)
+    timer.join()
+    assert stopped.status == "stopped", stopped
+    assert time.perf_counter() - start < took  # it did not run to the end
+    assert not (out / "walk0").exists() and [p.name for p in _hidden(out)] == [STOP_FILE]
+    assert signal.getsignal(signal.SIGUSR2) == signal.SIG_DFL  # the worker's handler is put back
+    # a task that starts after the word to stop returns at once
+    assert _cluster_task(tmp_path / "bags" / "walk0", out / "late", settings, stop).status == "stopped"
+    assert not (out / "late").exists()

@@ -126,7 +126,7 @@ def test_bags_on_a_cluster_survive_a_killed_worker_and_equal_one_process(tmp_pat
             driver = subprocess.Popen(process_on(tmp_path, address), stdout=log, stderr=subprocess.STDOUT)
         sessions = {p.pid for p in nodes}  # Ray titles a worker running a bag ray::<function>
         while (
-            not (tasks := in_sessions(sessions, b"ray::_process_one"))
+            not (tasks := in_sessions(sessions, b"ray::_cluster_task"))
             and driver.poll() is None
             and time.monotonic() < end
         ):
@@ -134,6 +134,23 @@ def test_bags_on_a_cluster_survive_a_killed_worker_and_equal_one_process(tmp_pat
         assert tasks, "no bag ran on the cluster: " + (tmp_path / "driver.log").read_text()
         os.kill(tasks[0], signal.SIGKILL)  # a worker dies in the middle of a bag
         assert driver.wait(timeout=LIMIT) == 0, (tmp_path / "driver.log").read_text()
+        # SIGTERM to a run on the cluster: the command's one line and 143 (Ray's own handler
+        # printed a stack dump and exited with 1; ray.cancel made its driver abort now and then)
+        command = process_on(tmp_path, address)
+        command[3] = str(tmp_path / "stopped")
+        stopped = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        # its output folder is made once it is connected (ray.init done, the command's handlers
+        # back); a SIGTERM before that is Python's default death
+        until = time.monotonic() + LIMIT
+        while not (tmp_path / "stopped").exists() and stopped.poll() is None and time.monotonic() < until:
+            time.sleep(0.05)
+        time.sleep(1.0)  # its bags are on their way to the workers
+        stopped.send_signal(signal.SIGTERM)
+        _, err = stopped.communicate(timeout=LIMIT)
+        assert stopped.returncode == 143 and err.strip().splitlines() == [err.strip()], err
+        assert "terminated" in err
+        # every task removed its half-written bag, and the word to stop is gone with the run
+        assert not [p.name for p in (tmp_path / "stopped").iterdir() if p.name.startswith(".")]
     finally:
         if driver is not None and driver.poll() is None:
             driver.kill()

@@ -11,7 +11,11 @@ With `--cluster ADDRESS` the bags go to a Ray cluster instead (one task a bag; i
 the same storage): Ray is the engine this field uses to spread work over machines, and it
 keeps workers, scheduling and node failures out of this file. A task whose worker or node
 died is sent again (at most RETRIES times), which the summary records; its half-written bag
-never takes the output's name (bagio.bag_writer), and its leftover is removed here."""
+never takes the output's name (bagio.bag_writer), and its leftover is removed here. A stopped
+run tells its tasks through a file in the output folder (STOP_FILE), which every node sees:
+each running task removes its half-written bag and returns, a queued one returns at once.
+Ray's own way (ray.cancel) made its driver abort now and then on a task cancelled as it
+started ("Tried to complete task that was not pending"), so it is not used."""
 
 from __future__ import annotations
 
@@ -21,6 +25,7 @@ import multiprocessing
 import os
 import signal
 import socket
+import threading
 import time
 from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
 from dataclasses import asdict, dataclass, field, replace
@@ -66,6 +71,10 @@ class BagResult:
 
 RETRIES = 3  # a bag whose worker died is sent again at most this many times (--cluster)
 CONNECT_TIMEOUT = 10.0  # s for the cluster's head to answer
+STOP_FILE = ".sparse_body_stop"  # in the output folder while a stopped cluster run waits for its tasks
+STOP_WORDS = "sparse-body process --cluster: stop\n"  # what STOP_FILE holds (a leftover one is ours)
+STOP_POLL = 0.2  # s between a cluster task's looks for STOP_FILE
+STOP_WAIT = 60.0  # s a stopped cluster run waits for its tasks to remove their half-written bags
 
 
 def is_bag(path: Path) -> bool:
@@ -113,8 +122,9 @@ def _stop(signum, frame):
     os._exit(143)  # between bags: nothing to clean up
 
 
-def _process_one(bag: Path, out: Path, settings: Settings) -> BagResult:
-    """A worker's task: one bag, every error caught and reported as its result."""
+def _process_one(bag: Path, out: Path, settings: Settings, exit_on_stop: bool = True) -> BagResult:
+    """A worker's task: one bag, every error caught and reported as its result. A stop ends
+    the worker process (exit_on_stop: a pool's) or is reported as the result "stopped"."""
     from .offline import process_bag
 
     global _writing
@@ -140,11 +150,43 @@ def _process_one(bag: Path, out: Path, settings: Settings) -> BagResult:
     except (ValueError, OSError, EOFError, MemoryError, RecursionError) as err:
         result.status, result.error = "failed", " ".join(str(err).split()) or type(err).__name__
     except _Stopped:
-        os._exit(143)  # the half-written bag is gone; the pool would hand this worker another
+        if exit_on_stop:
+            os._exit(143)  # the half-written bag is gone; the pool would hand this worker another
+        result.status, result.error = "stopped", "the run was stopped"
     finally:
         _writing = False
     result.refused, result.seconds = refused, round(time.perf_counter() - start, 3)
     return result
+
+
+def _stop_task(signum, frame):
+    if _writing:  # between bags a cluster task has nothing to remove: it returns on its own
+        raise _Stopped
+
+
+def _cluster_task(bag: Path, out: Path, settings: Settings, stop_file: Path) -> BagResult:
+    """One bag as a Ray task (in its worker's main thread, where signal handlers run): a thread
+    watches for stop_file and interrupts the bag with SIGUSR2, which _process_one turns into the
+    removal of its half-written bag."""
+    if stop_file.exists():  # queued when the run was stopped
+        return BagResult(str(bag), str(out), "stopped", error="the run was stopped")
+    previous = signal.signal(signal.SIGUSR2, _stop_task)
+    finished = threading.Event()
+
+    def watch() -> None:
+        while not finished.wait(STOP_POLL):
+            if stop_file.exists():
+                os.kill(os.getpid(), signal.SIGUSR2)
+                return
+
+    watcher = threading.Thread(target=watch, name="sparse-body-stop", daemon=True)
+    watcher.start()
+    try:
+        return _process_one(bag, out, settings, exit_on_stop=False)
+    finally:
+        finished.set()
+        watcher.join()
+        signal.signal(signal.SIGUSR2, previous)
 
 
 def _worker_init() -> None:
@@ -198,6 +240,9 @@ def process_many(
     try:
         summary = out_dir / SUMMARY
         check_target(summary, _is_our_summary, True, "summary")  # the rules _write_summary writes by
+        if cluster is not None:  # one left by a run killed while it stopped would stop this one
+            check_target(out_dir / STOP_FILE, _is_our_stop_file, True, "stop file")
+            (out_dir / STOP_FILE).unlink(missing_ok=True)
     except BaseException:
         if created:
             out_dir.rmdir()
@@ -223,7 +268,7 @@ def process_many(
         if cluster is None:
             _run_here(tasks, settings, jobs, record)
         else:
-            _run_on_cluster(tasks, settings, connection, record)
+            _run_on_cluster(tasks, settings, connection, record, out_dir / STOP_FILE)
     except BaseException:
         # a stop can end a worker after its bag took the output's name but before its result
         # came back: the bag is complete and kept, so the summary must list it as well
@@ -321,18 +366,21 @@ def _connect(address: str):
     return ray
 
 
-def _run_on_cluster(tasks: list[Task], settings: Settings, ray, record) -> None:
+def _run_on_cluster(tasks: list[Task], settings: Settings, ray, record, stop_file: Path) -> None:
     """One Ray task a bag (`ray`: connected by _connect). A task that ends because its worker
     process or node died is sent again, up to RETRIES times; one that raises (a bug:
     _process_one reports every error a bag can cause) fails its bag with the error, and the
-    others go on."""
+    others go on. A stop (Ctrl-C, SIGTERM) writes stop_file and waits for the tasks."""
     from ray import exceptions as ray_errors
 
     by_ref: dict = {}
     try:
-        remote = ray.remote(num_cpus=1, max_retries=0)(_process_one)  # retried here, to record why
+        remote = ray.remote(num_cpus=1, max_retries=0)(_cluster_task)  # retried here, to record why
         # absolute: a worker's folder is its own (the nodes see the same storage, not the same cwd)
-        by_ref.update({remote.remote(bag.absolute(), out.absolute(), settings): (i, bag, out) for i, bag, out in tasks})
+        stop = stop_file.absolute()
+        by_ref.update(
+            {remote.remote(bag.absolute(), out.absolute(), settings, stop): (i, bag, out) for i, bag, out in tasks}
+        )
         retried: dict[int, list[str]] = {i: [] for i, _, _ in tasks}
         while by_ref:
             (ref,), _ = ray.wait(list(by_ref), num_returns=1)
@@ -347,7 +395,7 @@ def _run_on_cluster(tasks: list[Task], settings: Settings, ray, record) -> None:
                     # a worker killed after its bag took the output's name leaves a complete bag of
                     # ours there: the retry replaces it (what is not ours is refused all the same)
                     again = replace(settings, overwrite=True)
-                    by_ref[remote.remote(bag.absolute(), out.absolute(), again)] = (i, bag, out)
+                    by_ref[remote.remote(bag.absolute(), out.absolute(), again, stop)] = (i, bag, out)
                     continue
                 result = BagResult(str(bag), str(out), "failed", error=f"its worker died {len(retried[i])} times")
             result.input, result.output, result.retried = str(bag), str(out), retried[i]
@@ -355,15 +403,44 @@ def _run_on_cluster(tasks: list[Task], settings: Settings, ray, record) -> None:
                 remove_leftovers(out)  # no attempt of it runs any more
             record(i, result)
     except BaseException:
-        # KeyboardInterrupt in each task: bag_writer removes its half-written bag. The queued
-        # tasks first: a running task cancelled first frees its worker, a queued one is pushed
-        # to it as it is cancelled, and Ray's driver aborts on the reply ("Tried to complete
-        # task that was not pending", a failed check; once beside four burners)
-        for ref in reversed(list(by_ref)):
-            ray.cancel(ref)
+        _stop_cluster_tasks(by_ref, ray, record, stop_file)
         raise
     finally:
         ray.shutdown()
+
+
+def _stop_cluster_tasks(by_ref: dict, ray, record, stop_file: Path) -> None:
+    """Tell every task to stop and wait (STOP_WAIT at most) until each has removed its half-written
+    bag; a bag that finished meanwhile is recorded as done."""
+    made = False
+    try:
+        # O_EXCL: a name someone put there meanwhile is not written through, and not removed
+        fd = os.open(stop_file, os.O_WRONLY | os.O_CREAT | os.O_EXCL | getattr(os, "O_NOFOLLOW", 0), 0o644)
+        made = True
+        with os.fdopen(fd, "w") as file:
+            file.write(STOP_WORDS)
+    except OSError:
+        pass  # the tasks then run to their end, and the stop still ends the run
+    try:
+        if made and by_ref:
+            ready, _ = ray.wait(list(by_ref), num_returns=len(by_ref), timeout=STOP_WAIT)
+            for ref in ready:
+                with contextlib.suppress(Exception):  # a task whose worker died: nothing to record
+                    result = ray.get(ref)
+                    if result.status == "done":
+                        i, bag, out = by_ref[ref]
+                        result.input, result.output = str(bag), str(out)
+                        record(i, result)
+    finally:
+        if made:
+            stop_file.unlink(missing_ok=True)
+
+
+def _is_our_stop_file(path: Path) -> bool:
+    try:
+        return path.is_file() and path.stat().st_size < 1024 and path.read_text() == STOP_WORDS
+    except (OSError, ValueError):
+        return False
 
 
 def _is_our_summary(path: Path) -> bool:

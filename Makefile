@@ -2,21 +2,32 @@
 VENV ?= .venv
 PY := $(VENV)/bin/python
 
-.PHONY: setup setup-dev test test-busy demo eval bench fuzz cards train-lobstr train-dragposer train-dtp train-avatarjlm clean
+.PHONY: setup setup-test setup-train setup-dev test test-train test-busy demo eval bench fuzz cards train-lobstr train-dragposer train-dtp train-avatarjlm clean
 
-# The runtime (nodes, offline tools, demo: no torch), or with training and the test suite (--dev).
+# The runtime (nodes, offline tools, demo: no torch); with the test suite's tools (--test);
+# with training as well (--train: PyPI's torch and its CUDA libraries, about 5 GB more).
 setup:
 	bash scripts/setup.sh
 
-setup-dev:
-	bash scripts/setup.sh --dev
+setup-test:
+	bash scripts/setup.sh --test
 
-test: setup-dev
-	$(PY) -m pytest -q -rs test
+setup-train:
+	bash scripts/setup.sh --train
+
+setup-dev: setup-train
+
+# The suite without training: every method's inference, nodes, launch, offline tools (no torch).
+test: setup-test
+	$(PY) -m pytest -q -rs -m "not train" test
+
+# The tests that train (a short run of each method's trainer) or compare with torch.
+test-train: setup-train
+	$(PY) -m pytest -q -rs -m train test
 
 # The suite on a busy machine: one CPU-burning process per core runs beside it.
-test-busy: setup-dev
-	bash scripts/busy.sh $(PY) -m pytest -q -rs test
+test-busy: setup-test
+	bash scripts/busy.sh $(PY) -m pytest -q -rs -m "not train" test
 
 demo: setup
 	$(VENV)/bin/sparse-body demo
@@ -28,7 +39,7 @@ eval: setup
 	$(VENV)/bin/sparse-body eval --estimator dtp --sensors six_point
 	$(VENV)/bin/sparse-body eval --estimator avatarjlm --sensors three_point
 
-bench: setup-dev
+bench: setup-train
 	$(VENV)/bin/sparse-body bench
 	$(VENV)/bin/sparse-body bench --runtime lobstr
 	$(VENV)/bin/sparse-body bench --runtime dragposer
@@ -36,36 +47,36 @@ bench: setup-dev
 # A million generated inputs into each parser of outside input: the serial stream, VMC
 # datagrams, /tf messages through the TF ingest, BVH and ASF/AMC motion files, sensor
 # configuration and calibration YAML.
-fuzz: setup-dev
+fuzz: setup-test
 	for target in serial vmc tf bvh asf_amc yaml; do $(VENV)/bin/python -m sparse_body.apps.fuzz $$target 1000000 || exit 1; done
 
 # The release of the test-split tables: every shipped model measured again on the test split
 # (models/<model>.eval.json, each run's per-clip figures) and its card rendered from that; the
 # only command that reads the test split. `sparse-body train M --render-only` renders a card
 # from its measured file without measuring.
-cards: setup-dev
+cards: setup-train
 	for m in lobstr dtp avatarjlm dragposer; do $(VENV)/bin/sparse-body train $$m --card-only || exit 1; done
 
 # Retrain the shipped LoBSTr model (11,848 steps: about 50 minutes on 2 CPU cores) and rewrite its model card.
-train-lobstr: setup-dev
+train-lobstr: setup-train
 	$(VENV)/bin/sparse-body train lobstr --config small
 
 # Retrain the shipped DragPoser models: the pose VAE, then its temporal predictor (30 + 30
 # minutes on 2 CPU cores), and rewrite the model card.
-train-dragposer: setup-dev
+train-dragposer: setup-train
 	$(VENV)/bin/sparse-body train dragposer --config small
 
 # Retrain the shipped DTP models: the lookahead one, then the online one (pre-training and
 # occlusion fine-tuning, about 45 minutes each on 2 CPU cores), and rewrite the model card
 # (which evaluates them; the online model's run does).
-train-dtp: setup-dev
+train-dtp: setup-train
 	$(VENV)/bin/sparse-body train dtp --config lookahead --no-card
 	$(VENV)/bin/sparse-body train dtp --config small
 
 # Retrain the shipped AvatarJLM models: the three- and four-point ones side by side, a core
 # each (88 minutes; and 3,965 steps, 76 minutes on the 2-core developer machine), then one card
 # for both (which evaluates them).
-train-avatarjlm: setup-dev
+train-avatarjlm: setup-train
 	$(VENV)/bin/sparse-body train avatarjlm --config four_point --threads 1 --no-card & \
 	$(VENV)/bin/sparse-body train avatarjlm --config small --threads 1 --no-card; wait
 	$(VENV)/bin/sparse-body train avatarjlm --card-only

@@ -926,6 +926,16 @@ class Terminated(KeyboardInterrupt):
 
 # Exit codes: one per kind of error a user can cause (docs/outputs.md, the table).
 EXIT_INPUT, EXIT_USAGE, EXIT_OUTPUT, EXIT_OS, EXIT_TOO_LARGE = 1, 2, 3, 4, 5
+TRAINING_MODULES = ("torch", "roma", "onnx")  # requirements-train.txt: what `make setup` leaves out
+
+
+def needs_training_tools(module: str) -> str:
+    return (
+        f"this needs the training tools ({module}), which the runtime install leaves out: "
+        "make setup-train (or pip install -r requirements-train.txt)"
+    )
+
+
 EXIT_INTERRUPTED, EXIT_TERMINATED = 130, 143
 
 
@@ -1010,6 +1020,9 @@ def main(argv: list[str] | None = None) -> None:
         if stop is not None:  # partial output was removed on the way out
             print(f"{command}: interrupted; {left}", file=sys.stderr)
             sys.exit(EXIT_INTERRUPTED)
+        if isinstance(err, ModuleNotFoundError) and err.name in TRAINING_MODULES:
+            print(f"{command}: {needs_training_tools(err.name)}", file=sys.stderr)
+            sys.exit(EXIT_INPUT)
         # ValueError includes MotionFileError, BagError, OutputError, SensorConfigError, CalibrationError
         if not isinstance(err, (ValueError, OSError, EOFError, YAMLError, MemoryError, RecursionError)):
             raise  # a bug, not something the user caused: its traceback is what we need

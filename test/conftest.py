@@ -59,9 +59,26 @@ def ros_env(monkeypatch):
     rclpy.shutdown()
 
 
+def shipped_model(name: str) -> tuple[Path, dict]:
+    """A model of models/ and its training report: what the inference tests run (they need
+    no torch; the trainers are tested by the tests marked `train`)."""
+    import json
+
+    from sparse_body.core.resources import models_dir
+
+    return models_dir() / f"{name}.onnx", json.loads((models_dir() / f"{name}.train.json").read_text())
+
+
 def pytest_collection_modifyitems(config, items):
     """Tests marked `mocap` skip, saying why, when the motion capture is absent (the marker
-    alone skips nothing)."""
+    alone skips nothing); tests marked `train` skip when torch is not installed."""
+    import importlib.util
+
+    if importlib.util.find_spec("torch") is None:
+        no_torch = pytest.mark.skip(reason="needs the training tools (make test-train installs them)")
+        for item in items:
+            if item.get_closest_marker("train") is not None:
+                item.add_marker(no_torch)
     if find_mocap_root() is not None:
         return
     skip = pytest.mark.skip(reason=NO_MOCAP)

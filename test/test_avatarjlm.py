@@ -9,6 +9,7 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
+from conftest import shipped_model
 
 from sparse_body.core.kinematics import forward_kinematics
 from sparse_body.core.resources import models_dir
@@ -20,7 +21,6 @@ from sparse_body.data.virtual_trackers import VR_NOISE, synthesize_trackers
 from sparse_body.estimators import create_estimator
 from sparse_body.methods.avatarjlm.features import SITES, input_joints, sequence_features
 
-torch = pytest.importorskip("torch")
 THREE, FOUR = load_sensor_config("three_point"), load_sensor_config("four_point")
 WRISTS = [J["left_wrist"], J["right_wrist"]]
 
@@ -31,19 +31,9 @@ def clip(clip_index):
 
 
 @pytest.fixture(scope="module")
-def tiny_models(tmp_path_factory, mocap_root):
-    """Tiny three- and four-point models trained for a few steps by the real training code."""
-    from sparse_body.methods.avatarjlm.model import AvatarJlmConfig
-    from sparse_body.methods.avatarjlm.train import train
-    from sparse_body.train.harness import TrainRun
-
-    folder = tmp_path_factory.mktemp("avatarjlm")
-    for sensors in ("three_point", "four_point"):
-        train(
-            replace(AvatarJlmConfig.named("tiny"), sensors=sensors),
-            TrainRun(mocap_root, folder / f"{sensors}.onnx", limit=2, log=lambda *_: None),
-        )
-    return folder
+def avatarjlm_models():
+    """The shipped three- and four-point models."""
+    return {"three_point": shipped_model("avatarjlm")[0], "four_point": shipped_model("avatarjlm_four_point")[0]}
 
 
 def _features(motion, sites=SITES["three_point"]):
@@ -67,10 +57,13 @@ def test_features_do_not_depend_on_where_the_person_stands_or_faces(clip):
     assert x.shape == (len(clip), 54) and np.abs(x[1:, 9:12]).max() > 1e-3  # it sees the head move
 
 
+@pytest.mark.train
 def test_streaming_onnx_step_gives_the_torch_models_output_over_the_window(tmp_path, clip):
     """Frame by frame through the runtime's kept past (AvatarJlmModel) against the torch
     network on the whole stream so far: at a stream's start and long after the past is full
     (each block sees window - 1 frames back, the stacked blocks further)."""
+    import torch
+
     from sparse_body.methods.avatarjlm.estimator import AvatarJlmModel
     from sparse_body.methods.avatarjlm.model import AvatarJlmConfig, AvatarJlmNet
     from sparse_body.methods.avatarjlm.train import export_onnx
@@ -97,12 +90,12 @@ def test_streaming_onnx_step_gives_the_torch_models_output_over_the_window(tmp_p
         np.testing.assert_allclose(streamed[t], sixd_to_matrix(full.astype(np.float64)), atol=1e-4)
 
 
-def test_hands_reach_their_trackers_and_missing_ones_hold_the_pose(tiny_models, clip):
+def test_hands_reach_their_trackers_and_missing_ones_hold_the_pose(avatarjlm_models, clip):
     stream = synthesize_trackers(clip, THREE, VR_NOISE, seed=3)
     head = stream.sites.index("head")
     stream.positions[160:165, head] = np.nan  # the headset gone: no pose
     stream.valid[100:103, stream.sites.index("left_hand")] = False
-    path = str(tiny_models / "three_point.onnx")
+    path = str(avatarjlm_models["three_point"])
     est = create_estimator("avatarjlm", THREE, clip.skeleton, model_path=path, filter=False)
     poses = est.process(stream)
     assert len(poses) == len(stream) and all(p.is_finite() for p in poses)
@@ -120,9 +113,9 @@ def test_hands_reach_their_trackers_and_missing_ones_hold_the_pose(tiny_models, 
     np.testing.assert_allclose(_joints(raw[50], clip.skeleton)[J["head"]], clip.positions[50, J["head"]], atol=0.01)
 
 
-def test_a_gap_starts_the_past_over(tiny_models, clip):
+def test_a_gap_starts_the_past_over(avatarjlm_models, clip):
     stream = synthesize_trackers(clip, THREE, seed=1)
-    path = str(tiny_models / "three_point.onnx")
+    path = str(avatarjlm_models["three_point"])
     est = create_estimator("avatarjlm", THREE, clip.skeleton, model_path=path, filter=False)
     est.reset()
     for t in range(100):
@@ -141,9 +134,9 @@ def test_a_gap_starts_the_past_over(tiny_models, clip):
     )
 
 
-def test_four_point_model_stands_on_the_pelvis_tracker_and_needs_it(tiny_models, clip):
+def test_four_point_model_stands_on_the_pelvis_tracker_and_needs_it(avatarjlm_models, clip):
     stream = synthesize_trackers(clip, FOUR, seed=2)
-    path = str(tiny_models / "four_point.onnx")
+    path = str(avatarjlm_models["four_point"])
     poses = create_estimator("avatarjlm", FOUR, clip.skeleton, model_path=path, filter=False).process(stream)
     assert all(p.valid and p.is_finite() for p in poses)
     np.testing.assert_allclose(poses[80].root_position, clip.positions[80, 0], atol=1e-6)
@@ -153,11 +146,20 @@ def test_four_point_model_stands_on_the_pelvis_tracker_and_needs_it(tiny_models,
         create_estimator("avatarjlm", THREE, clip.skeleton, model_path=str(models_dir() / "lobstr.onnx"))
 
 
-def test_legs_are_rebuilt_by_default_only_where_the_network_turns_them(tiny_models, clip):
+@pytest.mark.train
+def test_legs_are_rebuilt_by_default_only_where_the_network_turns_them(tmp_path, mocap_root, clip):
     """Three-point networks trained from random rotations turn their legs (the runtime rebuilds
     them unless told not to); the four-point model and networks started from the identity
-    (the shipped three-point one, tested below) do not."""
-    three, four = (str(tiny_models / f"{s}.onnx") for s in ("three_point", "four_point"))
+    (the shipped three-point one, tested below) do not. Tiny models trained a few steps by the
+    real training code."""
+    from sparse_body.methods.avatarjlm.model import AvatarJlmConfig
+    from sparse_body.methods.avatarjlm.train import train
+    from sparse_body.train.harness import TrainRun
+
+    for sensors in ("three_point", "four_point"):
+        config = replace(AvatarJlmConfig.named("tiny"), sensors=sensors)
+        train(config, TrainRun(mocap_root, tmp_path / f"{sensors}.onnx", limit=2, log=lambda *_: None))
+    three, four = (str(tmp_path / f"{s}.onnx") for s in ("three_point", "four_point"))
     assert create_estimator("avatarjlm", THREE, clip.skeleton, model_path=three).legs_from_positions
     assert not create_estimator(
         "avatarjlm", THREE, clip.skeleton, model_path=three, legs_from_positions=False
@@ -165,6 +167,7 @@ def test_legs_are_rebuilt_by_default_only_where_the_network_turns_them(tiny_mode
     assert not create_estimator("avatarjlm", FOUR, clip.skeleton, model_path=four).legs_from_positions
 
 
+@pytest.mark.train
 def test_train_avatarjlm_is_one_command(tmp_path, mocap_root):
     import onnxruntime as ort
 
@@ -195,6 +198,7 @@ def test_train_avatarjlm_is_one_command(tmp_path, mocap_root):
     assert json.loads(meta["config"]) == report["config"] and json.loads(meta["method"]) == "avatarjlm"
 
 
+@pytest.mark.train
 def test_a_finished_training_trains_further_from_its_kept_checkpoint(tmp_path, mocap_root):
     """--keep-checkpoint then --resume: the second run starts where the first stopped and its
     report keeps the first run, which the model card shows."""
@@ -315,7 +319,7 @@ def test_legs_rebuilt_from_positions_undo_a_leg_turned_about_its_thigh(clip_inde
     assert bent.sum() > 10
 
 
-def test_estimator_node_runs_avatarjlm_over_dds(tiny_models, tmp_path, clip, ros_env):
+def test_estimator_node_runs_avatarjlm_over_dds(avatarjlm_models, tmp_path, clip, ros_env):
     """estimator:=avatarjlm with the three-point configuration, fed by the tracker bridge from a bag."""
     import rclpy
 
@@ -330,7 +334,7 @@ def test_estimator_node_runs_avatarjlm_over_dds(tiny_models, tmp_path, clip, ros
         THREE,
         {
             "estimator": "avatarjlm",
-            "model_path": str(tiny_models / "three_point.onnx"),
+            "model_path": str(avatarjlm_models["three_point"]),
             "height": clip.skeleton.height(),
         },
         until_valid=30,
@@ -341,7 +345,10 @@ def test_estimator_node_runs_avatarjlm_over_dds(tiny_models, tmp_path, clip, ros
     assert all(np.all(np.isfinite(m.position)) for m in listener.received["joint_states"])
 
 
+@pytest.mark.train
 def test_leg_term_judges_the_legs_own_swing_not_the_root(clip, tmp_path):
+    import torch
+
     from sparse_body.core.rotations import matrix_to_6d
     from sparse_body.methods.avatarjlm.model import AvatarJlmConfig, AvatarJlmNet, leg_positions
     from sparse_body.methods.avatarjlm.train import train

@@ -32,3 +32,35 @@ def test_demo_without_mocap_says_so_and_writes_bags_and_animation(tmp_path, caps
         run_demo(tmp_path, load_sensor_config("six_point"), "ik", mocap_root=None, seconds=0.5, gif=False)
     assert (tmp_path / "trackers" / "mine.txt").read_text() == "a user's file"
     assert metrics["End-effector PE [cm]"] < 1.0
+
+
+def test_the_synthetic_walk_plants_its_feet():
+    """The walk a user without motion capture sees: its feet stand on the floor for about
+    half of each stride and do not slide there (it slid at 3.8 m/s, so the demo's skate was
+    "n/a: no frame has a foot in contact"), measured by the metrics' own contact labels."""
+    import numpy as np
+
+    from sparse_body.core.contacts import FOOT_JOINTS, contact_labels, estimate_floor
+    from sparse_body.core.kinematics import forward_kinematics
+    from sparse_body.core.metrics import foot_skate
+    from sparse_body.core.rotations import quat_to_matrix
+    from sparse_body.data.synthetic import synthetic_walk
+
+    walk = synthetic_walk(60.0)  # the straight and the circle
+    _, pos = forward_kinematics(quat_to_matrix(walk.local_quats), walk.root_positions, walk.skeleton.offsets)
+    contacts = contact_labels(pos, walk.fps)
+    assert 0.4 < contacts.mean() < 0.7 and contacts.any(axis=1).all()  # a foot always stands
+    assert foot_skate(pos, contacts, walk.fps) < 2.0  # cm/s
+    assert pos[:, FOOT_JOINTS, 2].min() >= estimate_floor(pos) - 1e-9  # no foot under the floor
+    speed = np.linalg.norm(np.diff(walk.root_positions[:, :2], axis=0), axis=1) * walk.fps
+    assert abs(speed.mean() - 1.0) < 0.05  # the speed asked for
+    metrics = run_demo_metrics()
+    assert metrics["Contact acc [%]"] > 90.0 and metrics["Skate [cm/s]"] < 5.0
+
+
+def run_demo_metrics() -> dict:
+    import tempfile
+    from pathlib import Path
+
+    with tempfile.TemporaryDirectory() as folder:
+        return run_demo(Path(folder), load_sensor_config("six_point"), "ik", mocap_root=None, seconds=3.0, gif=False)

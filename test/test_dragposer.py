@@ -29,11 +29,16 @@ from sparse_body.methods.dragposer.constraints import (
 )
 from sparse_body.methods.dragposer.pose import dual_quaternions, split_heading
 
-torch = pytest.importorskip("torch")
+
+@pytest.fixture(scope="module")
+def shipped_models():
+    """The folder of the shipped models (VAE, temporal predictor, tracker prior)."""
+    return models_dir()
 
 
 @pytest.fixture(scope="module")
 def tiny_vae(tmp_path_factory, mocap_root):
+    """Tiny models trained for a few steps by the real training code (for the torch tests)."""
     from sparse_body.methods.dragposer.vae_model import VaeConfig
     from sparse_body.methods.dragposer.vae_train import train_vae
     from sparse_body.train.harness import TrainRun
@@ -77,7 +82,10 @@ def _random_pose(rng):
     return local, glob, pos
 
 
+@pytest.mark.train
 def test_constraints_give_the_same_residuals_in_numpy_and_torch(rng):
+    import torch
+
     local, glob, pos = _random_pose(rng)
     _, target_glob, target_pos = _random_pose(rng)
     set_ = ConstraintSet()
@@ -105,6 +113,7 @@ def test_constraints_give_the_same_residuals_in_numpy_and_torch(rng):
     assert set_.remove("lookat:15") and not set_.remove("lookat:15") and len(set_) == 5
 
 
+@pytest.mark.train
 def test_gauss_newton_reaches_a_decodable_pose_like_the_autograd_reference(tiny_vae, rng):
     from sparse_body.methods.dragposer.estimator import LatentOptimizer, PoseVaeRuntime
     from sparse_body.methods.dragposer.torch_reference import load_vae, optimise
@@ -149,29 +158,31 @@ def test_gauss_newton_reaches_a_decodable_pose_like_the_autograd_reference(tiny_
     assert np.linalg.norm(pos_ref - pos_gn, axis=-1).mean() < 0.01
 
 
-def test_estimator_works_on_any_sensor_subset_and_survives_faulty_sensors(tiny_vae):
+def test_estimator_works_on_any_sensor_subset_and_survives_faulty_sensors(shipped_models):
     motion = synthetic_walk(2.0)
     for name in ("six_point", "four_point", "three_point", "hip_hands", "four_point_foot_imus"):
         config = load_sensor_config(name)
         noise = TrackerNoise(fault_probability=0.05, fault_frames=20) if name == "six_point" else TrackerNoise()
         stream = synthesize_trackers(motion, config, noise, seed=1)
-        est = create_estimator("dragposer", config, motion.skeleton, model_dir=str(tiny_vae), iterations=3)
+        est = create_estimator("dragposer", config, motion.skeleton, model_dir=str(shipped_models), iterations=3)
         poses = est.process(stream)
         assert len(poses) == len(stream) and all(p.is_finite() for p in poses), name
         assert all(p.valid for p in poses), name  # some tracker is always there
     stream = synthesize_trackers(motion, load_sensor_config("four_point"))
     stream.valid[50:60] = False  # every tracker gone
     stream.positions[50:60] = np.nan
-    est = create_estimator("dragposer", load_sensor_config("four_point"), motion.skeleton, model_dir=str(tiny_vae))
+    est = create_estimator(
+        "dragposer", load_sensor_config("four_point"), motion.skeleton, model_dir=str(shipped_models)
+    )
     poses = est.process(stream)
     assert [p.valid for p in poses[48:62]] == [True] * 2 + [False] * 10 + [True] * 2
 
 
-def test_user_constraints_are_added_and_removed_at_runtime(tiny_vae):
+def test_user_constraints_are_added_and_removed_at_runtime(shipped_models):
     motion = synthetic_walk(1.0)
     config = load_sensor_config("four_point")
     stream = synthesize_trackers(motion, config)
-    est = create_estimator("dragposer", config, motion.skeleton, model_dir=str(tiny_vae), iterations=10)
+    est = create_estimator("dragposer", config, motion.skeleton, model_dir=str(shipped_models), iterations=10)
     for frame in list(stream)[:10]:
         est.step(frame)
     assert sorted(est.constraints.names()) == ["floor:10", "floor:11"]
@@ -193,6 +204,7 @@ def test_missing_model_is_a_clear_error(tmp_path):
         create_estimator("dragposer", load_sensor_config("six_point"), Skeleton.canonical(), model_dir=str(tmp_path))
 
 
+@pytest.mark.train
 def test_train_dragposer_is_one_command(tmp_path, mocap_root):
     subprocess.run(
         [
@@ -224,7 +236,7 @@ def test_train_dragposer_is_one_command(tmp_path, mocap_root):
         assert (tmp_path / f"dragposer_{part}.onnx").is_file()
 
 
-def test_constraint_node_refines_an_estimator_over_dds_and_takes_new_constraints(tiny_vae, tmp_path, ros_env):
+def test_constraint_node_refines_an_estimator_over_dds_and_takes_new_constraints(shipped_models, tmp_path, ros_env):
     """estimator (ik) -> constraint node (refined/...), with constraints changed by service."""
     import rclpy
 
@@ -247,7 +259,7 @@ def test_constraint_node_refines_an_estimator_over_dds_and_takes_new_constraints
     )
     refiner = start_node(
         "sparse_body.ros.constraint_node",
-        {"sensors": "four_point", "model_path": str(tiny_vae), "autostart": True, "iterations": 2},
+        {"sensors": "four_point", "model_path": str(shipped_models), "autostart": True, "iterations": 2},
         "sparse_body_constraint",
         tmp_path,
         ros_env,
@@ -296,7 +308,7 @@ def test_constraint_node_refines_an_estimator_over_dds_and_takes_new_constraints
     assert not missing.success
 
 
-def test_constraint_node_counts_a_bad_input_that_comes_before_it_is_activated(tiny_vae, ros_env):
+def test_constraint_node_counts_a_bad_input_that_comes_before_it_is_activated(shipped_models, ros_env):
     """Configured but not active: a malformed estimate on its input (any peer can send one)
     is counted as an error, not a crash of the node."""
     from rclpy.lifecycle import TransitionCallbackReturn
@@ -306,7 +318,10 @@ def test_constraint_node_counts_a_bad_input_that_comes_before_it_is_activated(ti
     from sparse_body.ros.constraint_node import ConstraintNode
 
     node = ConstraintNode(
-        parameter_overrides=[Parameter("sensors", value="four_point"), Parameter("model_path", value=str(tiny_vae))]
+        parameter_overrides=[
+            Parameter("sensors", value="four_point"),
+            Parameter("model_path", value=str(shipped_models)),
+        ]
     )
     try:
         assert node.trigger_configure() == TransitionCallbackReturn.SUCCESS
@@ -332,6 +347,7 @@ def test_temporal_context_ignores_where_the_person_stands_and_faces(rng):
     np.testing.assert_allclose(step[1, :3], [0, -0.1, 0], atol=1e-9)  # moved to the person's right
 
 
+@pytest.mark.train
 def test_limb_noise_turns_whole_limbs_and_nothing_else(rng):
     from sparse_body.methods.dragposer.pose import LIMBS
     from sparse_body.methods.dragposer.temporal_train import limb_noise
@@ -353,8 +369,10 @@ def test_limb_noise_turns_whole_limbs_and_nothing_else(rng):
     assert noisy.dtype == local.dtype and np.all(np.isfinite(noisy))
 
 
+@pytest.mark.train
 def test_temporal_predictor_onnx_matches_torch_and_is_causal(tiny_vae, rng):
     import onnxruntime as ort
+    import torch
 
     from sparse_body.methods.dragposer.temporal_model import TemporalConfig, TemporalPredictor
 
@@ -381,11 +399,11 @@ def test_temporal_predictor_onnx_matches_torch_and_is_causal(tiny_vae, rng):
     )
 
 
-def test_temporal_prior_waits_for_history_then_feeds_its_own_predictions(tiny_vae, rng):
+def test_temporal_prior_waits_for_history_then_feeds_its_own_predictions(shipped_models, rng):
     from sparse_body.methods.dragposer.temporal import TemporalPrior
 
     def run(ahead, last_z):
-        prior = TemporalPrior(tiny_vae, ahead=ahead)
+        prior = TemporalPrior(shipped_models, ahead=ahead)
         n, predictions = prior.every, []
         for tick in range(prior.past + 2):
             z = rng.normal(size=24) if tick < prior.past + 1 else last_z
@@ -411,13 +429,13 @@ def test_temporal_prior_waits_for_history_then_feeds_its_own_predictions(tiny_va
     b = run(prior.window, np.ones(24))[1][-1]
     np.testing.assert_allclose(a, b, atol=1e-6)
     with pytest.raises(ValueError, match="ahead must be between 1 and"):
-        TemporalPrior(tiny_vae, ahead=prior.window + 1)
+        TemporalPrior(shipped_models, ahead=prior.window + 1)
 
 
-def test_temporal_target_ramps_from_the_solved_latent_to_the_prediction(tiny_vae, rng):
+def test_temporal_target_ramps_from_the_solved_latent_to_the_prediction(shipped_models, rng):
     from sparse_body.methods.dragposer.temporal import TemporalPrior
 
-    ramped, held = TemporalPrior(tiny_vae), TemporalPrior(tiny_vae, ramp=False)
+    ramped, held = TemporalPrior(shipped_models), TemporalPrior(shipped_models, ramp=False)
     n, tick = ramped.every, ramped.past * ramped.every  # the first tick with W_p steps of history
 
     def observe(z, frame):
@@ -473,9 +491,9 @@ def test_polish_puts_end_effectors_on_their_trackers_without_moving_the_latent()
     np.testing.assert_allclose(states[True], states[False])  # the search itself is not changed
 
 
-def test_missing_temporal_predictor_names_the_file_and_the_way_out(tiny_vae, tmp_path):
+def test_missing_temporal_predictor_names_the_file_and_the_way_out(shipped_models, tmp_path):
     for part in ("encoder", "decoder"):
-        (tmp_path / f"dragposer_{part}.onnx").write_bytes((tiny_vae / f"dragposer_{part}.onnx").read_bytes())
+        (tmp_path / f"dragposer_{part}.onnx").write_bytes((shipped_models / f"dragposer_{part}.onnx").read_bytes())
     with pytest.raises(ModelMissing, match="dragposer_temporal.onnx.*temporal_weight to 0"):
         create_estimator("dragposer", load_sensor_config("six_point"), Skeleton.canonical(), model_dir=str(tmp_path))
     with pytest.raises(ModelMissing, match="dragposer_tracker_prior.onnx.*tracker_prior to 0"):
@@ -614,8 +632,10 @@ def test_tracker_prior_features_ignore_where_the_person_stands_and_faces_and_str
     np.testing.assert_allclose(np.concatenate(stream), x, atol=1e-9)
 
 
+@pytest.mark.train
 def test_tracker_prior_onnx_matches_torch_step_by_step(tiny_vae, rng):
     import onnxruntime as ort
+    import torch
 
     from sparse_body.methods.dragposer.tracker_prior import FEATURES
     from sparse_body.methods.dragposer.tracker_prior_train import TrackerPriorConfig, TrackerPriorNet, export
@@ -633,7 +653,7 @@ def test_tracker_prior_onnx_matches_torch_step_by_step(tiny_vae, rng):
         np.testing.assert_allclose(z[0], ref[t], atol=1e-5)
 
 
-def test_tracker_prior_pulls_the_latent_towards_its_guess_and_leaves_the_trackers_reached(tiny_vae):
+def test_tracker_prior_pulls_the_latent_towards_its_guess_and_leaves_the_trackers_reached(shipped_models):
     from sparse_body.core.rotations import quat_to_matrix
 
     motion = synthetic_walk(1.0)
@@ -641,7 +661,9 @@ def test_tracker_prior_pulls_the_latent_towards_its_guess_and_leaves_the_tracker
     stream = list(synthesize_trackers(motion, config))[:30]
     gaps, reach = {}, {}
     for weight in (1e-6, 1.0):
-        est = create_estimator("dragposer", config, motion.skeleton, model_dir=str(tiny_vae), tracker_prior=weight)
+        est = create_estimator(
+            "dragposer", config, motion.skeleton, model_dir=str(shipped_models), tracker_prior=weight
+        )
         guesses, predict = [], est.guesser.predict
         est.guesser.predict = lambda targets, guesses=guesses, predict=predict: (  # a spy
             guesses.append(predict(targets)) or guesses[-1]
@@ -661,11 +683,14 @@ def test_tracker_prior_pulls_the_latent_towards_its_guess_and_leaves_the_tracker
         gaps[weight], reach[weight] = np.mean(gap[1:]), np.mean(miss)
     assert gaps[1.0] < 0.5 * gaps[1e-6]
     assert reach[1.0] < 0.01  # the polish still puts them on their trackers
-    prior = create_estimator("dragposer", config, motion.skeleton, model_dir=str(tiny_vae)).guesser
+    prior = create_estimator("dragposer", config, motion.skeleton, model_dir=str(shipped_models)).guesser
     assert prior.predict({"head": None}) is None  # no headset: no guess
 
 
+@pytest.mark.train
 def test_tracker_prior_trains_through_the_shipped_decoder_as_onnx_runs_it(tiny_vae, rng):
+    import torch
+
     from sparse_body.methods.dragposer.estimator import PoseVaeRuntime
     from sparse_body.methods.dragposer.tracker_prior_train import frozen_decoder
 

@@ -9,6 +9,7 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
+from conftest import shipped_model
 
 from sparse_body.core.resources import models_dir
 from sparse_body.core.rotations import yaw_matrix
@@ -19,7 +20,6 @@ from sparse_body.data.virtual_trackers import NO_NOISE, VR_NOISE, synthesize_tra
 from sparse_body.estimators import create_estimator
 from sparse_body.methods.dtp.features import INPUT_JOINTS, leaf_features, window_features
 
-torch = pytest.importorskip("torch")
 SIX = load_sensor_config("six_point")
 
 
@@ -29,20 +29,12 @@ def clip(clip_index):
 
 
 @pytest.fixture(scope="module")
-def tiny_models(tmp_path_factory, mocap_root):
-    """Tiny online and lookahead models trained for a few steps by the real training code."""
-    from sparse_body.methods.dtp.model import DtpConfig
-    from sparse_body.methods.dtp.train import train
-    from sparse_body.train.harness import TrainRun
-
-    folder = tmp_path_factory.mktemp("dtp")
-    online = DtpConfig.named("tiny")
-    lookahead = replace(DtpConfig.named("tiny"), future=2)
-    reports = {
-        name: train(config, TrainRun(mocap_root, folder / f"{name}.onnx", limit=2, log=lambda *_: None))
-        for name, config in (("online", online), ("lookahead", lookahead))
-    }
-    return folder, reports
+def dtp_models():
+    """The shipped online model (its stage before fine-tuning beside it) and lookahead model,
+    with their training reports."""
+    (online, online_report), (lookahead, lookahead_report) = shipped_model("dtp"), shipped_model("dtp_lookahead")
+    paths = {"online": online, "online.pretrained": online.with_suffix(".pretrained.onnx"), "lookahead": lookahead}
+    return paths, {"online": online_report, "lookahead": lookahead_report}
 
 
 def _features(motion, current=-1):
@@ -65,10 +57,12 @@ def test_window_features_do_not_depend_on_where_the_person_stands_or_faces(clip)
     assert np.abs(_features(window)[0, :2]).max() > 0.01
 
 
+@pytest.mark.train
 def test_onnx_gives_the_torch_models_output_on_the_same_window(tmp_path, clip):
     """Any window length up to the trained one, online and with future frames; a token never
     sees further ahead than `future` frames."""
     import onnxruntime as ort
+    import torch
 
     from sparse_body.methods.dtp.model import DtpConfig, DtpNet
     from sparse_body.methods.dtp.train import export_onnx
@@ -99,28 +93,28 @@ def test_onnx_gives_the_torch_models_output_on_the_same_window(tmp_path, clip):
         assert np.abs(out[15 - future :] - base[15 - future :]).max() > 1e-3
 
 
-def test_onnx_metadata_carries_the_configuration_and_both_stages_are_kept(tiny_models):
+def test_onnx_metadata_carries_the_configuration_and_both_stages_are_kept(dtp_models):
     import onnxruntime as ort
 
-    folder, reports = tiny_models
-    meta = ort.InferenceSession(str(folder / "online.onnx"), providers=["CPUExecutionProvider"]).get_modelmeta()
+    models, reports = dtp_models
+    meta = ort.InferenceSession(str(models["online"]), providers=["CPUExecutionProvider"]).get_modelmeta()
     assert json.loads(meta.custom_metadata_map["method"]) == "dtp"
     assert json.loads(meta.custom_metadata_map["config"]) == reports["online"]["config"]
     assert json.loads(meta.custom_metadata_map["stage"]) == "finetune"
-    pretrained = ort.InferenceSession(str(folder / "online.pretrained.onnx"), providers=["CPUExecutionProvider"])
+    pretrained = ort.InferenceSession(str(models["online.pretrained"]), providers=["CPUExecutionProvider"])
     assert json.loads(pretrained.get_modelmeta().custom_metadata_map["stage"]) == "pretrain"
     assert set(reports["online"]["stages"]) == {"pretrain", "finetune"}
 
 
-def test_missing_feet_read_as_occluded_and_the_body_goes_on(tiny_models, clip):
-    folder, _ = tiny_models
+def test_missing_feet_read_as_occluded_and_the_body_goes_on(dtp_models, clip):
+    models, _ = dtp_models
     stream = synthesize_trackers(clip, SIX, VR_NOISE, seed=3)
     foot, head = stream.sites.index("left_foot"), stream.sites.index("head")
     stream.valid[50:110, foot] = False  # a foot tracker gone for a second
     stream.positions[50:110, foot] = np.nan
     stream.orientations[130:140, stream.sites.index("right_foot")] = np.nan  # and one giving NaN
     stream.positions[160:165, head] = np.nan  # the headset gone: no pose
-    est = create_estimator("dtp", SIX, clip.skeleton, model_path=str(folder / "online.onnx"), filter=False)
+    est = create_estimator("dtp", SIX, clip.skeleton, model_path=str(models["online"]), filter=False)
     poses = est.process(stream)
     assert len(poses) == len(stream) and all(p.is_finite() for p in poses)
     valid = np.array([p.valid for p in poses])
@@ -132,7 +126,7 @@ def test_missing_feet_read_as_occluded_and_the_body_goes_on(tiny_models, clip):
     from sparse_body.core.skeleton import JOINT_INDEX as J
 
     raw = create_estimator(
-        "dtp", SIX, clip.skeleton, model_path=str(folder / "online.onnx"), filter=False, polish=False
+        "dtp", SIX, clip.skeleton, model_path=str(models["online"]), filter=False, polish=False
     ).process(stream)
 
     def joints(pose):
@@ -146,26 +140,26 @@ def test_missing_feet_read_as_occluded_and_the_body_goes_on(tiny_models, clip):
     assert np.linalg.norm(joints(poses[80])[J["left_ankle"]]) > 0.3
 
 
-def test_a_gap_starts_the_window_over(tiny_models, clip):
-    folder, _ = tiny_models
+def test_a_gap_starts_the_window_over(dtp_models, clip):
+    models, _ = dtp_models
     stream = synthesize_trackers(clip, SIX, seed=1)
-    est = create_estimator("dtp", SIX, clip.skeleton, model_path=str(folder / "online.onnx"), filter=False)
+    est = create_estimator("dtp", SIX, clip.skeleton, model_path=str(models["online"]), filter=False)
     est.reset()
     for t in range(100):
         est.step(stream.frame(t))
     late = stream.frame(150)
     late = replace(late, stamp=late.stamp + 5.0)  # seconds later: nothing before it counts
     after_gap = est.step(late)
-    fresh = create_estimator("dtp", SIX, clip.skeleton, model_path=str(folder / "online.onnx"), filter=False)
+    fresh = create_estimator("dtp", SIX, clip.skeleton, model_path=str(models["online"]), filter=False)
     fresh.reset()
     np.testing.assert_allclose(after_gap.local_quats, fresh.step(late).local_quats, atol=1e-6)
 
 
-def test_lookahead_sees_the_frames_after_each_one_offline(tiny_models, clip):
-    folder, reports = tiny_models
+def test_lookahead_sees_the_frames_after_each_one_offline(dtp_models, clip):
+    models, reports = dtp_models
     future = reports["lookahead"]["config"]["future"]
     stream = synthesize_trackers(clip.slice(0, 60), SIX, seed=2)
-    est = create_estimator("dtp", SIX, clip.skeleton, model_path=str(folder / "lookahead.onnx"), filter=False)
+    est = create_estimator("dtp", SIX, clip.skeleton, model_path=str(models["lookahead"]), filter=False)
     offline = est.process(stream)
     assert len(offline) == len(stream) and all(p.valid and p.is_finite() for p in offline)
     changed = synthesize_trackers(clip.slice(0, 60), SIX, seed=2)
@@ -179,7 +173,7 @@ def test_lookahead_sees_the_frames_after_each_one_offline(tiny_models, clip):
     assert not np.allclose(live[30].local_quats, offline[30].local_quats, atol=1e-6)
 
 
-def test_lookahead_offline_eases_a_returning_hand_as_a_live_step_does(tiny_models, clip):
+def test_lookahead_offline_eases_a_returning_hand_as_a_live_step_does(dtp_models, clip):
     """Offline, the lookahead model's frames are sampled ahead of its poses; each pose is made
     once the frames after it are sampled, so a returning hand starts from where the last pose
     had it (filter_reacquire_speed) instead of snapping from wherever the method guessed."""
@@ -187,7 +181,7 @@ def test_lookahead_offline_eases_a_returning_hand_as_a_live_step_does(tiny_model
     from sparse_body.core.rotations import quat_to_matrix
     from sparse_body.core.skeleton import JOINT_INDEX
 
-    folder, _ = tiny_models
+    models, _ = dtp_models
     stream = synthesize_trackers(clip.slice(0, 120), SIX, seed=2)
     hand = stream.sites.index("left_hand")
     stream.valid[40:70, hand] = False
@@ -195,7 +189,7 @@ def test_lookahead_offline_eases_a_returning_hand_as_a_live_step_does(tiny_model
     wrist = JOINT_INDEX["left_wrist"]
 
     def largest_step_after_return(**options) -> float:
-        est = create_estimator("dtp", SIX, clip.skeleton, model_path=str(folder / "lookahead.onnx"), **options)
+        est = create_estimator("dtp", SIX, clip.skeleton, model_path=str(models["lookahead"]), **options)
         poses = est.process(stream)
         joints = [
             forward_kinematics(quat_to_matrix(p.local_quats), p.root_position, clip.skeleton.offsets)[1] for p in poses
@@ -237,6 +231,7 @@ def test_occlusion_protocol_occludes_the_share_asked_one_or_both_feet_both_ways(
         VR_NOISE.occluding(100)
 
 
+@pytest.mark.train
 def test_train_dtp_is_one_command(tmp_path, mocap_root):
     out = tmp_path / "dtp.onnx"
     subprocess.run(
@@ -264,6 +259,7 @@ def test_train_dtp_is_one_command(tmp_path, mocap_root):
     assert report["stages"]["pretrain"]["steps"] == 2 and report["train_clips"] == 1
 
 
+@pytest.mark.train
 def test_resume_after_the_pre_training_goes_on_with_the_fine_tuning(tmp_path, mocap_root, monkeypatch):
     import sparse_body.methods.dtp.train as dtp_train
     from sparse_body.methods.dtp.model import DtpConfig
@@ -314,21 +310,21 @@ def test_shipped_fine_tuning_pays_off_on_occluded_feet(clip_index):
     assert tuned["Lower PE [cm]"] < pretrained["Lower PE [cm]"]
 
 
-def test_estimator_node_runs_dtp_over_dds(tiny_models, tmp_path, clip, ros_env):
+def test_estimator_node_runs_dtp_over_dds(dtp_models, tmp_path, clip, ros_env):
     """estimator:=dtp with the six-point configuration, fed by the tracker bridge from a bag."""
     import rclpy
 
     pytest.importorskip("tf2_msgs.msg")
     from ros_helpers import after_first_valid, replay_bag
 
-    folder, _ = tiny_models
+    models, _ = dtp_models
     listener = replay_bag(
         rclpy,
         ros_env,
         tmp_path,
         clip.slice(0, 180),
         SIX,
-        {"estimator": "dtp", "model_path": str(folder / "online.onnx"), "height": clip.skeleton.height()},
+        {"estimator": "dtp", "model_path": str(models["online"]), "height": clip.skeleton.height()},
         until_valid=30,
     )
     statuses = after_first_valid(listener)  # the bag loops until 30 valid, however slow the machine

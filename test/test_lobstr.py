@@ -6,6 +6,7 @@ import sys
 
 import numpy as np
 import pytest
+from conftest import shipped_model
 
 from sparse_body.core.contacts import FOOT_JOINTS
 from sparse_body.core.kinematics import forward_kinematics
@@ -29,8 +30,6 @@ from sparse_body.methods.lobstr.features import (
     upper_targets,
 )
 
-torch = pytest.importorskip("torch")
-
 
 @pytest.fixture(scope="module")
 def clip(clip_index):
@@ -38,15 +37,9 @@ def clip(clip_index):
 
 
 @pytest.fixture(scope="module")
-def tiny_model(tmp_path_factory, mocap_root):
-    """A tiny model trained for a few steps by the real training code on two clips."""
-    from sparse_body.methods.lobstr.model import LobstrConfig
-    from sparse_body.methods.lobstr.train import train
-    from sparse_body.train.harness import TrainRun
-
-    out = tmp_path_factory.mktemp("lobstr") / "tiny.onnx"
-    report = train(LobstrConfig.named("tiny"), TrainRun(mocap_root, out, limit=2, log=lambda *_: None))
-    return out, report
+def lobstr_model():
+    """The shipped model and its training report."""
+    return shipped_model("lobstr")
 
 
 def test_features_do_not_depend_on_where_the_person_stands_or_faces(clip):
@@ -120,11 +113,13 @@ def test_leg_targets_round_trip_through_apply_legs(clip):
         assert not np.allclose(apply_upper(local[t], upper[t + 1 - 2 * (t > 0)]), local[t], atol=1e-3)
 
 
+@pytest.mark.train
 @pytest.mark.parametrize("learned_upper", [False, True])
 def test_streaming_onnx_equals_the_recurrent_net_over_the_window(tmp_path, clip, learned_upper):
     """The runtime carries the GRU state; running the exported step frame by frame must give
     what the training graph gives for the whole window at once."""
     import onnxruntime as ort
+    import torch
 
     from sparse_body.methods.lobstr.model import LobstrConfig, LobstrNet
     from sparse_body.methods.lobstr.train import export_onnx
@@ -153,17 +148,17 @@ def test_streaming_onnx_equals_the_recurrent_net_over_the_window(tmp_path, clip,
     assert np.abs(np.diff(np.stack(streamed_legs), axis=0)).max() > 1e-3  # the state did carry something
 
 
-def test_onnx_metadata_carries_the_configuration(tiny_model):
+def test_onnx_metadata_carries_the_configuration(lobstr_model):
     import onnxruntime as ort
 
-    path, report = tiny_model
+    path, report = lobstr_model
     meta = ort.InferenceSession(str(path), providers=["CPUExecutionProvider"]).get_modelmeta().custom_metadata_map
     assert json.loads(meta["method"]) == "lobstr"
     assert json.loads(meta["config"]) == report["config"]
 
 
-def test_estimator_gives_one_finite_pose_per_frame_and_survives_bad_samples(tiny_model, clip):
-    path, _ = tiny_model
+def test_estimator_gives_one_finite_pose_per_frame_and_survives_bad_samples(lobstr_model, clip):
+    path, _ = lobstr_model
     config = load_sensor_config("four_point")
     stream = synthesize_trackers(clip, config, TrackerNoise(drop_probability=0.05), seed=3)
     stream.positions[100:110, 1] = np.nan  # a headset reporting NaN
@@ -196,12 +191,12 @@ def test_estimator_gives_one_finite_pose_per_frame_and_survives_bad_samples(tiny
     np.testing.assert_allclose(pos[J["left_wrist"]], clip.positions[50, J["left_wrist"]], atol=0.01)
 
 
-def test_learned_upper_body_is_the_networks_put_on_the_trackers_and_false_is_the_papers_ik(tiny_model, clip):
+def test_learned_upper_body_is_the_networks_put_on_the_trackers_and_false_is_the_papers_ik(lobstr_model, clip):
     """The network's upper body, turned onto the headset and hands (learned_upper, the
     default with a model trained with it); learned_upper=false is the paper's: the IK's."""
     from sparse_body.core.skeleton import UPPER_BODY
 
-    path, report = tiny_model
+    path, report = lobstr_model
     assert report["config"]["learned_upper"]
     config = load_sensor_config("four_point")
     stream = synthesize_trackers(clip, config, TrackerNoise(), seed=1)
@@ -233,7 +228,7 @@ def test_learned_upper_body_is_the_networks_put_on_the_trackers_and_false_is_the
     assert np.mean(paper_misses) < 0.01
 
 
-def test_estimator_refuses_a_missing_or_foreign_model(tmp_path, clip, tiny_model):
+def test_estimator_refuses_a_missing_or_foreign_model(tmp_path, clip, lobstr_model):
     config = load_sensor_config("four_point")
     with pytest.raises(ModelMissing, match="train one"):
         create_estimator("lobstr", config, clip.skeleton, model_path=str(tmp_path / "none.onnx"))
@@ -241,10 +236,10 @@ def test_estimator_refuses_a_missing_or_foreign_model(tmp_path, clip, tiny_model
     with pytest.raises(ValueError, match="junk.onnx"):
         create_estimator("lobstr", config, clip.skeleton, model_path=str(tmp_path / "junk.onnx"))
     with pytest.raises(ValueError, match="needs trackers on pelvis"):
-        create_estimator("lobstr", load_sensor_config("three_point"), clip.skeleton, model_path=str(tiny_model[0]))
+        create_estimator("lobstr", load_sensor_config("three_point"), clip.skeleton, model_path=str(lobstr_model[0]))
     for bad in (-0.01, 0.05, float("nan")):  # a tolerance the fallback's 2 cm would override
         with pytest.raises(ValueError, match="spine_tolerance"):
-            create_estimator("lobstr", config, clip.skeleton, model_path=str(tiny_model[0]), spine_tolerance=bad)
+            create_estimator("lobstr", config, clip.skeleton, model_path=str(lobstr_model[0]), spine_tolerance=bad)
     # metadata that claims LoBSTr over a graph with other inputs: refused when loaded, not at every step
     import onnx
     from onnx import TensorProto, helper
@@ -263,7 +258,7 @@ def test_estimator_refuses_a_missing_or_foreign_model(tmp_path, clip, tiny_model
         create_estimator("lobstr", config, clip.skeleton, model_path=str(tmp_path / "claims_lobstr.onnx"))
     # DragPoser pointed at the LoBSTr file: refused, not silently the shipped models beside it
     with pytest.raises(ValueError, match="not a DragPoser model"):
-        create_estimator("dragposer", config, clip.skeleton, model_path=str(tiny_model[0]))
+        create_estimator("dragposer", config, clip.skeleton, model_path=str(lobstr_model[0]))
 
 
 def test_contact_hold_pins_the_toe_then_lets_go_slowly():
@@ -307,6 +302,7 @@ def test_contact_hold_lets_go_of_a_point_out_of_reach():
     assert np.linalg.norm(p[FOOT_JOINTS[0]][:2] - far[:2]) < 1.2  # not stretched back to the old point
 
 
+@pytest.mark.train
 def test_train_is_one_command(tmp_path, mocap_root):
     out = tmp_path / "m.onnx"
     subprocess.run(
@@ -351,7 +347,7 @@ def test_shipped_model_beats_the_ik_baseline_on_a_test_clip(clip_index):
     assert lobstr["Toe PE [cm]"] < ik["Toe PE [cm]"]
 
 
-def test_estimator_node_runs_lobstr_over_dds(tiny_model, tmp_path, clip, ros_env):
+def test_estimator_node_runs_lobstr_over_dds(lobstr_model, tmp_path, clip, ros_env):
     """estimator:=lobstr with the four-point configuration, fed by the tracker bridge."""
     import rclpy
 
@@ -370,7 +366,7 @@ def test_estimator_node_runs_lobstr_over_dds(tiny_model, tmp_path, clip, ros_env
         {
             "sensors": "four_point",
             "estimator": "lobstr",
-            "model_path": str(tiny_model[0]),
+            "model_path": str(lobstr_model[0]),
             "autostart": True,
             "height": clip.skeleton.height(),
         },

@@ -25,6 +25,7 @@ def test_each_record_names_an_estimator_and_baselines_that_exist(name):
         assert all(isinstance(v, float) for table in figures.values() for v in table.values())
 
 
+@pytest.mark.train  # the configurations live beside the torch models
 @pytest.mark.parametrize("name", TRAINABLE)
 def test_each_trainable_method_has_presets_for_tests_and_for_a_small_machine(name):
     training = METHODS[name].training

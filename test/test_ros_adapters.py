@@ -342,7 +342,8 @@ def test_mounting_calibration_finds_where_trackers_sit_and_publishes_them_as_con
         got = last[site.frame_id]
         position, quat = [got.translation.x, got.translation.y, got.translation.z], got.rotation
         joint, _ = site.joint_pose(np.array(position), np.array([quat.x, quat.y, quat.z, quat.w]))
-        assert np.linalg.norm(joint - standing.positions[-1, site.joint_index]) < 0.003, site.site
+        # as far off as the mounting found is (5 mm above): the joint is placed with it
+        assert np.linalg.norm(joint - standing.positions[-1, site.joint_index]) < 0.005, site.site
 
 
 def test_calibration_requests_are_bounded_and_write_only_under_the_calibration_dir(ros_env, tmp_path):

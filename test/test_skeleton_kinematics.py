@@ -1,13 +1,11 @@
 import numpy as np
 import pytest
-import torch
 from conftest import random_rotations
 
 from sparse_body.core.kinematics import forward_kinematics, global_to_local
 from sparse_body.core.rotations import euler_to_matrix
 from sparse_body.core.skeleton import JOINT_INDEX as J
 from sparse_body.core.skeleton import JOINT_NAMES, NUM_JOINTS, PARENTS, Skeleton, joint_indices
-from sparse_body.train import torch_body
 
 
 def test_topology_is_smpl_body():
@@ -52,7 +50,12 @@ def test_fk_hand_computed_elbow_bend():
     np.testing.assert_allclose(pos[J["right_wrist"]], rest[J["right_wrist"]], atol=1e-12)
 
 
+@pytest.mark.train
 def test_numpy_and_torch_fk_agree(rng):
+    import torch
+
+    from sparse_body.train import torch_body
+
     s = Skeleton.canonical(1.6)
     local = random_rotations(rng, (8, 22))
     root = rng.normal(size=(8, 3))
@@ -65,8 +68,12 @@ def test_numpy_and_torch_fk_agree(rng):
     np.testing.assert_allclose(global_to_local(g_np), local, atol=1e-10)
 
 
+@pytest.mark.train
 def test_torch_rotation_helpers_match_numpy(rng):
+    import torch
+
     from sparse_body.core.rotations import matrix_to_6d, matrix_to_quat, sixd_to_matrix
+    from sparse_body.train import torch_body
 
     m = random_rotations(rng, (16,))
     d6 = matrix_to_6d(m) + rng.normal(0, 0.1, (16, 6))

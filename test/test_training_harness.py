@@ -8,10 +8,6 @@ import numpy as np
 import onnxruntime as ort
 import pytest
 
-from sparse_body.methods.lobstr.model import LobstrConfig
-from sparse_body.methods.lobstr.train import train
-from sparse_body.train.harness import TrainRun
-
 
 def quiet(*_):
     pass
@@ -19,10 +15,16 @@ def quiet(*_):
 
 @pytest.fixture(scope="module")
 def tiny():
+    from sparse_body.methods.lobstr.model import LobstrConfig
+
     return replace(LobstrConfig.named("tiny"), steps=4, steps_per_epoch=2)
 
 
+@pytest.mark.train
 def test_an_interrupted_training_resumes_from_its_checkpoint(tmp_path, mocap_root, tiny):
+    from sparse_body.methods.lobstr.train import train
+    from sparse_body.train.harness import TrainRun
+
     checkpoint = tmp_path / "lobstr.checkpoint.npz"
     first = train(tiny, TrainRun(mocap_root, tmp_path / "a.onnx", limit=2, log=quiet, checkpoint=checkpoint))
     assert [h["step"] for h in first["history"]] == [2, 4]
@@ -46,14 +48,22 @@ def test_an_interrupted_training_resumes_from_its_checkpoint(tmp_path, mocap_roo
     assert json.loads(meta.custom_metadata_map["trained_steps"]) == 8
 
 
+@pytest.mark.train
 def test_without_resume_a_checkpoint_is_overwritten_not_read(tmp_path, mocap_root, tiny):
+    from sparse_body.methods.lobstr.train import train
+    from sparse_body.train.harness import TrainRun
+
     checkpoint = tmp_path / "lobstr.checkpoint.npz"
     train(tiny, TrainRun(mocap_root, tmp_path / "a.onnx", limit=2, log=quiet, checkpoint=checkpoint))
     again = train(tiny, TrainRun(mocap_root, tmp_path / "b.onnx", limit=2, log=quiet, checkpoint=checkpoint))
     assert [h["step"] for h in again["history"]] == [2, 4]
 
 
+@pytest.mark.train
 def test_a_checkpoint_of_another_configuration_is_refused_by_name(tmp_path, mocap_root, tiny):
+    from sparse_body.methods.lobstr.train import train
+    from sparse_body.train.harness import TrainRun
+
     checkpoint = tmp_path / "lobstr.checkpoint.npz"
     train(tiny, TrainRun(mocap_root, tmp_path / "a.onnx", limit=2, log=quiet, checkpoint=checkpoint))
     with pytest.raises(ValueError, match="lobstr.checkpoint.npz: the checkpoint does not fit"):
@@ -117,6 +127,7 @@ def test_the_lobstr_card_is_rendered_from_its_measured_file_alone(tmp_path):
     assert write_lobstr_card(onnx, report, mocap_root=None, evaluate=False).read_text() == text
 
 
+@pytest.mark.train  # `train --render-only` reads each method's configuration class (torch)
 @pytest.mark.parametrize(
     "method, out, card",
     [

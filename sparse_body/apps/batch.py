@@ -147,16 +147,30 @@ def _process_one(bag: Path, out: Path, settings: Settings, exit_on_stop: bool = 
             **settings.options,
         )
         result.frames, result.invalid = len(poses), sum(not p.valid for p in poses)
-    except (ValueError, OSError, EOFError, MemoryError, RecursionError) as err:
-        result.status, result.error = "failed", " ".join(str(err).split()) or type(err).__name__
-    except _Stopped:
-        if exit_on_stop:
-            os._exit(143)  # the half-written bag is gone; the pool would hand this worker another
-        result.status, result.error = "stopped", "the run was stopped"
+    except Exception as err:
+        # the stop lands wherever the bag is; inside compiled code (a numba kernel) it comes
+        # back as that code's SystemError, caused by _Stopped
+        if _caused_by_stop(err):
+            if exit_on_stop:
+                os._exit(143)  # the half-written bag is gone; the pool would hand this worker another
+            result.status, result.error = "stopped", "the run was stopped"
+        elif isinstance(err, (ValueError, OSError, EOFError, MemoryError, RecursionError)):
+            result.status, result.error = "failed", " ".join(str(err).split()) or type(err).__name__
+        else:
+            raise
     finally:
         _writing = False
     result.refused, result.seconds = refused, round(time.perf_counter() - start, 3)
     return result
+
+
+def _caused_by_stop(err: BaseException | None) -> bool:
+    seen = 0
+    while err is not None and seen < 20:
+        if isinstance(err, _Stopped):
+            return True
+        err, seen = err.__cause__ or err.__context__, seen + 1
+    return False
 
 
 def _stop_task(signum, frame):

@@ -79,7 +79,11 @@ def animate(
     floor = float(truth[..., 2].min())
     low, high = both.min(axis=0) - 0.15, both.max(axis=0) + 0.15
     low[2], high[2] = floor, max(high[2], floor + 1.0)
+    # at least 1.5 m across: a walk along x otherwise leaves a sliver whose y ticks run together
+    middle, half = (low[1] + high[1]) / 2, max((high[1] - low[1]) / 2, 0.75)
+    low[1], high[1] = middle - half, middle + half
     extent = high - low  # metres along x, y, z: the box's shape
+    ticks = [np.arange(np.ceil(low[k]), high[k] + 1e-9, 1.0 if extent[k] > 3.0 else 0.5) for k in (0, 1)]
     fig = plt.figure(figsize=(size_px / 100, size_px / 100), dpi=100)
     ax = fig.add_axes((0.02, 0.04, 0.96, 0.86), projection="3d")
     grid = (
@@ -101,8 +105,10 @@ def animate(
         # the picture (at 1.1 the x label was cut off and the y ticks ran into it)
         ax.set_box_aspect(tuple(extent), zoom=0.9)
         ax.grid(False)  # the floor grid below is the scale
-        ax.set_xlabel("x [m]", fontsize=7, labelpad=0)
-        ax.set_ylabel("y [m]", fontsize=7, labelpad=0)
+        ax.set_xticks(ticks[0])  # whole metres (half metres on a short side): labels that do not touch
+        ax.set_yticks(ticks[1])
+        ax.set_xlabel("x [m]", fontsize=7, labelpad=7)
+        ax.set_ylabel("y [m]", fontsize=7, labelpad=2)
         ax.tick_params(labelsize=6, pad=0)
         ax.set_zticks([])
         for x in grid[0]:  # the floor, 0.5 m squares

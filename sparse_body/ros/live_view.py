@@ -1,6 +1,7 @@
 """A live view without RViz: what the estimator node publishes, served to the Foxglove app
 over its WebSocket protocol (the foxglove-sdk package), so a user with a headset and no ROS
-desktop opens ws://HOST:PORT in Foxglove and sees the body move with its trackers.
+desktop opens ws://HOST:PORT in Foxglove and sees the body move with its trackers. Clients
+of both names of the protocol (foxglove.sdk.v1 and the older foxglove.websocket.v1) connect.
 
 The channels carry the node's own CDR bytes (io/cdr.py) with ROS 2 message definitions as
 their schemas ("ros2msg"), so Foxglove decodes them as it decodes a ROS bag: /joint_states,
@@ -15,6 +16,7 @@ import numpy as np
 from ..core.types import TrackerFrame
 from ..io import cdr
 from ..io.bagio import typestore
+from .ws_front import WebSocketFront
 
 CHANNELS = {
     "/joint_states": "sensor_msgs/msg/JointState",
@@ -40,10 +42,17 @@ class LiveView:
         except ImportError as err:
             raise LiveViewError(f"foxglove_port needs foxglove-sdk (pip install foxglove-sdk): {err}") from err
         self._context = foxglove.Context()
+        # the SDK's server on loopback, behind a front on host:port that also lets in clients
+        # of the protocol's older name (ros/ws_front.py)
         try:
-            self.server = foxglove.start_server(name="sparse_body", host=host, port=port, context=self._context)
+            self.server = foxglove.start_server(name="sparse_body", host="127.0.0.1", port=0, context=self._context)
         except Exception as err:  # noqa: BLE001 - the SDK raises its own error types
-            raise LiveViewError(f"the live view cannot serve on {host}:{port}: {err}") from err
+            raise LiveViewError(f"the live view cannot start its server: {err}") from err
+        try:
+            self._front = WebSocketFront(host, port, int(self.server.port))
+        except OSError as err:
+            self.server.stop()
+            raise LiveViewError(f"the live view cannot serve on {host}:{port}: {err.strerror or err}") from err
         store = typestore()
         self._channels = {
             topic: foxglove.Channel(
@@ -62,7 +71,7 @@ class LiveView:
 
     @property
     def port(self) -> int:
-        return int(self.server.port)
+        return self._front.port
 
     def log(self, topic: str, data: bytes, stamp: float) -> None:
         self._channels[topic].log(data, log_time=int(stamp * 1e9))
@@ -83,4 +92,5 @@ class LiveView:
         self.log("/robot_description", self._description, stamp)
 
     def close(self) -> None:
+        self._front.stop()
         self.server.stop()

@@ -20,6 +20,8 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from .model_card import beside  # noqa: F401 (the trainers' and the command's name for it)
+
 
 @dataclass(frozen=True)
 class TrainRun:
@@ -151,12 +153,6 @@ def load_best(model: torch.nn.Module, checkpoint: Path) -> None:
     _, _, best_state, _ = _restore(model, Path(checkpoint))
     model.load_state_dict(best_state or model.state_dict())
     model.eval()
-
-
-def beside(report_path: Path, suffix: str) -> Path:
-    """A file kept with a training report: <model>.train.json -> <model><suffix> (the
-    ablation's .augment.json, the .checkpoint.npz)."""
-    return Path(report_path).with_name(Path(report_path).name.removesuffix(".train.json") + suffix)
 
 
 def with_earlier_runs(report: dict, earlier: dict | None) -> dict:

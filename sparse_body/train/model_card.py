@@ -7,12 +7,16 @@ from pathlib import Path
 from ..core.sensors import load_sensor_config
 
 
+def beside(report_path: Path, suffix: str) -> Path:
+    """A file kept with a training report: <model>.train.json -> <model><suffix> (the
+    ablation's .augment.json, the .checkpoint.npz)."""
+    return Path(report_path).with_name(Path(report_path).name.removesuffix(".train.json") + suffix)
+
+
 def augmentation_table(report_path: Path, columns: dict[str, str]) -> str:
     """The augmentation ablation (<model>.augment.json, `sparse-body train ... --ablate-augment`)
     as a Markdown table of validation figures, or a line saying it has not been run."""
     import json
-
-    from .harness import beside
 
     path = beside(report_path, ".augment.json")
     if not path.is_file():

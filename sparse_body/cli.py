@@ -14,6 +14,7 @@ from dataclasses import replace
 from pathlib import Path
 
 from .io.tf_guards import TfGuards
+from .io.topics import COMPRESSIONS, ESTIMATE_TOPICS
 
 
 def _mocap(args) -> Path:
@@ -362,7 +363,18 @@ def cmd_process(args) -> int:
             f"the bags finished are kept (see {Path(args.bag_out) / SUMMARY}), the ones being written were "
             "removed; the same command resumes"
         )
-        settings = Settings(name, options, load_sensor_config(args.sensors), body, args.fps, guards, args.overwrite)
+        settings = Settings(
+            name,
+            options,
+            load_sensor_config(args.sensors),
+            body,
+            args.fps,
+            guards,
+            args.overwrite,
+            args.topics,
+            args.compression,
+            args.axis_links,
+        )
         results = process_many(
             inputs, Path(args.bag_out), settings, args.jobs, progress=not args.quiet, cluster=args.cluster
         )
@@ -376,6 +388,7 @@ def cmd_process(args) -> int:
             raise BagError(f"{len(failed)} of {len(results)} bags failed, the first: {failed[0].error}")
         return 0
     refused: dict[str, int] = {}
+    timings: dict[str, float] = {}
     poses = process_bag(
         inputs[0],
         Path(args.bag_out),
@@ -387,6 +400,10 @@ def cmd_process(args) -> int:
         overwrite=args.overwrite,
         refused=refused,
         guards=guards,
+        topics=args.topics,
+        compression=args.compression,
+        axis_links=args.axis_links,
+        timings=timings,
         **options,
     )
     invalid = sum(not p.valid for p in poses)
@@ -395,7 +412,15 @@ def cmd_process(args) -> int:
         f"written {args.bag_out}: {len(poses)} estimates ({invalid} marked invalid); "
         f"tracker samples refused: {rejected}"
     )
+    print(_rates(len(poses), timings))
     return 0
+
+
+def _rates(frames: int, timings: dict[str, float]) -> str:
+    """Frames a second of each part of a run, so that a user sees what bounds it."""
+    parts = [("reading", "read"), ("estimation", "estimate"), ("writing", "write")]
+    said = [f"{name} {frames / max(timings[key], 1e-9):,.0f} frames/s ({timings[key]:.1f} s)" for name, key in parts]
+    return f"{', '.join(said)}; the estimator's start {timings['start']:.1f} s"
 
 
 def cmd_demo(args) -> int:
@@ -501,6 +526,15 @@ def _between(low: float, high: float, unit: str = ""):
 
     parse.__name__ = "number"
     return parse
+
+
+def _topics(text: str) -> tuple[str, ...]:
+    """--topics: a comma-separated choice of the estimate bag's topics, in the bag's order."""
+    given = {t.strip() if t.strip().startswith("/") else "/" + t.strip() for t in text.split(",") if t.strip()}
+    unknown = sorted(given - set(ESTIMATE_TOPICS))
+    if unknown or not given:
+        raise argparse.ArgumentTypeError(f"{', '.join(unknown) or 'no topic'}: choose from {','.join(ESTIMATE_TOPICS)}")
+    return tuple(t for t in ESTIMATE_TOPICS if t in given)
 
 
 def _between_int(low: int, high: int):
@@ -748,6 +782,25 @@ def build_parser() -> argparse.ArgumentParser:
         help="estimator, with options: lobstr, refined:base=lobstr (DragPoser refinement after it)",
     )
     p.add_argument("--sensors", default="six_point")
+    p.add_argument(
+        "--topics",
+        type=_topics,
+        default=ESTIMATE_TOPICS,
+        help="the topics each output bag holds, comma-separated (default: all of " + ",".join(ESTIMATE_TOPICS) + ")",
+    )
+    p.add_argument(
+        "--compression",
+        choices=COMPRESSIONS,
+        default="zstd",
+        help="the output's MCAP chunk compression, which every MCAP reader reads (default zstd; lz4 is "
+        "faster and larger)",
+    )
+    p.add_argument(
+        "--axis-links",
+        action="store_true",
+        help="put the URDF's massless links inside each joint on /tf too, for a viewer without "
+        "robot_state_publisher (about 40 %% more output)",
+    )
     p.add_argument("--height", type=_height, default=1.75, help="the tracked person's height in metres")
     p.add_argument(
         "--calibration",

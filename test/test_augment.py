@@ -89,6 +89,7 @@ def test_augmentation_names_parse_and_unknown_ones_are_refused():
     assert set(SEGMENTS) >= {"thigh", "shin", "upper_arm", "forearm", "torso"}
 
 
+@pytest.mark.train
 def test_ablation_command_writes_each_runs_validation(tmp_path, mocap_root):
     from sparse_body.cli import main
 

@@ -11,6 +11,7 @@ from rosbags.rosbag2 import Reader
 from sparse_body.apps.offline import make_bag, process_bag
 from sparse_body.core.rotations import quat_to_matrix
 from sparse_body.core.sensors import load_sensor_config
+from sparse_body.core.skeleton import NUM_JOINTS
 from sparse_body.data.synthetic import synthetic_walk
 from sparse_body.io.bagio import DESCRIPTION_TOPIC, JOINT_STATES_TOPIC, TF_TOPIC, read_topic
 from sparse_body.io.output import joint_state_names
@@ -47,10 +48,20 @@ def _tf_poses(message, fixed: str) -> dict[str, tuple[np.ndarray, np.ndarray]]:
 
 
 def test_a_processed_bag_holds_the_urdf_its_links_on_tf_and_the_trackers(tmp_path):
+    """By default /tf holds the links with a shape (robot_state_publisher computes the massless
+    ones from /joint_states); with axis_links, every link of the URDF."""
     motion = synthetic_walk(1.5)
     config = load_sensor_config("six_point")
     make_bag(motion, config, tmp_path / "in")
-    process_bag(tmp_path / "in", tmp_path / "out", "ik", config, motion.skeleton, progress=False)
+    process_bag(tmp_path / "in", tmp_path / "small", "ik", config, motion.skeleton, progress=False)
+    process_bag(tmp_path / "in", tmp_path / "out", "ik", config, motion.skeleton, progress=False, axis_links=True)
+    (urdf,) = read_topic(tmp_path / "small", DESCRIPTION_TOPIC)
+    shaped = [link.get("name") for link in ET.fromstring(urdf.data).iter("link") if link.find("visual") is not None]
+    tfs = read_topic(tmp_path / "small", TF_TOPIC)
+    for k in (0, len(tfs) - 1):
+        poses = _tf_poses(tfs[k], config.fixed_frame)
+        assert set(shaped) <= set(poses) and len(shaped) == NUM_JOINTS, shaped
+        assert not [name for name in poses if name.endswith("_link")]  # no massless link
 
     with Reader(tmp_path / "out") as reader:
         (description,) = [c for c in reader.connections if c.topic == DESCRIPTION_TOPIC]

@@ -34,7 +34,15 @@ from pathlib import Path
 from ..core.file_output import check_target, write_file
 from ..core.sensors import SensorConfig
 from ..core.skeleton import Skeleton
-from ..io.bagio import BagError, OutputError, joint_state_count, made_with, remove_leftovers, written_by_us
+from ..io.bagio import (
+    ESTIMATE_TOPICS,
+    BagError,
+    OutputError,
+    joint_state_count,
+    made_with,
+    remove_leftovers,
+    written_by_us,
+)
 from ..io.tf_guards import TfGuards
 
 SUMMARY = "sparse_body_summary.json"  # beside the outputs; replaced only when it is ours
@@ -52,6 +60,9 @@ class Settings:
     fps: float
     guards: TfGuards
     overwrite: bool = False
+    topics: tuple[str, ...] = ESTIMATE_TOPICS  # what each output bag holds
+    compression: str = "zstd"  # its chunks' (io/bagio.COMPRESSIONS)
+    axis_links: bool = False  # the URDF's massless links on /tf too
 
 
 @dataclass
@@ -144,6 +155,9 @@ def _process_one(bag: Path, out: Path, settings: Settings, exit_on_stop: bool = 
             overwrite=settings.overwrite,
             refused=refused,
             guards=settings.guards,
+            topics=settings.topics,
+            compression=settings.compression,
+            axis_links=settings.axis_links,
             **settings.options,
         )
         result.frames, result.invalid = len(poses), sum(not p.valid for p in poses)
@@ -229,7 +243,13 @@ def process_many(
         if target == given.resolve() or given.resolve() in target.parents:
             raise OutputError(f"{out_dir}: is (or is inside) the input {given}; choose another output folder")
     record_of_run = settings_record(
-        settings.estimator, settings.options, settings.sensors, settings.skeleton, settings.fps
+        settings.estimator,
+        settings.options,
+        settings.sensors,
+        settings.skeleton,
+        settings.fps,
+        settings.topics,
+        settings.axis_links,
     )
     results: dict[int, BagResult] = {}
     todo, other = [], []

@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 import yaml
 from rosbags.interfaces import Qos, QosDurability, QosHistory, QosLiveliness, QosReliability, QosTime
-from rosbags.rosbag2 import Reader, ReaderError, StoragePlugin, Writer
+from rosbags.rosbag2 import CompressionFormat, CompressionMode, Reader, ReaderError, StoragePlugin, Writer
 from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 
 from .. import __version__
@@ -38,11 +38,18 @@ from .output import (
     tracker_table,
 )
 from .tf_cache import TfCache, TfGuards
+from .topics import (  # noqa: F401 (the names callers import from here)
+    COMPRESSIONS,
+    CONTACTS_TOPIC,
+    DESCRIPTION_TOPIC,
+    ESTIMATE_TOPICS,
+    JOINT_STATES_TOPIC,
+    STATUS_TOPIC,
+    TF_STATIC_TOPIC,
+    TF_TOPIC,
+)
 from .urdf import body_urdf
 
-TF_TOPIC, TF_STATIC_TOPIC = "/tf", "/tf_static"
-JOINT_STATES_TOPIC, CONTACTS_TOPIC, STATUS_TOPIC = "/joint_states", "/foot_contacts", "/estimate_status"
-DESCRIPTION_TOPIC = "/robot_description"
 TF_TYPE = "tf2_msgs/msg/TFMessage"
 
 
@@ -204,11 +211,16 @@ def remove_leftovers(path: Path) -> None:
 
 
 @contextmanager
-def bag_writer(path: Path, overwrite: bool = False, inputs: tuple[Path, ...] = (), made_with: str = ""):
+def bag_writer(
+    path: Path, overwrite: bool = False, inputs: tuple[Path, ...] = (), made_with: str = "", compression: str = "zstd"
+):
     """A rosbag2 (MCAP) Writer on a temporary name beside `path`, moved into place only when
     the block ends without an error (SIGINT and SIGTERM included: the command line turns both
     into exceptions): an interrupted or failed write leaves nothing behind. `path` is checked
-    by check_output before and again just before it is replaced."""
+    by check_output before and again just before it is replaced. Its chunks are compressed
+    with `compression` (COMPRESSIONS)."""
+    if compression not in COMPRESSIONS:
+        raise ValueError(f"compression {compression!r}: one of {', '.join(COMPRESSIONS)}")
     path = check_output(path, overwrite, inputs)
     # the bag is made under its own name inside a hidden folder, so that its file is NAME.mcap
     partial = _partial(path, os.getpid())
@@ -217,7 +229,12 @@ def bag_writer(path: Path, overwrite: bool = False, inputs: tuple[Path, ...] = (
     shutil.rmtree(partial, ignore_errors=True)
     partial.mkdir()
     try:
-        with Writer(tmp, version=8, storage_plugin=StoragePlugin.MCAP) as writer:
+        writer = Writer(tmp, version=8, storage_plugin=StoragePlugin.MCAP)
+        if compression != "none":
+            writer.set_compression(CompressionMode.STORAGE, CompressionFormat.ZSTD)  # chunks, not the file
+        with writer:
+            if compression == "lz4":
+                _chunks_in_lz4(writer)
             writer.set_custom_data(WRITER_KEY, f"sparse_body {__version__}")
             if made_with:
                 writer.set_custom_data(MADE_WITH_KEY, made_with)
@@ -230,6 +247,17 @@ def bag_writer(path: Path, overwrite: bool = False, inputs: tuple[Path, ...] = (
         shutil.rmtree(partial, ignore_errors=True)
         if old.is_dir() and written_by_us(old):
             shutil.rmtree(old, ignore_errors=True)
+
+
+def _chunks_in_lz4(writer: Writer) -> None:
+    """rosbags writes zstd chunks only; its MCAP storage takes another chunk compressor
+    (lz4 frames, the MCAP format's other one, which rosbags and every MCAP reader read)."""
+    import lz4.frame
+
+    storage = getattr(writer, "storage", None)
+    if storage is None or not hasattr(storage, "compressor") or not hasattr(storage, "compression"):
+        raise BagError("this version of rosbags cannot write lz4 chunks; use --compression zstd or none")
+    storage.compression, storage.compressor = "lz4", lz4.frame.compress
 
 
 def write_tracker_bag(
@@ -372,23 +400,65 @@ def write_estimate_bag(
     inputs: tuple[Path, ...] = (),
     trackers: tuple[SensorConfig, TrackerStream] | None = None,
     made_with: str = "",
+    topics: tuple[str, ...] = ESTIMATE_TOPICS,
+    compression: str = "zstd",
+    axis_links: bool = False,
 ) -> None:
     """Per pose: one JointState, one FootContacts, one EstimateStatus and one /tf message;
-    once, first: the body's URDF on /robot_description. So that a viewer draws the bag as it
-    is (Foxglove's 3D panel, or RViz with `ros2 bag play`), /tf holds every link of that URDF
-    and, with `trackers` (the input frames, one per pose), the trackers beside the body.
-    The messages are encoded for the whole recording at once (io/cdr.py)."""
+    once, first: the body's URDF on /robot_description (each only where `topics` has it). So
+    that a viewer draws the bag as it is (Foxglove's 3D panel, or RViz with `ros2 bag play`),
+    /tf holds every link of that URDF that has a shape (the body's) and, with `trackers` (the
+    input frames, one per pose), the trackers beside the body; with `axis_links`, the URDF's
+    massless links inside each joint as well, which robot_state_publisher otherwise computes
+    from /joint_states (they were 60 % of a bag: 49 against 35 MB for ten minutes). The
+    messages are encoded for the whole recording at once (io/cdr.py)."""
     if trackers is not None and len(trackers[1]) != len(poses):
         raise ValueError(f"{len(poses)} poses but {len(trackers[1])} tracker frames")
+    unknown = sorted(set(topics) - set(ESTIMATE_TOPICS))
+    if unknown or not topics:
+        raise ValueError(f"topics {', '.join(unknown) or '(none)'}: choose from {', '.join(ESTIMATE_TOPICS)}")
     store = typestore()
     stamps = np.array([p.stamp for p in poses], dtype=np.float64)
     quats = np.array([p.local_quats for p in poses], dtype=np.float64).reshape(len(poses), NUM_JOINTS, 4)
     roots = np.array([p.root_position for p in poses], dtype=np.float64).reshape(len(poses), 3)
     angles = joint_angles(quats)
     js, contacts, status = cdr.estimate_messages(poses, skeleton, fixed_frame, angles=angles)
-    body = body_table(quats, roots, skeleton, fixed_frame, prefix) + axis_link_table(angles, skeleton, prefix)
-    tf: list[bytes] = [b""] * len(poses)
-    shown = tracker_sites(*trackers) if trackers is not None else np.zeros((len(poses), 0), bool)
+    per_frame = {JOINT_STATES_TOPIC: js, CONTACTS_TOPIC: contacts, STATUS_TOPIC: status}
+    if TF_TOPIC in topics:
+        per_frame[TF_TOPIC] = _tf_messages(
+            stamps, quats, roots, angles if axis_links else None, skeleton, fixed_frame, prefix, trackers
+        )
+    types = {
+        JOINT_STATES_TOPIC: "sensor_msgs/msg/JointState",
+        CONTACTS_TOPIC: "sparse_body/msg/FootContacts",
+        STATUS_TOPIC: "sparse_body/msg/EstimateStatus",
+        TF_TOPIC: TF_TYPE,
+    }
+    with bag_writer(path, overwrite, inputs, made_with, compression) as writer:
+        connections = {
+            topic: writer.add_connection(topic, types[topic], typestore=store) for topic in types if topic in topics
+        }
+        log_ns = _log_times(stamps)
+        if log_ns and DESCRIPTION_TOPIC in topics:
+            c_urdf = writer.add_connection(
+                DESCRIPTION_TOPIC, "std_msgs/msg/String", typestore=store, offered_qos_profiles=[LATCHED]
+            )
+            urdf = store.types["std_msgs/msg/String"](data=body_urdf(skeleton))
+            writer.write(c_urdf, log_ns[0], store.serialize_cdr(urdf, "std_msgs/msg/String"))
+        written = [(connections[topic], per_frame[topic]) for topic in connections]
+        for i, ns in enumerate(log_ns):
+            for connection, messages in written:
+                writer.write(connection, ns, messages[i])
+
+
+def _tf_messages(stamps, quats, roots, angles, skeleton, fixed_frame, prefix, trackers) -> list[bytes]:
+    """One /tf message a pose: the body's links (and with `angles`, the URDF's massless links),
+    and the trackers it was made from."""
+    body = body_table(quats, roots, skeleton, fixed_frame, prefix)
+    if angles is not None:
+        body = body + axis_link_table(angles, skeleton, prefix)
+    tf: list[bytes] = [b""] * len(stamps)
+    shown = tracker_sites(*trackers) if trackers is not None else np.zeros((len(stamps), 0), bool)
     for pattern, which in cdr.same_rows(shown):  # frames with the same trackers
         table = TransformTable(body.parents, body.children, body.values[which])
         if trackers is not None:
@@ -397,23 +467,7 @@ def write_estimate_bag(
             which, cdr.tf_messages(stamps[which], table.parents, table.children, table.values), strict=True
         ):
             tf[i] = data
-    with bag_writer(path, overwrite, inputs, made_with) as writer:
-        c_js = writer.add_connection(JOINT_STATES_TOPIC, "sensor_msgs/msg/JointState", typestore=store)
-        c_fc = writer.add_connection(CONTACTS_TOPIC, "sparse_body/msg/FootContacts", typestore=store)
-        c_st = writer.add_connection(STATUS_TOPIC, "sparse_body/msg/EstimateStatus", typestore=store)
-        c_tf = writer.add_connection(TF_TOPIC, TF_TYPE, typestore=store)
-        c_urdf = writer.add_connection(
-            DESCRIPTION_TOPIC, "std_msgs/msg/String", typestore=store, offered_qos_profiles=[LATCHED]
-        )
-        log_ns = _log_times(stamps)
-        if log_ns:
-            urdf = store.types["std_msgs/msg/String"](data=body_urdf(skeleton))
-            writer.write(c_urdf, log_ns[0], store.serialize_cdr(urdf, "std_msgs/msg/String"))
-        for i, ns in enumerate(log_ns):
-            writer.write(c_js, ns, js[i])
-            writer.write(c_fc, ns, contacts[i])
-            writer.write(c_st, ns, status[i])
-            writer.write(c_tf, ns, tf[i])
+    return tf
 
 
 def read_topic(path: Path, topic: str) -> list:

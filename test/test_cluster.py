@@ -42,7 +42,15 @@ def free_ports(n: int) -> list[int]:
             s.close()
 
 
-def start_ray(args: list[str], log: Path) -> subprocess.Popen:
+@pytest.fixture
+def env(tmp_path):
+    """The environment with a home folder of the test's own: a ~/.ray/auth_token of the user's
+    (a plain ray.init() leaves one) made every connection fail with InvalidAuthToken."""
+    (tmp_path / "home").mkdir()
+    return {**os.environ, "HOME": str(tmp_path / "home")}
+
+
+def start_ray(args: list[str], log: Path, env: dict) -> subprocess.Popen:
     """`ray start ... --block` in a session of its own (stopped as one: `ray stop` would stop
     every Ray on the machine, another test run's too)."""
     with open(log, "w") as out:
@@ -51,6 +59,7 @@ def start_ray(args: list[str], log: Path) -> subprocess.Popen:
             stdout=out,
             stderr=subprocess.STDOUT,
             start_new_session=True,
+            env=env,
         )
 
 
@@ -91,7 +100,7 @@ def messages(bag: Path) -> list[tuple[str, int, bytes]]:
         return [(c.topic, t, bytes(raw)) for c, t, raw in reader.messages()]
 
 
-def test_bags_on_a_cluster_survive_a_killed_worker_and_equal_one_process(tmp_path):
+def test_bags_on_a_cluster_survive_a_killed_worker_and_equal_one_process(tmp_path, env):
     config = load_sensor_config("six_point")
     walk = synthetic_walk(20.0)
     (tmp_path / "in").mkdir()
@@ -112,6 +121,7 @@ def test_bags_on_a_cluster_survive_a_killed_worker_and_equal_one_process(tmp_pat
             f"--runtime-env-agent-port={others[4]}",
         ],
         tmp_path / "head.log",
+        env,
     )
     nodes = [head]
     driver = None
@@ -121,9 +131,9 @@ def test_bags_on_a_cluster_survive_a_killed_worker_and_equal_one_process(tmp_pat
         while "Ray runtime started" not in (tmp_path / "head.log").read_text() and time.monotonic() < end:
             assert head.poll() is None, (tmp_path / "head.log").read_text()
             time.sleep(0.5)
-        nodes.append(start_ray([f"--address={address}"], tmp_path / "worker.log"))  # a second machine's node
+        nodes.append(start_ray([f"--address={address}"], tmp_path / "worker.log", env))  # a second machine's node
         with open(tmp_path / "driver.log", "w") as log:
-            driver = subprocess.Popen(process_on(tmp_path, address), stdout=log, stderr=subprocess.STDOUT)
+            driver = subprocess.Popen(process_on(tmp_path, address), stdout=log, stderr=subprocess.STDOUT, env=env)
         sessions = {p.pid for p in nodes}  # Ray titles a worker running a bag ray::<function>
         while (
             not (tasks := in_sessions(sessions, b"ray::_cluster_task"))
@@ -138,7 +148,7 @@ def test_bags_on_a_cluster_survive_a_killed_worker_and_equal_one_process(tmp_pat
         # printed a stack dump and exited with 1; ray.cancel made its driver abort now and then)
         command = process_on(tmp_path, address)
         command[3] = str(tmp_path / "stopped")
-        stopped = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        stopped = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
         # its output folder is made once it is connected (ray.init done, the command's handlers
         # back); a SIGTERM before that is Python's default death
         until = time.monotonic() + LIMIT
@@ -170,12 +180,14 @@ def test_bags_on_a_cluster_survive_a_killed_worker_and_equal_one_process(tmp_pat
         assert messages(tmp_path / "out" / f"walk{k}") == messages(tmp_path / "here" / f"walk{k}")
 
 
-def test_a_cluster_that_is_not_there_is_a_one_line_error(tmp_path):
+def test_a_cluster_that_is_not_there_is_a_one_line_error(tmp_path, env):
     config = load_sensor_config("six_point")
     (tmp_path / "in").mkdir()
     make_bag(synthetic_walk(1.0), config, tmp_path / "in" / "walk")
     (port,) = free_ports(1)
-    done = subprocess.run(process_on(tmp_path, f"127.0.0.1:{port}"), capture_output=True, text=True, timeout=LIMIT)
+    done = subprocess.run(
+        process_on(tmp_path, f"127.0.0.1:{port}"), capture_output=True, text=True, timeout=LIMIT, env=env
+    )
     assert done.returncode == 1 and "no Ray cluster there" in done.stderr, (
         done.stderr
     )  # bad input, not "output refused"

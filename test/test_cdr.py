@@ -83,11 +83,14 @@ def test_a_processed_bag_holds_exactly_the_messages_built_one_by_one(tmp_path):
     stream.valid[7, 1] = False  # and a frame without its left hand
     from sparse_body.io.bagio import write_estimate_bag
 
-    write_estimate_bag(tmp_path / "out2", poses, motion.skeleton, "world", trackers=(config, stream))
+    write_estimate_bag(tmp_path / "out2", poses, motion.skeleton, "world", trackers=(config, stream), axis_links=True)
     with Reader(tmp_path / "out2") as reader:
         raw = {}
         for conn, _, data in reader.messages():
             raw.setdefault(conn.topic, []).append(bytes(data))
+    write_estimate_bag(tmp_path / "out3", poses, motion.skeleton, "world", trackers=(config, stream))
+    with Reader(tmp_path / "out3") as reader:  # the default: no massless links
+        default_tf = [bytes(data) for conn, _, data in reader.messages() if conn.topic == TF_TOPIC]
     shown = tracker_sites(config, stream)
     for i, pose in enumerate(poses):
         js = T["sensor_msgs/msg/JointState"](
@@ -120,6 +123,7 @@ def test_a_processed_bag_holds_exactly_the_messages_built_one_by_one(tmp_path):
         trackers = tracker_table(config, stream, np.array([i]), tuple(np.flatnonzero(shown[i]))).frame(0)
         transforms = body_transforms(pose, motion.skeleton, "world") + links + trackers
         assert raw[TF_TOPIC][i] == _tf(pose.stamp, transforms), i
+        assert default_tf[i] == _tf(pose.stamp, body_transforms(pose, motion.skeleton, "world") + trackers), i
     assert len(raw[TF_TOPIC]) == len(poses) and b"left_controller" not in raw[TF_TOPIC][7]
 
 

@@ -32,7 +32,9 @@ def main() -> None:
     args = parser.parse_args()
     root = find_mocap_root()
     if root is None:
-        raise SystemExit("no motion capture indexed: sparse-body import-mocap FOLDER --out DIR, then SPARSE_BODY_MOCAP=DIR")
+        raise SystemExit(
+            "no motion capture indexed: sparse-body import-mocap FOLDER --out DIR, then SPARSE_BODY_MOCAP=DIR"
+        )
     sensors = load_sensor_config(args.sensors)
     items = {item.name: item for item in split_items(root, args.split)}
     print(f"lower-body PE [cm] by leg disagreement between {args.first} and {args.second} [cm]")

@@ -219,9 +219,10 @@ def bench_dragposer(
     rotation_tolerance: float = 0.087,
     torch_frames: int = 10,
 ) -> None:
-    """DragPoser's pose optimiser, six-point, on the demo's CMU test clip (the synthetic walk without
-    ../shared/mocap): milliseconds per frame and iterations until the trackers are met (1 cm,
-    5 degrees), for the ONNX Runtime Gauss-Newton runtime and the torch autograd reference
+    """DragPoser's pose optimiser, six-point, on the demo's CMU test clip (the synthetic walk
+    where no motion capture is indexed: `sparse-body import-mocap`): milliseconds per frame and
+    iterations until the trackers are met (1 cm, 5 degrees), for the ONNX Runtime Gauss-Newton
+    runtime and the torch autograd reference
     (Adam, the paper's kind of step), both starting each frame from the runtime's previous
     solution."""
     import torch

@@ -3,7 +3,7 @@
 Convention (REP-103): x forward, y left, z up, metres. All-identity local rotations give the
 rest pose: a T-pose facing +x with legs straight down and arms along +y (left) / -y (right).
 Offsets are per person (a retargeted clip carries its subject's); the canonical body below
-is the mean of the 22 CMU ASF subjects in ../shared/mocap, made left-right symmetric and
+is the mean of the 22 CMU ASF subjects (mocap.cs.cmu.edu), made left-right symmetric and
 scaled from their mean stature (1.55 m) to CANONICAL_HEIGHT.
 """
 

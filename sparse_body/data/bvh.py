@@ -15,7 +15,7 @@ from scipy.spatial.transform import Rotation
 from . import MotionFileError
 from .source import MAX_JOINTS, SourceMotion, read_text, stem
 
-# Length units of the CMU BVH conversions (see ../shared/mocap/README.md): MotionBuilder and
+# Length units of the CMU BVH conversions (cgspeed's releases of the CMU database): MotionBuilder and
 # 3ds Max releases keep the ASF units (1/0.45 inch), Daz releases use centimetres.
 CMU_ASF_UNIT = 0.0254 / 0.45
 

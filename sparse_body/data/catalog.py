@@ -1,5 +1,6 @@
-"""The CMU collection in ../shared/mocap: its clip index, the train/validation/test split,
-and a cache of retargeted clips so that only the first load parses the text files."""
+"""The CMU collection (allasfamc.zip from mocap.cs.cmu.edu, indexed by `sparse-body
+import-mocap`): its clip index, the train/validation/test split, and a cache of retargeted
+clips so that only the first load parses the text files."""
 
 from __future__ import annotations
 
@@ -54,8 +55,9 @@ class Clip:
 
 
 def find_mocap_root(explicit: str | os.PathLike | None = None) -> Path | None:
-    """The shared CMU folder: explicit path, $SPARSE_BODY_MOCAP, or ../shared/mocap/cmu
-    beside the checkout or the working directory. None when none exists."""
+    """The indexed CMU folder (`sparse-body import-mocap` of CMU's allasfamc.zip): explicit
+    path, $SPARSE_BODY_MOCAP, or the maintainers' data folder beside the checkout or the
+    working directory. None when none exists."""
     if explicit:
         candidates = [explicit]
     else:

@@ -1037,14 +1037,10 @@ def _stop_behind(err: BaseException) -> KeyboardInterrupt | None:
     """The Ctrl-C or SIGTERM an error stands for, if any: an interrupt inside compiled code
     comes back wrapped (numba's dispatcher turns it into a SystemError whose cause is the
     KeyboardInterrupt), and it is still the user's stop, not a failure."""
-    seen: set[int] = set()
-    cause: BaseException | None = err
-    while cause is not None and id(cause) not in seen:
-        if isinstance(cause, KeyboardInterrupt):
-            return cause
-        seen.add(id(cause))
-        cause = cause.__cause__ or cause.__context__
-    return None
+    from .core.causes import cause_of_kind
+
+    stop = cause_of_kind(err, KeyboardInterrupt)
+    return stop if isinstance(stop, KeyboardInterrupt) else None
 
 
 def main(argv: list[str] | None = None) -> None:

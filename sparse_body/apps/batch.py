@@ -31,6 +31,7 @@ from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wai
 from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 
+from ..core.causes import cause_of_kind
 from ..core.file_output import check_target, write_file
 from ..core.sensors import SensorConfig
 from ..core.skeleton import Skeleton
@@ -178,13 +179,8 @@ def _process_one(bag: Path, out: Path, settings: Settings, exit_on_stop: bool = 
     return result
 
 
-def _caused_by_stop(err: BaseException | None) -> bool:
-    seen = 0
-    while err is not None and seen < 20:
-        if isinstance(err, _Stopped):
-            return True
-        err, seen = err.__cause__ or err.__context__, seen + 1
-    return False
+def _caused_by_stop(err: BaseException) -> bool:
+    return cause_of_kind(err, _Stopped) is not None
 
 
 def _stop_task(signum, frame):

@@ -156,7 +156,7 @@ def test_ctrl_c_at_any_moment_ends_in_one_line(tmp_path, delay):
     """SIGINT while the command starts, loads its model or works: exit 130, one line, no
     traceback, nothing written (the first seconds printed a KeyboardInterrupt traceback)."""
     bag = tmp_path / "long"
-    make_bag(synthetic_walk(30.0), load_sensor_config("six_point"), bag)
+    make_bag(synthetic_walk(120.0), load_sensor_config("six_point"), bag)  # 7,200 frames: still running at 4 s
     before = sorted(p.name for p in tmp_path.iterdir())
     # SIGINT as a terminal delivers it: a script's background job (CI) starts with it ignored
     proc = subprocess.Popen(

@@ -225,10 +225,10 @@ if ! up_to_date package "$pkg_hash"; then
 fi
 
 # The per-frame kernels are compiled by numba on first use and cached beside their sources
-# (sparse_body/core/__pycache__); compiling them here spares the first node its seconds.
+# (sparse_body/*/__pycache__); compiling them here spares the first node its seconds.
 say "compiling the per-frame kernels (numba) and the package's bytecode"
 "$VPY" -m compileall -q "$ROOT/sparse_body" > /dev/null || die "compiling sparse_body's bytecode failed"
-"$VPY" -c 'from sparse_body.core.mat3 import compile_kernels; compile_kernels()' \
+"$VPY" -c 'from sparse_body.estimators.kernels import compile_kernels; compile_kernels()' \
   || die "compiling the per-frame kernels failed"
 
 say "ready: activate with 'source $VENV/bin/activate'"

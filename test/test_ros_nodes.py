@@ -858,3 +858,32 @@ def test_generated_tf_messages_never_stop_the_node_nor_give_a_non_finite_joint(r
     assert alive, (tmp_path / "sparse_body_estimator.log").read_text()[-3000:]
     states = listener.received["joint_states"]
     assert len(states) > 100 and all(np.all(np.isfinite(m.position)) for m in states)
+
+
+@pytest.mark.parametrize("signal_name", ["SIGINT", "SIGTERM"])
+def test_a_signal_during_a_cold_start_ends_the_node_at_once(ros_env, tmp_path, signal_name):
+    """A start with no compiled kernels (a cache of its own, empty) compiles for most of a
+    minute; a signal then ends the node within seconds with exit code 0 (issue 52: it waited
+    for the compile, and `ros2 launch` escalated to SIGKILL)."""
+    import signal
+
+    env = {**ros_env, "NUMBA_CACHE_DIR": str(tmp_path / "numba"), "NUMBA_DEBUG_CACHE": "1", "PYTHONUNBUFFERED": "1"}
+    node = start_estimator({"sensors": "four_point", "estimator": "dragposer", "autostart": True}, tmp_path, env)
+    log = tmp_path / "sparse_body_estimator.log"
+    try:
+        deadline = time.monotonic() + STARTUP_LIMIT
+        while "[cache] data saved" not in log.read_text() and node.poll() is None and time.monotonic() < deadline:
+            time.sleep(0.1)
+        assert "[cache] data saved" in log.read_text(), log.read_text()[-3000:]  # compiling: the start is under way
+        assert "configured" not in log.read_text()
+        sent = time.monotonic()
+        node.send_signal(getattr(signal, signal_name))
+        code = node.wait(timeout=60)
+        took = time.monotonic() - sent
+    finally:
+        stop(node)
+    text = log.read_text()
+    assert code == 0, text[-3000:]
+    assert "stopped while starting" in text and "Traceback" not in text, text[-3000:]
+    print(f"{signal_name} during a cold start: ended {took:.2f} s after the signal")
+    assert took < 5.0, f"{took:.1f} s from the signal to the end"

@@ -155,6 +155,49 @@ def test_an_installed_node_comes_up_and_ends_on_sigint_with_exit_code_0(prefix, 
     assert node.returncode == 0, "".join(lines) + rest
 
 
+@builds
+def test_the_first_start_after_the_build_loads_the_kernels_and_compiles_none(prefix, tmp_path):
+    """The install compiled the per-frame kernels into the installed package (CMakeLists.txt),
+    so the first DragPoser node after a build loads them: numba says "data saved" for each
+    kernel it compiles, and a cold start spent a minute there (issue 52)."""
+    from ros_helpers import isolated_domain
+
+    env = {**_sourced(prefix), "ROS_DOMAIN_ID": isolated_domain(), "NUMBA_DEBUG_CACHE": "1"}
+    env.pop("NUMBA_CACHE_DIR", None)
+    started = time.monotonic()
+    node = subprocess.Popen(
+        [str(prefix / "lib" / "sparse_body" / "estimator_node"), "--ros-args", "-p", "estimator:=dragposer"]
+        + ["-p", "sensors:=four_point", "-p", "autostart:=true"],
+        cwd=tmp_path,
+        env=env,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.STDOUT,
+        text=True,
+    )
+    lines: list[str] = []
+    try:
+        while time.monotonic() - started < 300:
+            line = node.stdout.readline()
+            if not line:
+                break
+            lines.append(line)
+            if "configured: dragposer on four_point" in line:
+                break
+        took = time.monotonic() - started
+        node.send_signal(signal.SIGINT)
+        rest, _ = node.communicate(timeout=60)
+    finally:
+        if node.poll() is None:
+            node.kill()
+    log = "".join(lines)
+    assert "configured: dragposer on four_point" in log, log[-3000:] + rest
+    compiled = [line for line in lines if "[cache] data saved" in line]
+    assert not compiled, f"compiled at the first start ({took:.1f} s):\n" + "".join(compiled[:5])
+    assert any("[cache] data loaded" in line and str(prefix) in line for line in lines), log[-3000:]
+    print(f"first start after the build: configured in {took:.1f} s")
+    assert took < 60  # loading; compiling took 45-100 s on this machine
+
+
 # requirements.txt -> the rosdep key in package.xml (ros/rosdistro rosdep/python.yaml), or None
 # where rosdep has no key and the README's workspace section installs it with pip
 ROSDEP_KEYS = {

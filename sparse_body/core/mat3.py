@@ -183,34 +183,3 @@ def yaw_frame(m):
     out = np.zeros((3, 3))
     out[0, 0], out[0, 1], out[1, 0], out[1, 1], out[2, 2] = c, -s, s, c, 1.0
     return out
-
-
-def compile_kernels() -> None:
-    """Compile (or load from the disk cache) every kernel of the per-frame path by running
-    each once; setup runs it, so that the first estimator started after an install does not
-    spend seconds compiling (numba compiles on first call), and so does the estimator node
-    at configure."""
-    from ..estimators.base import create_estimator
-    from .body_ik import LIMBS, reach
-    from .kinematics import LEG_JOINTS, forward_kinematics
-    from .rotations import sixd_to_matrix, yaw_matrix_of
-    from .sensors import load_sensor_config
-    from .skeleton import Skeleton, standing_pose
-    from .types import TrackerFrame
-
-    skeleton = Skeleton.canonical()
-    local, root = standing_pose(), np.array([0.0, 0.0, 0.9])
-    glob, pos = forward_kinematics(local, root, skeleton.offsets)
-    forward_kinematics(local, root, skeleton.offsets, joints=LEG_JOINTS)
-    sensors = load_sensor_config("six_point")
-    ik = create_estimator("ik", sensors, skeleton)  # the filter, the joint targets, solve_body, quaternions
-    sites = sensors.site_names
-    for t in range(3):
-        ends = np.array([pos[s.joint_index] for s in sensors.sites])
-        quats = np.tile([0.0, 0.0, 0.0, 1.0], (len(sites), 1))
-        ik.step(TrackerFrame(t / 60, sites, ends, quats, np.ones(len(sites), dtype=bool)))
-    limb = next(iter(LIMBS.values()))
-    for exact in (False, True):
-        reach(local.copy(), glob[0], pos[limb.upper], skeleton.offsets, limb, pos[limb.end], None, exact)
-    sixd_to_matrix(np.tile([1.0, 0.0, 0.0, 0.0, 1.0, 0.0], (4, 1)))
-    yaw_matrix_of(np.eye(3))

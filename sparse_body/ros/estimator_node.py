@@ -33,7 +33,6 @@ from std_msgs.msg import String
 from sparse_body.msg import EstimateStatus, FootContacts
 
 from ..core.calibration import CalibrationError, person_body
-from ..core.mat3 import compile_kernels
 from ..core.rotations import matrix_to_quat
 from ..core.sensors import SensorConfigError, load_sensor_config
 from ..core.skeleton import JOINT_NAMES, standing_pose
@@ -42,6 +41,7 @@ from ..core.tracker_filter import UPPER, FilterConfig
 from ..core.types import BodyPose
 from ..estimators import create_estimator
 from ..estimators.base import Estimator, parse_estimator_spec
+from ..estimators.kernels import compile_kernels
 from ..io import cdr
 from ..io.output import HELD, axis_link_name, axis_link_table, body_table, joint_angles
 from ..io.tf_cache import TfGuards
@@ -584,8 +584,8 @@ class EstimatorNode(LifecycleNode):
 
 
 def main(args=None, node_class=None) -> None:
-    init(args)  # a signal while the model loads ends the node as soon as spinning starts
-    start_and_spin((node_class or EstimatorNode)())
+    init(args)  # from here a signal ends the node, also while it starts
+    start_and_spin(node_class or EstimatorNode)
 
 
 if __name__ == "__main__":

@@ -4,23 +4,60 @@ rclpy's own signal handlers shut the context down from the signal, while the exe
 taking a message: that race ended nodes with `RuntimeError: Unable to convert call argument`
 and exit status 1. Here the signals only set a flag; the spin loop sees it within a tenth of
 a second and the node is destroyed and the context shut down in order, from the main thread.
+
+While the node starts (its constructor, then configure: models loaded, kernels compiled or
+loaded) there is no spin loop to look at the flag, and a start could take a minute after a
+fresh install: there the signal interrupts the start itself, and the process ends at once
+with exit code 0, as a stop while spinning does (issue 52: Ctrl-C during the first start
+waited for it, and `ros2 launch` escalated to SIGKILL).
 """
 
 from __future__ import annotations
 
+import _thread
+import contextlib
 import signal
 import sys
 import threading
+import time
 
 import rclpy
 from rclpy.executors import ExternalShutdownException
 from rclpy.signals import SignalHandlerOptions
 
 _STOP = threading.Event()
+_STARTING = threading.Event()  # set from init() until the node spins
+_REPEATING = threading.Event()
 
 
 def _on_signal(signum, frame) -> None:
     _STOP.set()
+    if _STARTING.is_set():  # handlers run in the main thread, the one starting the node
+        _keep_interrupting()
+        raise KeyboardInterrupt
+
+
+def _keep_interrupting() -> None:
+    """An interrupt raised inside a C callback (numba's compiler is called back from LLVM) is
+    dropped there: until the start has ended, raise it again every 0.2 s."""
+    if _REPEATING.is_set():
+        return
+    _REPEATING.set()
+
+    def repeat() -> None:
+        while _STARTING.is_set():
+            time.sleep(0.2)
+            if _STARTING.is_set():
+                _thread.interrupt_main(signal.SIGINT)  # runs _on_signal in the main thread
+
+    threading.Thread(target=repeat, name="interrupt_start", daemon=True).start()
+
+
+def _quiet_dropped_interrupts(unraisable) -> None:
+    """Where a C callback dropped our interrupt, Python prints it as "Exception ignored"
+    with a traceback; the start is being stopped, so that is not news."""
+    if not (_STOP.is_set() and isinstance(unraisable.exc_value, KeyboardInterrupt)):
+        sys.__unraisablehook__(unraisable)
 
 
 def init(args=None) -> None:
@@ -29,26 +66,54 @@ def init(args=None) -> None:
     rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
     for sig in (signal.SIGINT, signal.SIGTERM):
         signal.signal(sig, _on_signal)
+    sys.unraisablehook = _quiet_dropped_interrupts
+    _STARTING.set()
 
 
 def stop_requested() -> bool:
     return _STOP.is_set()
 
 
-def start_and_spin(node, threads: int = 1) -> None:
-    """A lifecycle node's main: configure and activate it when its autostart parameter says so
-    (a configure that fails ends the process with exit code 1, its reason logged by the node),
-    then spin_until_shutdown."""
+def start_and_spin(make_node, threads: int = 1) -> None:
+    """A lifecycle node's main: make it (make_node: its class), configure and activate it when
+    its autostart parameter says so (a configure that fails ends the process with exit code
+    1, its reason logged by the node), then spin_until_shutdown. A signal before spinning
+    ends the process with exit code 0."""
     from rclpy.lifecycle import TransitionCallbackReturn
 
-    if node.get_parameter("autostart").value:
-        if node.trigger_configure() != TransitionCallbackReturn.SUCCESS:
-            node.get_logger().fatal("configure failed; exiting")
-            node.destroy_node()
-            rclpy.try_shutdown()
-            sys.exit(1)
-        node.trigger_activate()
+    node = None
+    try:
+        node = make_node()
+        if node.get_parameter("autostart").value:
+            if node.trigger_configure() != TransitionCallbackReturn.SUCCESS:
+                node.get_logger().fatal("configure failed; exiting")
+                node.destroy_node()
+                rclpy.try_shutdown()
+                sys.exit(1)
+            node.trigger_activate()
+        _STARTING.clear()
+    except KeyboardInterrupt:
+        while _STARTING.is_set():  # a repeated interrupt may land here, before the clear
+            with contextlib.suppress(KeyboardInterrupt):
+                _STARTING.clear()
+        _ignore_signals()
+        if node is not None:
+            node.get_logger().info("stopped while starting")
+            with contextlib.suppress(Exception):  # half made: what is there goes with the process
+                node.destroy_node()
+        rclpy.try_shutdown()
+        sys.exit(0)
     spin_until_shutdown(node, threads)
+
+
+def _ignore_signals() -> None:
+    """The node is stopping: a second signal has nothing left to ask. A terminal's Ctrl-C
+    reaches every process of a launch and launch then sends its own SIGINT; Python's
+    finalisation puts the default handlers back, so that second SIGINT killed the exiting
+    node (exit code -2, "process has died"). Ignored signals stay ignored."""
+    if threading.current_thread() is threading.main_thread():
+        for sig in (signal.SIGINT, signal.SIGTERM):
+            signal.signal(sig, signal.SIG_IGN)
 
 
 def spin_until_shutdown(node, threads: int = 1) -> None:
@@ -74,10 +139,4 @@ def spin_until_shutdown(node, threads: int = 1) -> None:
         except Exception:  # noqa: BLE001 - destroying after the context went away
             pass
         rclpy.try_shutdown()
-        # The node is stopping: a second signal has nothing left to ask. A terminal's Ctrl-C
-        # reaches every process of a launch and launch then sends its own SIGINT; Python's
-        # finalisation puts the default handlers back, so that second SIGINT killed the
-        # exiting node (exit code -2, "process has died"). Ignored signals stay ignored.
-        if threading.current_thread() is threading.main_thread():
-            for sig in (signal.SIGINT, signal.SIGTERM):
-                signal.signal(sig, signal.SIG_IGN)
+        _ignore_signals()

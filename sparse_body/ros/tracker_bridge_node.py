@@ -370,7 +370,7 @@ class TrackerBridge(LifecycleNode):
 
 def main(args=None) -> None:
     init(args)
-    start_and_spin(TrackerBridge(), threads=2)
+    start_and_spin(TrackerBridge, threads=2)
 
 
 if __name__ == "__main__":

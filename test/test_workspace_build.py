@@ -122,51 +122,13 @@ def test_the_installed_command_processes_a_bag_with_a_shipped_model(prefix, tmp_
     assert (tmp_path / "body.bag" / "metadata.yaml").is_file()
 
 
-@builds
-def test_an_installed_node_comes_up_and_ends_on_sigint_with_exit_code_0(prefix, tmp_path):
-    from ros_helpers import isolated_domain
-
-    env = {**_sourced(prefix), "ROS_DOMAIN_ID": isolated_domain()}
-    node = subprocess.Popen(
-        [str(prefix / "lib" / "sparse_body" / "estimator_node"), "--ros-args", "-p", "estimator:=lobstr"]
-        + ["-p", "sensors:=four_point", "-p", "autostart:=true"],
-        cwd=tmp_path,
-        env=env,
-        stdout=subprocess.PIPE,
-        stderr=subprocess.STDOUT,
-        text=True,
-    )
-    lines: list[str] = []
-    deadline = time.monotonic() + 300  # a generous start on a busy machine: it loads ONNX Runtime
-    try:
-        while time.monotonic() < deadline:
-            line = node.stdout.readline()
-            if not line:
-                break
-            lines.append(line)
-            if "configured: lobstr on four_point" in line:
-                break
-        assert any("configured: lobstr on four_point" in line for line in lines), "".join(lines)
-        node.send_signal(signal.SIGINT)
-        rest, _ = node.communicate(timeout=60)
-    finally:
-        if node.poll() is None:
-            node.kill()
-    assert node.returncode == 0, "".join(lines) + rest
-
-
-@builds
-def test_the_first_start_after_the_build_loads_the_kernels_and_compiles_none(prefix, tmp_path):
-    """The install compiled the per-frame kernels into the installed package (CMakeLists.txt),
-    so the first DragPoser node after a build loads them: numba says "data saved" for each
-    kernel it compiles, and a cold start spent a minute there (issue 52)."""
-    from ros_helpers import isolated_domain
-
-    env = {**_sourced(prefix), "ROS_DOMAIN_ID": isolated_domain(), "NUMBA_DEBUG_CACHE": "1"}
-    env.pop("NUMBA_CACHE_DIR", None)
+def _start_and_stop(prefix: Path, tmp_path: Path, estimator: str, env: dict) -> tuple[list[str], float, int]:
+    """The installed estimator node with autostart, until it says it is configured (at most
+    300 s: a generous start on a busy machine), then SIGINT: (its output lines, seconds to
+    configured, exit code)."""
     started = time.monotonic()
     node = subprocess.Popen(
-        [str(prefix / "lib" / "sparse_body" / "estimator_node"), "--ros-args", "-p", "estimator:=dragposer"]
+        [str(prefix / "lib" / "sparse_body" / "estimator_node"), "--ros-args", "-p", f"estimator:={estimator}"]
         + ["-p", "sensors:=four_point", "-p", "autostart:=true"],
         cwd=tmp_path,
         env=env,
@@ -181,7 +143,7 @@ def test_the_first_start_after_the_build_loads_the_kernels_and_compiles_none(pre
             if not line:
                 break
             lines.append(line)
-            if "configured: dragposer on four_point" in line:
+            if f"configured: {estimator} on four_point" in line:
                 break
         took = time.monotonic() - started
         node.send_signal(signal.SIGINT)
@@ -189,8 +151,31 @@ def test_the_first_start_after_the_build_loads_the_kernels_and_compiles_none(pre
     finally:
         if node.poll() is None:
             node.kill()
+    return lines + rest.splitlines(keepends=True), took, node.returncode
+
+
+@builds
+def test_an_installed_node_comes_up_and_ends_on_sigint_with_exit_code_0(prefix, tmp_path):
+    from ros_helpers import isolated_domain
+
+    env = {**_sourced(prefix), "ROS_DOMAIN_ID": isolated_domain()}
+    lines, _, code = _start_and_stop(prefix, tmp_path, "lobstr", env)
+    assert any("configured: lobstr on four_point" in line for line in lines), "".join(lines)
+    assert code == 0, "".join(lines)
+
+
+@builds
+def test_the_first_start_after_the_build_loads_the_kernels_and_compiles_none(prefix, tmp_path):
+    """The install compiled the per-frame kernels into the installed package (CMakeLists.txt),
+    so the first DragPoser node after a build loads them: numba says "data saved" for each
+    kernel it compiles, and a cold start spent a minute there (issue 52)."""
+    from ros_helpers import isolated_domain
+
+    env = {**_sourced(prefix), "ROS_DOMAIN_ID": isolated_domain(), "NUMBA_DEBUG_CACHE": "1"}
+    env.pop("NUMBA_CACHE_DIR", None)
+    lines, took, code = _start_and_stop(prefix, tmp_path, "dragposer", env)
     log = "".join(lines)
-    assert "configured: dragposer on four_point" in log, log[-3000:] + rest
+    assert "configured: dragposer on four_point" in log and code == 0, log[-3000:]
     compiled = [line for line in lines if "[cache] data saved" in line]
     assert not compiled, f"compiled at the first start ({took:.1f} s):\n" + "".join(compiled[:5])
     assert any("[cache] data loaded" in line and str(prefix) in line for line in lines), log[-3000:]

@@ -71,6 +71,26 @@ def test_where_the_two_disagree_the_first_is_kept(walk):
     assert 0.0 < shares[0] < 0.7 and np.all(np.diff(shares) < 0) and shares[-1] < 0.1, shares
 
 
+def test_the_first_estimator_in_its_own_thread_gives_the_poses_of_one_after_the_other(walk):
+    """parallel (the default) steps the first estimator in a worker thread beside the second;
+    the two share only the frame's targets, so the poses are exactly the serial ones."""
+    together = _run("blend", walk)
+    assert all(p.valid for p in together[5:])
+    assert _same(together, _run("blend", walk, parallel=False))
+
+
+def test_an_error_in_the_worker_thread_reaches_the_caller(walk):
+    motion, stream = walk
+    est = create_estimator("blend", FOUR, motion.skeleton, fps=motion.fps, filter=False)
+
+    def fails(frame):
+        raise RuntimeError("the first estimator failed")
+
+    est.parts[0].step = fails
+    with pytest.raises(RuntimeError, match="the first estimator failed"):
+        est.step(stream.frame(0))
+
+
 def test_slerp_takes_the_short_arc_and_stays_unit():
     a = np.array([[0.0, 0.0, 0.0, 1.0], [0.0, 0.0, np.sin(0.5), np.cos(0.5)]])
     b = np.array([[0.0, 0.0, np.sin(0.5), np.cos(0.5)], [0.0, 0.0, 0.0, -1.0]])  # -identity: the same rotation

@@ -408,13 +408,15 @@ def test_temporal_prior_waits_for_history_then_feeds_its_own_predictions(shipped
         for tick in range(prior.past + 2):
             z = rng.normal(size=24) if tick < prior.past + 1 else last_z
             for _ in range(n):
+                prior.target()  # as the estimator asks, before each frame's search
                 prior.observe(z, np.array([0.01 * tick, 0, 0.9]), 0.0, np.full(6, 0.5))
                 predictions.append(None if prior.prediction is None else prior.prediction.copy())
         return prior, predictions
 
     prior, predictions = run(1, np.zeros(24))
     first = next(i for i, p in enumerate(predictions) if p is not None)
-    assert first == prior.past * prior.every  # W_p steps of history, then the next tick
+    # W_p steps of history, then the next tick; its prediction is taken up two frames later
+    assert first == prior.past * prior.every + 2
     assert np.all(np.isfinite(predictions[-1]))
     # ahead=1: every prediction restarts from the newest solved latent; ahead>1: the decoder
     # is fed its own predictions, so what was solved in between does not change it
@@ -446,16 +448,36 @@ def test_temporal_target_ramps_from_the_solved_latent_to_the_prediction(shipped_
         assert ramped.target() is None and held.target() is None  # nothing before the history
         tick_z = rng.normal(size=24)
         observe(tick_z, frame)
-    prediction = ramped.prediction
-    np.testing.assert_allclose(held.prediction, prediction)
-    assert not np.allclose(prediction, tick_z)
-    # k frames after the tick the ramp is k/n of the way from the tick's latent to the prediction
-    for k in range(1, n + 1):
-        np.testing.assert_allclose(ramped.target(), tick_z + k / n * (prediction - tick_z), atol=1e-12)
+    # the frame after the tick keeps the prior it had (none yet): the prediction is being made
+    assert ramped.target() is None and held.target() is None
+    observe(rng.normal(size=24), tick + 1)
+    # from the second frame on, k frames after the tick the ramp is k/n of the way from the
+    # tick's latent to the prediction, as if the prediction had been there from the tick
+    for k in range(2, n + 1):
+        target = ramped.target()
+        prediction = ramped.prediction
         np.testing.assert_allclose(held.target(), prediction)
+        assert not np.allclose(prediction, tick_z)
+        np.testing.assert_allclose(target, tick_z + k / n * (prediction - tick_z), atol=1e-12)
         if k < n:
             observe(rng.normal(size=24), tick + k)  # between ticks: no new prediction
             np.testing.assert_allclose(ramped.prediction, prediction)
+
+
+def test_the_prediction_is_the_one_the_model_gives_in_line(shipped_models, rng):
+    """The worker thread changes when the prediction is taken up, not what it is: the same
+    session run in line on the same inputs gives the same latent."""
+    from sparse_body.methods.dragposer.temporal import TemporalPrior
+
+    prior = TemporalPrior(shipped_models)
+    for frame in range(prior.past * prior.every + 3):
+        prior.target()
+        prior.observe(rng.normal(size=24), np.array([0.01 * frame, 0, 0.9]), 0.0, np.full(6, 0.5))
+    past_latents, past_context = prior._past
+    future = np.zeros((1, prior.window, 24), np.float32)
+    future[0, 0] = prior._decoder[0]
+    feeds = {"past_latents": past_latents, "past_context": past_context, "future_latents": future}
+    np.testing.assert_allclose(prior.prediction, prior.session.run(None, feeds)[0][0, 0], atol=1e-6)
 
 
 @pytest.mark.skipif(not (models_dir() / "dragposer_decoder.onnx").is_file(), reason="no shipped DragPoser model")

@@ -249,6 +249,22 @@ def test_setup_py_defers_to_pyproject():
     assert out.stdout.split()[-2:] == [project["name"], project["version"]]
 
 
+def test_pyproject_depends_on_what_requirements_txt_lists():
+    """`pip install .` and `make demo` (requirements.txt) give the same runtime: numba, the
+    viewer's and the live view's packages were missing from pyproject's list."""
+    import re
+    from pathlib import Path
+
+    import tomllib
+
+    root = Path(__file__).resolve().parents[1]
+    lines = (root / "requirements.txt").read_text().splitlines()
+    listed = sorted(line.split("#")[0].strip() for line in lines if line.split("#")[0].strip())
+    declared = tomllib.loads((root / "pyproject.toml").read_text())["project"]["dependencies"]
+    assert sorted(declared) == listed
+    assert all(re.match(r"^[a-z0-9-]+>=", d) for d in declared)
+
+
 def test_the_demo_draws_the_skull_above_the_head_joint_and_its_output_is_not_committed():
     from pathlib import Path
 

@@ -3,7 +3,8 @@
 CPU starvation must show up as a lower output rate, never as lost or invalid estimates
 (issue 28): a replayed bag gives at least 95 % valid estimates beside two CPU burners per
 core and 99 % beside one, and the JointState latency p99 (receive time minus the tracker
-stamp) is at most 100 ms and 50 ms. Measured with the compiled per-frame path on the quiet
+stamp) is at most 100 ms and 50 ms (ik, lobstr; dragposer, blend, avatarjlm and dtp: the
+valid share). Measured with the compiled per-frame path on the quiet
 2-core developer machine, three runs of `pytest -s test/test_realtime.py`: every estimate
 valid; p99 21.7-36.4 ms at two burners a core, 12.6-28.6 ms at one. Before it, one clean
 `.ci/run` once gave 146-238 ms, and with it one replay in 17 gave 239 ms (the next 12.9), so a
@@ -39,6 +40,12 @@ ATTEMPTS = 3
         ("ik", "six_point", 1, 0.99, 50.0),
         ("lobstr", "four_point", 2, 0.95, 100.0),
         ("lobstr", "four_point", 1, 0.99, 50.0),
+        # the estimators with a search or a larger network (issue 52): validity only, their
+        # latency under burners is the scheduler's and the step's (p99 printed)
+        ("dragposer", "four_point", 2, 0.95, None),
+        ("blend", "four_point", 2, 0.95, None),
+        ("avatarjlm", "four_point", 2, 0.95, None),
+        ("dtp", "six_point", 2, 0.95, None),
     ],
 )
 def test_replay_under_cpu_burners_gives_valid_estimates_within_the_latency_bound(
@@ -47,6 +54,8 @@ def test_replay_under_cpu_burners_gives_valid_estimates_within_the_latency_bound
     config = load_sensor_config(sensors)
     others = _busy_share()  # before the test's own burners: is other work loading the machine?
     p99s = [_replay_p99(ros_env, tmp_path / "0", estimator, config, per_core, valid_share)]
+    if p99_bound is None:
+        return
     while min(p99s) > p99_bound and len(p99s) < ATTEMPTS:  # a chance spike must repeat to fail
         p99s.append(_replay_p99(ros_env, tmp_path / str(len(p99s)), estimator, config, per_core, valid_share))
     p99 = min(p99s)

@@ -200,6 +200,7 @@ ROSDEP_KEYS = {
     "foxglove-sdk": None,  # the live view (ros/live_view.py); no rosdep key checked here, so installed with pip
     "websockets": None,  # `view ws://...` records the live view (apps/live_record.py); installed with pip
     "plotly": None,  # the viewer (apps/viewer.py); no rosdep key checked here, so installed with pip
+    "threadpoolctl": None,  # the BLAS threads under DragPoser's search; installed with pip
 }
 
 

@@ -23,6 +23,12 @@ def njit(fn):
     return _njit(cache=True, error_model="numpy")(fn)
 
 
+def njit_nogil(fn):
+    """njit for a kernel long enough (a tenth of a millisecond or more) that another thread
+    should run meanwhile: it releases the GIL."""
+    return _njit(cache=True, error_model="numpy", nogil=True)(fn)
+
+
 @njit
 def mul(a, b):
     """a @ b for 3x3 matrices."""

@@ -17,6 +17,8 @@ never jumps.
 
 from __future__ import annotations
 
+from concurrent.futures import ThreadPoolExecutor
+
 import numpy as np
 
 from ...core.kinematics import forward_kinematics
@@ -50,6 +52,7 @@ class BlendEstimator(Estimator):
         "disagree_from": Range(0.0, 10.0, "metres of leg disagreement with no share"),
         "settle": Range(0.0, 10.0, "seconds: the share's time constant"),
     }
+    # (parallel: bool, no range) the first estimator steps in a worker thread beside the second
 
     def __init__(
         self,
@@ -62,6 +65,7 @@ class BlendEstimator(Estimator):
         agree_within: float = 0.15,
         disagree_from: float = 0.25,
         settle: float = 0.1,
+        parallel: bool = True,
     ) -> None:
         super().__init__(sensors, skeleton, fps)
         if "blend" in (first, second):
@@ -76,6 +80,11 @@ class BlendEstimator(Estimator):
         for inner in self.parts:
             inner.use_filter(NO_FILTER)  # this estimator's filter has done it
             inner.read_targets_from(self)
+        # The two never share state but the frame's targets (converted before both start), so
+        # the first (a network: ONNX Runtime, which lets go of the GIL) runs in a worker thread
+        # while this thread runs the second: a step costs the longer of the two, not their sum
+        # (issue 52), with the same poses as one after the other (test_blend).
+        self._worker = ThreadPoolExecutor(1, thread_name_prefix="blend_first") if parallel else None
 
     def _reset(self) -> None:
         for inner in self.parts:
@@ -90,7 +99,16 @@ class BlendEstimator(Estimator):
         return float(np.linalg.norm(pa[self.legs] - pb[self.legs], axis=-1).mean())
 
     def _estimate(self, frame):
-        a, b = (inner.step(frame) for inner in self.parts)
+        first, second = self.parts
+        if self._worker is None:
+            a, b = first.step(frame), second.step(frame)
+        else:
+            self._converted(frame)  # the targets both read, converted here and only read there
+            running = self._worker.submit(first.step, frame)
+            try:
+                b = second.step(frame)
+            finally:
+                a = running.result()  # its error, if any, is raised here
         if not (a.valid and b.valid):  # one alone would jump on the way in and out
             return None
         trust = (self.disagree_from - self.disagreement(a, b)) / (self.disagree_from - self.agree_within)

@@ -108,7 +108,17 @@ class LatentOptimizer:
         self.vae, self.offsets = vae, offsets
         self.damping, self.prior_weight, self.latent_weight, self.eps = damping, prior_weight, latent_weight, eps
         self.lam = damping
-        self.last_cost = np.inf  # the cost before the last step
+        self.last_jacobian: np.ndarray | None = None  # the last step's
+
+    def predicted_gain(self, r: np.ndarray) -> float:
+        """How much the next step from residual r would lower the cost r.r, by the linear
+        model of the last step's Jacobian (search._predicted_gain)."""
+        jac = self.last_jacobian
+        if jac is None:
+            return np.inf
+        h, g = jac.T @ jac, jac.T @ r
+        step = -np.linalg.solve(h + self.lam * np.diag(np.diag(h) + 1e-9), g)
+        return float(-(2.0 * g @ step + step @ h @ step))
 
     def pose(self, z, root, yaw, decoded=None):
         """local, global rotations and positions of one pose (or a batch: z (B, 24) ...)."""
@@ -145,7 +155,8 @@ class LatentOptimizer:
         r0 = res[0]
         jac = (res[1:] - r0).T / e  # (m, 28)
         h, g = jac.T @ jac, jac.T @ r0
-        cost = self.last_cost = r0 @ r0
+        self.last_jacobian = jac
+        cost = r0 @ r0
         # Levenberg-Marquardt: a step that does not lower the cost is refused, with more damping
         for _ in range(6):
             delta = -np.linalg.solve(h + self.lam * np.diag(np.diag(h) + 1e-9), g)
@@ -172,7 +183,9 @@ class DragPoserEstimator(Estimator):
         "ahead": Range(1, 16, "frames"),
         "root_prior": Range(0.0, 100.0),
         "tracker_prior": Range(0.0, 100.0),
-        "cost_tolerance": Range(0.0, 1.0, "a step that lowers the cost by less than this share is the last"),
+        "cost_tolerance": Range(
+            0.0, 1.0, "the search ends when the next step would lower the cost by less than this share"
+        ),
         # the optimiser's (LatentOptimizer)
         "damping": Range(1e-9, 1e6),
         "prior_weight": Range(0.0, 10.0),
@@ -231,13 +244,14 @@ class DragPoserEstimator(Estimator):
         self.optimizer = LatentOptimizer(self.vae, skeleton.offsets, **optimizer)
         # the same steps compiled (search.py); None: the decoder is not the MLP it knows, or
         # compiled=False asks for the ONNX Runtime search it is tested against
-        self.search = CompiledSearch.of(self.vae, skeleton.offsets, skeleton.parents) if compiled else None
+        self.search = CompiledSearch.of(self.vae, skeleton.offsets, skeleton.parents, threads) if compiled else None
         # the paper's stopping rule: positional and rotational thresholds on the trackers
         self.iterations, self.tolerance, self.rotation_tolerance = iterations, tolerance, rotation_tolerance
         # The trackers are seldom met within `tolerance` (a VAE with 1.6 cm reconstruction
         # error cannot always close it; the polish does): from the previous frame's state the
         # first step does the work and the next lower the cost by 0.03 % and 0.0003 % (six-
-        # and four-point walk). A step that lowers it by less than this share ends the search.
+        # and four-point walk). Where the step's own Jacobian predicts the next one to lower
+        # the cost by less than this share, the search ends without computing another.
         self.cost_tolerance = cost_tolerance
         self.weights = (position_weight, orientation_weight)
         self.polish = polish
@@ -414,7 +428,7 @@ class DragPoserEstimator(Estimator):
             z, root, yaw, r0 = opt.step(constraints, z, root, yaw, z_prior, weight)
             if constraints.converged(r0, self.tolerance, self.rotation_tolerance, END_JOINTS):
                 break
-            if z is not before and r0 @ r0 > (1.0 - self.cost_tolerance) * opt.last_cost:
+            if z is not before and opt.predicted_gain(r0) < self.cost_tolerance * (r0 @ r0):
                 break
         return z, root, yaw, used
 

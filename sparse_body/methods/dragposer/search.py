@@ -18,11 +18,12 @@ Constraints travel as arrays (`pack`): a kind, joint, weight and up to 9 numbers
 from __future__ import annotations
 
 import math
+from functools import cache
 from pathlib import Path
 
 import numpy as np
 
-from ...core.mat3 import njit
+from ...core.mat3 import njit, njit_nogil
 from ...estimators.onnx_graph import read_graph
 from .constraints import AboveFloor, AngleLimit, ConstraintSet, LookAt, Orientation, OverPoint, Position
 from .pose import DECODER_OUTPUT
@@ -219,14 +220,26 @@ def _converged(kinds, joints, weights, r, position_tol, rotation_sin_tol, skip) 
 
 
 @njit
+def _predicted_gain(jac, h, r, lam) -> float:
+    """How much the next damped Gauss-Newton step from residual r would lower the cost r.r,
+    by the linear model of the last Jacobian: -(2 g.d + d.H.d) for g = J^T r."""
+    a = h.copy()
+    for d in range(len(h)):
+        a[d, d] += lam * (h[d, d] + 1e-9)
+    g = jac.T @ r
+    step = -np.linalg.solve(a, g)
+    return -(2.0 * (g @ step) + step @ (h @ step))
+
+
+@njit_nogil
 def search(
     z, root, yaw, z_prior, prior_weight, latent_weight, damping, iterations, eps, w, w32, offsets, parents,
     kinds, joints, weights, data, position_tol, rotation_sin_tol, skip, cost_tolerance,
 ):  # fmt: skip
     """Up to `iterations` Levenberg-Marquardt steps from (z, root, yaw), stopping once the
-    trackers are met or a step lowered the cost by less than cost_tolerance of it: (z, root,
-    yaw, steps used). LatentOptimizer.step's algorithm; w: the decoder's weights in float64,
-    w32 in float32."""
+    trackers are met or the next step is predicted to lower the cost by less than
+    cost_tolerance of it: (z, root, yaw, steps used). LatentOptimizer.step's algorithm;
+    w: the decoder's weights in float64, w32 in float32."""
     nz = len(z)
     n = nz + 4
     m = 2 * nz
@@ -276,8 +289,8 @@ def search(
             lam = min(lam * 4, 1e6)
         if _converged(kinds, joints, weights, r0, position_tol, rotation_sin_tol, skip):
             break
-        if moved and r0 @ r0 > (1.0 - cost_tolerance) * cost:  # a step that barely helped: done
-            break
+        if moved and _predicted_gain(jac, h, r0, lam) < cost_tolerance * (r0 @ r0):
+            break  # the next step would barely help: spare its Jacobian
     return z, root, yaw, used
 
 
@@ -290,23 +303,38 @@ def pose_of(z, root, yaw, w, offsets, parents):
     return local, glob, pos
 
 
-class CompiledSearch:
-    """The search over one decoder and body; `run` is LatentOptimizer's loop of steps."""
+@cache
+def _blas():
+    """The loaded BLAS libraries' thread pools (threadpoolctl): numba's products call
+    scipy's OpenBLAS, whose helper threads, left at one per core, spin after each product and
+    took a core from the ONNX Runtime worker and the node (issue 52: the tick frames' p99
+    1.9 ms with them, 1.0 ms on one thread)."""
+    from threadpoolctl import ThreadpoolController
 
-    def __init__(self, weights: tuple[np.ndarray, ...], offsets: np.ndarray, parents: np.ndarray) -> None:
+    return ThreadpoolController()
+
+
+class CompiledSearch:
+    """The search over one decoder and body; `run` is LatentOptimizer's loop of steps, on
+    `threads` BLAS threads (the estimator's `threads`, as ONNX Runtime's)."""
+
+    def __init__(
+        self, weights: tuple[np.ndarray, ...], offsets: np.ndarray, parents: np.ndarray, threads: int = 1
+    ) -> None:
         self.weights = weights
         self.weights32 = tuple(np.ascontiguousarray(a, np.float32) for a in weights)
         self.offsets = np.ascontiguousarray(offsets, np.float64)
         self.parents = np.ascontiguousarray(parents, np.int64)
+        self.threads = threads
 
     @classmethod
-    def of(cls, vae, offsets: np.ndarray, parents: np.ndarray) -> CompiledSearch | None:
+    def of(cls, vae, offsets: np.ndarray, parents: np.ndarray, threads: int = 1) -> CompiledSearch | None:
         """The search over a PoseVaeRuntime's decoder, or None where its graph is not the MLP
         this knows or its poses differ from ONNX Runtime's (checked here on a few latents)."""
         weights = mlp_weights(vae.dir / "dragposer_decoder.onnx")
         if weights is None:
             return None
-        out = cls(weights, offsets, parents)
+        out = cls(weights, offsets, parents, threads)
         zs = np.random.default_rng(0).normal(size=(4, weights[0].shape[1]))
         ours = np.array([out.pose(z, np.zeros(3), 0.0)[0] for z in zs])
         return out if np.abs(ours - vae.decode(zs)).max() < 1e-4 else None
@@ -319,12 +347,13 @@ class CompiledSearch:
         skip_mask = np.zeros(len(self.offsets), dtype=np.bool_)
         for j in skip:
             skip_mask[j] = True
-        z, root, yaw, used = search(
-            np.asarray(z, np.float64), np.asarray(root, np.float64), float(yaw), np.asarray(z_prior, np.float64),
-            float(prior_weight), float(latent_weight), float(damping), int(iterations), float(eps),
-            self.weights, self.weights32, self.offsets, self.parents,
-            kinds, joints, weights, data, float(position_tol), math.sin(rotation_tol), skip_mask, float(cost_tolerance),
-        )  # fmt: skip
+        with _blas().limit(limits=self.threads, user_api="blas"):
+            z, root, yaw, used = search(
+                np.asarray(z, np.float64), np.asarray(root, np.float64), float(yaw), np.asarray(z_prior, np.float64),
+                float(prior_weight), float(latent_weight), float(damping), int(iterations), float(eps),
+                self.weights, self.weights32, self.offsets, self.parents, kinds, joints, weights, data,
+                float(position_tol), math.sin(rotation_tol), skip_mask, float(cost_tolerance),
+            )  # fmt: skip
         return z, root, float(yaw), int(used)
 
     def pose(self, z, root, yaw):

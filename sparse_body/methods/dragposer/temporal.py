@@ -13,11 +13,19 @@ decoder restarts from the newest solved latent; in between, the decoder is fed i
 predictions, so with a large `ahead` it carries a motion (a walking cycle) through
 ambiguity instead of copying the solved pose back. Until W_p steps of history exist (W_p x n
 frames, about a second) there is no prediction and the caller falls back to its own prior.
+
+The prediction (a transformer pass: 0.3 ms alone, 0.7 ms amid a frame's other work, most of
+DragPoser's p99) runs in a worker thread and is taken up one frame later than it could be:
+the frame after the tick still holds the previous prediction, and the ramp to the new one
+starts at the second frame, at the share it would have had there. Live, that frame is 16 ms
+of the worker's time; offline, the worker runs beside the next frame's search. The outcome
+depends only on the frame count, never on the threads' timing (issue 52).
 """
 
 from __future__ import annotations
 
 from collections import deque
+from concurrent.futures import Future, ThreadPoolExecutor
 from pathlib import Path
 
 import numpy as np
@@ -42,19 +50,38 @@ class TemporalPrior:
         if not 1 <= ahead <= self.window:
             raise ValueError(f"ahead must be between 1 and {self.window} (the model's W_f), got {ahead}")
         self.ahead, self.ramp = ahead, ramp
+        self._worker = ThreadPoolExecutor(1, thread_name_prefix="dragposer_temporal")
+        # the tick's run: (its future, which output step answers, the latent solved at the tick)
+        self._pending: tuple[Future, int, np.ndarray] | None = None
+        self._pending_age = 0  # frames observed since that tick
+        self.prediction: np.ndarray | None = None
+        self._anchor: np.ndarray | None = None  # the latent solved at the tick
         self.reset()
 
+    def _settle(self) -> None:
+        """Take up the prediction of the last tick (waiting for its run if it is not done)."""
+        if self._pending is not None:
+            future, step, anchor = self._pending
+            self._pending = None
+            self.prediction = future.result()[0][0, step].astype(np.float64)
+            self._anchor, self._since = anchor, self._pending_age
+
     def reset(self) -> None:
+        if self._pending is not None:  # a run under way ends before its inputs are forgotten
+            self._pending[0].result()
+            self._pending = None
         self._history: deque = deque(maxlen=self.past + 1)  # (z, root, yaw, heights), every n frames
         self._frames = 0
         self._past: tuple[np.ndarray, np.ndarray] | None = None  # the encoder's window
         self._decoder: list[np.ndarray] = []
-        self.prediction: np.ndarray | None = None
-        self._anchor: np.ndarray | None = None  # the latent solved at the tick
+        self.prediction = None
+        self._anchor = None
         self._since = 0  # frames observed since the tick
 
     def target(self) -> np.ndarray | None:
         """The prior for the next frame: None until there is a prediction."""
+        if self._pending is not None and self._pending_age >= 1:
+            self._settle()
         if self.prediction is None or not self.ramp:
             return self.prediction
         share = min(self._since + 1, self.every) / self.every
@@ -65,8 +92,10 @@ class TemporalPrior:
         tick = self._frames % self.every == 0
         self._frames += 1
         self._since += 1
+        self._pending_age += 1
         if not tick:
             return
+        self._settle()  # the last tick's, if no frame asked for it (every = 1)
         self._history.append(
             (np.asarray(z, np.float32), np.asarray(root, float), float(yaw), np.asarray(heights, float))
         )
@@ -83,8 +112,6 @@ class TemporalPrior:
             self._decoder.append(self.prediction.astype(np.float32))
         future = np.zeros((1, self.window, LATENT), np.float32)
         future[0, : len(self._decoder)] = self._decoder
-        out = self.session.run(
-            None, {"past_latents": self._past[0], "past_context": self._past[1], "future_latents": future}
-        )[0]
-        self.prediction = out[0, len(self._decoder) - 1].astype(np.float64)
-        self._anchor, self._since = np.asarray(z, np.float64), 0
+        feeds = {"past_latents": self._past[0], "past_context": self._past[1], "future_latents": future}
+        run = self._worker.submit(self.session.run, None, feeds)
+        self._pending, self._pending_age = (run, len(self._decoder) - 1, np.asarray(z, np.float64)), 0

@@ -120,6 +120,15 @@ def quat_matrix(q):
 
 
 @njit
+def quat_matrices(q):
+    """Unit quaternions (N, 4) as rotation matrices (N, 3, 3)."""
+    out = np.empty((len(q), 3, 3))
+    for n in range(len(q)):
+        out[n] = quat_matrix(q[n])
+    return out
+
+
+@njit
 def forward_kinematics_into(local, root, offsets, parents, joints, glob, pos) -> None:
     """One pose's global rotations and positions, written into glob (J, 3, 3) and pos (J, 3):
     the root and then joints (parents before children)."""

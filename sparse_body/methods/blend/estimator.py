@@ -22,7 +22,7 @@ from concurrent.futures import ThreadPoolExecutor
 import numpy as np
 
 from ...core.kinematics import forward_kinematics
-from ...core.rotations import quat_to_matrix
+from ...core.mat3 import quat_matrices
 from ...core.skeleton import LOWER_BODY, joint_indices
 from ...core.tracker_filter import NO_FILTER
 from ...core.types import BodyPose
@@ -93,9 +93,9 @@ class BlendEstimator(Estimator):
 
     def disagreement(self, a: BodyPose, b: BodyPose) -> float:
         """Metres: the mean distance between the two poses' leg joints."""
-        offsets = self.skeleton.offsets
-        _, pa = forward_kinematics(quat_to_matrix(a.local_quats), a.root_position, offsets)
-        _, pb = forward_kinematics(quat_to_matrix(b.local_quats), b.root_position, offsets)
+        offsets = self.skeleton.offsets  # the estimators' quaternions are unit: converted compiled
+        _, pa = forward_kinematics(quat_matrices(np.ascontiguousarray(a.local_quats, float)), a.root_position, offsets)
+        _, pb = forward_kinematics(quat_matrices(np.ascontiguousarray(b.local_quats, float)), b.root_position, offsets)
         return float(np.linalg.norm(pa[self.legs] - pb[self.legs], axis=-1).mean())
 
     def _estimate(self, frame):

@@ -220,14 +220,20 @@ def _converged(kinds, joints, weights, r, position_tol, rotation_sin_tol, skip) 
 
 
 @njit
-def _predicted_gain(jac, h, r, lam) -> float:
-    """How much the next damped Gauss-Newton step from residual r would lower the cost r.r,
-    by the linear model of the last Jacobian: -(2 g.d + d.H.d) for g = J^T r."""
+def _damped(h, lam):
+    """Levenberg-Marquardt's matrix: h with lam times its diagonal (and a floor) added."""
     a = h.copy()
     for d in range(len(h)):
         a[d, d] += lam * (h[d, d] + 1e-9)
+    return a
+
+
+@njit
+def _predicted_gain(jac, h, r, lam) -> float:
+    """How much the next damped Gauss-Newton step from residual r would lower the cost r.r,
+    by the linear model of the last Jacobian: -(2 g.d + d.H.d) for g = J^T r."""
     g = jac.T @ r
-    step = -np.linalg.solve(a, g)
+    step = -np.linalg.solve(_damped(h, lam), g)
     return -(2.0 * (g @ step) + step @ (h @ step))
 
 
@@ -274,10 +280,7 @@ def search(
         h, g, cost = jac.T @ jac, jac.T @ r0, r0 @ r0
         moved = False
         for _ in range(6):  # a step that does not lower the cost is refused, with more damping
-            a = h.copy()
-            for d in range(n):
-                a[d, d] += lam * (h[d, d] + 1e-9)
-            delta = -np.linalg.solve(a, g)
+            delta = -np.linalg.solve(_damped(h, lam), g)
             zc, rc, yc = z + delta[:nz], root + delta[nz : nz + 3], yaw + delta[n - 1]
             sc = decode_sixd(zc, *w)
             _residuals(sc, rc, yc, zc, z_prior, sw, sl, kinds, joints, weights, data, offsets, parents, buf, r1)

@@ -196,6 +196,34 @@ def test_replayed_bag_gives_one_valid_estimate_per_tracker_frame_with_small_end_
     assert np.mean(errors) < 0.02, f"mean end-effector error {np.mean(errors) * 100:.2f} cm"
 
 
+def test_a_step_over_its_budget_gives_the_fallbacks_pose_flagged_and_counted(ros_env, tmp_path):
+    """DragPoser with a budget no step can keep (a microsecond): the frames are ik's, valid,
+    said so on estimate_status and counted on /diagnostics, and none is lost; without a
+    fallback every step is waited for and is DragPoser's own."""
+    config = load_sensor_config("four_point")
+    motion = synthetic_walk(3.0)
+    parameters = {"estimator": "dragposer", "step_budget": 1e-6}
+    (tmp_path / "over").mkdir()
+    (tmp_path / "waited").mkdir()
+    listener = replay_bag(rclpy, ros_env, tmp_path / "over", motion, config, parameters)
+    statuses = during_playback(listener, "estimate_status")
+    over = [s for s in statuses if s.valid and s.message.startswith("over budget: ik's pose")]
+    assert len(over) >= 0.5 * len(statuses) and len(statuses) >= 30, {s.message for s in statuses}
+    assert "dragposer took over 0.0 ms" in over[0].message
+    assert sum(s.valid for s in statuses) >= 0.95 * len(statuses), {s.message for s in statuses}
+    assert all(np.all(np.isfinite(m.position)) for m in listener.received["joint_states"])
+    values = diagnostic_values(listener, "estimator")
+    assert int(values["estimates by budget_fallback (step over budget)"]) >= 10, values
+    assert float(values["over budget [%]"]) >= 50.0, values
+
+    parameters["budget_fallback"] = ""
+    listener = replay_bag(rclpy, ros_env, tmp_path / "waited", motion, config, parameters)
+    statuses = during_playback(listener, "estimate_status")
+    assert sum(s.valid for s in statuses) >= 0.95 * len(statuses) and len(statuses) >= 30
+    assert not any(s.message.startswith("over budget") for s in statuses)
+    assert diagnostic_values(listener, "estimator")["estimates by budget_fallback (step over budget)"] == "0"
+
+
 def _end_effector_errors(listener, config, skeleton) -> list[float]:
     """FK of each valid estimate (JointState and root TF) on skeleton against the joints the
     trackers of the same stamp place: hands and feet, metres."""

@@ -199,11 +199,14 @@ def _status_template(frame_id: str, valid: bool, message: str) -> tuple[bytes, i
     return bytes(layout.buf), stamp
 
 
-def status_messages(stamps, frame_id: str, valid: np.ndarray, held_message: str) -> list[bytes]:
-    """sparse_body/EstimateStatus per frame: valid with an empty message, else held_message."""
+def status_messages(
+    stamps, frame_id: str, valid: np.ndarray, held_message: str, valid_message: str = ""
+) -> list[bytes]:
+    """sparse_body/EstimateStatus per frame: valid with valid_message (empty by default), else
+    held_message."""
     out: list[bytes] = [b""] * len(stamps)
     for (state,), which in same_rows(np.asarray(valid, bool)[:, None]):
-        template, stamp = _status_template(frame_id, state, "" if state else held_message)
+        template, stamp = _status_template(frame_id, state, valid_message if state else held_message)
         rows = _rows(template, len(which))
         _put_stamp(rows, stamp, *stamp_parts(np.asarray(stamps)[which]))
         for i, row in zip(which, rows, strict=True):
@@ -229,10 +232,12 @@ def estimate_messages(
     held_message: str = HELD,
     stamps=None,
     angles: np.ndarray | None = None,
+    valid_message: str = "",
 ) -> tuple[list[bytes], list[bytes], list[bytes]]:
     """(JointState, FootContacts, EstimateStatus) per pose, stamped with the poses' stamps or
     `stamps`: the one builder of the estimate bag and of the live node's messages. `angles`:
-    the poses' joint_angles when the caller has them already (the URDF's link TF needs them too)."""
+    the poses' joint_angles when the caller has them already (the URDF's link TF needs them too).
+    valid_message: the valid poses' status message (live: which estimator made a pose over budget)."""
     stamps = np.array([p.stamp for p in poses] if stamps is None else stamps, dtype=np.float64)
     quats = np.array([p.local_quats for p in poses], dtype=np.float64).reshape(len(poses), NUM_JOINTS, 4)
     roots = np.array([p.root_position for p in poses], dtype=np.float64).reshape(len(poses), 3)
@@ -247,7 +252,7 @@ def estimate_messages(
             np.array([p.contact_probability for p in poses], np.float64).reshape(len(poses), feet),
             foot_points(quats, roots, skeleton),
         ),
-        status_messages(stamps, fixed_frame, np.array([p.valid for p in poses], bool), held_message),
+        status_messages(stamps, fixed_frame, np.array([p.valid for p in poses], bool), held_message, valid_message),
     )
 
 

@@ -26,7 +26,8 @@ from .estimator_node import EstimatorNode
 from .estimator_node import main as estimator_main
 from .messages import to_seconds
 
-PARAMETERS = {k: v for k, v in ESTIMATOR_PARAMETERS.items() if k != "estimator"}
+# the refiner's input is the estimate: no estimator to choose, nor one to fall back on
+PARAMETERS = {k: v for k, v in ESTIMATOR_PARAMETERS.items() if k not in ("estimator", "budget_fallback", "step_budget")}
 PARAMETERS.update(
     {
         "model_path": ("", "folder holding dragposer_encoder.onnx and dragposer_decoder.onnx; empty: the shipped"),
@@ -110,6 +111,12 @@ class ConstraintNode(EstimatorNode):
         return InputRefiner(
             sensors, self.skeleton, p["output_rate"], p["model_path"], int(p["iterations"]), p["input_timeout"]
         )
+
+    def _make_budget_fallback(self, p: dict, sensors) -> None:
+        return None  # every refinement is waited for
+
+    def _step_budget(self) -> float:
+        return 0.0
 
     def _configure_inputs(self) -> None:
         from sparse_body.srv import SetConstraint

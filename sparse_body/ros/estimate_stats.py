@@ -22,7 +22,8 @@ class EstimateStats:
     resets: int = 0  # clock jumps back
     last_error: str = ""
     input_driven: int = 0
-    fallback: int = 0
+    fallback: int = 0  # estimates the fallback timer made
+    over_budget: int = 0  # estimates budget_fallback made: the estimator's step missed its budget
 
     def error(self, text: str) -> None:
         self.errors += 1
@@ -55,6 +56,8 @@ class EstimateStats:
             "clock jumps back": str(self.resets),
             "estimates driven by input": str(self.input_driven),
             "estimates by the fallback timer": str(self.fallback),
+            "estimates by budget_fallback (step over budget)": str(self.over_budget),
+            "over budget [%]": f"{100.0 * self.over_budget / max(1, self.input_driven + self.fallback):.1f}",
         }
         stale = []
         if ages is not None and site_valid is not None:

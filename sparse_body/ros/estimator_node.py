@@ -41,6 +41,7 @@ from ..core.tracker_filter import UPPER, FilterConfig
 from ..core.types import BodyPose
 from ..estimators import create_estimator
 from ..estimators.base import Estimator, parse_estimator_spec
+from ..estimators.budget import BudgetedStep
 from ..estimators.kernels import compile_kernels
 from ..io import cdr
 from ..io.output import HELD, axis_link_name, axis_link_table, body_table, joint_angles
@@ -118,6 +119,17 @@ PARAMETERS = {
         "estimates per second when the trackers do not drive them (input slow, partial or "
         "absent); estimates driven by tracker input are limited to twice this",
     ),
+    "step_budget": (
+        0.0,
+        "seconds an estimator's step may take before budget_fallback gives that frame's pose "
+        "instead (flagged on estimate_status, counted on /diagnostics), so a slow step never puts "
+        "the output behind the trackers; 0: three quarters of the output period (1/output_rate)",
+    ),
+    "budget_fallback": (
+        "ik",
+        "the cheaper estimator whose pose is published for a frame the estimator's step has not "
+        "given within step_budget; empty, or the estimator itself: every step is waited for",
+    ),
     "stale_timeout": (
         0.1,
         "a tracker's newest sample no longer counts when it is this many seconds (or three of "
@@ -162,6 +174,7 @@ RANGES = {
     "filter_spin_acceleration": (0.01, 1000.0),
     **{FILTER + name: (0.0, high) for name, (high, _) in UPPER.items()},
     "output_rate": (0.1, 1000.0),
+    "step_budget": (0.0, 1.0),
     "stale_timeout": (0.001, 10.0),
     "tracker_timeout": (0.01, 60.0),
     "clock_window": (0.0, 1e9),
@@ -169,6 +182,8 @@ RANGES = {
     "play_radius": (0.1, 1e6),
     "foxglove_port": (0, 65535),
 }
+# how estimate_status begins for a valid pose made by budget_fallback (the step over its budget)
+OVER_BUDGET = "over budget:"
 # seconds a fallback tick may come later than its period before the node counts itself as
 # stalled (not running) rather than the trackers as silent
 STALL = 0.25
@@ -190,7 +205,10 @@ def _check_estimator_spec(value: str) -> str | None:
 
 
 # Text parameters with a form to check (the rest are checked where they are used, at configure).
-TEXT_CHECKS = {"estimator": _check_estimator_spec}
+TEXT_CHECKS = {
+    "estimator": _check_estimator_spec,
+    "budget_fallback": lambda value: _check_estimator_spec(value) if value else None,
+}
 
 
 def check_parameter(name: str, value, default, ranges: dict[str, tuple[float, float]] = RANGES) -> str | None:
@@ -220,6 +238,7 @@ class EstimatorNode(LifecycleNode):
 
     # Made in on_configure (timers in on_activate), destroyed in _release / _stop_timers.
     estimator: Estimator | None = None
+    budgeted: BudgetedStep | None = None  # the estimator (and budget_fallback) as stepped live
     tf_in: TfReader | None = None
     pub_joints: LifecyclePublisher | None = None
     pub_contacts: LifecyclePublisher | None = None
@@ -278,6 +297,7 @@ class EstimatorNode(LifecycleNode):
             if p["calibration"]:
                 self.get_logger().info(f"the body of {p['calibration']}: {self.skeleton.height():.2f} m tall")
             self.estimator = self._make_estimator(p, sensors)
+            self.budgeted = BudgetedStep(self.estimator, self._make_budget_fallback(p, sensors))
             compile_kernels()  # here, not at the first estimate: numba compiles (or loads) on first use
         except (SensorConfigError, CalibrationError, ValueError, FileNotFoundError) as err:
             self.get_logger().error(f"configure failed: {err}")
@@ -345,6 +365,20 @@ class EstimatorNode(LifecycleNode):
         )
         return create_estimator(name, sensors, self.skeleton, fps=p["output_rate"], **options)
 
+    def _make_budget_fallback(self, p: dict, sensors) -> Estimator | None:
+        """The estimator for frames the estimator's step misses its budget on (None: none), with
+        the same filter parameters, so both see the trackers alike."""
+        name, options = parse_estimator_spec(p["budget_fallback"]) if p["budget_fallback"] else ("", {})
+        if not name or name == parse_estimator_spec(p["estimator"])[0]:
+            return None
+        options.update(
+            {k: p[k] for k, (default, _) in self.PARAMETERS.items() if k.startswith(FILTER) and p[k] != default}
+        )
+        return create_estimator(name, sensors, self.skeleton, fps=p["output_rate"], **options)
+
+    def _step_budget(self) -> float:
+        return self.params["step_budget"] or 0.75 / self.params["output_rate"]
+
     def _configure_inputs(self) -> None:
         """More inputs than the trackers' TF (the constraint node's estimate)."""
 
@@ -357,8 +391,8 @@ class EstimatorNode(LifecycleNode):
         return self.params["estimator"]
 
     def on_activate(self, state: LifecycleState) -> TransitionCallbackReturn:
-        assert self.estimator is not None  # activate follows a successful configure
-        self.estimator.reset()
+        assert self.budgeted is not None  # activate follows a successful configure
+        self.budgeted.reset()
         self._stats = EstimateStats()
         self._last_now: float | None = None
         self._last_input = -np.inf  # the newest tracker stamp the last estimate used
@@ -402,7 +436,9 @@ class EstimatorNode(LifecycleNode):
         if self.live_view is not None:
             self.live_view.close()
             self.live_view = None
-        self.tf_in = self.estimator = None
+        if self.budgeted is not None:
+            self.budgeted.close()  # the late step, if any, ends first
+        self.tf_in = self.estimator = self.budgeted = None
         self.pub_joints = self.pub_contacts = self.pub_status = self.pub_tf = self.pub_diag = None
         self.pub_description = None
         self._last_good: BodyPose | None = None
@@ -447,13 +483,14 @@ class EstimatorNode(LifecycleNode):
 
     def _estimate(self, fallback: bool) -> None:
         """One estimate from the trackers' newest samples: gathered, stepped, published."""
+        deadline = time.monotonic() + self._step_budget()  # for the step, counted from here
         now = self.get_clock().now().nanoseconds * 1e-9
         self._restart_on_jump_back(now)
         gathered = self._gather(now, fallback)
         if gathered is None:
             return
         frame, stamps, newest, no_input, silent = gathered
-        pose, reason = self._step(frame)
+        pose, reason = self._step(frame, deadline)
         # Stamp the outputs with the newest tracker stamp used, so latency can be measured; with
         # a filter lag the pose is that much older, and so are its stamp and its latency.
         source_time = float(stamps[frame.valid].max()) if frame.valid.any() else now
@@ -473,10 +510,10 @@ class EstimatorNode(LifecycleNode):
 
     def _restart_on_jump_back(self, now: float) -> None:
         """A clock jump back (a looping bag, a restarted simulation): start afresh."""
-        assert self.tf_in is not None and self.estimator is not None  # estimates come only while active
+        assert self.tf_in is not None and self.budgeted is not None  # estimates come only while active
         # `|`, not `or`: the reader's flag is taken (and cleared) whatever the clock did
         if (self._last_now is not None and now < self._last_now - 1.0) | self.tf_in.take_jump_back():
-            self.estimator.reset()
+            self.budgeted.reset()
             self._last_input = -np.inf
             self._stats.resets += 1
         self._last_now = now
@@ -508,20 +545,29 @@ class EstimatorNode(LifecycleNode):
         self._ages, self._site_valid = now - stamps, frame.valid.copy()
         return frame, stamps, newest, no_input, silent if np.isfinite(newest) else np.inf
 
-    def _step(self, frame) -> tuple[BodyPose, str]:
-        """The estimator's pose for frame (finite: a failure holds the last good pose) and
-        the reason when it is held."""
-        assert self.estimator is not None
+    def _step(self, frame, deadline: float) -> tuple[BodyPose, str]:
+        """The estimator's pose for frame, or budget_fallback's where the step is not done by
+        the deadline (finite: a failure holds the last good pose), and what estimate_status
+        says of it: why it is held, or that the fallback made it."""
+        assert self.budgeted is not None
         try:
-            pose = self.estimator.step(frame)
+            pose, over_budget = self.budgeted.step(frame, deadline)
             if not pose.is_finite():
                 raise FloatingPointError("estimator returned non-finite values")
         except Exception as err:  # noqa: BLE001 - a failing step must not take the node down
             self._stats.error(f"{type(err).__name__}: {err}")
-            self.estimator.reset()
+            self.budgeted.reset()
             return self._held(frame.stamp), "estimator error; held"
+        if over_budget:
+            self._stats.over_budget += 1
         if pose.valid:
             self._last_good = pose
+        if over_budget and pose.valid:  # a held one says why it is held
+            assert self.budgeted.fallback is not None
+            return pose, (
+                f"{OVER_BUDGET} {self.budgeted.fallback.name}'s pose: {self._method()} took over "
+                f"{self._step_budget() * 1000:.1f} ms"
+            )
         return pose, ""
 
     def _held_reason(self, frame, no_input: bool, silent: float) -> str:
@@ -542,7 +588,7 @@ class EstimatorNode(LifecycleNode):
         quats, root = pose.local_quats[None], pose.root_position[None]
         angles = joint_angles(quats)  # once: the JointState and the URDF's massless links
         (joints,), (contacts,), (status,) = cdr.estimate_messages(
-            [pose], self.skeleton, frame_id, reason or HELD, stamps=[stamp], angles=angles
+            [pose], self.skeleton, frame_id, reason or HELD, stamps=[stamp], angles=angles, valid_message=reason
         )
         self.pub_joints.publish(joints)
         self.pub_contacts.publish(contacts)

@@ -44,6 +44,8 @@ def _nodes(context):
             "height": height,
             "calibration": arg("calibration"),
             "model_path": arg("model_path"),
+            "step_budget": float(arg("step_budget")),
+            "budget_fallback": arg("budget_fallback"),
             "foxglove_port": int(arg("foxglove_port")),
             "foxglove_host": arg("foxglove_host"),
             "publish_link_tf": False,
@@ -123,6 +125,17 @@ def generate_launch_description():
             ),
             DeclareLaunchArgument(
                 "model_path", default_value="", description="model file of a learned estimator (empty: the shipped one)"
+            ),
+            DeclareLaunchArgument(
+                "step_budget",
+                default_value="0.0",
+                description="seconds a step may take before budget_fallback's pose is published for "
+                "that frame (0: three quarters of the output period)",
+            ),
+            DeclareLaunchArgument(
+                "budget_fallback",
+                default_value="ik",
+                description="the cheaper estimator for a frame over budget (empty: every step is waited for)",
             ),
             DeclareLaunchArgument("height", default_value="1.75", description="the person's height in metres"),
             DeclareLaunchArgument(

@@ -30,6 +30,7 @@ from sparse_body.io.output import (
     foot_points,
     joint_angles,
     joint_state_names,
+    published_precision,
     stamp_parts,
     tracker_sites,
     tracker_table,
@@ -96,12 +97,12 @@ def test_a_processed_bag_holds_exactly_the_messages_built_one_by_one(tmp_path):
         js = T["sensor_msgs/msg/JointState"](
             header=_header(pose.stamp, ""),
             name=joint_state_names(),
-            position=joint_angles(pose.local_quats),
+            position=published_precision(joint_angles(pose.local_quats)),  # the published numbers
             velocity=np.zeros(0),
             effort=np.zeros(0),
         )
         assert raw[JOINT_STATES_TOPIC][i] == STORE.serialize_cdr(js, "sensor_msgs/msg/JointState"), i
-        points = foot_points(pose.local_quats, pose.root_position, motion.skeleton)
+        points = published_precision(foot_points(pose.local_quats, pose.root_position, motion.skeleton))
         contacts = T["sparse_body/msg/FootContacts"](
             header=_header(pose.stamp, "world"),
             contacts=[

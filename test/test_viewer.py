@@ -120,7 +120,8 @@ def test_the_page_of_an_estimate_bag_shows_the_body_and_plays_in_a_real_browser(
         np.array([p.root_position for p in poses]),
         motion.skeleton.offsets,
     )
-    np.testing.assert_allclose(positions, want, atol=1e-9)  # the bag's body is the estimate
+    # the bag's body is the estimate, in the published numbers' float32 precision (0.06 um a metre)
+    np.testing.assert_allclose(positions, want, atol=1e-6)
     assert fps == 60.0 and trackers.shape == (len(poses), len(config.sites), 3)
     page = write_body_page(tmp_path / "body.html", fps, estimate=positions, trackers=trackers, title="walk")
     assert '<script src="http' not in page.read_text()  # plotly.js is inside: no network needed

@@ -21,7 +21,7 @@ import numpy as np
 
 from ..core.skeleton import NUM_JOINTS, Skeleton
 from ..core.types import BodyPose
-from .output import FOOT_NAMES, HELD, foot_points, joint_angles, joint_state_names
+from .output import FOOT_NAMES, HELD, foot_points, joint_angles, joint_state_names, published_precision
 
 ENCAPSULATION = b"\x00\x01\x00\x00"  # CDR, little-endian
 
@@ -243,14 +243,16 @@ def estimate_messages(
     roots = np.array([p.root_position for p in poses], dtype=np.float64).reshape(len(poses), 3)
     feet = len(FOOT_NAMES)
     return (
-        joint_state_messages(stamps, joint_state_names(), joint_angles(quats) if angles is None else angles),
+        joint_state_messages(
+            stamps, joint_state_names(), published_precision(joint_angles(quats) if angles is None else angles)
+        ),
         foot_contact_messages(
             stamps,
             fixed_frame,
             list(FOOT_NAMES),
             np.array([p.contact for p in poses], bool).reshape(len(poses), feet),
             np.array([p.contact_probability for p in poses], np.float64).reshape(len(poses), feet),
-            foot_points(quats, roots, skeleton),
+            published_precision(foot_points(quats, roots, skeleton)),
         ),
         status_messages(stamps, fixed_frame, np.array([p.valid for p in poses], bool), held_message, valid_message),
     )

@@ -84,6 +84,15 @@ class TransformTable:
         ]
 
 
+def published_precision(values) -> np.ndarray:
+    """Estimated numbers as they are published, live and in bags: rounded to float32 precision
+    and sent as float64 (the message types' own). The rounding, 6e-8 of a value (0.06 um a
+    metre, 1e-7 rad), lies five orders of magnitude below any tracker's noise, and the zero
+    bits it leaves make a compressed estimate bag 37 % smaller (issue 55). Tracker samples
+    copied beside the body keep every bit."""
+    return np.asarray(values, np.float32).astype(np.float64)
+
+
 def body_table(
     local_quats: np.ndarray,
     roots: np.ndarray,
@@ -100,6 +109,7 @@ def body_table(
     values[:, 0, :3] = roots
     values[:, 1:, :3] = skeleton.offsets[1 : len(joints)]
     values[:, :, 3:] = local_quats[:, : len(joints)]
+    values = published_precision(values)
     parents = (fixed_frame,) + tuple(prefix + JOINT_NAMES[PARENTS[j]] for j in joints[1:])
     return TransformTable(parents, tuple(prefix + JOINT_NAMES[j] for j in joints), values)
 

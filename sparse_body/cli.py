@@ -389,7 +389,7 @@ def cmd_process(args) -> int:
         return 0
     refused: dict[str, int] = {}
     timings: dict[str, float] = {}
-    poses = process_bag(
+    result = process_bag(
         inputs[0],
         Path(args.bag_out),
         name,
@@ -406,21 +406,25 @@ def cmd_process(args) -> int:
         timings=timings,
         **options,
     )
-    invalid = sum(not p.valid for p in poses)
     rejected = ", ".join(f"{n} {reason}" for reason, n in sorted(refused.items())) or "none"
     print(
-        f"written {args.bag_out}: {len(poses)} estimates ({invalid} marked invalid); "
+        f"written {args.bag_out}: {result.frames} estimates ({result.invalid} marked invalid); "
         f"tracker samples refused: {rejected}"
     )
-    print(_rates(len(poses), timings))
+    print(_rates(result.frames, timings))
     return 0
 
 
 def _rates(frames: int, timings: dict[str, float]) -> str:
-    """Frames a second of each part of a run, so that a user sees what bounds it."""
+    """Frames a second of each part of a run, and the whole run's time, so that a user sees
+    what bounds it (reading and writing beside the estimation, or taking turns with it)."""
     parts = [("reading", "read"), ("estimation", "estimate"), ("writing", "write")]
     said = [f"{name} {frames / max(timings[key], 1e-9):,.0f} frames/s ({timings[key]:.1f} s)" for name, key in parts]
-    return f"{', '.join(said)}; the estimator's start {timings['start']:.1f} s"
+    how = "side by side" if timings["parallel"] else "in turn"
+    return (
+        f"{', '.join(said)}, {how}; the estimator's start {timings['start']:.1f} s; "
+        f"the whole run {timings['wall']:.1f} s"
+    )
 
 
 def cmd_demo(args) -> int:

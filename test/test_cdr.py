@@ -77,12 +77,14 @@ def test_a_processed_bag_holds_exactly_the_messages_built_one_by_one(tmp_path):
     motion = synthetic_walk(3.0)
     config = load_sensor_config("six_point")
     make_bag(motion, config, tmp_path / "in", start=1_700_000_000.123456789)
-    poses = process_bag(tmp_path / "in", tmp_path / "out", "ik", config, motion.skeleton, progress=False)
+    poses = process_bag(
+        tmp_path / "in", tmp_path / "out", "ik", config, motion.skeleton, progress=False, keep_poses=True
+    ).poses
     stream = read_tracker_stream(tmp_path / "in", config)
     assert any(p.contact.any() for p in poses) and any(not p.contact.all() for p in poses)
     poses[5] = poses[5].held(poses[5].stamp)  # an invalid estimate in the bag too
     stream.valid[7, 1] = False  # and a frame without its left hand
-    from sparse_body.io.bagio import write_estimate_bag
+    from sparse_body.io.estimate_bag import write_estimate_bag
 
     write_estimate_bag(tmp_path / "out2", poses, motion.skeleton, "world", trackers=(config, stream), axis_links=True)
     with Reader(tmp_path / "out2") as reader:

@@ -37,7 +37,9 @@ def test_process_writes_one_estimate_per_frame(tmp_path):
     motion = synthetic_walk(2.0)
     config = load_sensor_config("six_point")
     make_bag(motion, config, tmp_path / "in")
-    poses = process_bag(tmp_path / "in", tmp_path / "out", "ik", config, motion.skeleton, progress=False)
+    poses = process_bag(
+        tmp_path / "in", tmp_path / "out", "ik", config, motion.skeleton, progress=False, keep_poses=True
+    ).poses
     states = read_topic(tmp_path / "out", JOINT_STATES_TOPIC)
     assert len(states) == len(poses) == len(motion)
     assert list(states[0].name) == joint_state_names() and len(states[0].name) == 63
@@ -75,8 +77,15 @@ def test_bad_tracker_samples_keep_one_finite_output_per_frame(tmp_path, smooth):
     # Frame 90 carried no transform at all, so it is no input frame; every other one is.
     assert len(back) == len(motion) - 1
     poses = process_bag(
-        tmp_path / "bad", tmp_path / "out", "ik", config, motion.skeleton, progress=False, smooth=smooth
-    )
+        tmp_path / "bad",
+        tmp_path / "out",
+        "ik",
+        config,
+        motion.skeleton,
+        progress=False,
+        smooth=smooth,
+        keep_poses=True,
+    ).poses
     assert len(poses) == len(back)
     assert all(p.is_finite() for p in poses)
     valid = np.array([p.valid for p in poses])
@@ -112,8 +121,15 @@ def test_frames_whose_samples_were_all_refused_are_invalid_and_counted(tmp_path)
     write_tracker_bag(tmp_path / "bad", stream, config)
     refused = {}
     poses = process_bag(
-        tmp_path / "bad", tmp_path / "out", "ik", config, motion.skeleton, progress=False, refused=refused
-    )
+        tmp_path / "bad",
+        tmp_path / "out",
+        "ik",
+        config,
+        motion.skeleton,
+        progress=False,
+        refused=refused,
+        keep_poses=True,
+    ).poses
     assert len(poses) == len(motion)
     assert not poses[50].valid and not poses[60].valid and poses[49].valid and poses[61].valid
     assert refused == {"non-finite or absurd value": 4, "degenerate quaternion": 4}
@@ -122,7 +138,6 @@ def test_frames_whose_samples_were_all_refused_are_invalid_and_counted(tmp_path)
 
 
 def test_outputs_are_never_half_written_nor_silently_replaced(tmp_path, monkeypatch):
-    import sparse_body.io.bagio as bagio
     from sparse_body.cli import main
 
     motion = synthetic_walk(1.0)
@@ -132,26 +147,31 @@ def test_outputs_are_never_half_written_nor_silently_replaced(tmp_path, monkeypa
         make_bag(motion, config, tmp_path / "in")
     make_bag(motion, config, tmp_path / "in", overwrite=True)
     process_bag(tmp_path / "in", tmp_path / "out", "ik", config, motion.skeleton, progress=False)
-    # an existing output is refused before the estimation starts
-    monkeypatch.setattr("sparse_body.apps.offline.read_tracker_stream", lambda *a, **k: pytest.fail("estimated first"))
-    with pytest.raises(BagError, match=r"out: already exists"):
-        process_bag(tmp_path / "in", tmp_path / "out", "ik", config, motion.skeleton, progress=False)
+    # an existing output is refused before the reading and the estimation start
+    monkeypatch.setattr("sparse_body.apps.offline.create_estimator", lambda *a, **k: pytest.fail("estimated first"))
+    monkeypatch.setattr("sparse_body.apps.pipeline.tracker_chunks", lambda *a, **k: pytest.fail("read first"))
+    for parallel in (False, True):
+        with pytest.raises(BagError, match=r"out: already exists"):
+            process_bag(
+                tmp_path / "in", tmp_path / "out", "ik", config, motion.skeleton, progress=False, parallel=parallel
+            )
     monkeypatch.undo()
-    # Ctrl-C while writing: nothing is left behind, and the command exits 130 with one line
-    log_times = bagio._log_times
 
-    class Interrupted(list):  # Ctrl-C after five frames have been written
-        def __iter__(self):
-            for k, ns in enumerate(super().__iter__()):
-                if k == 5:
-                    raise KeyboardInterrupt
-                yield ns
+    # Ctrl-C while writing, in this process or in the writer's: nothing is left behind, and
+    # the command exits 130 with one line
+    from sparse_body.io.estimate_bag import EstimateBagWriter
 
-    monkeypatch.setattr(bagio, "_log_times", lambda stamps: Interrupted(log_times(stamps)))
+    def interrupted(self, poses, trackers):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(EstimateBagWriter, "write", interrupted)
     before = sorted(p.name for p in tmp_path.iterdir())
     with pytest.raises(SystemExit) as ended:
         main(["process", str(tmp_path / "in"), str(tmp_path / "new"), "--sensors", "three_point", "--quiet"])
     assert ended.value.code == 130
+    assert sorted(p.name for p in tmp_path.iterdir()) == before
+    with pytest.raises(KeyboardInterrupt):  # (raised in the forked writer, said here)
+        process_bag(tmp_path / "in", tmp_path / "new", "ik", config, motion.skeleton, progress=False, parallel=True)
     assert sorted(p.name for p in tmp_path.iterdir()) == before
 
 

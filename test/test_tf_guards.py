@@ -229,8 +229,15 @@ def test_a_bag_with_poisoned_tf_gives_valid_estimates_offline(tmp_path):
                 writer.write(conn, int(t * 1e9) + k, data)
     refused: dict[str, int] = {}
     poses = process_bag(
-        tmp_path / "poisoned", tmp_path / "out", "ik", CONFIG, motion.skeleton, progress=False, refused=refused
-    )
+        tmp_path / "poisoned",
+        tmp_path / "out",
+        "ik",
+        CONFIG,
+        motion.skeleton,
+        progress=False,
+        refused=refused,
+        keep_poses=True,
+    ).poses
     assert len(poses) == len(stream) + len(range(3, len(stream), 6))  # the head-at-0 messages are input frames too
     assert sum(p.valid for p in poses) >= len(stream)  # every real frame valid
     assert refused["stamp far from the clock"] == len(range(3, len(stream), 6))

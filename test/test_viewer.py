@@ -113,7 +113,9 @@ def test_the_page_of_an_estimate_bag_shows_the_body_and_plays_in_a_real_browser(
     motion = synthetic_walk(3.0)
     config = load_sensor_config("six_point")
     make_bag(motion, config, tmp_path / "in")
-    poses = process_bag(tmp_path / "in", tmp_path / "out", "ik", config, motion.skeleton, progress=False)
+    poses = process_bag(
+        tmp_path / "in", tmp_path / "out", "ik", config, motion.skeleton, progress=False, keep_poses=True
+    ).poses
     positions, trackers, fps = bag_bodies(tmp_path / "out")
     _, want = forward_kinematics(
         quat_to_matrix(np.array([p.local_quats for p in poses])),

@@ -145,7 +145,7 @@ def _process_one(bag: Path, out: Path, settings: Settings, exit_on_stop: bool = 
     refused: dict[str, int] = {}
     try:
         _writing = True
-        poses = process_bag(
+        processed = process_bag(
             bag,
             out,
             settings.estimator,
@@ -161,7 +161,7 @@ def _process_one(bag: Path, out: Path, settings: Settings, exit_on_stop: bool = 
             axis_links=settings.axis_links,
             **settings.options,
         )
-        result.frames, result.invalid = len(poses), sum(not p.valid for p in poses)
+        result.frames, result.invalid = processed.frames, processed.invalid
     except Exception as err:
         # the stop lands wherever the bag is; inside compiled code (a numba kernel) it comes
         # back as that code's SystemError, caused by _Stopped

@@ -161,8 +161,17 @@ def run_demo(
     make_bag(motion, sensors, trackers, overwrite=True)
     print(f"tracker bag ({sensors.name}): {trackers}")
     poses = process_bag(
-        trackers, estimates, estimator, sensors, motion.skeleton, motion.fps, progress=False, overwrite=True
-    )
+        trackers,
+        estimates,
+        estimator,
+        sensors,
+        motion.skeleton,
+        motion.fps,
+        progress=False,
+        overwrite=True,
+        keep_poses=True,
+    ).poses
+    assert poses is not None  # keep_poses
     print(f"estimate bag ({estimator}): {estimates}, {len(poses)} estimates")
     local = quat_to_matrix(np.stack([p.local_quats for p in poses]))
     glob, pos = forward_kinematics(local, np.stack([p.root_position for p in poses]), motion.skeleton.offsets)

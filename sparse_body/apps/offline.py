@@ -2,16 +2,23 @@
 
 from __future__ import annotations
 
+from contextlib import ExitStack
+from dataclasses import dataclass
 from pathlib import Path
+
+import numpy as np
 
 from ..core.sensors import SensorConfig
 from ..core.skeleton import Skeleton
-from ..core.types import BodyPose
+from ..core.types import BodyPose, BodyPoses, TrackerStream
 from ..data.motion import Motion
 from ..data.virtual_trackers import NO_NOISE, TrackerNoise, synthesize_trackers
 from ..estimators import create_estimator
-from ..io.bagio import ESTIMATE_TOPICS, check_output, read_tracker_stream, write_estimate_bag, write_tracker_bag
+from ..io.bagio import ESTIMATE_TOPICS, bag_folder, check_output, tracker_frame_count, write_tracker_bag
+from ..io.estimate_bag import check_topics
 from ..io.tf_guards import TfGuards
+from ..io.topics import COMPRESSIONS
+from .pipeline import ForkedReader, ForkedWriter, Reader, Writer, can_fork
 
 
 def make_bag(
@@ -32,6 +39,16 @@ def make_bag(
     return len(stream)
 
 
+@dataclass
+class Processed:
+    """What process_bag made: how many estimates, how many of them invalid, and with
+    keep_poses the poses themselves (else None: a long recording's would fill memory)."""
+
+    frames: int = 0
+    invalid: int = 0
+    poses: list[BodyPose] | None = None
+
+
 def process_bag(
     bag_in: Path,
     bag_out: Path,
@@ -48,18 +65,80 @@ def process_bag(
     compression: str = "zstd",
     axis_links: bool = False,
     timings: dict | None = None,
+    keep_poses: bool = False,
+    parallel: bool | None = None,
     **options,
-) -> list[BodyPose]:
-    """Run an estimator over a tracker bag and write one estimate per input frame (refused
-    tracker samples are counted in `refused`, reason -> count, when a dict is given; the
-    seconds spent reading, estimating and writing in `timings`, likewise)."""
+) -> Processed:
+    """Run an estimator over a tracker bag and write one estimate per input frame, a chunk of
+    frames at a time (apps/pipeline.py): with `parallel` (None: wherever this process may
+    fork) the reading and the writing run in child processes beside the estimation. Refused
+    tracker samples are counted in `refused` (reason -> count) when a dict is given; the
+    seconds spent reading, estimating and writing (each in its own process when parallel) and
+    the whole run's go into `timings`, likewise."""
     import time
+    from collections import deque
 
-    check_output(bag_out, overwrite, (Path(bag_in),))  # before the estimation, not after it
     clock = time.perf_counter()
-    stream = read_tracker_stream(bag_in, sensors, stale_after, refused, guards)
-    read = time.perf_counter()
-    never = [site for s, site in enumerate(sensors.site_names) if not stream.valid[:, s].any()]
+    check_topics(topics)
+    if compression not in COMPRESSIONS:
+        raise ValueError(f"compression {compression!r}: one of {', '.join(COMPRESSIONS)}")
+    parallel = can_fork() if parallel is None else parallel
+    made_with = settings_record(estimator, options, sensors, skeleton, fps, topics, axis_links)
+    bag = dict(
+        skeleton=skeleton, fixed_frame=sensors.fixed_frame, sensors=sensors, topics=topics, axis_links=axis_links
+    )
+    done = Processed(poses=[] if keep_poses else None)
+    seen = np.zeros(len(sensors.sites), bool)  # each tracker: ever usable?
+    with ExitStack() as stack:  # left in reverse: the children end before the folder goes
+        tmp = stack.enter_context(bag_folder(bag_out, overwrite, (Path(bag_in),)))  # checked before any work
+        reader: Reader | ForkedReader
+        writer: Writer | ForkedWriter
+        if parallel:  # forked before the estimator starts threads (ONNX Runtime's)
+            reader = stack.enter_context(ForkedReader(bag_in, sensors, stale_after, guards))
+            writer = stack.enter_context(ForkedWriter(tmp, made_with, compression, (reader.conn,), **bag))
+            reader.start()  # the threads that feed the pipes, once both children are forked
+            writer.start()
+        else:
+            reader = stack.enter_context(Reader(bag_in, sensors, stale_after, guards))
+            writer = stack.enter_context(Writer(tmp, made_with, compression, **bag))
+        started = time.perf_counter()
+        est = create_estimator(estimator, sensors, skeleton, fps=fps, **options)
+        ready = time.perf_counter()
+        pending: deque[TrackerStream] = deque()  # read chunks whose poses are not all made
+
+        def frames():
+            for chunk in reader:
+                pending.append(chunk)
+                seen[:] |= chunk.valid.any(axis=0)
+                yield from chunk
+
+        stream = frames()
+        if progress:
+            from tqdm import tqdm
+
+            total = tracker_frame_count(bag_in)
+            stream = tqdm(stream, total=total, desc=f"{estimator} {Path(bag_in).name}", unit="frame")
+        made: list[BodyPose] = []
+        waiting = 0.0  # seconds the loop waited for chunks (the reader's time, not the estimator's)
+        for pose in est.stream(stream):  # offline: an estimator that can look ahead does here
+            made.append(pose)
+            if len(made) == len(pending[0]):
+                waited = time.perf_counter()
+                writer.write(BodyPoses.of(made), pending.popleft())
+                waiting += time.perf_counter() - waited
+                done.frames += len(made)
+                done.invalid += sum(not p.valid for p in made)
+                if done.poses is not None:
+                    done.poses += made
+                made = []
+        estimated = time.perf_counter()
+        writer.finish()
+        if not parallel:
+            waiting += reader.busy  # the reading happened inside the loop
+    if refused is not None:
+        for reason, count in reader.refused.items():
+            refused[reason] = refused.get(reason, 0) + count
+    never = [site for s, site in enumerate(sensors.site_names) if not seen[s]]
     if never:
         import warnings
 
@@ -68,33 +147,16 @@ def process_bag(
             f"with a usable pose (wrong --sensors?)",
             stacklevel=2,
         )
-    est = create_estimator(estimator, sensors, skeleton, fps=fps, **options)
-    frames = iter(stream)
-    if progress:
-        from tqdm import tqdm
-
-        frames = tqdm(frames, total=len(stream), desc=f"{estimator} {Path(bag_in).name}", unit="frame")
-    started = time.perf_counter()
-    poses = est.process(frames)  # offline: an estimator that can look ahead does here
-    estimated = time.perf_counter()
-    write_estimate_bag(
-        bag_out,
-        poses,
-        skeleton,
-        sensors.fixed_frame,
-        overwrite=overwrite,
-        inputs=(Path(bag_in),),
-        trackers=(sensors, stream),
-        made_with=settings_record(estimator, options, sensors, skeleton, fps, topics, axis_links),
-        topics=topics,
-        compression=compression,
-        axis_links=axis_links,
-    )
     if timings is not None:
         timings.update(
-            read=read - clock, start=started - read, estimate=estimated - started, write=time.perf_counter() - estimated
+            read=reader.busy,
+            start=ready - started,
+            estimate=max(0.0, estimated - ready - waiting),
+            write=writer.busy,
+            wall=time.perf_counter() - clock,
+            parallel=float(parallel),
         )
-    return poses
+    return done
 
 
 def settings_record(
@@ -110,8 +172,6 @@ def settings_record(
     bags are comparable only when it is the same."""
     import hashlib
     import json
-
-    import numpy as np
 
     body = hashlib.sha256(np.asarray(skeleton.offsets, np.float64).tobytes()).hexdigest()[:12]
     record = {"estimator": estimator, "options": options, "sensors": sensors.name, "fps": fps, "body": body}

@@ -79,3 +79,31 @@ class BodyPose:
     def is_finite(self) -> bool:
         # a sum is finite only when every element is (numpy's isfinite and all cost more, every step)
         return math.isfinite(self.local_quats.sum() + self.root_position.sum())
+
+
+@dataclass
+class BodyPoses:
+    """Estimates as arrays, one row a pose (a recording or a chunk of it): what the message
+    encoder takes, and what crosses between processes cheaply (arrays, not objects)."""
+
+    stamps: np.ndarray  # (T,) seconds
+    local_quats: np.ndarray  # (T, 22, 4)
+    roots: np.ndarray  # (T, 3)
+    contact_probability: np.ndarray  # (T, 2)
+    contact: np.ndarray  # (T, 2) bool
+    valid: np.ndarray  # (T,) bool
+
+    @classmethod
+    def of(cls, poses: list[BodyPose]) -> BodyPoses:
+        count = len(poses)
+        return cls(
+            np.array([p.stamp for p in poses], np.float64),
+            np.array([p.local_quats for p in poses], np.float64).reshape(count, NUM_JOINTS, 4),
+            np.array([p.root_position for p in poses], np.float64).reshape(count, 3),
+            np.array([p.contact_probability for p in poses], np.float64).reshape(count, 2),
+            np.array([p.contact for p in poses], bool).reshape(count, 2),
+            np.array([p.valid for p in poses], bool),
+        )
+
+    def __len__(self) -> int:
+        return len(self.stamps)

@@ -5,7 +5,7 @@ from __future__ import annotations
 import inspect
 import math
 from abc import ABC, abstractmethod
-from collections.abc import Iterable
+from collections.abc import Iterable, Iterator
 from typing import ClassVar, TypeGuard
 
 import numpy as np
@@ -286,15 +286,20 @@ class Estimator(ABC):
     def process(self, stream: TrackerStream | Iterable[TrackerFrame]) -> list[BodyPose]:
         """One pose per frame of a recording (offline). A recording that jumps back in time by
         more than a second (a concatenated or looping take) starts over there."""
+        return list(self.stream(stream))
+
+    def stream(self, frames: TrackerStream | Iterable[TrackerFrame]) -> Iterator[BodyPose]:
+        """process() a pose at a time, in the frames' order, taking frames only as it needs
+        them: a recording of any length in bounded memory (but for the whole-recording
+        smoother, use_filter(smooth=True), which needs every frame first)."""
         self.reset()
-        poses, last = [], None
-        for frame in self.filtered(stream):
+        last = None
+        for frame in self.filtered(frames):
             if last is not None and frame.stamp < last - 1.0:  # the method starts over (the
                 self._last = None  # filter did so by itself)
                 self._reset()
             last = frame.stamp
-            poses.append(self._step_filtered(frame))
-        return poses
+            yield self._step_filtered(frame)
 
 
 def parse_estimator_spec(spec: str) -> tuple[str, dict]:

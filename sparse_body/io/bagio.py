@@ -11,12 +11,12 @@ import os
 import shutil
 import signal
 import tempfile
+from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
 
 import numpy as np
 import yaml
-from rosbags.interfaces import Qos, QosDurability, QosHistory, QosLiveliness, QosReliability, QosTime
 from rosbags.rosbag2 import CompressionFormat, CompressionMode, Reader, ReaderError, StoragePlugin, Writer
 from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 
@@ -24,18 +24,11 @@ from .. import __version__
 from ..core.file_output import OutputError as FileOutputError
 from ..core.resources import share_dir
 from ..core.sensors import SensorConfig
-from ..core.skeleton import NUM_JOINTS, Skeleton
 from ..core.textfile import load_yaml, read_limited
-from ..core.types import BodyPose, TrackerStream
+from ..core.types import TrackerStream
 from . import cdr
 from .output import (
-    TransformTable,
-    axis_link_table,
-    body_table,
-    joint_angles,
     stamp_parts,
-    tracker_sites,
-    tracker_table,
 )
 from .tf_cache import TfCache, TfGuards
 from .topics import (  # noqa: F401 (the names callers import from here)
@@ -48,7 +41,6 @@ from .topics import (  # noqa: F401 (the names callers import from here)
     TF_STATIC_TOPIC,
     TF_TOPIC,
 )
-from .urdf import body_urdf
 
 TF_TYPE = "tf2_msgs/msg/TFMessage"
 
@@ -211,16 +203,12 @@ def remove_leftovers(path: Path) -> None:
 
 
 @contextmanager
-def bag_writer(
-    path: Path, overwrite: bool = False, inputs: tuple[Path, ...] = (), made_with: str = "", compression: str = "zstd"
-):
-    """A rosbag2 (MCAP) Writer on a temporary name beside `path`, moved into place only when
-    the block ends without an error (SIGINT and SIGTERM included: the command line turns both
-    into exceptions): an interrupted or failed write leaves nothing behind. `path` is checked
-    by check_output before and again just before it is replaced. Its chunks are compressed
-    with `compression` (COMPRESSIONS)."""
-    if compression not in COMPRESSIONS:
-        raise ValueError(f"compression {compression!r}: one of {', '.join(COMPRESSIONS)}")
+def bag_folder(path: Path, overwrite: bool = False, inputs: tuple[Path, ...] = ()):
+    """The path a bag is written at: a temporary name beside `path`, moved into place only
+    when the block ends without an error (SIGINT and SIGTERM included: the command line turns
+    both into exceptions), so an interrupted or failed write leaves nothing behind. `path` is
+    checked by check_output before and again just before it is replaced. The writer may be in
+    another process (apps/pipeline.py): this one owns the name."""
     path = check_output(path, overwrite, inputs)
     # the bag is made under its own name inside a hidden folder, so that its file is NAME.mcap
     partial = _partial(path, os.getpid())
@@ -229,16 +217,7 @@ def bag_writer(
     shutil.rmtree(partial, ignore_errors=True)
     partial.mkdir()
     try:
-        writer = Writer(tmp, version=8, storage_plugin=StoragePlugin.MCAP)
-        if compression != "none":
-            writer.set_compression(CompressionMode.STORAGE, CompressionFormat.ZSTD)  # chunks, not the file
-        with writer:
-            if compression == "lz4":
-                _chunks_in_lz4(writer)
-            writer.set_custom_data(WRITER_KEY, f"sparse_body {__version__}")
-            if made_with:
-                writer.set_custom_data(MADE_WITH_KEY, made_with)
-            yield writer
+        yield tmp
         check_output(path, overwrite, inputs)  # nothing else may have appeared meanwhile
         if path.exists():
             os.replace(path, old)  # a bag of ours: moved aside, removed once replaced
@@ -247,6 +226,36 @@ def bag_writer(
         shutil.rmtree(partial, ignore_errors=True)
         if old.is_dir() and written_by_us(old):
             shutil.rmtree(old, ignore_errors=True)
+
+
+@contextmanager
+def open_writer(tmp: Path, made_with: str = "", compression: str = "zstd"):
+    """A rosbag2 (MCAP) Writer at bag_folder's temporary path, closed (its summary and
+    metadata written) when the block ends. Its chunks are compressed with `compression`
+    (COMPRESSIONS)."""
+    if compression not in COMPRESSIONS:
+        raise ValueError(f"compression {compression!r}: one of {', '.join(COMPRESSIONS)}")
+    writer = Writer(tmp, version=8, storage_plugin=StoragePlugin.MCAP)
+    if compression != "none":
+        writer.set_compression(CompressionMode.STORAGE, CompressionFormat.ZSTD)  # chunks, not the file
+    with writer:
+        if compression == "lz4":
+            _chunks_in_lz4(writer)
+        writer.set_custom_data(WRITER_KEY, f"sparse_body {__version__}")
+        if made_with:
+            writer.set_custom_data(MADE_WITH_KEY, made_with)
+        yield writer
+
+
+@contextmanager
+def bag_writer(
+    path: Path, overwrite: bool = False, inputs: tuple[Path, ...] = (), made_with: str = "", compression: str = "zstd"
+):
+    """open_writer in bag_folder: a bag that takes its name only once it is whole."""
+    if compression not in COMPRESSIONS:  # before any folder is made
+        raise ValueError(f"compression {compression!r}: one of {', '.join(COMPRESSIONS)}")
+    with bag_folder(path, overwrite, inputs) as tmp, open_writer(tmp, made_with, compression) as writer:
+        yield writer
 
 
 def _chunks_in_lz4(writer: Writer) -> None:
@@ -320,17 +329,66 @@ def read_tracker_stream(
     refused: dict | None = None,
     guards: TfGuards | None = None,
 ) -> TrackerStream:
-    """The trackers at each input frame of a bag: every /tf message that moves a tracker
-    frame is one frame, sampled at the newest tracker stamp held. The messages go through the
-    same TfCache ingest as the live node's (read by io/cdr.py's read_tf, as the live node
-    reads them), with the bag's receive time as the clock: a
-    tracker whose sample in that message was refused is invalid in that frame, and every
-    refusal is counted in `refused` (reason -> count) when a dict is given."""
+    """The trackers at each input frame of a bag (tracker_chunks, whole)."""
+    chunks = list(tracker_chunks(path, config, stale_after, refused, guards))
+    return TrackerStream(
+        config.site_names,
+        np.concatenate([c.times for c in chunks]),
+        np.concatenate([c.positions for c in chunks]),
+        np.concatenate([c.orientations for c in chunks]),
+        np.concatenate([c.valid for c in chunks]),
+    )
+
+
+CHUNK_FRAMES = 512  # frames a chunk of a streamed recording: 8.5 s at 60 Hz, 0.6 MB of poses and trackers
+
+
+def tracker_frame_count(path: Path) -> int | None:
+    """How many /tf messages a bag holds, from its metadata (an upper bound on its frames), or
+    None where it does not say."""
+    try:
+        with Reader(Path(path)) as reader:
+            return sum(c.msgcount for c in reader.connections if c.topic == TF_TOPIC) or None
+    except Exception:  # noqa: BLE001 - reading it properly says what is wrong, later
+        return None
+
+
+def tracker_chunks(
+    path: Path,
+    config: SensorConfig,
+    stale_after: float = 0.1,
+    refused: dict | None = None,
+    guards: TfGuards | None = None,
+    size: int | None = None,
+) -> Iterator[TrackerStream]:
+    """The trackers at each input frame of a bag, `size` (CHUNK_FRAMES) frames a chunk, read as they are
+    needed (a recording of any length in bounded memory): every /tf message that moves a
+    tracker frame is one frame, sampled at the newest tracker stamp held. The messages go
+    through the same TfCache ingest as the live node's (read by io/cdr.py's read_tf, as the
+    live node reads them), with the bag's receive time as the clock: a tracker whose sample in
+    that message was refused is invalid in that frame, and every refusal is counted in
+    `refused` (reason -> count) when a dict is given, once the bag is read."""
     path = Path(path)
     if not path.exists():
         raise BagError(f"{path}: no such bag")
     cache = TfCache({s.frame_id for s in config.sites}, guards)
-    times, frames = [], []
+    times: list[float] = []
+    frames: list = []
+    last_stamp, count = None, 0
+    size = size or CHUNK_FRAMES
+
+    def chunk() -> TrackerStream:
+        out = TrackerStream(
+            config.site_names,
+            np.array(times),
+            np.stack([f.positions for f in frames]),
+            np.stack([f.orientations for f in frames]),
+            np.stack([f.valid for f in frames]),
+        )
+        times.clear()
+        frames.clear()
+        return out
+
     try:
         with Reader(path) as reader:
             conns = [c for c in reader.connections if c.topic in (TF_TOPIC, TF_STATIC_TOPIC)]
@@ -349,125 +407,28 @@ def read_tracker_stream(
                 if np.isfinite(got.newest):  # the newest held (a tracker in another message may be newer)
                     stamp = cache.newest_tracker_stamp()
                 else:  # every sample refused: the frame keeps its own stamp if it has one
-                    stamp = got.refused_stamp if np.isfinite(got.refused_stamp) else (times[-1] if times else 0.0)
+                    stamp = got.refused_stamp if np.isfinite(got.refused_stamp) else (last_stamp or 0.0)
                 frame, _ = cache.sample(config, stamp, stale_after)
                 for s, site in enumerate(config.sites):
                     if site.frame_id in got.refused:
                         frame.valid[s] = False
                 times.append(stamp)
                 frames.append(frame)
+                last_stamp, count = stamp, count + 1
+                if len(frames) == size:
+                    yield chunk()
     except BagError:
         raise
     except Exception as err:  # noqa: BLE001 - rosbags raises many kinds for a broken file
         raise BagError(f"{path}: cannot be read as a rosbag2 ({err})") from None
     if refused is not None:
-        for reason, count in cache.refused.items():
-            if count:
-                refused[reason.value] = refused.get(reason.value, 0) + count
-    if not frames:
+        for reason, n in cache.refused.items():
+            if n:
+                refused[reason.value] = refused.get(reason.value, 0) + n
+    if not count:
         raise BagError(f"{path}: no transforms of the tracker frames {', '.join(sorted(cache.trackers))}")
-    return TrackerStream(
-        config.site_names,
-        np.array(times),
-        np.stack([f.positions for f in frames]),
-        np.stack([f.orientations for f in frames]),
-        np.stack([f.valid for f in frames]),
-    )
-
-
-# robot_state_publisher's robot_description: kept for late subscribers, so `ros2 bag play`
-# offers it as transient local and RViz gets it whenever it starts
-LATCHED = Qos(
-    QosHistory.KEEP_LAST,
-    1,
-    QosReliability.RELIABLE,
-    QosDurability.TRANSIENT_LOCAL,
-    QosTime(0, 0),
-    QosTime(0, 0),
-    QosLiveliness.AUTOMATIC,
-    QosTime(0, 0),
-    False,
-)
-
-
-def write_estimate_bag(
-    path: Path,
-    poses: list[BodyPose],
-    skeleton: Skeleton,
-    fixed_frame: str = "world",
-    prefix: str = "",
-    overwrite: bool = False,
-    inputs: tuple[Path, ...] = (),
-    trackers: tuple[SensorConfig, TrackerStream] | None = None,
-    made_with: str = "",
-    topics: tuple[str, ...] = ESTIMATE_TOPICS,
-    compression: str = "zstd",
-    axis_links: bool = False,
-) -> None:
-    """Per pose: one JointState, one FootContacts, one EstimateStatus and one /tf message;
-    once, first: the body's URDF on /robot_description (each only where `topics` has it). So
-    that a viewer draws the bag as it is (Foxglove's 3D panel, or RViz with `ros2 bag play`),
-    /tf holds every link of that URDF that has a shape (the body's) and, with `trackers` (the
-    input frames, one per pose), the trackers beside the body; with `axis_links`, the URDF's
-    massless links inside each joint as well, which robot_state_publisher otherwise computes
-    from /joint_states (they were 60 % of a bag: 49 against 35 MB for ten minutes). The
-    messages are encoded for the whole recording at once (io/cdr.py)."""
-    if trackers is not None and len(trackers[1]) != len(poses):
-        raise ValueError(f"{len(poses)} poses but {len(trackers[1])} tracker frames")
-    unknown = sorted(set(topics) - set(ESTIMATE_TOPICS))
-    if unknown or not topics:
-        raise ValueError(f"topics {', '.join(unknown) or '(none)'}: choose from {', '.join(ESTIMATE_TOPICS)}")
-    store = typestore()
-    stamps = np.array([p.stamp for p in poses], dtype=np.float64)
-    quats = np.array([p.local_quats for p in poses], dtype=np.float64).reshape(len(poses), NUM_JOINTS, 4)
-    roots = np.array([p.root_position for p in poses], dtype=np.float64).reshape(len(poses), 3)
-    angles = joint_angles(quats)
-    js, contacts, status = cdr.estimate_messages(poses, skeleton, fixed_frame, angles=angles)
-    per_frame = {JOINT_STATES_TOPIC: js, CONTACTS_TOPIC: contacts, STATUS_TOPIC: status}
-    if TF_TOPIC in topics:
-        per_frame[TF_TOPIC] = _tf_messages(
-            stamps, quats, roots, angles if axis_links else None, skeleton, fixed_frame, prefix, trackers
-        )
-    types = {
-        JOINT_STATES_TOPIC: "sensor_msgs/msg/JointState",
-        CONTACTS_TOPIC: "sparse_body/msg/FootContacts",
-        STATUS_TOPIC: "sparse_body/msg/EstimateStatus",
-        TF_TOPIC: TF_TYPE,
-    }
-    with bag_writer(path, overwrite, inputs, made_with, compression) as writer:
-        connections = {
-            topic: writer.add_connection(topic, types[topic], typestore=store) for topic in types if topic in topics
-        }
-        log_ns = _log_times(stamps)
-        if log_ns and DESCRIPTION_TOPIC in topics:
-            c_urdf = writer.add_connection(
-                DESCRIPTION_TOPIC, "std_msgs/msg/String", typestore=store, offered_qos_profiles=[LATCHED]
-            )
-            urdf = store.types["std_msgs/msg/String"](data=body_urdf(skeleton))
-            writer.write(c_urdf, log_ns[0], store.serialize_cdr(urdf, "std_msgs/msg/String"))
-        written = [(connections[topic], per_frame[topic]) for topic in connections]
-        for i, ns in enumerate(log_ns):
-            for connection, messages in written:
-                writer.write(connection, ns, messages[i])
-
-
-def _tf_messages(stamps, quats, roots, angles, skeleton, fixed_frame, prefix, trackers) -> list[bytes]:
-    """One /tf message a pose: the body's links (and with `angles`, the URDF's massless links),
-    and the trackers it was made from."""
-    body = body_table(quats, roots, skeleton, fixed_frame, prefix)
-    if angles is not None:
-        body = body + axis_link_table(angles, skeleton, prefix)
-    tf: list[bytes] = [b""] * len(stamps)
-    shown = tracker_sites(*trackers) if trackers is not None else np.zeros((len(stamps), 0), bool)
-    for pattern, which in cdr.same_rows(shown):  # frames with the same trackers
-        table = TransformTable(body.parents, body.children, body.values[which])
-        if trackers is not None:
-            table = table + tracker_table(*trackers, which, tuple(np.flatnonzero(pattern)))
-        for i, data in zip(
-            which, cdr.tf_messages(stamps[which], table.parents, table.children, table.values), strict=True
-        ):
-            tf[i] = data
-    return tf
+    if frames:
+        yield chunk()
 
 
 def read_topic(path: Path, topic: str) -> list:

@@ -19,8 +19,8 @@ from functools import lru_cache
 
 import numpy as np
 
-from ..core.skeleton import NUM_JOINTS, Skeleton
-from ..core.types import BodyPose
+from ..core.skeleton import Skeleton
+from ..core.types import BodyPoses
 from .output import FOOT_NAMES, HELD, foot_points, joint_angles, joint_state_names, published_precision
 
 ENCAPSULATION = b"\x00\x01\x00\x00"  # CDR, little-endian
@@ -226,7 +226,7 @@ def same_rows(flags: np.ndarray) -> list[tuple[tuple[bool, ...], np.ndarray]]:
 
 
 def estimate_messages(
-    poses: list[BodyPose],
+    poses: BodyPoses,
     skeleton: Skeleton,
     fixed_frame: str,
     held_message: str = HELD,
@@ -238,10 +238,8 @@ def estimate_messages(
     `stamps`: the one builder of the estimate bag and of the live node's messages. `angles`:
     the poses' joint_angles when the caller has them already (the URDF's link TF needs them too).
     valid_message: the valid poses' status message (live: which estimator made a pose over budget)."""
-    stamps = np.array([p.stamp for p in poses] if stamps is None else stamps, dtype=np.float64)
-    quats = np.array([p.local_quats for p in poses], dtype=np.float64).reshape(len(poses), NUM_JOINTS, 4)
-    roots = np.array([p.root_position for p in poses], dtype=np.float64).reshape(len(poses), 3)
-    feet = len(FOOT_NAMES)
+    stamps = np.asarray(poses.stamps if stamps is None else stamps, dtype=np.float64)
+    quats = poses.local_quats
     return (
         joint_state_messages(
             stamps, joint_state_names(), published_precision(joint_angles(quats) if angles is None else angles)
@@ -250,11 +248,11 @@ def estimate_messages(
             stamps,
             fixed_frame,
             list(FOOT_NAMES),
-            np.array([p.contact for p in poses], bool).reshape(len(poses), feet),
-            np.array([p.contact_probability for p in poses], np.float64).reshape(len(poses), feet),
-            published_precision(foot_points(quats, roots, skeleton)),
+            poses.contact,
+            poses.contact_probability,
+            published_precision(foot_points(quats, poses.roots, skeleton)),
         ),
-        status_messages(stamps, fixed_frame, np.array([p.valid for p in poses], bool), held_message, valid_message),
+        status_messages(stamps, fixed_frame, poses.valid, held_message, valid_message),
     )
 
 

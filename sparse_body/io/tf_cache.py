@@ -137,8 +137,8 @@ class TfCache:
         now: float | None = None,
     ) -> Accepted:
         # plain floats, not numpy: a transform costs a few microseconds, also in a flood
-        x, y, z = (float(v) for v in translation)
-        qx, qy, qz, qw = (float(v) for v in rotation)
+        x, y, z = map(float, translation)
+        qx, qy, qz, qw = map(float, rotation)
         stamp = float(stamp)
         held = self._edges.get(child) or self._others.get(child)
         result = self._check(held, stamp, (x, y, z, qx, qy, qz, qw), static, now)
@@ -165,10 +165,21 @@ class TfCache:
 
     def _check(self, held: Edge | None, stamp: float, values: tuple, static: bool, now: float | None) -> Accepted:
         """values: x y z qx qy qz qw."""
-        # bounded first (NaN fails every comparison): no product below can overflow
-        if not (-MAX_VALUE <= stamp <= MAX_VALUE and all(-MAX_VALUE <= v <= MAX_VALUE for v in values)):
+        # bounded first (NaN fails every comparison): no product below can overflow; written
+        # out, as every sample of every tracker passes here
+        x, y, z, qx, qy, qz, qw = values
+        m = MAX_VALUE
+        if not (
+            -m <= stamp <= m
+            and -m <= x <= m
+            and -m <= y <= m
+            and -m <= z <= m
+            and -m <= qx <= m
+            and -m <= qy <= m
+            and -m <= qz <= m
+            and -m <= qw <= m
+        ):
             return Accepted.NON_FINITE
-        qx, qy, qz, qw = values[3:]
         if not 0.81 < qx * qx + qy * qy + qz * qz + qw * qw < 1.21:
             return Accepted.BAD_QUATERNION
         window = self.guards.clock_window
@@ -272,24 +283,35 @@ class TfCache:
         from ..core.types import TrackerFrame
 
         S = len(config.sites)
-        positions = np.full((S, 3), np.nan)
-        orientations = np.full((S, 4), np.nan)
-        valid = np.zeros(S, dtype=bool)
-        stamps = np.full(S, -np.inf)
+        # rows gathered as tuples and made arrays once: a frame is sampled for every /tf message
+        nowhere, unturned = (math.nan,) * 3, (math.nan,) * 4
+        positions, orientations = [nowhere] * S, [unturned] * S
+        valid, stamps = [False] * S, [-math.inf] * S
         for s, site in enumerate(config.sites):
-            found = self.lookup(config.fixed_frame, site.frame_id)
-            if found is None:
-                continue
-            t_stamp, t, q = found
-            stamps[s] = t_stamp if np.isfinite(t_stamp) else stamp
-            if not np.sqrt(t @ t) <= self.guards.play_radius:
+            edge = self._edges.get(site.frame_id)
+            if edge is not None and edge.parent == config.fixed_frame:  # the usual tracker, as lookup's
+                t_stamp, t, q = (math.inf if edge.static else edge.stamp), edge.translation, edge.rotation
+            else:
+                found = self.lookup(config.fixed_frame, site.frame_id)
+                if found is None:
+                    continue
+                t_stamp, t, q = found
+            stamps[s] = t_stamp if t_stamp != math.inf else stamp
+            if not math.sqrt(t[0] * t[0] + t[1] * t[1] + t[2] * t[2]) <= self.guards.play_radius:
                 self.refused[Accepted.OUT_OF_PLAY_SPACE] += 1
                 continue
             if stamp - stamps[s] > self.budget(site.frame_id, stale_after):
                 continue
             valid[s] = True
             if site.has_position:
-                positions[s] = t
+                positions[s] = tuple(t)
             if site.has_orientation:
-                orientations[s] = q
-        return TrackerFrame(stamp, config.site_names, positions, orientations, valid), stamps
+                orientations[s] = tuple(q)
+        frame = TrackerFrame(
+            stamp,
+            config.site_names,
+            np.array(positions, np.float64).reshape(S, 3),
+            np.array(orientations, np.float64).reshape(S, 4),
+            np.array(valid, bool),
+        )
+        return frame, np.array(stamps, np.float64)

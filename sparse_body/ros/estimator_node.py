@@ -38,7 +38,7 @@ from ..core.sensors import SensorConfigError, load_sensor_config
 from ..core.skeleton import JOINT_NAMES, standing_pose
 from ..core.tracker_filter import PREFIX as FILTER
 from ..core.tracker_filter import UPPER, FilterConfig
-from ..core.types import BodyPose
+from ..core.types import BodyPose, BodyPoses
 from ..estimators import create_estimator
 from ..estimators.base import Estimator, parse_estimator_spec
 from ..estimators.budget import BudgetedStep
@@ -588,7 +588,13 @@ class EstimatorNode(LifecycleNode):
         quats, root = pose.local_quats[None], pose.root_position[None]
         angles = joint_angles(quats)  # once: the JointState and the URDF's massless links
         (joints,), (contacts,), (status,) = cdr.estimate_messages(
-            [pose], self.skeleton, frame_id, reason or HELD, stamps=[stamp], angles=angles, valid_message=reason
+            BodyPoses.of([pose]),
+            self.skeleton,
+            frame_id,
+            reason or HELD,
+            stamps=[stamp],
+            angles=angles,
+            valid_message=reason,
         )
         self.pub_joints.publish(joints)
         self.pub_contacts.publish(contacts)

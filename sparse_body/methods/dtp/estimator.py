@@ -27,7 +27,7 @@ from __future__ import annotations
 
 import bisect
 from collections import deque
-from collections.abc import Iterable
+from collections.abc import Iterable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
 from typing import cast
@@ -237,43 +237,55 @@ class DtpEstimator(Estimator):
                 glob[j] = sample.turns[j]  # (what hangs below, a toe, is placed from it by the caller)
         return local, glob, pos
 
-    def process(self, stream: TrackerStream | Iterable[TrackerFrame]) -> list[BodyPose]:
+    def stream(self, frames: TrackerStream | Iterable[TrackerFrame]) -> Iterator[BodyPose]:
         """One pose per frame; with a lookahead model each frame also sees the `future`
         frames after it (offline), else as step() does. Each frame's pose is made as soon as
         the frames after it are sampled, so that sampling sees the poses before it (a
-        returning tracker is eased from where the last pose had its joint)."""
+        returning tracker is eased from where the last pose had its joint). Only the frames a
+        window can still reach are kept: a recording of any length in bounded memory."""
         if not self.model.future:
-            return super().process(stream)
+            yield from super().stream(frames)
+            return
         self.reset()
-        frames = list(stream)
-        samples: list[Sample | None] = []
-        run_of: list[int] = []  # runs of usable frames without a gap longer than max_gap: a window stays within one
-        poses: list[BodyPose] = []
+        seen: dict[int, TrackerFrame] = {}  # by frame index, from the oldest a window reaches
+        samples: dict[int, Sample | None] = {}
+        run_of: dict[
+            int, int
+        ] = {}  # runs of usable frames without a gap longer than max_gap: a window stays within one
+        past, future = self.model.past, self.model.future
 
-        def pose_of(i: int) -> BodyPose:
+        def pose_of(i: int, count: int) -> BodyPose:
             s = samples[i]
             if s is None:
-                return self._checked(frames[i].stamp, None)
+                return self._checked(seen[i].stamp, None)
             lo, hi = i, i
-            while lo > i - self.model.past and lo > 0 and run_of[lo - 1] == run_of[i]:
+            while lo > i - past and lo > 0 and run_of[lo - 1] == run_of[i]:
                 lo -= 1
-            while hi < i + self.model.future and hi + 1 < len(samples) and run_of[hi + 1] == run_of[i]:
+            while hi < i + future and hi + 1 < count and run_of[hi + 1] == run_of[i]:
                 hi += 1
-            x = self._features(cast(list[Sample], samples[lo : hi + 1]), i - lo)  # one run: no gaps
-            return self._checked(frames[i].stamp, self._pose(s, self.model.run(x, i - lo)))
+            window = [samples[k] for k in range(lo, hi + 1)]
+            x = self._features(cast(list[Sample], window), i - lo)  # one run: no gaps
+            return self._checked(seen[i].stamp, self._pose(s, self.model.run(x, i - lo)))
 
-        run = 0
+        def forget_before(i: int) -> None:
+            for table in (seen, samples, run_of):
+                table.pop(i - past - 1, None)  # (lo - 1 >= i - past - 1 is the oldest read)
+
+        run, count = 0, 0
         for j, frame in enumerate(self.filtered(frames)):
+            seen[j] = frame
             s = self.sample(frame)
             if (
                 s is not None
                 and j
-                and (samples[j - 1] is None or not 0 < frames[j].stamp - frames[j - 1].stamp <= self.max_gap)
+                and (samples[j - 1] is None or not 0 < frame.stamp - seen[j - 1].stamp <= self.max_gap)
             ):
                 run += 1
-            samples.append(s)
-            run_of.append(run if s is not None else -1)
-            if j >= self.model.future:
-                poses.append(pose_of(j - self.model.future))
-        poses += [pose_of(i) for i in range(len(poses), len(frames))]
-        return poses
+            samples[j] = s
+            run_of[j] = run if s is not None else -1
+            count = j + 1
+            if j >= future:
+                yield pose_of(j - future, count)
+                forget_before(j - future)
+        for i in range(max(0, count - future), count):
+            yield pose_of(i, count)

@@ -48,6 +48,8 @@ def test_a_missing_robot_state_publisher_is_said_and_nothing_is_started_for_it(m
         "robot_state_publisher": "true",
         "foxglove_port": "0",
         "foxglove_host": "127.0.0.1",
+        "step_budget": "0.0",
+        "budget_fallback": "ik",
     }.items():
         context.launch_configurations[name] = value
     actions = module._nodes(context)
@@ -85,6 +87,8 @@ def test_a_calibration_file_is_the_body_of_the_estimator_and_of_robot_state_publ
         "robot_state_publisher": "true",
         "foxglove_port": "0",
         "foxglove_host": "0.0.0.0",
+        "step_budget": "0.0",
+        "budget_fallback": "ik",
     }.items():
         context.launch_configurations[name] = value
     actions = module._nodes(context)

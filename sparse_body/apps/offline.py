@@ -14,7 +14,14 @@ from ..core.types import BodyPose, BodyPoses, TrackerStream
 from ..data.motion import Motion
 from ..data.virtual_trackers import NO_NOISE, TrackerNoise, synthesize_trackers
 from ..estimators import create_estimator
-from ..io.bagio import ESTIMATE_TOPICS, bag_folder, check_output, tracker_frame_count, write_tracker_bag
+from ..io.bagio import (
+    ESTIMATE_TOPICS,
+    bag_folder,
+    check_output,
+    interrupts_held,
+    tracker_frame_count,
+    write_tracker_bag,
+)
 from ..io.estimate_bag import check_topics
 from ..io.tf_guards import TfGuards
 from ..io.topics import COMPRESSIONS
@@ -94,8 +101,11 @@ def process_bag(
         reader: Reader | ForkedReader
         writer: Writer | ForkedWriter
         if parallel:  # forked before the estimator starts threads (ONNX Runtime's)
-            reader = stack.enter_context(ForkedReader(bag_in, sensors, stale_after, guards))
-            writer = stack.enter_context(ForkedWriter(tmp, made_with, compression, (reader.conn,), **bag))
+            # A child made but not yet in the stack would outlive a Ctrl-C (it ignores signals)
+            # and hold the exit forever: the two are one step (a Ctrl-C 1.5 s in did it).
+            with interrupts_held():
+                reader = stack.enter_context(ForkedReader(bag_in, sensors, stale_after, guards))
+                writer = stack.enter_context(ForkedWriter(tmp, made_with, compression, (reader.conn,), **bag))
             reader.start()  # the threads that feed the pipes, once both children are forked
             writer.start()
         else:

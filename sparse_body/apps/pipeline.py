@@ -99,6 +99,7 @@ def _in_child(*inherited: Connection) -> None:
     ends."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     signal.signal(signal.SIGTERM, signal.SIG_IGN)
+    signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT, signal.SIGTERM})  # held by the fork (offline.py)
     # The estimation bounds the run: given a core whenever it can run, it never waits on the
     # reader or the writer, which share what is left (on 2 cores, the whole 10-minute ik run
     # took 5.3-5.4 s without it and 4.2-4.5 s with it)

@@ -178,15 +178,23 @@ def check_output(path: Path, overwrite: bool = False, inputs: tuple[Path, ...] =
 _INTERRUPTS = frozenset({signal.SIGINT, signal.SIGTERM})
 
 
+@contextmanager
+def interrupts_held():
+    """SIGINT and SIGTERM wait until the block ends (then a signal held meanwhile is delivered):
+    for two steps that must not be parted, such as making something and taking charge of it."""
+    held = signal.pthread_sigmask(signal.SIG_BLOCK, _INTERRUPTS)
+    try:
+        yield
+    finally:
+        signal.pthread_sigmask(signal.SIG_SETMASK, held)
+
+
 def _probe_writable(parent: Path, name: str) -> None:
     """Make and remove an empty hidden folder in `parent` (OSError where we may not write).
     Ctrl-C and SIGTERM wait until it is gone: landing between the two, they left the probe
     behind in a user's folder (test_batch's Ctrl-C test, once on a loaded machine)."""
-    held = signal.pthread_sigmask(signal.SIG_BLOCK, _INTERRUPTS)
-    try:
+    with interrupts_held():
         os.rmdir(tempfile.mkdtemp(prefix=f".{name}.probe-", dir=parent))
-    finally:
-        signal.pthread_sigmask(signal.SIG_SETMASK, held)  # a signal held meanwhile is delivered now
 
 
 def _partial(path: Path, pid: int | str) -> Path:

@@ -46,7 +46,10 @@ class BudgetedStep:
             late, self._running = self._running, None
             late.result()  # its pose is dropped; its error, if any, is raised here
         running = self._worker.submit(self.estimator.step, frame)
-        wait = None if deadline == math.inf else max(0.0, deadline - time.monotonic())
+        wait = None if deadline == math.inf else deadline - time.monotonic()
+        if wait is not None and wait <= 0.0:  # past already: not waited for, whatever the worker does
+            self._running = running
+            return self.fallback.step(frame), True
         try:
             return running.result(timeout=wait), False
         except Pending:

@@ -17,6 +17,7 @@ from ..estimators import create_estimator
 from ..io.bagio import (
     ESTIMATE_TOPICS,
     bag_folder,
+    check_compression,
     check_output,
     interrupts_held,
     tracker_frame_count,
@@ -24,7 +25,6 @@ from ..io.bagio import (
 )
 from ..io.estimate_bag import check_topics
 from ..io.tf_guards import TfGuards
-from ..io.topics import COMPRESSIONS
 from .pipeline import ForkedReader, ForkedWriter, Reader, Writer, can_fork
 
 
@@ -87,8 +87,7 @@ def process_bag(
 
     clock = time.perf_counter()
     check_topics(topics)
-    if compression not in COMPRESSIONS:
-        raise ValueError(f"compression {compression!r}: one of {', '.join(COMPRESSIONS)}")
+    check_compression(compression)
     parallel = can_fork() if parallel is None else parallel
     made_with = settings_record(estimator, options, sensors, skeleton, fps, topics, axis_links)
     bag = dict(

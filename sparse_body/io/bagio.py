@@ -83,14 +83,21 @@ def _transform_msg(store, seconds, parent, child, translation, rotation):
     )
 
 
-def _log_times(stamps) -> list[int]:
-    """Bag (receive) times in ns: the stamps, kept increasing. Readers return messages in
-    this order, so a header clock that jumps back must not reorder the recording."""
-    out, last = [], -1
+def log_times(stamps, last: int = -1) -> list[int]:
+    """Bag (receive) times in ns: the stamps, kept increasing from `last` (the time written
+    before them, for a recording written in chunks). Readers return messages in this order,
+    so a header clock that jumps back must not reorder the recording."""
+    out = []
     for t in stamps:
         last = max(last + 1, int(round(t * 1e9)))
         out.append(last)
     return out
+
+
+def check_compression(compression: str) -> None:
+    """ValueError naming the choices for a compression an output bag cannot have."""
+    if compression not in COMPRESSIONS:
+        raise ValueError(f"compression {compression!r}: one of {', '.join(COMPRESSIONS)}")
 
 
 # The key this package writes into every bag's metadata.yaml (custom_data): an existing path
@@ -241,8 +248,7 @@ def open_writer(tmp: Path, made_with: str = "", compression: str = "zstd"):
     """A rosbag2 (MCAP) Writer at bag_folder's temporary path, closed (its summary and
     metadata written) when the block ends. Its chunks are compressed with `compression`
     (COMPRESSIONS)."""
-    if compression not in COMPRESSIONS:
-        raise ValueError(f"compression {compression!r}: one of {', '.join(COMPRESSIONS)}")
+    check_compression(compression)
     writer = Writer(tmp, version=8, storage_plugin=StoragePlugin.MCAP)
     if compression != "none":
         writer.set_compression(CompressionMode.STORAGE, CompressionFormat.ZSTD)  # chunks, not the file
@@ -260,8 +266,7 @@ def bag_writer(
     path: Path, overwrite: bool = False, inputs: tuple[Path, ...] = (), made_with: str = "", compression: str = "zstd"
 ):
     """open_writer in bag_folder: a bag that takes its name only once it is whole."""
-    if compression not in COMPRESSIONS:  # before any folder is made
-        raise ValueError(f"compression {compression!r}: one of {', '.join(COMPRESSIONS)}")
+    check_compression(compression)  # before any folder is made
     with bag_folder(path, overwrite, inputs) as tmp, open_writer(tmp, made_with, compression) as writer:
         yield writer
 
@@ -292,7 +297,7 @@ def write_tracker_bag(
     TFMessage = store.types[TF_TYPE]
     with bag_writer(path, overwrite, inputs) as writer:
         conn = writer.add_connection(TF_TOPIC, TF_TYPE, typestore=store)
-        log_ns = _log_times(start + np.asarray(stream.times, dtype=float))
+        log_ns = log_times(start + np.asarray(stream.times, dtype=float))
         for i in range(len(stream)):
             t = start + float(stream.times[i])
             transforms = []

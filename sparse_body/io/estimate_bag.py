@@ -12,7 +12,7 @@ from ..core.sensors import SensorConfig
 from ..core.skeleton import Skeleton
 from ..core.types import BodyPose, BodyPoses, TrackerStream
 from . import cdr
-from .bagio import TF_TYPE, bag_writer, typestore
+from .bagio import TF_TYPE, bag_writer, log_times, typestore
 from .output import TransformTable, axis_link_table, body_table, joint_angles, tracker_sites, tracker_table
 from .topics import CONTACTS_TOPIC, DESCRIPTION_TOPIC, ESTIMATE_TOPICS, JOINT_STATES_TOPIC, STATUS_TOPIC, TF_TOPIC
 from .urdf import body_urdf
@@ -89,12 +89,8 @@ class EstimateBagWriter:
         if TF_TOPIC in self.topics:
             shown = (self.sensors, trackers) if self.sensors is not None and trackers is not None else None
             per_frame[TF_TOPIC] = self._tf_messages(poses, angles if self.axis_links else None, shown)
-        # Bag (receive) times in ns: the stamps, kept increasing. Readers return messages in
-        # this order, so a header clock that jumps back must not reorder the recording.
-        log_ns = []
-        for t in poses.stamps:
-            self._last_ns = max(self._last_ns + 1, int(round(t * 1e9)))
-            log_ns.append(self._last_ns)
+        log_ns = log_times(poses.stamps, self._last_ns)
+        self._last_ns = log_ns[-1]
         if not self._described:
             c_urdf = self.writer.add_connection(
                 DESCRIPTION_TOPIC, "std_msgs/msg/String", typestore=self.store, offered_qos_profiles=[LATCHED]

@@ -152,6 +152,23 @@ def test_leftovers_of_killed_writers_go_and_nothing_else(tmp_path):
     assert (someone / "notes.txt").read_text() == "mine" and link.is_symlink()
 
 
+def test_a_worker_stops_once_and_a_second_sigterm_cannot_break_its_clean_up(monkeypatch):
+    # the pool sends SIGTERM to every worker again when one ends (concurrent.futures counts
+    # itself broken): a second _Stopped inside the first one's clean-up left a half-written bag
+    from sparse_body.apps import batch
+
+    previous = signal.getsignal(signal.SIGTERM)
+    monkeypatch.setattr(batch, "_writing", True)
+    try:
+        signal.signal(signal.SIGTERM, batch._stop)
+        with pytest.raises(batch._Stopped):
+            batch._stop(signal.SIGTERM, None)
+        assert signal.getsignal(signal.SIGTERM) == signal.SIG_IGN
+        os.kill(os.getpid(), signal.SIGTERM)  # the second one: nothing happens
+    finally:
+        signal.signal(signal.SIGTERM, previous)
+
+
 def test_a_bag_that_took_its_name_as_the_run_was_stopped_is_in_the_summary(tmp_path, monkeypatch):
     # CI once caught a worker ended by the stop after its bag was in place but before its
     # result came back: the bag was kept and the summary did not list it. Here the stop comes

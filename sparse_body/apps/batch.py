@@ -86,7 +86,7 @@ CONNECT_TIMEOUT = 10.0  # s for the cluster's head to answer
 STOP_FILE = ".sparse_body_stop"  # in the output folder while a stopped cluster run waits for its tasks
 STOP_WORDS = "sparse-body process --cluster: stop\n"  # what STOP_FILE holds (a leftover one is ours)
 STOP_POLL = 0.2  # s between a cluster task's looks for STOP_FILE
-STOP_WAIT = 60.0  # s a stopped cluster run waits for its tasks to remove their half-written bags
+STOP_WAIT = 60.0  # s a stopped run waits for its workers or tasks to remove their half-written bags
 
 
 def is_bag(path: Path) -> bool:
@@ -130,6 +130,10 @@ _writing = False  # in a worker: a bag is being processed
 
 def _stop(signum, frame):
     if _writing:
+        # Once: when another worker ends, the pool counts itself broken and sends SIGTERM to
+        # every worker again (concurrent.futures' terminate_broken), and a second _Stopped
+        # landing in this one's clean-up left its half-written bag (CI, stop 59)
+        signal.signal(signal.SIGTERM, signal.SIG_IGN)
         raise _Stopped
     os._exit(143)  # between bags: nothing to clean up
 
@@ -352,7 +356,14 @@ def _run_here(tasks: list[Task], settings: Settings, jobs: int, record) -> None:
             for process in workers:
                 process.terminate()  # SIGTERM: each removes its half-written bag (bagio.bag_writer)
             for process in workers:
-                process.join(timeout=10)
+                process.join(timeout=STOP_WAIT)
+                if process.is_alive():  # stuck: it ignores a second SIGTERM
+                    process.kill()
+                    process.join()
+            # no worker runs now: what one could not remove (a stop landing in its clean-up, a
+            # kill) goes here, never left for the next run over the folder
+            for _, _, out in tasks:
+                remove_leftovers(out)
             # a bag that finished as the run was stopped is on disk: the summary says so too
             wait(pending, timeout=1.0)
             for future, i in pending.items():

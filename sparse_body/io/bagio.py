@@ -230,8 +230,8 @@ def bag_folder(path: Path, overwrite: bool = False, inputs: tuple[Path, ...] = (
     tmp = partial / path.name
     old = path.with_name(f".{path.name}.replaced-{os.getpid()}")
     shutil.rmtree(partial, ignore_errors=True)
-    partial.mkdir()
     try:
+        partial.mkdir()  # inside: an interrupt right after it must not leave the folder
         yield tmp
         check_output(path, overwrite, inputs)  # nothing else may have appeared meanwhile
         if path.exists():

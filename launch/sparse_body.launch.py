@@ -2,9 +2,9 @@
 
     ros2 launch sparse_body sparse_body.launch.py sensors:=four_point estimator:=lobstr bag:=/path/to/trackers
 
-Arguments: sensors, estimator, model_path, refine, height, calibration (a T-pose calibration
-file: its fitted body replaces the height-scaled one), bag (the tracker source; empty:
-trackers come from elsewhere on /tf), loop (replay the bag again and again), rviz,
+Arguments: sensors, estimator, model_path, refine, step_budget, budget_fallback, predict_ahead,
+height, calibration (a T-pose calibration file: its fitted body replaces the height-scaled one),
+bag (the tracker source; empty: trackers come from elsewhere on /tf), loop (replay the bag again and again), rviz,
 robot_state_publisher, foxglove_port and foxglove_host (the live view). The estimator is a
 lifecycle node; it is configured and activated here through its autostart parameter.
 """
@@ -18,6 +18,7 @@ from launch.substitutions import LaunchConfiguration
 from launch_ros.actions import LifecycleNode, Node
 
 from launch import LaunchDescription
+from sparse_body.estimators.base import estimator_names
 
 
 def _installed(package: str) -> bool:
@@ -46,6 +47,7 @@ def _nodes(context):
             "model_path": arg("model_path"),
             "step_budget": float(arg("step_budget")),
             "budget_fallback": arg("budget_fallback"),
+            "predict_ahead": float(arg("predict_ahead")),
             "foxglove_port": int(arg("foxglove_port")),
             "foxglove_host": arg("foxglove_host"),
             "publish_link_tf": False,
@@ -121,7 +123,7 @@ def generate_launch_description():
             DeclareLaunchArgument(
                 "estimator",
                 default_value="ik",
-                description="estimation method: ik, lobstr, dragposer, dtp, avatarjlm (options as NAME:key=value)",
+                description=f"estimation method: {', '.join(estimator_names())} (options as NAME:key=value)",
             ),
             DeclareLaunchArgument(
                 "model_path", default_value="", description="model file of a learned estimator (empty: the shipped one)"
@@ -136,6 +138,11 @@ def generate_launch_description():
                 "budget_fallback",
                 default_value="ik",
                 description="the cheaper estimator for a frame over budget (empty: every step is waited for)",
+            ),
+            DeclareLaunchArgument(
+                "predict_ahead",
+                default_value="0.0",
+                description="seconds past the trackers' stamp the body is forecast and stamped (0 to 0.2; 0: none)",
             ),
             DeclareLaunchArgument("height", default_value="1.75", description="the person's height in metres"),
             DeclareLaunchArgument(

@@ -42,11 +42,14 @@ def cmd_eval(args) -> int:
         split_items,
         untrained_categories,
     )
+    from .core.forecast import MAX_AHEAD
     from .core.sensors import load_sensor_config
     from .data.field_protocol import Protocol
     from .methods import METHODS, paper_figures
 
     sensors = load_sensor_config(args.sensors)
+    if args.horizon is not None and not 0.0 <= args.horizon <= MAX_AHEAD:
+        raise ValueError(f"--horizon must be from 0 to {MAX_AHEAD:g} seconds, got {args.horizon:g}")
     specs, reference = list(args.estimator), {}
     if not args.no_compare:
         for name in args.estimator:
@@ -106,6 +109,7 @@ def cmd_eval(args) -> int:
         out=out,
         progress=not args.quiet,
         warn=lambda text: print(f"warning: {text}", file=sys.stderr),
+        **({} if args.horizon is None else {"horizon": args.horizon}),
     )
     if not results[0].clips:
         raise ValueError(
@@ -700,6 +704,14 @@ def build_parser() -> argparse.ArgumentParser:
         "--intervals",
         action="store_true",
         help="each mean in the table with its 95 %% bootstrap intervals, clips drawn and people drawn",
+    )
+    p.add_argument(
+        "--horizon",
+        type=float,
+        metavar="SECONDS",
+        help="score each pose against the body this long after its frame (default: the estimator's "
+        "predict_ahead; a horizon without predict_ahead: the present pose given as the later one, what a "
+        "forecast must beat)",
     )
     p.add_argument(
         "--per-joint",

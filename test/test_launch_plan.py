@@ -50,6 +50,7 @@ def test_a_missing_robot_state_publisher_is_said_and_nothing_is_started_for_it(m
         "foxglove_host": "127.0.0.1",
         "step_budget": "0.0",
         "budget_fallback": "ik",
+        "predict_ahead": "0.0",
     }.items():
         context.launch_configurations[name] = value
     actions = module._nodes(context)
@@ -89,6 +90,7 @@ def test_a_calibration_file_is_the_body_of_the_estimator_and_of_robot_state_publ
         "foxglove_host": "0.0.0.0",
         "step_budget": "0.0",
         "budget_fallback": "ik",
+        "predict_ahead": "0.0",
     }.items():
         context.launch_configurations[name] = value
     actions = module._nodes(context)

@@ -196,6 +196,22 @@ def test_replayed_bag_gives_one_valid_estimate_per_tracker_frame_with_small_end_
     assert np.mean(errors) < 0.02, f"mean end-effector error {np.mean(errors) * 100:.2f} cm"
 
 
+def test_predict_ahead_publishes_the_body_stamped_that_far_past_its_trackers(ros_env, tmp_path):
+    # 105 ms: not a whole number of 60 Hz frames, so a forecast stamp is never a tracker's
+    ahead = 0.105
+    motion, config = synthetic_walk(4.0), load_sensor_config("six_point")
+    listener = replay_bag(rclpy, ros_env, tmp_path, motion, config, {"estimator": "ik", "predict_ahead": ahead})
+    valid = [s for s in listener.received["estimate_status"] if s.valid]
+    assert len(valid) >= 0.5 * len(motion), f"{len(valid)} valid estimates of {len(motion)} frames"
+    tracker, shift = set(listener.tracker_stamps), round(ahead * 1e5)
+    keys = [stamp_key(s.header.stamp) for s in valid]
+    ahead_of_a_frame = [k for k in keys if {k - shift - 1, k - shift, k - shift + 1} & tracker]
+    assert len(ahead_of_a_frame) >= 0.9 * len(keys), sorted(set(keys) - set(ahead_of_a_frame))[:5]
+    assert not [k for k in keys if k in tracker]
+    states = listener.received["joint_states"]
+    assert all(np.all(np.isfinite(m.position)) for m in states)
+
+
 def test_a_step_over_its_budget_gives_the_fallbacks_pose_flagged_and_counted(ros_env, tmp_path):
     """DragPoser with a budget no step can keep (a microsecond): the frames are ik's, valid,
     said so on estimate_status and counted on /diagnostics, and none is lost; without a

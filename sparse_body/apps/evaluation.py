@@ -218,6 +218,7 @@ class Estimated:
     global_rotations: np.ndarray  # (T, 22, 3, 3)
     local_rotations: np.ndarray  # (T, 22, 3, 3)
     contacts: np.ndarray  # (T, 2) left, right
+    horizon: int = 0  # frames after its own frame each pose is of (predict_ahead), scored there
 
 
 def estimate_motion(
@@ -226,6 +227,7 @@ def estimate_motion(
     sensors: SensorConfig,
     protocol: Protocol = FIELD,
     seed: int = 0,
+    horizon: float | None = None,
     **options,
 ) -> Estimated:
     """The estimate of one motion from its own virtual trackers as the protocol hands them to
@@ -234,7 +236,9 @@ def estimate_motion(
     The motion is first moved so that its floor is z = 0, as in a calibrated VR play space:
     estimators that need the floor (IK contacts, LoBSTr's reference height) find it there.
     The estimate's joints are placed with the body the estimator was given, as a user's
-    avatar or robot would show them."""
+    avatar or robot would show them. Each pose is scored against the body `horizon` seconds
+    after its frame (None: the estimator's predict_ahead): `horizon` without predict_ahead is
+    the baseline a forecast must beat, the present pose given as the later one."""
     floor = estimate_floor(motion.positions)
     motion = Motion(
         motion.name, motion.fps, motion.skeleton, motion.local_quats, motion.root_positions - [0.0, 0.0, floor]
@@ -246,7 +250,11 @@ def estimate_motion(
     local = quat_to_matrix(np.stack([p.local_quats for p in poses]))
     root = np.stack([p.root_position for p in poses])
     glob, pos = forward_kinematics(local, root, view.skeleton.offsets)
-    return Estimated(motion, view, pos, glob, local, np.stack([p.contact for p in poses]))
+    ahead = round((estimator.ahead if horizon is None else horizon) * motion.fps)
+    if not 0 <= ahead < len(motion) - 1:
+        raise ValueError(f"a horizon of {ahead} frames does not fit the {len(motion)}-frame motion {motion.name}")
+    contacts = np.stack([p.contact for p in poses])
+    return Estimated(motion, view, pos, glob, local, contacts, ahead)
 
 
 def evaluate_motion(*args, per_joint: bool = False, **options) -> dict[str, float]:
@@ -258,27 +266,32 @@ def evaluate_motion(*args, per_joint: bool = False, **options) -> dict[str, floa
 def score(run: Estimated, per_joint: bool = False) -> dict[str, float]:
     """The metrics of an estimate against the motion it was made from."""
     motion, floor = run.motion, 0.0
-    gt_contacts = contact_labels(motion.positions, motion.fps, floor)
+    # pose t against the body at t + horizon: the first frames have no pose of their time
+    made, true = slice(0, len(motion) - run.horizon), slice(run.horizon, len(motion))
+    gt_pos = motion.positions[true]
+    gt_contacts = contact_labels(motion.positions, motion.fps, floor)[true]
     tracked = sorted({s.joint_index for s in run.view.sensors.sites})
     metrics = sequence_metrics(
-        run.positions,
-        run.global_rotations,
-        run.local_rotations,
-        motion.positions,
-        motion.global_rotations,
-        motion.local_rotations,
+        run.positions[made],
+        run.global_rotations[made],
+        run.local_rotations[made],
+        gt_pos,
+        motion.global_rotations[true],
+        motion.local_rotations[true],
         motion.fps,
         floor,
         gt_contacts,
-        run.contacts,
+        run.contacts[made],
         tracked,
     )
     lost = run.view.stream.lost
     if lost is not None:  # a protocol that takes trackers out of view (--hand-loss)
         joints = [site.joint_index for site in run.view.sensors.sites]
-        metrics.update(loss_metrics(run.positions, motion.positions, lost, joints, motion.fps))
+        metrics.update(loss_metrics(run.positions[made], gt_pos, lost[made], joints, motion.fps))
     if per_joint:
-        metrics.update(per_joint_metrics(run.positions, motion.positions, run.local_rotations, motion.local_rotations))
+        metrics.update(
+            per_joint_metrics(run.positions[made], gt_pos, run.local_rotations[made], motion.local_rotations[true])
+        )
     return metrics
 
 

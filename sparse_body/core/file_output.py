@@ -17,8 +17,8 @@ from __future__ import annotations
 
 import contextlib
 import os
+import secrets
 import stat
-import tempfile
 from collections.abc import Callable
 from pathlib import Path
 
@@ -29,9 +29,6 @@ class OutputError(ValueError):
 
 # how much of an existing file is read to find its marker
 HEAD_BYTES = 64 * 1024
-# the permissions a plainly created file gets (mkstemp's own are 0600)
-_UMASK = os.umask(0o022)
-os.umask(_UMASK)
 
 
 def read_head(path: Path) -> bytes:
@@ -83,10 +80,12 @@ def write_file(
     path = check_target(path, ours, overwrite, what)
     if isinstance(data, str):
         data = data.encode("utf-8")
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".partial", dir=path.absolute().parent)
+    # named before it is made, so that an interrupt right after it is made removes it too (one
+    # landing between mkstemp's return and the cleanup's try left it: CI's Ctrl-C test)
+    tmp = path.absolute().parent / f".{path.name}.{secrets.token_hex(6)}.partial"
     try:
+        fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL | getattr(os, "O_BINARY", 0), 0o666)  # umask applies
         with os.fdopen(fd, "wb") as f:
-            os.fchmod(f.fileno(), 0o666 & ~_UMASK)
             f.write(data)
         check_target(path, ours, overwrite, what)  # nothing else may have appeared meanwhile
         os.replace(tmp, path)

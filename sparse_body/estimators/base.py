@@ -13,6 +13,7 @@ import yaml
 
 from ..core import mat3
 from ..core.fixed_lag import FixedLagSmoother
+from ..core.forecast import MAX_AHEAD, PoseForecast
 from ..core.kinematics import forward_kinematics
 from ..core.mat3 import njit
 from ..core.reacquire import FreezeGuard, Reacquisition
@@ -124,6 +125,17 @@ class Estimator(ABC):
         self._mounting_sites: tuple[str, ...] = ()
         self._rows: dict[tuple, np.ndarray] = {}  # full_targets: (frame sites, sites) -> rows
         self.use_filter(FilterConfig())
+        self.use_forecast(0.0)
+
+    def use_forecast(self, ahead: float) -> None:
+        """Give each pose `ahead` seconds past its frame, forecast (core/forecast.py; the
+        option predict_ahead), from the next reset."""
+        self.forecast = PoseForecast(ahead)
+
+    @property
+    def ahead(self) -> float:
+        """Seconds by which a step's pose is forecast past its frame (predict_ahead)."""
+        return self.forecast.ahead
 
     def use_filter(self, config: FilterConfig, smooth: bool = False) -> None:
         """Filter the tracker input this way from now on (from the next reset: no history).
@@ -160,6 +172,7 @@ class Estimator(ABC):
         self._last: BodyPose | None = None
         self._shown: BodyPose | None = None  # the last pose given, valid or held
         self.input_filter.reset()
+        self.forecast.reset()
         self.reacquisition.reset()
         if self.freeze_guard is not None:
             self.freeze_guard.reset()
@@ -175,8 +188,8 @@ class Estimator(ABC):
         long before, and held (invalid) until as many frames have come since a reset."""
         filtered = self.input_filter(frame if self.freeze_guard is None else self.freeze_guard(frame))
         if filtered is None:
-            return self.held_pose(frame.stamp - self.lag)
-        return self._step_filtered(filtered)
+            return self.forecast.forecast(self.held_pose(frame.stamp - self.lag))
+        return self.forecast.forecast(self._step_filtered(filtered))
 
     def _step_filtered(self, frame: TrackerFrame) -> BodyPose:
         """step() on a frame the filter (or the offline smoother) has already seen."""
@@ -297,9 +310,10 @@ class Estimator(ABC):
         for frame in self.filtered(frames):
             if last is not None and frame.stamp < last - 1.0:  # the method starts over (the
                 self._last = None  # filter did so by itself)
+                self.forecast.reset()
                 self._reset()
             last = frame.stamp
-            yield self._step_filtered(frame)
+            yield self.forecast.forecast(self._step_filtered(frame))
 
 
 def parse_estimator_spec(spec: str) -> tuple[str, dict]:
@@ -320,7 +334,8 @@ def parse_estimator_spec(spec: str) -> tuple[str, dict]:
 def create_estimator(name: str, sensors: SensorConfig, skeleton: Skeleton, fps: float = 60.0, **options) -> Estimator:
     """An estimator by name with its options; filter_<field> options (of FilterConfig) set
     the tracker filter every estimator has, filter=false turns it off; smooth=true smooths
-    a whole recording in process() (offline) instead."""
+    a whole recording in process() (offline) instead; predict_ahead=SECONDS gives each pose
+    that far past its frame, forecast (core/forecast.py)."""
     from ..methods import METHODS, load
 
     if name not in METHODS:
@@ -329,6 +344,9 @@ def create_estimator(name: str, sensors: SensorConfig, skeleton: Skeleton, fps: 
     smooth = options.pop("smooth", False)
     if not isinstance(smooth, bool):
         raise ValueError(f"smooth must be true or false, got {smooth!r}")
+    ahead = options.pop("predict_ahead", 0.0)
+    if isinstance(ahead, bool) or not isinstance(ahead, (int, float)) or not 0.0 <= ahead <= MAX_AHEAD:
+        raise ValueError(f"predict_ahead must be a number of seconds from 0 to {MAX_AHEAD:g}, got {ahead!r}")
     cls = load(METHODS[name].estimator)
     known = cls.options()
     takes_more = any(
@@ -351,4 +369,5 @@ def create_estimator(name: str, sensors: SensorConfig, skeleton: Skeleton, fps: 
             raise
         raise ValueError(f"estimator {name!r}: {err}; its options are {', '.join(known)}") from None
     estimator.use_filter(filtering, smooth)
+    estimator.use_forecast(float(ahead))
     return estimator

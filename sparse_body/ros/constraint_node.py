@@ -27,7 +27,11 @@ from .estimator_node import main as estimator_main
 from .messages import to_seconds
 
 # the refiner's input is the estimate: no estimator to choose, nor one to fall back on
-PARAMETERS = {k: v for k, v in ESTIMATOR_PARAMETERS.items() if k not in ("estimator", "budget_fallback", "step_budget")}
+PARAMETERS = {
+    k: v
+    for k, v in ESTIMATOR_PARAMETERS.items()
+    if k not in ("estimator", "budget_fallback", "step_budget", "predict_ahead")
+}
 PARAMETERS.update(
     {
         "model_path": ("", "folder holding dragposer_encoder.onnx and dragposer_decoder.onnx; empty: the shipped"),

@@ -33,6 +33,7 @@ from std_msgs.msg import String
 from sparse_body.msg import EstimateStatus, FootContacts
 
 from ..core.calibration import CalibrationError, person_body
+from ..core.forecast import MAX_AHEAD
 from ..core.rotations import matrix_to_quat
 from ..core.sensors import SensorConfigError, load_sensor_config
 from ..core.skeleton import JOINT_NAMES, standing_pose
@@ -114,6 +115,12 @@ PARAMETERS = {
         "m/s: a tracker that comes back starts where the estimate had its joint and catches up "
         "at this speed (no snap); 0: at once",
     ),
+    "predict_ahead": (
+        0.0,
+        "seconds past the trackers' stamp the body is forecast and stamped (a teleoperation "
+        "loop cancels its own delay with it): each joint carried on at its fading velocity; 0: "
+        "the body at the trackers' stamp",
+    ),
     "output_rate": (
         60.0,
         "estimates per second when the trackers do not drive them (input slow, partial or "
@@ -175,6 +182,7 @@ RANGES = {
     **{FILTER + name: (0.0, high) for name, (high, _) in UPPER.items()},
     "output_rate": (0.1, 1000.0),
     "step_budget": (0.0, 1.0),
+    "predict_ahead": (0.0, MAX_AHEAD),
     "stale_timeout": (0.001, 10.0),
     "tracker_timeout": (0.01, 60.0),
     "clock_window": (0.0, 1e9),
@@ -360,9 +368,7 @@ class EstimatorNode(LifecycleNode):
         name, options = parse_estimator_spec(p["estimator"])
         if p["model_path"]:
             options["model_path"] = p["model_path"]
-        options.update(
-            {k: p[k] for k, (default, _) in self.PARAMETERS.items() if k.startswith(FILTER) and p[k] != default}
-        )
+        options.update(self._shared_options(p))
         return create_estimator(name, sensors, self.skeleton, fps=p["output_rate"], **options)
 
     def _make_budget_fallback(self, p: dict, sensors) -> Estimator | None:
@@ -371,10 +377,16 @@ class EstimatorNode(LifecycleNode):
         name, options = parse_estimator_spec(p["budget_fallback"]) if p["budget_fallback"] else ("", {})
         if not name or name == parse_estimator_spec(p["estimator"])[0]:
             return None
-        options.update(
-            {k: p[k] for k, (default, _) in self.PARAMETERS.items() if k.startswith(FILTER) and p[k] != default}
-        )
+        options.update(self._shared_options(p))
         return create_estimator(name, sensors, self.skeleton, fps=p["output_rate"], **options)
+
+    def _shared_options(self, p: dict) -> dict:
+        """What the estimator and its budget fallback are both given, so that their poses are
+        alike: the filter_* parameters a user set and predict_ahead."""
+        shared = {k: p[k] for k, (default, _) in self.PARAMETERS.items() if k.startswith(FILTER) and p[k] != default}
+        if p.get("predict_ahead"):
+            shared["predict_ahead"] = p["predict_ahead"]
+        return shared
 
     def _step_budget(self) -> float:
         return self.params["step_budget"] or 0.75 / self.params["output_rate"]
@@ -492,13 +504,15 @@ class EstimatorNode(LifecycleNode):
         frame, stamps, newest, no_input, silent = gathered
         pose, reason = self._step(frame, deadline)
         # Stamp the outputs with the newest tracker stamp used, so latency can be measured; with
-        # a filter lag the pose is that much older, and so are its stamp and its latency.
+        # a filter lag the pose is that much older, and so are its stamp and its latency; with
+        # predict_ahead it is of a later time, and so is its stamp (latency: from the trackers).
         source_time = float(stamps[frame.valid].max()) if frame.valid.any() else now
-        source_time -= max(0.0, frame.stamp - pose.stamp)
+        stamp = source_time + (pose.stamp - frame.stamp)
+        source_time = min(source_time, stamp)
         if not pose.valid:
             self._stats.invalid += 1
             reason = reason or self._held_reason(frame, no_input, silent)
-        self._publish(pose, source_time, reason)
+        self._publish(pose, stamp, reason)
         if self.live_view is not None:
             self.live_view.log_trackers(frame, self.sensors.fixed_frame, self._frames)
         self._last_step = time.monotonic()

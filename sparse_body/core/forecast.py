@@ -83,7 +83,7 @@ class PoseForecast:
             return pose
         dt = pose.stamp - last.stamp if last is not None else 0.0
         if not pose.valid or last is None or not 0.0 < dt <= MAX_GAP:
-            return _restamped(pose, pose.stamp + self.ahead)
+            return pose.restamped(pose.stamp + self.ahead)
         turn = _rotation_vectors(_quat_multiply(_inverse(last.local_quats), pose.local_quats)) / dt
         speed = np.linalg.norm(turn, axis=1, keepdims=True)
         turn *= np.minimum(1.0, MAX_TURN / np.maximum(speed, 1e-12))
@@ -102,14 +102,3 @@ class PoseForecast:
 
 def _inverse(q: np.ndarray) -> np.ndarray:
     return q * np.array([-1.0, -1.0, -1.0, 1.0])
-
-
-def _restamped(pose: BodyPose, stamp: float) -> BodyPose:
-    return BodyPose(
-        stamp,
-        pose.local_quats.copy(),
-        pose.root_position.copy(),
-        pose.contact_probability.copy(),
-        pose.contact.copy(),
-        pose.valid,
-    )

@@ -67,13 +67,17 @@ class BodyPose:
     def held(self, stamp: float) -> BodyPose:
         """This pose again at a later stamp, marked invalid: what an estimator or node
         outputs when it has too little input."""
+        return self.restamped(stamp, valid=False)
+
+    def restamped(self, stamp: float, valid: bool | None = None) -> BodyPose:
+        """A copy of this pose at another stamp (valid as this one unless given)."""
         return BodyPose(
             stamp,
             self.local_quats.copy(),
             self.root_position.copy(),
             self.contact_probability.copy(),
             self.contact.copy(),
-            valid=False,
+            self.valid if valid is None else valid,
         )
 
     def is_finite(self) -> bool:

@@ -272,3 +272,33 @@ def load_amc(amc_path: Path, skeleton: AsfSkeleton, fps: float = 120.0) -> Sourc
     return SourceMotion(
         stem(amc_path), "cmu_asf", order, [index[parent[n]] if n != "root" else -1 for n in order], rest, pos, rot, fps
     )
+
+
+def plain_name(path: Path) -> str:
+    return path.name.lower().removesuffix(".gz")
+
+
+def _lower_stem(path: Path) -> str:
+    return plain_name(path).rsplit(".", 1)[0]
+
+
+def skeleton_for(amc: Path, given: Path | None = None) -> tuple[Path, str]:
+    """The ASF of an AMC file and how it was found: the one given; the ASF beside it whose name
+    is the longest prefix of the AMC file's name (case ignored); the only ASF beside it (the
+    two layouts it serves: data/motion_inputs.py)."""
+    if given is not None:
+        return Path(given), "given"
+    beside = sorted(p for p in amc.parent.iterdir() if p.is_file() and plain_name(p).endswith(".asf"))
+    name = _lower_stem(amc)
+    prefixes = [p for p in beside if name.startswith(_lower_stem(p))]
+    if prefixes:
+        return max(prefixes, key=lambda p: len(_lower_stem(p))), "name prefix"
+    if len(beside) == 1:
+        return beside[0], "the only ASF in its folder"
+    found = ", ".join(p.name for p in beside) if beside else "none"
+    raise MotionFileError(
+        amc,
+        f"which skeleton? an AMC file gets the ASF beside it whose name starts its own name, "
+        f"or the only ASF in its folder (ASF files there: {found}); pair them as "
+        f"--motion AMC=ASF or pass --skeleton-file ASF",
+    )

@@ -15,7 +15,7 @@ import numpy as np
 from ..core.resources import config_dir
 from ..core.textfile import load_yaml, read_limited
 from . import MotionFileError
-from .asf_amc import load_amc, load_asf
+from .asf_amc import load_amc, load_asf, skeleton_for
 from .bvh import load_bvh
 from .motion import Motion
 from .retarget import retarget
@@ -258,7 +258,7 @@ def load_motion_file(
     path: Path, fps: float = DEFAULT_FPS, skeleton: Path | None = None, amc_fps: float = 120.0
 ) -> Motion:
     """Any supported motion file: .bvh, .amc (captured at amc_fps, with its .asf: given, or
-    found beside it by the rule of motion_inputs.skeleton_for), AMASS .npz (needs an SMPL
+    found beside it by the rule of asf_amc.skeleton_for), AMASS .npz (needs an SMPL
     model, see amass.py) or a sparse_body motion .npz."""
     path = Path(path)
     name = path.name.lower().removesuffix(".gz")  # .AMC, .BVH: the same formats
@@ -266,8 +266,6 @@ def load_motion_file(
         return _retargeted(path, load_bvh(path), fps)
     if name.endswith(".amc"):
         if skeleton is None:
-            from .motion_inputs import skeleton_for
-
             skeleton, _ = skeleton_for(path)
         return _retargeted(path, load_amc(path, load_asf(skeleton), fps=amc_fps), fps)
     if name.endswith(".npz"):

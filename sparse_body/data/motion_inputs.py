@@ -1,6 +1,7 @@
 """A user's motion files for `eval --motion`: which files, the ASF skeleton of each AMC file,
 the group (folder or name prefix) each belongs to, a seed from its identity, and a parse
-cache keyed by content.
+cache keyed by content. (The ASF of an AMC file is found by asf_amc.skeleton_for, which the
+loader uses too; its rule is here.)
 
 Distributions lay ASF/AMC out in two ways: CMU's, a folder per actor with its one ASF
 (16/16.asf beside 16_05.amc), and by motion class, a folder per class holding every actor's
@@ -21,6 +22,7 @@ from pathlib import Path
 import numpy as np
 
 from . import MotionFileError
+from .asf_amc import plain_name, skeleton_for
 from .catalog import CACHE_VERSION, MOTION_SUFFIXES, cache_dir, cached_motion, load_motion_file
 from .motion import Motion
 
@@ -41,39 +43,11 @@ class MotionInput:
 
     @property
     def is_amc(self) -> bool:
-        return _plain_name(self.path).endswith(".amc")
-
-
-def _plain_name(path: Path) -> str:
-    return path.name.lower().removesuffix(".gz")
-
-
-def _stem(path: Path) -> str:
-    return _plain_name(path).rsplit(".", 1)[0]
+        return plain_name(self.path).endswith(".amc")
 
 
 def _is_motion(path: Path) -> bool:
-    return path.is_file() and not path.name.startswith(".") and _plain_name(path).endswith(MOTION_SUFFIXES)
-
-
-def skeleton_for(amc: Path, given: Path | None = None) -> tuple[Path, str]:
-    """The ASF of an AMC file and how it was found (see the module's rule)."""
-    if given is not None:
-        return Path(given), "given"
-    beside = sorted(p for p in amc.parent.iterdir() if p.is_file() and _plain_name(p).endswith(".asf"))
-    stem = _stem(amc)
-    prefixes = [p for p in beside if stem.startswith(_stem(p))]
-    if prefixes:
-        return max(prefixes, key=lambda p: len(_stem(p))), "name prefix"
-    if len(beside) == 1:
-        return beside[0], "the only ASF in its folder"
-    found = ", ".join(p.name for p in beside) if beside else "none"
-    raise MotionFileError(
-        amc,
-        f"which skeleton? an AMC file gets the ASF beside it whose name starts its own name, "
-        f"or the only ASF in its folder (ASF files there: {found}); pair them as "
-        f"--motion AMC=ASF or pass --skeleton-file ASF",
-    )
+    return path.is_file() and not path.name.startswith(".") and plain_name(path).endswith(MOTION_SUFFIXES)
 
 
 def _group(path: Path, root: Path | None, group_by: str) -> str:
@@ -110,13 +84,13 @@ def find_inputs(specs, skeleton_file: str | None = None, group_by: str = "folder
             files, root = [path], None
         else:
             raise MotionFileError(path, "no such file or folder")
-        if pair is not None and (len(files) != 1 or not _plain_name(path).endswith(".amc")):
+        if pair is not None and (len(files) != 1 or not plain_name(path).endswith(".amc")):
             raise MotionFileError(path, "AMC=ASF pairs one AMC file with its skeleton")
         for f in files:
-            if not _plain_name(f).endswith(MOTION_SUFFIXES):
+            if not plain_name(f).endswith(MOTION_SUFFIXES):
                 raise MotionFileError(f, "unknown motion format (expected .bvh, .amc, .npz, optionally .gz)")
             skeleton, how = (
-                skeleton_for(f, Path(pair) if pair else given) if _plain_name(f).endswith(".amc") else (None, "")
+                skeleton_for(f, Path(pair) if pair else given) if plain_name(f).endswith(".amc") else (None, "")
             )
             out.append(MotionInput(f, skeleton, "paired" if pair else how, _group(f, root, group_by)))
     if not out:

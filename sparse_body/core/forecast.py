@@ -17,7 +17,7 @@ import math
 
 import numpy as np
 
-from .types import BodyPose
+from .types import BodyPose, breaks_take
 
 MAX_AHEAD = 0.2  # s: past this a forecast is a guess (the option's range)
 FADE = 0.1  # s: the velocity's time constant (chosen on the held-out kind dance: docs/methods.md)
@@ -81,9 +81,9 @@ class PoseForecast:
         last, self._last = self._last, (pose if pose.valid else None)
         if self.ahead == 0.0:
             return pose
-        dt = pose.stamp - last.stamp if last is not None else 0.0
-        if not pose.valid or last is None or not 0.0 < dt <= MAX_GAP:
+        if not pose.valid or last is None or breaks_take(last.stamp, pose.stamp, MAX_GAP):
             return pose.restamped(pose.stamp + self.ahead)
+        dt = pose.stamp - last.stamp
         turn = _rotation_vectors(_quat_multiply(_inverse(last.local_quats), pose.local_quats)) / dt
         speed = np.linalg.norm(turn, axis=1, keepdims=True)
         turn *= np.minimum(1.0, MAX_TURN / np.maximum(speed, 1e-12))

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from . import mat3
-from .skeleton import JOINT_INDEX, NUM_JOINTS, PARENTS
+from .skeleton import JOINT_INDEX, LOWER_BODY, NUM_JOINTS, PARENTS
 
 _PARENTS = np.array(PARENTS, dtype=np.int64)
 
@@ -54,19 +54,7 @@ def forward_kinematics(local_rot: np.ndarray, root_pos: np.ndarray, offsets: np.
 
 _ALL_BUT_ROOT = np.arange(1, NUM_JOINTS)
 # the legs, parents before children: what a foot's IK needs, a third of the body's FK
-LEG_JOINTS = tuple(
-    JOINT_INDEX[n]
-    for n in (
-        "left_hip",
-        "right_hip",
-        "left_knee",
-        "right_knee",
-        "left_ankle",
-        "right_ankle",
-        "left_foot",
-        "right_foot",
-    )
-)
+LEG_JOINTS = tuple(JOINT_INDEX[n] for n in LOWER_BODY)
 
 
 def global_to_local(global_rot: np.ndarray) -> np.ndarray:

@@ -10,6 +10,13 @@ import numpy as np
 from .skeleton import NUM_JOINTS
 
 
+def breaks_take(earlier: float, later: float, max_gap: float) -> bool:
+    """Whether a step at `later` cannot follow one at `earlier` in the same take: time stood
+    still or went back, or more than max_gap seconds passed (a method with history starts
+    over; what counts as too long is each method's max_gap option)."""
+    return not 0.0 < later - earlier <= max_gap
+
+
 @dataclass
 class TrackerFrame:
     """The trackers' latest poses at one instant, in the fixed frame (REP-103, metres).

@@ -43,7 +43,7 @@ from ...core.contacts import ToeContacts
 from ...core.kinematics import forward_kinematics
 from ...core.rotations import rotation_between, rotations_to_quat, sixd_to_matrix
 from ...core.skeleton import JOINT_INDEX, PARENTS, body_scale
-from ...core.types import BodyPose, TrackerFrame
+from ...core.types import BodyPose, TrackerFrame, breaks_take
 from ...estimators.base import Estimator, full_target
 from ...estimators.onnx_model import load_model, shipped_model_path
 from ...estimators.options import FLOOR, MAX_GAP, THREADS
@@ -182,7 +182,7 @@ class AvatarJlmEstimator(Estimator):
         rot = np.stack([np.asarray(t[1], float) for t in targets])
         pos = (world - [0.0, 0.0, self.floor]) * self.scale
         previous = self._previous
-        if previous is not None and not 0 < frame.stamp - previous[0] <= self.max_gap:
+        if previous is not None and breaks_take(previous[0], frame.stamp, self.max_gap):
             self.model.start()
             previous = None
         step = 1.0 if previous is None else (frame.stamp - previous[0]) * self.model.fps

@@ -41,7 +41,7 @@ from ...core.kinematics import forward_kinematics
 from ...core.rotations import rotations_to_quat, sixd_to_matrix
 from ...core.sensors import SITE_JOINTS
 from ...core.skeleton import JOINT_INDEX, PARENTS, body_scale
-from ...core.types import BodyPose, TrackerFrame, TrackerStream
+from ...core.types import BodyPose, TrackerFrame, TrackerStream, breaks_take
 from ...estimators.base import Estimator, full_target
 from ...estimators.onnx_model import load_model, shipped_model_path
 from ...estimators.options import FLOOR, MAX_GAP, THREADS, Range
@@ -158,7 +158,7 @@ class DtpEstimator(Estimator):
         if sample is None:
             return None
         history = self._history
-        if history and not 0 < frame.stamp - history[-1][0] <= self.max_gap:
+        if history and breaks_take(history[-1][0], frame.stamp, self.max_gap):
             history.clear()
         history.append((frame.stamp, sample))
         # keep what the window can reach: `past` model frames back, and the gap allowed before that
@@ -278,7 +278,7 @@ class DtpEstimator(Estimator):
             if (
                 s is not None
                 and j
-                and (samples[j - 1] is None or not 0 < frame.stamp - seen[j - 1].stamp <= self.max_gap)
+                and (samples[j - 1] is None or breaks_take(seen[j - 1].stamp, frame.stamp, self.max_gap))
             ):
                 run += 1
             samples[j] = s

@@ -29,7 +29,7 @@ from ...core.rotations import (
 from ...core.sensors import SITE_JOINTS
 from ...core.skeleton import JOINT_INDEX as J
 from ...core.skeleton import body_scale, standing_pose
-from ...core.types import BodyPose, TrackerFrame
+from ...core.types import BodyPose, TrackerFrame, breaks_take
 from ...estimators.base import Estimator
 from ...estimators.onnx_model import load_model
 from ...estimators.options import FLOOR, MAX_GAP, THREADS, Range
@@ -163,7 +163,7 @@ class LobstrEstimator(Estimator):
             return None  # keep the previous sample: the next velocity spans the gap
         joints, rot = targets
         pos = (joints - self._floor) * self.scale
-        if self._prev is None or not 0 < frame.stamp - self._prev[0] <= self.max_gap:
+        if self._prev is None or breaks_take(self._prev[0], frame.stamp, self.max_gap):
             self._state = self.model.initial_state()
             if self.contacts:
                 self.contacts.reset()

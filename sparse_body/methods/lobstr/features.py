@@ -28,21 +28,12 @@ import numpy as np
 from ...core import mat3
 from ...core.mat3 import njit
 from ...core.rotations import matrix_to_6d, yaw_matrix_of
-from ...core.skeleton import JOINT_INDEX, UPPER_BODY
+from ...core.skeleton import JOINT_INDEX, LOWER_BODY, UPPER_BODY
 
 # The tracked joints, in input order: the reference comes from the pelvis.
 INPUT_SITES = ("pelvis", "head", "left_hand", "right_hand")
 INPUT_JOINTS = tuple(JOINT_INDEX[j] for j in ("pelvis", "head", "left_wrist", "right_wrist"))
-LEG_JOINT_NAMES = (
-    "left_hip",
-    "right_hip",
-    "left_knee",
-    "right_knee",
-    "left_ankle",
-    "right_ankle",
-    "left_foot",
-    "right_foot",
-)
+LEG_JOINT_NAMES = LOWER_BODY  # hips, knees, ankles, toes; left before right
 LEG_JOINTS = tuple(JOINT_INDEX[j] for j in LEG_JOINT_NAMES)
 HIPS = LEG_JOINTS[:2]
 UPPER_JOINTS = tuple(JOINT_INDEX[j] for j in UPPER_BODY)

@@ -680,8 +680,22 @@ def test_parameters_set_while_configured_apply_live_or_are_refused_with_the_reas
         assert not later.successful and "takes effect at configure" in later.reason
         live = set_one("stale_timeout", double_value=0.3)
         assert live.successful
-        negative = set_one("stale_timeout", double_value=-1.0)
-        assert not negative.successful and "between" in negative.reason
+        negative = set_one("stale_timeout", double_value=-1.0)  # refused by rclpy, from the declared range
+        assert not negative.successful and "out of range" in negative.reason and "Min: 0.001" in negative.reason
+        from rcl_interfaces.srv import DescribeParameters
+
+        describe = node.create_client(DescribeParameters, "/sparse_body_estimator/describe_parameters")
+        names = ["height", "predict_ahead", "foxglove_port", "estimator"]
+        described = _call(node, describe, DescribeParameters.Request(names=names)).descriptors
+        ranges = {
+            d.name: [(r.from_value, r.to_value) for r in (*d.floating_point_range, *d.integer_range)] for d in described
+        }
+        assert ranges == {
+            "height": [(0.5, 2.5)],
+            "predict_ahead": [(0.0, 0.2)],
+            "foxglove_port": [(0, 65535)],
+            "estimator": [],
+        }
     finally:
         listener.destroy()
         stop(proc)

@@ -21,7 +21,8 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
-from rcl_interfaces.msg import ParameterDescriptor, SetParametersResult
+from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor, SetParametersResult
+from rclpy.exceptions import InvalidParameterValueException
 from rclpy.lifecycle import LifecycleNode, LifecyclePublisher, LifecycleState, TransitionCallbackReturn
 from rclpy.publisher import Publisher
 from rclpy.qos import DurabilityPolicy, QoSProfile
@@ -238,6 +239,16 @@ def check_parameter(name: str, value, default, ranges: dict[str, tuple[float, fl
     return None
 
 
+def parameter_descriptor(default, text: str, bounds: tuple[float, float] | None) -> ParameterDescriptor:
+    """A parameter's description, typed dynamically, with its range where it has one."""
+    descriptor = ParameterDescriptor(description=text, dynamic_typing=True)
+    if bounds is not None and isinstance(default, float):
+        descriptor.floating_point_range = [FloatingPointRange(from_value=bounds[0], to_value=bounds[1], step=0.0)]
+    elif bounds is not None and isinstance(default, int) and not isinstance(default, bool):
+        descriptor.integer_range = [IntegerRange(from_value=int(bounds[0]), to_value=int(bounds[1]), step=1)]
+    return descriptor
+
+
 class EstimatorNode(LifecycleNode):
     NAME = "sparse_body_estimator"
     PARAMETERS = PARAMETERS
@@ -262,8 +273,18 @@ class EstimatorNode(LifecycleNode):
         super().__init__(self.NAME, **kwargs)
         # Typed by their defaults but declared dynamically: a wrong type or value given at
         # start-up is refused by configure with the reason, instead of ending the process.
+        # Numbers carry their range natively (`ros2 param describe` shows it; a set outside it
+        # is refused by rclpy); one given outside it at start-up is kept out, and configure
+        # says so (rclpy would have ended the process).
+        self._refused_at_start: dict[str, str] = {}
         for name, (default, text) in self.PARAMETERS.items():
-            self.declare_parameter(name, default, ParameterDescriptor(description=text, dynamic_typing=True))
+            descriptor = parameter_descriptor(default, text, self.RANGES.get(name))
+            try:
+                self.declare_parameter(name, default, descriptor)
+            except InvalidParameterValueException as err:
+                self.declare_parameter(name, default, descriptor, ignore_override=True)
+                low, high = self.RANGES[name]
+                self._refused_at_start[name] = f"{name} must be between {low:g} and {high:g} ({err})"
         self.add_on_set_parameters_callback(self._on_set_parameters)
         # counted from the start: inputs can fail before the first activate (the constraint
         # node's estimate input is subscribed at configure)
@@ -279,6 +300,8 @@ class EstimatorNode(LifecycleNode):
                 reason = f"{prm.name} takes effect at configure: deactivate and clean up the node first"
             if reason is not None:
                 return SetParametersResult(successful=False, reason=reason)
+        for prm in parameters:  # a value refused at start-up is replaced
+            self._refused_at_start.pop(prm.name, None)
         if self.estimator is not None:  # configured: the live ones apply from the next estimate
             for prm in parameters:
                 if prm.name in LIVE and prm.name in self.params:
@@ -288,7 +311,7 @@ class EstimatorNode(LifecycleNode):
     # -- lifecycle -------------------------------------------------------------------------
     def on_configure(self, state: LifecycleState) -> TransitionCallbackReturn:
         p = {name: self.get_parameter(name).value for name in self.PARAMETERS}
-        problems = [
+        problems = list(self._refused_at_start.values()) + [
             r
             for name, (default, _) in self.PARAMETERS.items()
             if (r := check_parameter(name, p[name], default, self.RANGES))

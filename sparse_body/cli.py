@@ -140,12 +140,22 @@ def cmd_eval(args) -> int:
     return 0
 
 
+def _training(method: str):
+    """The method's training record (train's choices name only trainable methods)."""
+    from .methods import METHODS
+
+    training = METHODS[method].training
+    if training is None:
+        raise ValueError(f"{method} is not trained (no learned model)")
+    return training
+
+
 def _trainers(args) -> list[tuple]:
     """(config class, train function, output, report file) for each part the command trains."""
     from .core.resources import models_dir
-    from .methods import METHODS, load
+    from .methods import load
 
-    training = METHODS[args.method].training
+    training = _training(args.method)
     names = [part.name for part in training.parts]
     if args.part != "all" and args.part not in names:
         raise ValueError(f"{args.method} has no part {args.part!r}; its parts: all, {', '.join(names)}")
@@ -187,10 +197,8 @@ def cmd_train(args) -> int:
             report_path.write_text(json.dumps(report, indent=1))
             print(f"written {out} and {report_path}")
     if not args.no_card:
-        from .methods import METHODS
-
         mocap = None if args.render_only else _mocap(args)  # rendering reads only the measured JSON
-        card = METHODS[args.method].training.card(parts[0][2], mocap, args.limit, not args.render_only)
+        card = _training(args.method).card(parts[0][2], mocap, args.limit, not args.render_only)
         print(f"written {card}")
     return 0
 
@@ -455,6 +463,7 @@ def cmd_view(args) -> int:
 
     source = Path(args.source) if args.source else None
     title = None
+    parts: dict  # what the page draws, by name: arrays (None: not shown)
     if args.source and args.source.startswith(("ws://", "wss://")):
         from .apps.live_record import record_tf
         from .apps.viewer import tf_bodies
@@ -499,7 +508,10 @@ def cmd_bench(args) -> int:
     from .methods import METHODS, load
 
     if args.runtime:
-        load(METHODS[args.runtime].runtime_bench)()
+        bench = METHODS[args.runtime].runtime_bench
+        if bench is None:
+            raise ValueError(f"{args.runtime} has no runtime bench")
+        load(bench)()
         return 0
     if args.estimator:
         run(args.estimator, args.sensors, latency=not args.no_latency)
@@ -593,7 +605,7 @@ def build_parser() -> argparse.ArgumentParser:
     sub = parser.add_subparsers(dest="command", required=True)
     _add = sub.add_parser
     # every subcommand's --help shows the defaults and what can be chosen
-    sub.add_parser = lambda *a, **k: _add(
+    sub.add_parser = lambda *a, **k: _add(  # type: ignore[method-assign]
         *a, formatter_class=argparse.ArgumentDefaultsHelpFormatter, epilog=_choices_text(), **k
     )
 
@@ -894,7 +906,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.set_defaults(func=cmd_bench)
 
     p = sub.add_parser("train", help="train a learned estimator on the CMU train split (ONNX + model card)")
-    trainable = {name: METHODS[name].training for name in TRAINABLE}
+    trainable = {name: t for name in TRAINABLE if (t := METHODS[name].training) is not None}
     p.add_argument("method", choices=list(trainable))
     p.add_argument(
         "--config", default="small", help="; ".join(f"{name}: {t.config_help}" for name, t in trainable.items())
@@ -1066,11 +1078,14 @@ def main(argv: list[str] | None = None) -> None:
 
     global _sigterm_seen
     _sigterm_seen = False
-    command, YAMLError = "sparse-body", ValueError  # (yaml's own until it is imported)
+    command = "sparse-body"
+    yaml_error: type[Exception] = ValueError  # (yaml's own until it is imported)
     args = None
     try:  # from the first statement: Ctrl-C while starting is one line too
         signal.signal(signal.SIGTERM, _terminate)
         from yaml import YAMLError
+
+        yaml_error = YAMLError
 
         args = build_parser().parse_args(argv)
         command = f"sparse-body {args.command}"
@@ -1089,7 +1104,7 @@ def main(argv: list[str] | None = None) -> None:
             print(f"{command}: {needs_training_tools(err.name)}", file=sys.stderr)
             sys.exit(EXIT_INPUT)
         # ValueError includes MotionFileError, BagError, OutputError, SensorConfigError, CalibrationError
-        if not isinstance(err, (ValueError, OSError, EOFError, YAMLError, MemoryError, RecursionError)):
+        if not isinstance(err, (ValueError, OSError, EOFError, yaml_error, MemoryError, RecursionError)):
             raise  # a bug, not something the user caused: its traceback is what we need
         print(f"{command}: {_one_line(err)}", file=sys.stderr)
         sys.exit(_exit_code(err))

@@ -104,7 +104,7 @@ class VmcDecoder:
             return []
         samples = []
         for timed in messages:
-            kind = KINDS.get(getattr(timed.message, "address", None))
+            kind = KINDS.get(str(getattr(timed.message, "address", "")))
             if kind is None:
                 continue
             sample = self._tracking(kind, list(timed.message.params), arrival)

@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import contextlib
 import json
+import logging
 import multiprocessing
 import os
 import signal
@@ -397,7 +398,7 @@ def _connect(address: str):
                 f"--cluster {address}: no Ray cluster there ({err}; HOST:PORT of `ray start --head`)"
             ) from None
     try:
-        ray.init(address=address, logging_level="ERROR", log_to_driver=False, configure_logging=False)
+        ray.init(address=address, logging_level=logging.ERROR, log_to_driver=False, configure_logging=False)
     except (ConnectionError, RuntimeError, ValueError) as err:
         raise ClusterError(f"--cluster {address}: no Ray cluster there ({' '.join(str(err).split())})") from None
     finally:

@@ -16,6 +16,7 @@ import sys
 import tempfile
 import time
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -287,7 +288,7 @@ def bench_dragposer(
         constraints = est.tracker_constraints(frame)
         for c in est.constraints:
             constraints.add(c)
-        stats = {}
+        stats: dict[str, float] = {}
         t0 = time.perf_counter()
         optimise(
             vae,
@@ -310,11 +311,12 @@ def bench_dragposer(
         f"  torch autograd (Adam):    {np.mean(t_ms):8.1f} ms per frame over {torch_frames} frames; iterations to "
         f"converge: mean {np.mean(t_iters):.1f} (cap 2000); {np.sum(t_ms) / np.sum(t_iters):.2f} ms per iteration"
     )
-    for label, options in [
+    runs: list[tuple[str, dict[str, Any]]] = [
         ("live defaults", {}),
         ("without the temporal predictor", {"temporal_weight": 0.0}),
         ("without the IK polish", {"polish": False}),
-    ]:
+    ]
+    for label, options in runs:
         live = DragPoserEstimator(config, motion.skeleton, **options)
         times = []
         for frame in stream:
@@ -398,7 +400,10 @@ def run_goals(latency: bool = True) -> None:
     """The real-time goals, each figure beside its goal (six-point synthetic walk, one thread)."""
     alone, beside = bench_process()
     steps = bench_offline([name for _, name, _ in STEP_GOALS], "six_point")
-    rows = [(figure, f"p99 <= {goal:g} ms", steps[name], steps[name][1] <= goal) for figure, name, goal in STEP_GOALS]
+    # (figure, goal, p50 and p99 or None, met, unit)
+    rows: list[tuple[str, str, tuple[float, float] | None, bool, str]] = [
+        (figure, f"p99 <= {goal:g} ms", steps[name], steps[name][1] <= goal, " ms") for figure, name, goal in STEP_GOALS
+    ]
     rows.append(
         (
             "process ik: estimation + start / whole run",
@@ -420,12 +425,12 @@ def run_goals(latency: bool = True) -> None:
                 f"p99 <= {LATENCY_GOAL_MS:g} ms + ik step = {goal:.2f} ms",
                 measured,
                 measured is not None and measured[1] <= goal,
+                " ms",
             )
         )
     load = os.getloadavg()[0]
     print(f"\ngoals (load average {load:.1f} on {os.cpu_count()} cores while measured)")
     print(f"  {'figure':<50} {'goal':<34} {'p50 / p99':<22} met")
-    for figure, goal, measured, met, *unit in rows:
-        u = unit[0] if unit else " ms"
-        figures = "-" if measured is None else f"{measured[0]:.3f} / {measured[1]:.3f}{u}"
-        print(f"  {figure:<50} {goal:<34} {figures:<22} {'yes' if met else 'NO'}")
+    for figure, target, measured, met, unit in rows:
+        figures = "-" if measured is None else f"{measured[0]:.3f} / {measured[1]:.3f}{unit}"
+        print(f"  {figure:<50} {target:<34} {figures:<22} {'yes' if met else 'NO'}")

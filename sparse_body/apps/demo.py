@@ -4,6 +4,7 @@ out as metrics and an animation of the estimate against the ground truth."""
 from __future__ import annotations
 
 from pathlib import Path
+from typing import cast
 
 import numpy as np
 
@@ -69,7 +70,9 @@ def animate(
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.lines import Line2D
+    from mpl_toolkits.mplot3d.axes3d import Axes3D
     from PIL import Image
 
     step = gif_step(fps)
@@ -85,7 +88,8 @@ def animate(
     extent = high - low  # metres along x, y, z: the box's shape
     ticks = [np.arange(np.ceil(low[k]), high[k] + 1e-9, 1.0 if extent[k] > 3.0 else 0.5) for k in (0, 1)]
     fig = plt.figure(figsize=(size_px / 100, size_px / 100), dpi=100)
-    ax = fig.add_axes((0.02, 0.04, 0.96, 0.86), projection="3d")
+    ax = cast(Axes3D, fig.add_axes((0.02, 0.04, 0.96, 0.86), projection="3d"))
+    canvas = cast(FigureCanvasAgg, fig.canvas)  # Agg, chosen above
     grid = (
         np.arange(np.floor(low[0] * 2) / 2, high[0] + 0.5, 0.5),
         np.arange(np.floor(low[1] * 2) / 2, high[1] + 0.5, 0.5),
@@ -124,8 +128,8 @@ def animate(
         ax.scatter(tr[:, 0], tr[:, 1], tr[:, 2], color="tab:red", s=20)
         ax.legend(handles=legend, loc="upper left", fontsize=7, frameon=False)
         fig.suptitle(f"{title}   t = {i / fps:5.2f} s", fontsize=9, y=0.97)
-        fig.canvas.draw()
-        frames.append(Image.fromarray(np.asarray(fig.canvas.buffer_rgba())[..., :3]).quantize(colors=64))
+        canvas.draw()
+        frames.append(Image.fromarray(np.asarray(canvas.buffer_rgba())[..., :3]).quantize(colors=64))
     plt.close(fig)
     delay_ms = round(1000 * step / fps)  # whole centiseconds (gif_step)
     frames[0].save(path, save_all=True, append_images=frames[1:], duration=delay_ms, loop=0)

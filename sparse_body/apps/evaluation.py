@@ -10,6 +10,7 @@ import json
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field, replace
+from functools import partial
 from pathlib import Path
 
 import numpy as np
@@ -310,7 +311,7 @@ def split_items(mocap_root: Path, split: str, fps: float = DEFAULT_FPS, limit: i
             c.clip_id,
             c.clip_id,
             k,
-            lambda c=c: load_clip(c, fps),
+            partial(load_clip, c, fps),
             c.subject,
             str(c.path),
             subject=c.subject,
@@ -375,6 +376,8 @@ def evaluate(
     of a known layout, sparse_body .npz)."""
     if motions is not None:
         items, split = file_items(balanced(find_inputs(motions), limit), fps), "files"
+    elif mocap_root is None:
+        raise ValueError("no motion capture folder to take the split's clips from (import-mocap, or --motion files)")
     else:
         items = split_items(mocap_root, split, fps, limit)
     return run_evaluation(

@@ -182,7 +182,8 @@ def seeds() -> list[bytes]:
     out.append(b"\x02\x01" + out[0] + b"\xa5\x5a\x01" + out[1])
     for address in KINDS:
         b = OscMessageBuilder(address)
-        for v in ["LHR-1", 0.1, 1.6, 0.2, 0.0, 0.0, 0.0, 1.0]:
+        b.add_arg("LHR-1")
+        for v in [0.1, 1.6, 0.2, 0.0, 0.0, 0.0, 1.0]:
             b.add_arg(v)
         out.append(b.build().dgram)
     trackers = np.tile([0.1, 0.2, 1.6, 0.0, 0.0, 0.0, 1.0], (1, 2, 1))

@@ -36,11 +36,14 @@ def record_tf(url: str, seconds: float) -> tuple[list[list[TfRow]], int]:
 
 async def _record(url: str, seconds: float) -> tuple[list[list[TfRow]], int]:
     import websockets
+    from websockets.typing import Subprotocol
 
     messages: list[list[TfRow]] = []
     malformed = 0
     try:
-        ws = await websockets.connect(url, subprotocols=[SUBPROTOCOL, LEGACY_SUBPROTOCOL], open_timeout=CONNECT_TIMEOUT)
+        ws = await websockets.connect(
+            url, subprotocols=[Subprotocol(SUBPROTOCOL), Subprotocol(LEGACY_SUBPROTOCOL)], open_timeout=CONNECT_TIMEOUT
+        )
     except websockets.exceptions.WebSocketException as err:
         raise ViewError(f"{url}: not a Foxglove live view ({err})") from None
     async with ws:

@@ -47,7 +47,8 @@ class Reader:
     samples by reason once the bag is read."""
 
     def __init__(self, path: Path, sensors, stale_after: float, guards) -> None:
-        self.busy, self.refused = 0.0, {}
+        self.busy = 0.0
+        self.refused: dict[str, int] = {}
         self._chunks = tracker_chunks(path, sensors, stale_after, self.refused, guards)
 
     def __iter__(self) -> Iterator[TrackerStream]:
@@ -213,7 +214,8 @@ class ForkedReader:
     """Reader's chunks, read in a forked child while this process estimates."""
 
     def __init__(self, path: Path, sensors, stale_after: float, guards) -> None:
-        self.busy, self.refused = 0.0, {}
+        self.busy = 0.0
+        self.refused: dict[str, int] = {}
         self._child = _Child(_read_in_child, (path, sensors, stale_after, guards))
 
     def start(self) -> None:

@@ -106,9 +106,9 @@ def main(argv=None) -> int:
                 position = stream.positions[i, s] if site.has_position else None
                 frame = encode_frame(s + 1, device_us, stream.orientations[i, s], position)
                 if rng.random() < args.bad_crc:
-                    frame = bytearray(frame)
-                    frame[12] ^= 0xFF
-                    frame = bytes(frame)
+                    broken = bytearray(frame)
+                    broken[12] ^= 0xFF
+                    frame = bytes(broken)
                 if rng.random() < args.garbage:
                     frame = bytes(rng.integers(0, 256, size=int(rng.integers(1, 40)), dtype=np.uint8)) + frame
                 if args.split:

@@ -96,7 +96,7 @@ def body_page(
     if not fps > 0:
         raise ViewError(f"a frame rate must be positive, got {fps}")
     step = max(int(np.ceil(fps / MAX_FPS - 1e-6)), int(np.ceil(frames / MAX_FRAMES)))
-    picks = np.arange(0, frames, step)
+    picks = range(0, frames, step)
     every = np.concatenate([a.reshape(-1, 3) for a in shown + ([trackers] if trackers is not None else [])])
     every = every[np.all(np.isfinite(every), axis=1)]
     if not len(every):

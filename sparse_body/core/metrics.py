@@ -6,6 +6,8 @@ centimetres, degrees, cm/s, and Jitter in 100 m/s^3 (AvatarPoser, AvatarJLM).
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+
 import numpy as np
 
 from .contacts import FOOT_JOINTS
@@ -174,7 +176,7 @@ def loss_metrics(pred_pos, gt_pos, lost: np.ndarray, joints, fps: float) -> dict
     }
 
 
-def weighted_mean(rows: list[dict[str, float]], weights: list[float]) -> dict[str, float]:
+def weighted_mean(rows: list[dict[str, float]], weights: Sequence[float]) -> dict[str, float]:
     """Frame-weighted mean of per-sequence metrics, ignoring NaN entries."""
     out = {}
     for key in rows[0]:

@@ -78,7 +78,9 @@ def _axis_matrix(values: list[str], order: str, radians: bool = False) -> np.nda
 def load_asf(path: Path) -> AsfSkeleton:
     path = Path(path)
     lines = [ln.split("#")[0].strip() for ln in read_text(path).splitlines()]
-    section, bones, children = None, {}, {}
+    section = None
+    bones: dict[str, Bone] = {}
+    children: dict[str, list[str]] = {}
     length = 0.45
     root_order, root_axis, root_position = ["TX", "TY", "TZ", "RX", "RY", "RZ"], np.eye(3), np.zeros(3)
     current: dict | None = None
@@ -181,7 +183,8 @@ def _read_amc_frames(path: Path, skeleton: AsfSkeleton) -> tuple[dict[str, np.nd
     expected = {"root": len(skeleton.root_order)}
     expected.update({n: len(b.dof) for n, b in skeleton.bones.items() if b.dof})
     values: dict[str, list[list[float]]] = {n: [] for n in expected}
-    frame_no, seen, frames = None, set(), 0
+    frame_no, frames = None, 0
+    seen: set[str] = set()
 
     def close_frame():
         missing = set(expected) - seen

@@ -59,7 +59,10 @@ def load_bvh(path: Path, length_unit: float | None = None) -> SourceMotion:
     if not sep:
         raise MotionFileError(path, "no MOTION section (file truncated?)")
 
-    names, parents, offsets, channels = [], [], [], []
+    names: list[str] = []
+    parents: list[int] = []
+    offsets: list[list[float] | None] = []
+    channels: list[list[str]] = []
     stack: list[int] = []
     tokens = head.split()
     i = 1
@@ -89,8 +92,9 @@ def load_bvh(path: Path, length_unit: float | None = None) -> SourceMotion:
                 stack.pop()
                 i += 1
             elif tok == "OFFSET":
-                offsets[-1] = [float(v) for v in tokens[i + 1 : i + 4]]
-                if len(offsets[-1]) != 3 or not np.all(np.isfinite(offsets[-1])):
+                offset = [float(v) for v in tokens[i + 1 : i + 4]]
+                offsets[-1] = offset
+                if len(offset) != 3 or not np.all(np.isfinite(offset)):
                     raise MotionFileError(path, f"joint {names[-1]!r} has a malformed OFFSET")
                 i += 4
             elif tok == "CHANNELS":
@@ -114,9 +118,9 @@ def load_bvh(path: Path, length_unit: float | None = None) -> SourceMotion:
     header, _, data = motion.partition("Frame Time:")
     try:
         frames = int(header.split("Frames:")[1].split()[0])
-        frame_time, *values = data.split()
-        frame_time = float(frame_time)
-        values = np.asarray(values, dtype=np.float64)
+        frame_text, *value_texts = data.split()
+        frame_time = float(frame_text)
+        values = np.asarray(value_texts, dtype=np.float64)
     except (IndexError, ValueError):
         raise MotionFileError(path, "malformed MOTION header or non-numeric motion data") from None
     # 1/1000 s to 10 s a frame: what a motion capture system records
@@ -133,7 +137,7 @@ def load_bvh(path: Path, length_unit: float | None = None) -> SourceMotion:
 
     layout = _layout(names)
     unit = default_unit(layout) if length_unit is None else length_unit
-    offsets = np.asarray(offsets) * unit
+    bone_offsets = np.asarray(offsets, dtype=np.float64) * unit
     J = len(names)
     rot = np.empty((frames, J, 3, 3))
     pos = np.empty((frames, J, 3))
@@ -158,11 +162,11 @@ def load_bvh(path: Path, length_unit: float | None = None) -> SourceMotion:
         p = parents[j]
         if p < 0:
             rot[:, j] = local
-            pos[:, j] = offsets[j] + trans
+            pos[:, j] = bone_offsets[j] + trans
         else:
             rot[:, j] = rot[:, p] @ local
-            pos[:, j] = pos[:, p] + np.einsum("tab,tb->ta", rot[:, p], offsets[j] + trans)
-            rest[j] = rest[p] + offsets[j]
+            pos[:, j] = pos[:, p] + np.einsum("tab,tb->ta", rot[:, p], bone_offsets[j] + trans)
+            rest[j] = rest[p] + bone_offsets[j]
     if not np.all(np.isfinite(pos)):
         raise MotionFileError(path, "non-finite values")
     return SourceMotion(stem(path), layout, names, parents, rest, pos, rot, fps)

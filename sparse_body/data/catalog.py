@@ -58,6 +58,7 @@ def find_mocap_root(explicit: str | os.PathLike | None = None) -> Path | None:
     """The indexed CMU folder (`sparse-body import-mocap` of CMU's allasfamc.zip): explicit
     path, $SPARSE_BODY_MOCAP, or the maintainers' data folder beside the checkout or the
     working directory. None when none exists."""
+    candidates: list[str | os.PathLike | None]
     if explicit:
         candidates = [explicit]
     else:
@@ -125,7 +126,7 @@ def compute_split(clips: list[Clip]) -> dict[str, list[str]]:
     for c in clips:
         seconds[c.subject] = seconds.get(c.subject, 0.0) + c.seconds
     total = sum(seconds.values())
-    held = {"test": [], "validation": []}
+    held: dict[str, list[str]] = {"test": [], "validation": []}
     filled = {"test": 0.0, "validation": 0.0}
     for subject in sorted(seconds, key=lambda s: hashlib.sha1(s.encode()).hexdigest()):
         for part in held:
@@ -133,7 +134,7 @@ def compute_split(clips: list[Clip]) -> dict[str, list[str]]:
                 held[part].append(subject)
                 filled[part] += seconds[subject]
                 break
-    parts = {s: [] for s in SPLITS}
+    parts: dict[str, list[str]] = {s: [] for s in SPLITS}
     for c in sorted(clips, key=lambda c: c.clip_id):
         part = next((p for p, subjects in held.items() if c.subject in subjects), "train")
         parts[part].append(c.clip_id)
@@ -183,8 +184,8 @@ def load_clip(clip: Clip, fps: float = DEFAULT_FPS, use_cache: bool = True) -> M
     def parse() -> Motion:
         if clip.format == "file":  # a user's file (import-mocap): its skeleton found beside it
             return load_motion_file(clip.path, fps)
-        if clip.format == "asf/amc":
-            return retarget(load_amc(clip.path, load_asf(clip.skeleton_path), fps=clip.fps), fps)
+        if clip.format == "asf/amc" and (asf := clip.skeleton_path) is not None:
+            return retarget(load_amc(clip.path, load_asf(asf), fps=clip.fps), fps)
         if clip.format.startswith("bvh"):
             return retarget(load_bvh(clip.path), fps)
         raise MotionFileError(clip.path, f"unknown format {clip.format!r}")

@@ -28,6 +28,7 @@ and `lab`.
 from __future__ import annotations
 
 from dataclasses import asdict, dataclass, replace
+from typing import Any
 
 import numpy as np
 from scipy.spatial.transform import Rotation
@@ -155,7 +156,9 @@ class Protocol:
 
     @classmethod
     def from_json(cls, data: dict) -> Protocol:
-        noise = {k: tuple(v) if isinstance(v, list) else v for k, v in data["noise"].items()}  # JSON has no tuples
+        noise: dict[str, Any] = {
+            k: tuple(v) if isinstance(v, list) else v for k, v in data["noise"].items()
+        }  # (JSON has no tuples)
         return cls(**{**data, "noise": TrackerNoise(**noise)})
 
 
@@ -271,12 +274,12 @@ def mounting_motion(tpose: Motion, rng: np.random.Generator) -> Motion:
             for child in (1, 2, 3):
                 phase[:, child] = (turn.inv() * Rotation.from_quat(phase[:, child])).as_quat()
         quats.append(phase)
-    quats = np.concatenate(quats)
-    T = len(quats)
+    turned = np.concatenate(quats)
+    T = len(turned)
     heading = rng.uniform(0, 2 * np.pi)
     sway = SWAY_METRES * np.sin(2 * np.pi * 0.2 * np.arange(T) / tpose.fps)
     root = tpose.root_positions[-1] + np.outer(sway, [np.cos(heading), np.sin(heading), 0.0])
-    return Motion("mounting", tpose.fps, tpose.skeleton, quats, root)
+    return Motion("mounting", tpose.fps, tpose.skeleton, turned, root)
 
 
 def _samples(stream: TrackerStream, sensors: SensorConfig) -> dict[str, list]:

@@ -107,7 +107,7 @@ def balanced(inputs: list[MotionInput], limit: int | None) -> list[MotionInput]:
     for inp in inputs:
         groups.setdefault(inp.group, []).append(inp)
     queues = [list(reversed(g)) for _, g in sorted(groups.items())]
-    out = []
+    out: list[MotionInput] = []
     while len(out) < limit:
         for q in queues:
             if q and len(out) < limit:

@@ -11,7 +11,7 @@ import os
 import shutil
 import signal
 import tempfile
-from collections.abc import Iterator
+from collections.abc import Generator
 from contextlib import contextmanager
 from pathlib import Path
 
@@ -373,7 +373,7 @@ def tracker_chunks(
     refused: dict | None = None,
     guards: TfGuards | None = None,
     size: int | None = None,
-) -> Iterator[TrackerStream]:
+) -> Generator[TrackerStream, None, None]:
     """The trackers at each input frame of a bag, `size` (CHUNK_FRAMES) frames a chunk, read as they are
     needed (a recording of any length in bounded memory): every /tf message that moves a
     tracker frame is one frame, sampled at the newest tracker stamp held. The messages go

@@ -103,7 +103,9 @@ class EstimateBagWriter:
             for connection, messages in written:
                 self.writer.write(connection, ns, messages[i])
 
-    def _tf_messages(self, poses: BodyPoses, angles, trackers) -> list[bytes]:
+    def _tf_messages(
+        self, poses: BodyPoses, angles, trackers: tuple[SensorConfig, TrackerStream] | None
+    ) -> list[bytes]:
         """One /tf message a pose: the body's links (and with `angles`, the URDF's massless
         links), and the trackers it was made from."""
         body = body_table(poses.local_quats, poses.roots, self.skeleton, self.fixed_frame, self.prefix)

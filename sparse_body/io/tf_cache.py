@@ -285,7 +285,8 @@ class TfCache:
         S = len(config.sites)
         # rows gathered as tuples and made arrays once: a frame is sampled for every /tf message
         nowhere, unturned = (math.nan,) * 3, (math.nan,) * 4
-        positions, orientations = [nowhere] * S, [unturned] * S
+        positions: list[tuple[float, ...]] = [nowhere] * S
+        orientations: list[tuple[float, ...]] = [unturned] * S
         valid, stamps = [False] * S, [-math.inf] * S
         for s, site in enumerate(config.sites):
             edge = self._edges.get(site.frame_id)

@@ -59,7 +59,7 @@ class Fitted:
             "minutes": self.minutes,
             "validation": self.validation,
             "history": self.history,
-            "train_clips": len(split_clips(run.mocap_root, "train", run.limit)),
+            "train_clips": len(split_clips(run.mocap_root, "train", run.limit)) if run.mocap_root else 0,
             "augment": config.augment,
             **extra,
             **machine(),

@@ -161,7 +161,11 @@ def evaluate_jobs(jobs: list[tuple], workers: int = 2) -> list:
 NOISE_METRICS = ("MPJPE [cm]", "MPJVE [cm/s]", "Jitter [100m/s3]", "End-effector PE [cm]")
 # a noise table's three runs of each estimator: clean trackers, LoBSTr's noise through the live
 # filter, and the same smoothed offline (setup name, --noise, extra estimator options)
-NOISE_SETUPS = (("clean", "none", {}), ("noisy", "lobstr", {}), ("smoothed", "lobstr", {"smooth": True}))
+NOISE_SETUPS: tuple[tuple[str, str, dict[str, object]], ...] = (
+    ("clean", "none", {}),
+    ("noisy", "lobstr", {}),
+    ("smoothed", "lobstr", {"smooth": True}),
+)
 
 
 def noise_jobs(runs: list[tuple[str, dict]], sensors_name: str, mocap_root: Path, limit: int | None) -> list[tuple]:

@@ -5,7 +5,9 @@ lists its presets in PRESETS, a name -> the fields it changes, one commented kno
 from __future__ import annotations
 
 from dataclasses import replace
-from typing import Any, ClassVar
+from typing import Any, ClassVar, TypeVar
+
+P = TypeVar("P", bound="Presets")
 
 
 class Presets:
@@ -13,9 +15,10 @@ class Presets:
     PRESETS: ClassVar[dict[str, dict[str, Any]]] = {}
 
     @classmethod
-    def named(cls, name: str):
+    def named(cls: type[P], name: str) -> P:
         if name not in cls.PRESETS:
             raise ValueError(f"unknown {cls.KIND} configuration {name!r} ({', '.join(cls.PRESETS)})")
         fields = dict(cls.PRESETS[name])
         base = fields.pop("base", None)
-        return replace(cls.named(base) if base else cls(), **fields)
+        start: Any = cls.named(base) if base else cls()  # (a dataclass: each subclass is one)
+        return replace(start, **fields)

@@ -1,6 +1,6 @@
 """Lint, format and types as part of the suite (as ament_flake8 tests are in a ROS package):
-`ruff check`, `ruff format --check` over the tree and mypy over the package (each method's
-training side aside), with the settings in pyproject.toml."""
+`ruff check`, `ruff format --check` over the tree and mypy over the whole package, with
+the settings in pyproject.toml."""
 
 import shutil
 import subprocess

@@ -27,7 +27,7 @@ from .model_card import beside  # noqa: F401 (the trainers' and the command's na
 class TrainRun:
     """One training run's where and how, beside the method's configuration."""
 
-    mocap_root: Path | None  # the motion capture (catalog.find_mocap_root)
+    mocap_root: Path  # the motion capture (catalog.find_mocap_root)
     out: Path  # the .onnx file, or the folder of a method that writes several
     seed: int = 0  # torch's and the data's random draws
     limit: int | None = None  # only the first clips of each split (tests)
@@ -59,7 +59,7 @@ class Fitted:
             "minutes": self.minutes,
             "validation": self.validation,
             "history": self.history,
-            "train_clips": len(split_clips(run.mocap_root, "train", run.limit)) if run.mocap_root else 0,
+            "train_clips": len(split_clips(run.mocap_root, "train", run.limit)),
             "augment": config.augment,
             **extra,
             **machine(),

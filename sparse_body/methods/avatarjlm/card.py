@@ -87,7 +87,7 @@ def evaluate_avatarjlm(onnx_path: Path, mocap_root: Path, limit: int | None = No
         for spec in specs
     ]
     results = evaluate_jobs(jobs, workers)
-    measured = {}
+    measured: dict[str, list[dict]] = {}
     for job, result in zip(jobs, results, strict=True):
         measured.setdefault(job[0], []).append(result.to_json())
     path = onnx_path.with_suffix(".eval.json")
@@ -115,7 +115,8 @@ def _training(report: dict | None, name: str) -> str:
 def _curve(report: dict) -> str:
     """Every eighth check; minutes count from the first run's start (a resumed run's own
     history starts its clock at zero)."""
-    h, earlier, restarts = [], [r["minutes"] for r in report.get("earlier_runs", [])], 0
+    h: list[dict] = []
+    earlier, restarts = [r["minutes"] for r in report.get("earlier_runs", [])], 0
     for r in report["history"]:
         if h and r["minutes"] < h[-1]["minutes"] - sum(earlier[:restarts]):
             restarts += 1

@@ -30,7 +30,7 @@ training sees what a stream sees.
 from __future__ import annotations
 
 from dataclasses import asdict, dataclass
-from typing import ClassVar
+from typing import ClassVar, cast
 
 import torch
 from torch import nn
@@ -217,6 +217,10 @@ class Block(nn.Module):
 
 
 class AvatarJlmNet(nn.Module):
+    mean: torch.Tensor  # buffers (register_buffer), named for the type checker
+    std: torch.Tensor
+    offsets: torch.Tensor
+
     def __init__(self, config: AvatarJlmConfig) -> None:
         super().__init__()
         self.config = config
@@ -242,7 +246,8 @@ class AvatarJlmNet(nn.Module):
         )
         self.norm = nn.LayerNorm(d2)
         self.regress = nn.Linear(TOKENS * d2, NUM_JOINTS * 6)
-        for head in (self.initial[-1], self.regress) if config.identity_start else ():
+        heads: tuple[nn.Linear, ...] = (cast(nn.Linear, self.initial[-1]), self.regress)
+        for head in heads if config.identity_start else ():
             with torch.no_grad():
                 head.weight.mul_(0.1)
                 head.bias.copy_(torch.tensor([1.0, 0.0, 0.0, 0.0, 1.0, 0.0]).repeat(NUM_JOINTS))
@@ -296,8 +301,9 @@ class AvatarJlmNet(nn.Module):
         new_k, new_v = [], []
         for k in range(self.config.loops):
             tokens = self._spatial(k, tokens, given)
-            block = self.temporal[k]
-            bias = (block.attention.age_bias[:, past_age] + past_mask)[:, None, :]
+            block = cast(Block, self.temporal[k])
+            attention = cast(TemporalAttention, block.attention)
+            bias = (attention.age_bias[:, past_age] + past_mask)[:, None, :]
             out, key, value = block.step(tokens.transpose(0, 1), past_k[k], past_v[k], bias)
             tokens = out.transpose(0, 1)
             new_k.append(key)

@@ -82,8 +82,10 @@ def load_frames(mocap_root: Path, split: str, config: AvatarJlmConfig, rng, limi
             if config.sequence <= T:
                 starts.append(offset + np.arange(T - config.sequence + 1))
             offset += T
-    cat = [np.concatenate([p[k] for p in parts], axis=1 if k < 3 else 0) for k in range(6)]
-    return Frames(*[c.astype(np.float32) for c in cat], np.concatenate(starts))
+    x, yaw, head, root_rot, pose, contact = (
+        np.concatenate([p[k] for p in parts], axis=1 if k < 3 else 0).astype(np.float32) for k in range(6)
+    )
+    return Frames(x, yaw, head, root_rot, pose, contact, np.concatenate(starts))
 
 
 class WindowSampler:

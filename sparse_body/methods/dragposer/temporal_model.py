@@ -72,6 +72,10 @@ class TemporalConfig(Presets):
 
 
 class TemporalPredictor(nn.Module):
+    causal: torch.Tensor  # buffers (register_buffer), named for the type checker
+    context_mean: torch.Tensor
+    context_std: torch.Tensor
+
     def __init__(self, config: TemporalConfig) -> None:
         super().__init__()
         self.config = c = config

@@ -111,12 +111,12 @@ def validate(model: TemporalPredictor, data, config: TemporalConfig) -> dict[str
         hold.append(((b["future"] - b["target"]) ** 2).mean(-1))
         newest = b["future"][:, 0]
         extrapolate.append(((newest + 0.5 * (newest - b["past"][:, -1]) - b["target"][:, 0]) ** 2).mean(-1))
-    errors, hold = torch.cat(errors), torch.cat(hold)
+    error, held = torch.cat(errors), torch.cat(hold)
     return {
-        "mse": errors.mean().item(),
-        "mse_next": errors[:, 0].mean().item(),
-        "hold_mse": hold.mean().item(),
-        "hold_mse_next": hold[:, 0].mean().item(),
+        "mse": error.mean().item(),
+        "mse_next": error[:, 0].mean().item(),
+        "hold_mse": held.mean().item(),
+        "hold_mse_next": held[:, 0].mean().item(),
         "extrapolate_mse_next": torch.cat(extrapolate).mean().item(),
     }
 

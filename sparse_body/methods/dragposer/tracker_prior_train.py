@@ -87,6 +87,8 @@ class TrackerPriorConfig(Presets):
 
 
 class TrackerPriorNet(nn.Module):
+    scale: torch.Tensor  # a buffer (register_buffer), named for the type checker
+
     def __init__(self, config: TrackerPriorConfig) -> None:
         super().__init__()
         self.config = c = config
@@ -234,12 +236,12 @@ def train_tracker_prior(config: TrackerPriorConfig, run: TrainRun) -> dict:
     body = np.concatenate([c[2] for c in train_clips])
     decoder = frozen_decoder(out_dir)
     offsets = torch.tensor(Skeleton.canonical().offsets, dtype=torch.float32)
-    starts, offset = [], 0
+    firsts, offset = [], 0
     for _, target, _ in train_clips:
         if len(target) >= config.chunk:
-            starts.append(offset + np.arange(len(target) - config.chunk + 1))
+            firsts.append(offset + np.arange(len(target) - config.chunk + 1))
         offset += len(target)
-    starts = np.concatenate(starts)
+    starts = np.concatenate(firsts)
     run.log(
         f"data: {len(train_clips)} train clips ({len(z)} frames x {len(x)} copies), {len(val_clips)} validation "
         f"clips, {time.perf_counter() - t0:.0f} s"

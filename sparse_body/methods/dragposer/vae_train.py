@@ -90,11 +90,11 @@ def train_vae(config: VaeConfig, run: TrainRun) -> dict:
     dq = np.concatenate([c[0] for c in train_clips])
     pose = np.concatenate([c[1] for c in train_clips])
     # an example is frame i with i+1 in the same clip
-    starts, offset = [], 0
+    firsts, offset = [], 0
     for c in train_clips:
-        starts.append(offset + np.arange(len(c[0]) - 1))
+        firsts.append(offset + np.arange(len(c[0]) - 1))
         offset += len(c[0])
-    starts = np.concatenate(starts)
+    starts = np.concatenate(firsts)
     run.log(
         f"data: {len(train_clips)} train clips ({len(dq)} frames), {len(val_clips)} validation clips, "
         f"{time.perf_counter() - t0:.0f} s"

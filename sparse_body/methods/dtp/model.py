@@ -126,6 +126,11 @@ class EncoderLayer(nn.Module):
 
 
 class DtpNet(nn.Module):
+    mean: torch.Tensor  # buffers (register_buffer), named for the type checker
+    std: torch.Tensor
+    first_mask: torch.Tensor
+    mask: torch.Tensor
+
     def __init__(self, config: DtpConfig) -> None:
         super().__init__()
         self.config = config

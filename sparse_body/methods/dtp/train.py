@@ -13,7 +13,9 @@ from __future__ import annotations
 
 import json
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, replace
+from functools import partial
 from pathlib import Path
 
 import numpy as np
@@ -78,8 +80,10 @@ def load_frames(mocap_root: Path, split: str, config: DtpConfig, rng, limit: int
             if config.window <= T:
                 starts.append(offset + np.arange(T - config.window + 1))
             offset += T
-    cat = [np.concatenate([p[k] for p in parts], axis=1 if k == 2 else 0) for k in range(5)]
-    return Frames(*[c.astype(np.float32) for c in cat], np.concatenate(starts))
+    pelvis_pos, pelvis_rot, leaves, feet_pos, pose = (
+        np.concatenate([p[k] for p in parts], axis=1 if k == 2 else 0).astype(np.float32) for k in range(5)
+    )
+    return Frames(pelvis_pos, pelvis_rot, leaves, feet_pos, pose, np.concatenate(starts))
 
 
 def occlude(
@@ -175,6 +179,10 @@ def pretrained_path(out: Path) -> Path:
     return out.with_name(out.stem + ".pretrained.onnx")
 
 
+def _log_stage(log: Callable[[str], None], stage: str, message: str) -> None:
+    log(f"{stage}: {message}")
+
+
 def train(config: DtpConfig, run: TrainRun) -> dict:
     """Pre-train, export the pre-trained model, fine-tune on occluded feet, export out (an
     .onnx path) and return what the model card reports."""
@@ -220,8 +228,8 @@ def train(config: DtpConfig, run: TrainRun) -> dict:
         # each stage keeps its checkpoint, and a finished stage its report, until both are done:
         # --resume after the pre-training has finished goes straight on with the fine-tuning
         stage_checkpoint = run.checkpoint.with_name(f"{run.checkpoint.stem}.{stage}.npz") if run.checkpoint else None
-        finished = stage_checkpoint.with_suffix(".json") if run.checkpoint else None
-        if run.resume and finished is not None and finished.is_file() and stage_checkpoint.is_file():
+        finished = stage_checkpoint.with_suffix(".json") if stage_checkpoint else None
+        if run.resume and stage_checkpoint and finished and finished.is_file() and stage_checkpoint.is_file():
             stages[stage] = json.loads(finished.read_text())
             load_best(net, stage_checkpoint)
             run.log(f"{stage}: finished before, its best weights taken from {stage_checkpoint}")
@@ -236,7 +244,7 @@ def train(config: DtpConfig, run: TrainRun) -> dict:
             minutes=minutes,
             check_every=config.steps_per_check,
             after_check=sched.step,
-            run=replace(run, checkpoint=stage_checkpoint, log=lambda m, s=stage: run.log(f"{s}: {m}")),
+            run=replace(run, checkpoint=stage_checkpoint, log=partial(_log_stage, run.log, stage)),
         )
         stages[stage] = {
             "steps": fitted.steps,

@@ -75,6 +75,9 @@ class LobstrConfig(Presets):
 
 
 class LobstrNet(nn.Module):
+    mean: torch.Tensor  # buffers (register_buffer), named for the type checker
+    std: torch.Tensor
+
     def __init__(self, config: LobstrConfig) -> None:
         super().__init__()
         self.config = config

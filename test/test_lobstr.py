@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 from conftest import shipped_model
 
+from sparse_body.core.contact_hold import ContactHold, release_weight
 from sparse_body.core.contacts import FOOT_JOINTS
 from sparse_body.core.kinematics import forward_kinematics
 from sparse_body.core.resources import models_dir
@@ -19,7 +20,6 @@ from sparse_body.data.catalog import load_clip
 from sparse_body.data.virtual_trackers import TrackerNoise, synthesize_trackers
 from sparse_body.estimators import create_estimator
 from sparse_body.estimators.onnx_model import ModelMissing
-from sparse_body.methods.lobstr.contact_ik import ContactHold, release_weight
 from sparse_body.methods.lobstr.features import (
     INPUT_JOINTS,
     apply_legs,

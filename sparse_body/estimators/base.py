@@ -6,18 +6,20 @@ import inspect
 import math
 from abc import ABC, abstractmethod
 from collections.abc import Iterable, Iterator
+from dataclasses import replace
 from typing import ClassVar, TypeGuard
 
 import numpy as np
 import yaml
 
 from ..core import mat3
+from ..core.contact_hold import ContactHold
 from ..core.fixed_lag import FixedLagSmoother
 from ..core.forecast import MAX_AHEAD, PoseForecast
 from ..core.kinematics import forward_kinematics
 from ..core.mat3 import njit
 from ..core.reacquire import FreezeGuard, Reacquisition
-from ..core.rotations import matrix_to_quat, quat_to_matrix
+from ..core.rotations import matrix_to_quat, quat_to_matrix, rotations_to_quat
 from ..core.sensors import SensorConfig
 from ..core.skeleton import Skeleton, standing_pose
 from ..core.textfile import load_yaml
@@ -126,6 +128,13 @@ class Estimator(ABC):
         self._rows: dict[tuple, np.ndarray] = {}  # full_targets: (frame sites, sites) -> rows
         self.use_filter(FilterConfig())
         self.use_forecast(0.0)
+        self.use_foot_lock(False)
+
+    def use_foot_lock(self, on: bool) -> None:
+        """Hold each foot where its contact began while the method says it is in contact, by
+        moving hip and knee (core/contact_hold.py: LoBSTr's contact IK, from the method's own
+        contacts; the option foot_lock), from the next reset."""
+        self.foot_lock = ContactHold(self.skeleton) if on else None
 
     def use_forecast(self, ahead: float) -> None:
         """Give each pose `ahead` seconds past its frame, forecast (core/forecast.py; the
@@ -173,6 +182,8 @@ class Estimator(ABC):
         self._shown: BodyPose | None = None  # the last pose given, valid or held
         self.input_filter.reset()
         self.forecast.reset()
+        if self.foot_lock is not None:
+            self.foot_lock.reset()
         self.reacquisition.reset()
         if self.freeze_guard is not None:
             self.freeze_guard.reset()
@@ -189,7 +200,14 @@ class Estimator(ABC):
         filtered = self.input_filter(frame if self.freeze_guard is None else self.freeze_guard(frame))
         if filtered is None:
             return self.forecast.forecast(self.held_pose(frame.stamp - self.lag))
-        return self.forecast.forecast(self._step_filtered(filtered))
+        return self.forecast.forecast(self._locked(self._step_filtered(filtered)))
+
+    def _locked(self, pose: BodyPose) -> BodyPose:
+        """The pose with its feet held where they touched down (foot_lock), else as it is."""
+        if self.foot_lock is None or not pose.valid:
+            return pose
+        local = self.foot_lock.apply(mat3.quat_matrices(pose.local_quats), pose.root_position, pose.contact)
+        return replace(pose, local_quats=rotations_to_quat(local))
 
     def _step_filtered(self, frame: TrackerFrame) -> BodyPose:
         """step() on a frame the filter (or the offline smoother) has already seen."""
@@ -311,9 +329,11 @@ class Estimator(ABC):
             if last is not None and frame.stamp < last - 1.0:  # the method starts over (the
                 self._last = None  # filter did so by itself)
                 self.forecast.reset()
+                if self.foot_lock is not None:
+                    self.foot_lock.reset()
                 self._reset()
             last = frame.stamp
-            yield self.forecast.forecast(self._step_filtered(frame))
+            yield self.forecast.forecast(self._locked(self._step_filtered(frame)))
 
 
 def parse_estimator_spec(spec: str) -> tuple[str, dict]:
@@ -335,7 +355,8 @@ def create_estimator(name: str, sensors: SensorConfig, skeleton: Skeleton, fps: 
     """An estimator by name with its options; filter_<field> options (of FilterConfig) set
     the tracker filter every estimator has, filter=false turns it off; smooth=true smooths
     a whole recording in process() (offline) instead; predict_ahead=SECONDS gives each pose
-    that far past its frame, forecast (core/forecast.py)."""
+    that far past its frame, forecast (core/forecast.py); foot_lock=true holds a foot where it
+    touched down while in contact (core/contact_hold.py)."""
     from ..methods import METHODS, load
 
     if name not in METHODS:
@@ -344,6 +365,9 @@ def create_estimator(name: str, sensors: SensorConfig, skeleton: Skeleton, fps: 
     smooth = options.pop("smooth", False)
     if not isinstance(smooth, bool):
         raise ValueError(f"smooth must be true or false, got {smooth!r}")
+    foot_lock = options.pop("foot_lock", False)
+    if not isinstance(foot_lock, bool):
+        raise ValueError(f"foot_lock must be true or false, got {foot_lock!r}")
     ahead = options.pop("predict_ahead", 0.0)
     if isinstance(ahead, bool) or not isinstance(ahead, (int, float)) or not 0.0 <= ahead <= MAX_AHEAD:
         raise ValueError(f"predict_ahead must be a number of seconds from 0 to {MAX_AHEAD:g}, got {ahead!r}")
@@ -370,4 +394,5 @@ def create_estimator(name: str, sensors: SensorConfig, skeleton: Skeleton, fps: 
         raise ValueError(f"estimator {name!r}: {err}; its options are {', '.join(known)}") from None
     estimator.use_filter(filtering, smooth)
     estimator.use_forecast(float(ahead))
+    estimator.use_foot_lock(foot_lock)
     return estimator

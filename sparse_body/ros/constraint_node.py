@@ -30,7 +30,7 @@ from .messages import to_seconds
 PARAMETERS = {
     k: v
     for k, v in ESTIMATOR_PARAMETERS.items()
-    if k not in ("estimator", "budget_fallback", "step_budget", "predict_ahead")
+    if k not in ("estimator", "budget_fallback", "step_budget", "predict_ahead", "foot_lock")
 }
 PARAMETERS.update(
     {

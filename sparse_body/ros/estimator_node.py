@@ -116,6 +116,11 @@ PARAMETERS = {
         "m/s: a tracker that comes back starts where the estimate had its joint and catches up "
         "at this speed (no snap); 0: at once",
     ),
+    "foot_lock": (
+        False,
+        "hold each foot where it touched down while the estimator says it is in contact (hip and "
+        "knee move, LoBSTr's contact IK): less sliding; false: the estimator's legs as they are",
+    ),
     "predict_ahead": (
         0.0,
         "seconds past the trackers' stamp the body is forecast and stamped (a teleoperation "
@@ -405,10 +410,12 @@ class EstimatorNode(LifecycleNode):
 
     def _shared_options(self, p: dict) -> dict:
         """What the estimator and its budget fallback are both given, so that their poses are
-        alike: the filter_* parameters a user set and predict_ahead."""
+        alike: the filter_* parameters a user set, foot_lock and predict_ahead."""
         shared = {k: p[k] for k, (default, _) in self.PARAMETERS.items() if k.startswith(FILTER) and p[k] != default}
         if p.get("predict_ahead"):
             shared["predict_ahead"] = p["predict_ahead"]
+        if p.get("foot_lock"):
+            shared["foot_lock"] = True
         return shared
 
     def _step_budget(self) -> float:

@@ -1,7 +1,7 @@
 """LoBSTr (Yang et al. 2021) at runtime: ONNX Runtime, one GRU step per frame.
 
 The legs come from the network, driven by the velocities of pelvis, head and hands; contacts
-are held by IK (contact_ik.py). The paper solves the upper body by IK from the same trackers
+are held by IK (core/contact_hold.py). The paper solves the upper body by IK from the same trackers
 (Final IK); a model trained with the learned upper body (features.py) predicts it,
 and the same IK then only turns its spine and arms onto the headset and hands, keeping the
 predicted spine curve, elbow bends and swivels (learned_upper=false: the paper's IK).
@@ -19,6 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ...core.contact_hold import ContactHold
 from ...core.rotations import (
     axis_angle_to_matrix,
     matrix_to_6d,
@@ -34,7 +35,6 @@ from ...estimators.base import Estimator
 from ...estimators.onnx_model import load_model
 from ...estimators.options import FLOOR, MAX_GAP, THREADS, Range
 from ..ik.estimator import IKEstimator
-from .contact_ik import ContactHold
 from .features import INPUT_SITES, OUTPUTS, apply_legs, apply_upper, feature_count, features
 
 _ENDS = [J[SITE_JOINTS[site]] for site in INPUT_SITES[1:]]  # head and hands, in input order

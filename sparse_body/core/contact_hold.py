@@ -1,4 +1,5 @@
-"""Foot contacts held by IK (LoBSTr, section 3.4.1).
+"""Foot contacts held by IK (LoBSTr, section 3.4.1): LoBSTr's own (contact_ik), and every
+estimator's with the option foot_lock (estimators/base.py), from its own contacts.
 
 When a foot's contact turns on, its toe's position becomes the contact point, and hip and
 knee are solved (the shared two-bone IK, with the toe as the limb's end) so that the toe
@@ -14,11 +15,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ...core.body_ik import LIMBS, reach
-from ...core.contacts import FOOT_JOINTS
-from ...core.kinematics import LEG_JOINTS, forward_kinematics
-from ...core.skeleton import JOINT_INDEX as J
-from ...core.skeleton import Skeleton
+from .body_ik import LIMBS, reach
+from .contacts import FOOT_JOINTS
+from .kinematics import LEG_JOINTS, forward_kinematics
+from .skeleton import JOINT_INDEX as J
+from .skeleton import Skeleton
 
 # The toe is moved by the hip (ball) and knee (hinge) of its leg; ankle and toe keep the
 # network's rotations.

@@ -1,0 +1,39 @@
+"""foot_lock (estimators/base.py, core/contact_hold.py): every estimator's feet held where
+they touched down while its own contacts say so."""
+
+import numpy as np
+import pytest
+
+from sparse_body.apps.evaluation import estimate_motion, score
+from sparse_body.core.contacts import FOOT_JOINTS
+from sparse_body.core.sensors import load_sensor_config
+from sparse_body.core.skeleton import Skeleton
+from sparse_body.data.field_protocol import FIELD
+from sparse_body.data.synthetic import synthetic_walk
+from sparse_body.estimators import create_estimator
+
+
+def test_a_locked_foot_stays_where_it_touched_down_while_in_contact():
+    motion, sensors = synthetic_walk(6.0), load_sensor_config("six_point")
+    plain = estimate_motion(motion, "ik", sensors, FIELD)
+    locked = estimate_motion(motion, "ik", sensors, FIELD, foot_lock=True)
+    assert np.array_equal(plain.contacts, locked.contacts)  # the method's own contacts, unchanged
+    held = 0
+    for side, toe in enumerate(FOOT_JOINTS):
+        on = locked.contacts[:, side]
+        both = on[1:] & on[:-1]  # frame to frame within one contact
+        steps = np.linalg.norm(np.diff(locked.positions[:, toe], axis=0), axis=1)[both]
+        free = np.linalg.norm(np.diff(plain.positions[:, toe], axis=0), axis=1)[both]
+        held += both.sum()
+        # mostly held to the micrometre; where the leg cannot reach its point it is let go
+        assert np.median(steps) < 1e-6 and steps.mean() < 0.1 * free.mean(), (steps.mean(), free.mean())
+    assert held > 60  # a walk plants each foot for many frames
+    assert score(locked)["Skate [cm/s]"] < score(plain)["Skate [cm/s]"]
+
+
+def test_foot_lock_takes_true_or_false():
+    sensors, skeleton = load_sensor_config("four_point"), Skeleton.canonical(1.75)
+    assert create_estimator("ik", sensors, skeleton, foot_lock=True).foot_lock is not None
+    assert create_estimator("ik", sensors, skeleton).foot_lock is None
+    with pytest.raises(ValueError, match="foot_lock must be true or false"):
+        create_estimator("ik", sensors, skeleton, foot_lock="yes")

@@ -2,8 +2,8 @@
 
     ros2 launch sparse_body sparse_body.launch.py sensors:=four_point estimator:=lobstr bag:=/path/to/trackers
 
-Arguments: sensors, estimator, model_path, refine, step_budget, budget_fallback, predict_ahead,
-height, calibration (a T-pose calibration file: its fitted body replaces the height-scaled one),
+Arguments: sensors, estimator, model_path, refine, step_budget, budget_fallback, foot_lock,
+predict_ahead, height, calibration (a T-pose calibration file: its fitted body replaces the height-scaled one),
 bag (the tracker source; empty: trackers come from elsewhere on /tf), loop (replay the bag again and again), rviz,
 robot_state_publisher, foxglove_port and foxglove_host (the live view). The estimator is a
 lifecycle node; it is configured and activated here through its autostart parameter.
@@ -48,6 +48,7 @@ def _nodes(context):
             "step_budget": float(arg("step_budget")),
             "budget_fallback": arg("budget_fallback"),
             "predict_ahead": float(arg("predict_ahead")),
+            "foot_lock": arg("foot_lock").lower() in ("true", "1"),
             "foxglove_port": int(arg("foxglove_port")),
             "foxglove_host": arg("foxglove_host"),
             "publish_link_tf": False,
@@ -138,6 +139,11 @@ def generate_launch_description():
                 "budget_fallback",
                 default_value="ik",
                 description="the cheaper estimator for a frame over budget (empty: every step is waited for)",
+            ),
+            DeclareLaunchArgument(
+                "foot_lock",
+                default_value="false",
+                description="hold each foot where it touched down while the estimator calls it planted",
             ),
             DeclareLaunchArgument(
                 "predict_ahead",

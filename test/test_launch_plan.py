@@ -51,6 +51,7 @@ def test_a_missing_robot_state_publisher_is_said_and_nothing_is_started_for_it(m
         "step_budget": "0.0",
         "budget_fallback": "ik",
         "predict_ahead": "0.0",
+        "foot_lock": "false",
     }.items():
         context.launch_configurations[name] = value
     actions = module._nodes(context)
@@ -91,12 +92,14 @@ def test_a_calibration_file_is_the_body_of_the_estimator_and_of_robot_state_publ
         "step_budget": "0.0",
         "budget_fallback": "ik",
         "predict_ahead": "0.0",
+        "foot_lock": "false",
     }.items():
         context.launch_configurations[name] = value
     actions = module._nodes(context)
     estimator = next(kw for kind, kw in actions if kind == "lifecycle")
     assert estimator["parameters"][1]["calibration"] == str(tmp_path / "me.yaml")
     assert estimator["parameters"][1]["foxglove_host"] == "0.0.0.0"  # it was silently ignored
+    assert estimator["parameters"][1]["foot_lock"] is False and estimator["parameters"][1]["predict_ahead"] == 0.0
     rsp = next(kw for kind, kw in actions if kind == "node" and kw["package"] == "robot_state_publisher")
     assert rsp["parameters"][0]["robot_description"] == body_urdf(Calibration.load(tmp_path / "me.yaml").body())
     assert rsp["parameters"][0]["robot_description"] != body_urdf(Skeleton.canonical(1.62))

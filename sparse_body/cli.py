@@ -1051,6 +1051,16 @@ def _one_line(err: BaseException) -> str:
 
 
 _sigterm_seen = False  # set by _terminate; main() clears it at its start
+_sigint_seen = False  # set by _interrupt; likewise
+
+
+def _interrupt(signum, frame):
+    # remembered as well as raised: landing in a weakref callback or a __del__ while a module
+    # is imported, the KeyboardInterrupt is printed as "ignored" and the command went on (exit
+    # 0); main() looks at the flag before the command starts
+    global _sigint_seen
+    _sigint_seen = True
+    raise KeyboardInterrupt
 
 
 def _terminate(signum, frame):
@@ -1076,19 +1086,23 @@ def main(argv: list[str] | None = None) -> None:
     exit code, never a traceback."""
     import signal
 
-    global _sigterm_seen
-    _sigterm_seen = False
+    global _sigterm_seen, _sigint_seen
+    _sigterm_seen = _sigint_seen = False
     command = "sparse-body"
     yaml_error: type[Exception] = ValueError  # (yaml's own until it is imported)
     args = None
     try:  # from the first statement: Ctrl-C while starting is one line too
         signal.signal(signal.SIGTERM, _terminate)
+        if signal.getsignal(signal.SIGINT) is signal.default_int_handler:  # (not where it is ignored)
+            signal.signal(signal.SIGINT, _interrupt)
         from yaml import YAMLError
 
         yaml_error = YAMLError
 
         args = build_parser().parse_args(argv)
         command = f"sparse-body {args.command}"
+        if _sigterm_seen or _sigint_seen:  # a stop that an import swallowed: nothing has started
+            raise Terminated if _sigterm_seen else KeyboardInterrupt
         sys.exit(args.func(args))
     except (KeyboardInterrupt, Exception) as err:  # (SystemExit passes: argparse's, ours)
         stop = _stop_behind(err)

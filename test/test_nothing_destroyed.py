@@ -307,3 +307,27 @@ def test_every_user_error_is_one_line_and_its_exit_code(bag, tmp_path, capsys, c
     assert said in err and "Traceback" not in err
     assert time.monotonic() - started < 60
     assert not out.exists() and not [p for p in tmp_path.iterdir() if p.name.startswith(".")]
+
+
+def test_a_ctrl_c_that_an_import_swallowed_still_stops_the_command_before_it_starts(tmp_path, monkeypatch, capsys):
+    """SIGINT landing in a weakref callback while a module is imported is printed as "ignored"
+    and the command went on to finish (exit 0): the handler remembers it, and main() stops."""
+    real = cli.build_parser
+
+    def parser_after_a_swallowed_interrupt():
+        try:
+            cli._interrupt(signal.SIGINT, None)  # what the signal does, inside code that drops it
+        except KeyboardInterrupt:
+            pass
+        return real()
+
+    monkeypatch.setattr(cli, "build_parser", parser_after_a_swallowed_interrupt)
+    previous = signal.getsignal(signal.SIGINT)
+    try:
+        with pytest.raises(SystemExit) as stopped:
+            cli.main(["make-bag", str(tmp_path / "walk"), "--seconds", "1"])
+    finally:
+        signal.signal(signal.SIGINT, previous)
+    assert stopped.value.code == EXIT_INTERRUPTED
+    assert "interrupted; nothing written" in capsys.readouterr().err
+    assert not list(tmp_path.iterdir())

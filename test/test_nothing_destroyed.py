@@ -2,6 +2,7 @@
 an input, a plain file, a folder of other files or a device; interrupted and terminated runs
 leave nothing behind; every error a user can cause ends in one line and its own exit code."""
 
+import contextlib
 import os
 import signal
 import subprocess
@@ -315,10 +316,8 @@ def test_a_ctrl_c_that_an_import_swallowed_still_stops_the_command_before_it_sta
     real = cli.build_parser
 
     def parser_after_a_swallowed_interrupt():
-        try:
-            cli._interrupt(signal.SIGINT, None)  # what the signal does, inside code that drops it
-        except KeyboardInterrupt:
-            pass
+        with contextlib.suppress(KeyboardInterrupt):  # code that drops it
+            cli._interrupt(signal.SIGINT, None)  # what the signal does
         return real()
 
     monkeypatch.setattr(cli, "build_parser", parser_after_a_swallowed_interrupt)

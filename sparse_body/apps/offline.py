@@ -102,11 +102,15 @@ def process_bag(
         if parallel:  # forked before the estimator starts threads (ONNX Runtime's)
             # A child made but not yet in the stack would outlive a Ctrl-C (it ignores signals)
             # and hold the exit forever: the two are one step (a Ctrl-C 1.5 s in did it).
+            # The threads that feed the pipes start once both children are forked, in the same
+            # step: a stop landing inside Thread.start left a started thread that Python had
+            # already written off (a traceback on stderr, CI beside burners); started with the
+            # signals held, they keep them held, so a signal always finds the main thread.
             with interrupts_held():
                 reader = stack.enter_context(ForkedReader(bag_in, sensors, stale_after, guards))
                 writer = stack.enter_context(ForkedWriter(tmp, made_with, compression, (reader.conn,), **bag))
-            reader.start()  # the threads that feed the pipes, once both children are forked
-            writer.start()
+                reader.start()
+                writer.start()
         else:
             reader = stack.enter_context(Reader(bag_in, sensors, stale_after, guards))
             writer = stack.enter_context(Writer(tmp, made_with, compression, **bag))

@@ -129,8 +129,9 @@ def test_ctrl_c_keeps_the_finished_bags_and_removes_the_ones_being_written(tmp_p
     assert proc.returncode == EXIT_INTERRUPTED, err
     assert "Traceback" not in err and "bags finished are kept" in err.strip().splitlines()[-1], err
     assert not _hidden(out), _hidden(out)  # nothing half-written, under any name
-    done = [os.path.basename(b["output"]) for b in json.loads((out / SUMMARY).read_text())["bags"]]
-    assert sorted(p.name for p in out.iterdir() if p.is_dir()) == sorted(done)
+    summary = (out / SUMMARY).read_text()
+    done = [os.path.basename(b["output"]) for b in json.loads(summary)["bags"]]
+    assert sorted(p.name for p in out.iterdir() if p.is_dir()) == sorted(done), summary + err
     assert all(written_by_us(out / name) and _messages(out / name) for name in done)
 
 

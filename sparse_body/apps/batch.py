@@ -121,9 +121,11 @@ def output_for(bag: Path, out_dir: Path) -> Path:
     return out_dir / bag.name.removesuffix(".mcap")
 
 
-class _Stopped(Exception):
+class _Stopped(BaseException):
     """SIGTERM from the parent (Ctrl-C or SIGTERM to the run): the bag being written is removed
-    on the way out (bagio.bag_writer), then the worker ends."""
+    on the way out (bagio.bag_writer), then the worker ends. A BaseException, as
+    KeyboardInterrupt is: the `except Exception` of a reader or a library must not turn it into
+    an error of the bag (rosbags' errors become BagError, without their cause)."""
 
 
 _writing = False  # in a worker: a bag is being processed
@@ -167,7 +169,7 @@ def _process_one(bag: Path, out: Path, settings: Settings, exit_on_stop: bool = 
             **settings.options,
         )
         result.frames, result.invalid = processed.frames, processed.invalid
-    except Exception as err:
+    except (Exception, _Stopped) as err:
         # the stop lands wherever the bag is; inside compiled code (a numba kernel) it comes
         # back as that code's SystemError, caused by _Stopped
         if _caused_by_stop(err):

@@ -252,7 +252,7 @@ def estimate_motion(
     root = np.stack([p.root_position for p in poses])
     glob, pos = forward_kinematics(local, root, view.skeleton.offsets)
     ahead = round((estimator.ahead if horizon is None else horizon) * motion.fps)
-    if not 0 <= ahead < len(motion) - 1:
+    if ahead and not ahead < len(motion) - 1:  # (a pose on time always has its body)
         raise ValueError(f"a horizon of {ahead} frames does not fit the {len(motion)}-frame motion {motion.name}")
     contacts = np.stack([p.contact for p in poses])
     return Estimated(motion, view, pos, glob, local, contacts, ahead)

@@ -16,6 +16,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
+from scipy.spatial.transform import Rotation
 
 from .types import BodyPose, breaks_take
 
@@ -24,38 +25,6 @@ FADE = 0.1  # s: the velocity's time constant (chosen on the held-out kind dance
 MAX_TURN = 30.0  # rad/s a joint may turn (a fast punch's wrist: about 20)
 MAX_SPEED = 12.0  # m/s the root may move (a sprinter's: about 10)
 MAX_GAP = 0.1  # s between two poses over which a velocity is still read
-
-
-def _quat_multiply(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Hamilton products of (N, 4) x y z w quaternions."""
-    ax, ay, az, aw = a.T
-    bx, by, bz, bw = b.T
-    return np.stack(
-        (
-            aw * bx + ax * bw + ay * bz - az * by,
-            aw * by - ax * bz + ay * bw + az * bx,
-            aw * bz + ax * by - ay * bx + az * bw,
-            aw * bw - ax * bx - ay * by - az * bz,
-        ),
-        axis=-1,
-    )
-
-
-def _rotation_vectors(q: np.ndarray) -> np.ndarray:
-    """(N, 3) rotation vectors of (N, 4) unit quaternions, the shorter way round."""
-    q = np.where(q[:, 3:] < 0.0, -q, q)
-    sine = np.linalg.norm(q[:, :3], axis=1)
-    angle = 2.0 * np.arctan2(sine, np.clip(q[:, 3], 0.0, 1.0))
-    scale = np.where(sine > 1e-12, angle / np.maximum(sine, 1e-12), 2.0)
-    return q[:, :3] * scale[:, None]
-
-
-def _quaternions(v: np.ndarray) -> np.ndarray:
-    """(N, 4) unit quaternions of (N, 3) rotation vectors."""
-    angle = np.linalg.norm(v, axis=1)
-    half = 0.5 * angle
-    scale = np.where(angle > 1e-12, np.sin(half) / np.maximum(angle, 1e-12), 0.5)
-    return np.concatenate((v * scale[:, None], np.cos(half)[:, None]), axis=1)
 
 
 def faded_seconds(ahead: float, fade: float) -> float:
@@ -78,27 +47,23 @@ class PoseForecast:
         self._last: BodyPose | None = None
 
     def forecast(self, pose: BodyPose) -> BodyPose:
-        last, self._last = self._last, (pose if pose.valid else None)
         if self.ahead == 0.0:
             return pose
+        last, self._last = self._last, (pose if pose.valid else None)
         if not pose.valid or last is None or breaks_take(last.stamp, pose.stamp, MAX_GAP):
             return pose.restamped(pose.stamp + self.ahead)
         dt = pose.stamp - last.stamp
-        turn = _rotation_vectors(_quat_multiply(_inverse(last.local_quats), pose.local_quats)) / dt
+        now = Rotation.from_quat(pose.local_quats)
+        turn = (Rotation.from_quat(last.local_quats).inv() * now).as_rotvec() / dt  # the shorter way round
         speed = np.linalg.norm(turn, axis=1, keepdims=True)
         turn *= np.minimum(1.0, MAX_TURN / np.maximum(speed, 1e-12))
         velocity = (pose.root_position - last.root_position) / dt
         velocity *= min(1.0, MAX_SPEED / max(float(np.linalg.norm(velocity)), 1e-12))
-        quats = _quat_multiply(pose.local_quats, _quaternions(turn * self.carry))
         return BodyPose(
             pose.stamp + self.ahead,
-            quats / np.linalg.norm(quats, axis=1, keepdims=True),
+            (now * Rotation.from_rotvec(turn * self.carry)).as_quat(),
             pose.root_position + velocity * self.carry,
             pose.contact_probability.copy(),
             pose.contact.copy(),
             valid=True,
         )
-
-
-def _inverse(q: np.ndarray) -> np.ndarray:
-    return q * np.array([-1.0, -1.0, -1.0, 1.0])

@@ -181,9 +181,7 @@ class Estimator(ABC):
         self._last: BodyPose | None = None
         self._shown: BodyPose | None = None  # the last pose given, valid or held
         self.input_filter.reset()
-        self.forecast.reset()
-        if self.foot_lock is not None:
-            self.foot_lock.reset()
+        self._forget_given()
         self.reacquisition.reset()
         if self.freeze_guard is not None:
             self.freeze_guard.reset()
@@ -199,15 +197,22 @@ class Estimator(ABC):
         long before, and held (invalid) until as many frames have come since a reset."""
         filtered = self.input_filter(frame if self.freeze_guard is None else self.freeze_guard(frame))
         if filtered is None:
-            return self.forecast.forecast(self.held_pose(frame.stamp - self.lag))
-        return self.forecast.forecast(self._locked(self._step_filtered(filtered)))
+            return self._given(self.held_pose(frame.stamp - self.lag))
+        return self._given(self._step_filtered(filtered))
 
-    def _locked(self, pose: BodyPose) -> BodyPose:
-        """The pose with its feet held where they touched down (foot_lock), else as it is."""
-        if self.foot_lock is None or not pose.valid:
-            return pose
-        local = self.foot_lock.apply(mat3.quat_matrices(pose.local_quats), pose.root_position, pose.contact)
-        return replace(pose, local_quats=rotations_to_quat(local))
+    def _given(self, pose: BodyPose) -> BodyPose:
+        """A pose on its way out, live and offline alike: its feet held where they touched down
+        (foot_lock; a held pose as it is), then forecast (predict_ahead)."""
+        if self.foot_lock is not None and pose.valid:
+            local = self.foot_lock.apply(mat3.quat_matrices(pose.local_quats), pose.root_position, pose.contact)
+            pose = replace(pose, local_quats=rotations_to_quat(local))
+        return self.forecast.forecast(pose)
+
+    def _forget_given(self) -> None:
+        """_given's history: the contact points held and the last pose forecast from."""
+        self.forecast.reset()
+        if self.foot_lock is not None:
+            self.foot_lock.reset()
 
     def _step_filtered(self, frame: TrackerFrame) -> BodyPose:
         """step() on a frame the filter (or the offline smoother) has already seen."""
@@ -328,12 +333,10 @@ class Estimator(ABC):
         for frame in self.filtered(frames):
             if last is not None and frame.stamp < last - 1.0:  # the method starts over (the
                 self._last = None  # filter did so by itself)
-                self.forecast.reset()
-                if self.foot_lock is not None:
-                    self.foot_lock.reset()
+                self._forget_given()
                 self._reset()
             last = frame.stamp
-            yield self.forecast.forecast(self._locked(self._step_filtered(frame)))
+            yield self._given(self._step_filtered(frame))
 
 
 def parse_estimator_spec(spec: str) -> tuple[str, dict]:

@@ -1,0 +1,101 @@
+"""Humanoid retargeting (sparse_body/robot) measured on the validation people (field
+protocol): the estimator's pose of each clip, retargeted onto a robot frame by frame as the
+retarget node does, scored by robot/retarget.retarget_quality: each target's distance from
+the scaled human joint, joint-limit violations, foot skate while planted, below-floor depth,
+and the solver's step time.
+
+Usage: .venv/bin/python scripts/retarget_eval.py ROBOT_YAML [--urdf PATH] [--estimator ik]
+           [--sensors six_point] [--limit N] [--output docs/retarget_ROBOT.json]
+Writes the table (Markdown) to stdout and every clip's figures to --output.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import platform
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+
+def main() -> int:
+    from sparse_body.apps.evaluation import estimate_motion, split_items
+    from sparse_body.core.rotations import matrix_to_quat
+    from sparse_body.core.sensors import load_sensor_config
+    from sparse_body.core.types import BodyPose
+    from sparse_body.data.catalog import find_mocap_root, split_clips
+    from sparse_body.data.field_protocol import FIELD
+    from sparse_body.robot.mapping import load_mapping
+    from sparse_body.robot.retarget import HumanoidRetarget, retarget_quality
+    from sparse_body.robot.urdf_model import load_urdf
+
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("robot", type=Path)
+    parser.add_argument("--urdf", type=Path)
+    parser.add_argument("--estimator", default="ik")
+    parser.add_argument("--sensors", default="six_point")
+    parser.add_argument("--limit", type=int)
+    parser.add_argument("--output", type=Path)
+    args = parser.parse_args()
+    root = find_mocap_root()
+    if root is None:
+        print("no motion capture folder found (sparse-body import-mocap)", file=sys.stderr)
+        return 2
+    mapping = load_mapping(args.robot)
+    model = load_urdf(args.urdf or mapping.urdf)
+    kinds = {c.clip_id: c.category for c in split_clips(root, "validation")}
+    sensors = load_sensor_config(args.sensors)
+    rows, steps = [], []
+    for item in split_items(root, "validation", limit=args.limit):
+        est = estimate_motion(item.load(), args.estimator, sensors, FIELD, item.seed)
+        retarget = HumanoidRetarget(model, mapping, est.view.skeleton)
+        poses = []
+        for i in range(len(est.positions)):
+            body = BodyPose(
+                i / est.motion.fps, matrix_to_quat(est.local_rotations[i]), est.positions[i, 0], contact=est.contacts[i]
+            )
+            start = time.perf_counter()
+            poses.append(retarget.step(body))
+            steps.append(time.perf_counter() - start)
+        figures = retarget_quality(poses, retarget, est.contacts, est.motion.fps)
+        rows.append({"clip": item.key, "kind": kinds[item.key], **figures})
+        print(f"{item.key}: {figures}", file=sys.stderr)
+    keys = [k for k in rows[0] if k not in ("clip", "kind", "frames")]
+    frames = np.array([r["frames"] for r in rows])
+    print(f"{model.name} ({len(model.moving)} joints), {args.estimator} {args.sensors}, validation, field protocol:")
+    print(f"{len(rows)} clips, {int(frames.sum())} frames; scale {retarget.scale:.3f}\n")
+    print("| figure | frame-weighted mean | worst clip |\n| --- | ---: | ---: |")
+    summary = {}
+    for key in keys:
+        values = np.array([r.get(key, np.nan) for r in rows])
+        ok = np.isfinite(values)
+        mean = float(np.sum(values[ok] * frames[ok]) / frames[ok].sum()) if ok.any() else float("nan")
+        worst = float(values[ok].max()) if ok.any() else float("nan")
+        summary[key] = mean
+        print(f"| {key} | {mean:.2f} | {worst:.2f} |")
+    steps_ms = np.array(steps) * 1e3
+    print(f"| step p50 / p99 [ms] | {np.percentile(steps_ms, 50):.2f} / {np.percentile(steps_ms, 99):.2f} | |")
+    if args.output:
+        args.output.write_text(
+            json.dumps(
+                {
+                    "robot": model.name,
+                    "command": "python " + " ".join(sys.argv),
+                    "machine": f"{platform.machine()}, {len(os.sched_getaffinity(0))} cores",
+                    "step_ms": {"p50": float(np.percentile(steps_ms, 50)), "p99": float(np.percentile(steps_ms, 99))},
+                    "summary": summary,
+                    "clips": rows,
+                },
+                indent=1,
+            )
+            + "\n"
+        )
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,311 @@
+"""Each estimated body pose as a humanoid robot's joint angles.
+
+The human is scaled to the robot (by default robot leg over human leg, so a standing person
+stands the robot at its own height), and each mapped robot link reaches for its human joint:
+damped Gauss-Newton over the robot's floating base and its joints, a few steps a frame from
+the last frame's solution, each step clipped to the URDF's limits (so no published angle is
+ever outside them). Two weak pulls keep the solution steady where the targets leave freedom:
+towards the last frame's angles (smooth in time) and towards the robot's zero pose.
+
+Feet: the fixed frame's z = 0 is the floor. A foot target below its standing height is lifted
+to it, and while the estimator says that foot is planted, its target stays where it touched
+down, so the robot's foot does not slide when the human estimate's does.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..core.kinematics import forward_kinematics
+from ..core.rotations import matrix_to_quat, quat_to_matrix
+from ..core.skeleton import JOINT_INDEX, Skeleton
+from ..core.types import BodyPose
+from .mapping import SIDES, RobotMapping
+from .urdf_model import RobotFileError, RobotModel
+
+BASE_POSITION = 1.0  # weight of the base (pelvis) place, per metre
+BASE_TURN = 0.5  # and of its turn, per radian
+REST = 1e-3  # weight of the pull to the zero pose
+DAMPING = 1e-4  # Levenberg damping of each step
+FIRST_ITERATIONS = 40  # from the zero pose, on the first frame and after a reset
+PLANTED = 10.0  # a planted foot's position weighs this many times its own: the base gives way, not the foot
+LET_GO = 0.15  # m (robot's): a planted foot whose human foot has gone this far is planted again there
+MAX_TURN_STEP = 0.3  # rad: the largest joint or base turn of one step (a longer step is shortened)
+MAX_MOVE_STEP = 0.1  # m: the largest base move of one step
+
+
+@dataclass(frozen=True)
+class RobotPose:
+    stamp: float
+    positions: np.ndarray  # (moving joints,) in RobotModel.moving order, within limits
+    base_position: np.ndarray  # (3,) the base link's place in the fixed frame
+    base_quat: np.ndarray  # (4,) x y z w
+    reached: np.ndarray  # (targets, 3) where each target point is
+    wanted: np.ndarray  # (targets, 3) the scaled human joint it reaches for (before the floor and locks)
+    valid: bool = True
+
+
+def _skew(v: np.ndarray) -> np.ndarray:
+    return np.array([[0.0, -v[2], v[1]], [v[2], 0.0, -v[0]], [-v[1], v[0], 0.0]])
+
+
+def _log(r: np.ndarray) -> np.ndarray:
+    """The rotation vector of a rotation matrix."""
+    cos = min(1.0, max(-1.0, (np.trace(r) - 1.0) / 2.0))
+    angle = math.acos(cos)
+    w = np.array([r[2, 1] - r[1, 2], r[0, 2] - r[2, 0], r[1, 0] - r[0, 1]])
+    if angle < 1e-6:
+        return w / 2.0
+    if math.pi - angle < 1e-4:  # near a half turn the skew part vanishes: the axis from the diagonal
+        axis = np.sqrt(np.maximum((np.diag(r) + 1.0) / 2.0, 0.0))
+        k = int(np.argmax(axis))
+        axis = (r[:, k] + np.eye(3)[k]) / (2.0 * axis[k]) if axis[k] > 0 else axis
+        return axis / np.linalg.norm(axis) * angle
+    return w * (angle / (2.0 * math.sin(angle)))
+
+
+def _exp(v: np.ndarray) -> np.ndarray:
+    angle = float(np.linalg.norm(v))
+    if angle < 1e-12:
+        return np.eye(3)
+    k = _skew(v / angle)
+    return np.eye(3) + math.sin(angle) * k + (1.0 - math.cos(angle)) * (k @ k)
+
+
+class HumanoidRetarget:
+    """Body poses of one person (skeleton) as joint angles of one robot (model, mapping)."""
+
+    def __init__(self, model: RobotModel, mapping: RobotMapping, skeleton: Skeleton) -> None:
+        self.model, self.mapping, self.skeleton = model, mapping, skeleton
+        self.names = tuple(j.name for j in model.moving)
+        self.lower, self.upper = model.limits()
+        self.base = model.link(mapping.base)
+        self.links = [model.link(t.link) for t in mapping.targets]
+        self.chains = [model.chain(link) for link in self.links]
+        if model.chain(self.base):
+            raise RobotFileError(f"{mapping.source}: base {mapping.base!r} must be the URDF's root link or fixed to it")
+        self.points = np.array([t.point for t in mapping.targets], float)
+        self.joints = [JOINT_INDEX[t.joint] for t in mapping.targets]
+        self.rest_q = np.clip(0.0, self.lower, self.upper)
+        self._base_in_root = self._base_offset()
+        rest_links, _ = model.forward(self.rest_q, np.eye(4))
+        to_base = np.linalg.inv(rest_links[self.base])
+        rest = [to_base @ rest_links[link] for link in self.links]
+        self.rest_turns = np.array([r[:3, :3] for r in rest])  # each link's turn at the zero pose, base unturned
+        rest_points = np.array([r[:3, :3] @ p + r[:3, 3] for r, p in zip(rest, self.points, strict=True)])
+        self._scale_to(rest_points)
+        self.reset()
+
+    def _base_offset(self) -> np.ndarray:
+        """The root link's transform in the base link's frame at the zero pose: the solver
+        places the base, and the tree is computed from its root."""
+        links, _ = self.model.forward(self.rest_q, np.eye(4))
+        return np.linalg.inv(links[self.base])
+
+    def _scale_to(self, rest_points: np.ndarray) -> None:
+        """The scale and the floor heights, from the feet targets (those with a contact)."""
+        feet = [k for k, t in enumerate(self.mapping.targets) if t.contact]
+        human = self.skeleton.rest_positions()  # pelvis at the origin, T-pose
+        floor = human[:, 2].min()
+        if feet:
+            robot_leg = float(np.mean([-rest_points[k, 2] for k in feet]))
+            human_leg = float(np.mean([-human[self.joints[k], 2] for k in feet]))
+            self.human_ankle = float(np.mean([human[self.joints[k], 2] - floor for k in feet]))
+        elif self.mapping.scale is None:
+            raise RobotFileError(f"{self.mapping.source}: scale: auto needs feet targets (with contact: left/right)")
+        else:
+            robot_leg = human_leg = 1.0
+            self.human_ankle = 0.0
+        if self.mapping.scale is None and not robot_leg > 0.05:
+            raise RobotFileError(
+                f"{self.mapping.source}: the feet targets are not below the base at the zero pose; give a scale"
+            )
+        self.scale = self.mapping.scale if self.mapping.scale is not None else robot_leg / human_leg
+        self.ankle_height = (
+            self.mapping.ankle_height if self.mapping.ankle_height is not None else self.scale * self.human_ankle
+        )
+
+    def to_robot(self, points: np.ndarray) -> np.ndarray:
+        """Human points (..., 3) in the fixed frame, as the robot's: scaled about the floor,
+        a foot's standing height going to the robot's."""
+        out = np.asarray(points, float) * self.scale
+        out[..., 2] = self.scale * (np.asarray(points, float)[..., 2] - self.human_ankle) + self.ankle_height
+        return out
+
+    def reset(self) -> None:
+        """Forget the last solution and the planted feet (a new recording, a jump)."""
+        self.q = self.rest_q.copy()
+        self.base_turn = np.eye(3)
+        self.base_place = np.zeros(3)
+        self._locks: dict[int, np.ndarray] = {}
+        self._last: RobotPose | None = None
+
+    def step(self, pose: BodyPose) -> RobotPose:
+        """The robot's pose for a body pose. An invalid or non-finite body pose holds the last
+        robot pose, marked invalid (the zero pose before the first)."""
+        if not pose.valid or not pose.is_finite():
+            return self._held(pose.stamp)
+        turns, places = forward_kinematics(quat_to_matrix(pose.local_quats), pose.root_position, self.skeleton.offsets)
+        wanted = self.to_robot(places[self.joints])
+        goals = wanted.copy()
+        for k, target in enumerate(self.mapping.targets):
+            if not target.contact:
+                continue
+            goals[k, 2] = max(goals[k, 2], self.ankle_height)
+            if pose.contact[SIDES.index(target.contact)]:
+                held = self._locks.get(k)
+                if held is None or np.linalg.norm(held[:2] - goals[k, :2]) > LET_GO:
+                    held = self._locks[k] = np.array([goals[k, 0], goals[k, 1], self.ankle_height])
+                goals[k] = held
+            else:
+                self._locks.pop(k, None)
+        goal_turns = turns[self.joints] @ self.rest_turns
+        first = self._last is None
+        if first:
+            self.base_place = self.to_robot(places[0])
+            self.base_turn = turns[0].copy()
+        planted = np.array([k in self._locks for k in range(len(goals))])
+        self._solve(self.to_robot(places[0]), turns[0], goals, goal_turns, planted, FIRST_ITERATIONS if first else None)
+        links = self._links()
+        reached = np.array(
+            [links[link][:3, :3] @ p + links[link][:3, 3] for link, p in zip(self.links, self.points, strict=True)]
+        )
+        result = RobotPose(
+            pose.stamp, self.q.copy(), self.base_place.copy(), matrix_to_quat(self.base_turn), reached, wanted
+        )
+        if not (np.all(np.isfinite(result.positions)) and np.all(np.isfinite(result.base_position))):
+            self.reset()  # never published: the last good pose is held instead
+            return self._held(pose.stamp)
+        self._last = result
+        return result
+
+    def _held(self, stamp: float) -> RobotPose:
+        if self._last is None:
+            zero = np.zeros((len(self.links), 3))
+            return RobotPose(stamp, self.rest_q.copy(), np.zeros(3), np.array([0.0, 0.0, 0.0, 1.0]), zero, zero, False)
+        last = self._last
+        return RobotPose(stamp, last.positions, last.base_position, last.base_quat, last.reached, last.wanted, False)
+
+    def _links(self) -> np.ndarray:
+        base = np.eye(4)
+        base[:3, :3], base[:3, 3] = self.base_turn, self.base_place
+        links, _ = self.model.forward(self.q, base @ self._base_in_root)
+        return links
+
+    def _solve(self, base_goal, base_goal_turn, goals, goal_turns, planted, iterations: int | None) -> None:
+        n = len(self.q)
+        targets = self.mapping.targets
+        smooth = math.sqrt(self.mapping.smoothing)
+        rest = math.sqrt(REST)
+        previous = self.q.copy()
+        for _ in range(iterations or self.mapping.iterations):
+            base = np.eye(4)
+            base[:3, :3], base[:3, 3] = self.base_turn, self.base_place
+            links, frames = self.model.forward(self.q, base @ self._base_in_root)
+            rows, residuals = [], []
+            # the base: its place and turn
+            row = np.zeros((6, 6 + n))
+            row[:3, :3] = np.eye(3) * BASE_POSITION
+            row[3:, 3:6] = np.eye(3) * BASE_TURN
+            rows.append(row)
+            residuals.append(
+                np.concatenate(
+                    [(base_goal - self.base_place) * BASE_POSITION, _log(base_goal_turn @ self.base_turn.T) * BASE_TURN]
+                )
+            )
+            for k, target in enumerate(targets):
+                link = links[self.links[k]]
+                point = link[:3, :3] @ self.points[k] + link[:3, 3]
+                chain = self.chains[k]
+                axes = np.array([frames[i][:3, :3] @ self.model.moving[i].axis for i in chain]).reshape(-1, 3)
+                origins = np.array([frames[i][:3, 3] for i in chain]).reshape(-1, 3)
+                prismatic = np.array([self.model.moving[i].kind == "prismatic" for i in chain], bool)
+                if target.position > 0:
+                    weight = target.position * (PLANTED if planted[k] else 1.0)
+                    row = np.zeros((3, 6 + n))
+                    row[:, :3] = np.eye(3)
+                    row[:, 3:6] = -_skew(point - self.base_place)
+                    moved = np.cross(axes, point - origins)
+                    moved[prismatic] = axes[prismatic]
+                    row[:, 6 + np.array(chain, int)] = moved.T
+                    rows.append(row * weight)
+                    residuals.append((goals[k] - point) * weight)
+                if target.orientation > 0:
+                    row = np.zeros((3, 6 + n))
+                    row[:, 3:6] = np.eye(3)
+                    turned = axes.copy()
+                    turned[prismatic] = 0.0
+                    row[:, 6 + np.array(chain, int)] = turned.T
+                    rows.append(row * target.orientation)
+                    residuals.append(_log(goal_turns[k] @ link[:3, :3].T) * target.orientation)
+            pull = np.zeros((2 * n, 6 + n))
+            pull[:n, 6:] = np.eye(n) * smooth
+            pull[n:, 6:] = np.eye(n) * rest
+            rows.append(pull)
+            residuals.append(np.concatenate([(previous - self.q) * smooth, (self.rest_q - self.q) * rest]))
+            jac, res = np.vstack(rows), np.concatenate(residuals)
+            normal = jac.T @ jac
+            normal[np.diag_indices_from(normal)] += DAMPING
+            step = self._limited_step(normal, jac.T @ res)
+            # a long step leaves the region where the linearisation holds (and the limits' clip
+            # can make it worse): shortened, as a trust region would
+            longest = max(np.abs(step[3:]).max() / MAX_TURN_STEP, np.abs(step[:3]).max() / MAX_MOVE_STEP, 1.0)
+            step /= longest
+            self.base_place = self.base_place + step[:3]
+            self.base_turn = _exp(step[3:6]) @ self.base_turn
+            self.q = np.clip(self.q + step[6:], self.lower, self.upper)
+
+    def _limited_step(self, normal: np.ndarray, gradient: np.ndarray) -> np.ndarray:
+        """The Gauss-Newton step with the joints it would push past a limit held at that
+        limit and the rest solved again for it (a few rounds of an active set): clipping the
+        free step instead lets the other joints act as if the clipped ones had moved, and a
+        planted foot slides."""
+        step = np.zeros(len(gradient))
+        free = np.ones(len(gradient), bool)
+        for _ in range(4):
+            rhs = gradient[free] - normal[np.ix_(free, ~free)] @ step[~free]
+            step[free] = np.linalg.solve(normal[np.ix_(free, free)], rhs)
+            moved = self.q + step[6:]
+            over = free[6:] & ((moved < self.lower) | (moved > self.upper))
+            if not over.any():
+                break
+            held = np.flatnonzero(over)
+            step[6 + held] = np.clip(moved[held], self.lower[held], self.upper[held]) - self.q[held]
+            free[6 + held] = False
+        return step
+
+
+def retarget_quality(
+    poses: list[RobotPose], retarget: HumanoidRetarget, contacts: np.ndarray, fps: float
+) -> dict[str, float]:
+    """What a run of robot poses is worth: each target's mean and 95th-percentile distance
+    [cm] from its scaled human joint (feet: only while not planted, where the lock moves the
+    goal), joint values outside the URDF's limits (a count), and each foot target's skate
+    [cm/s]: its mean horizontal speed while planted on consecutive frames."""
+    reached = np.array([p.reached for p in poses])
+    wanted = np.array([p.wanted for p in poses])
+    q = np.array([p.positions for p in poses])
+    out: dict[str, float] = {
+        "frames": float(len(poses)),
+        "limit violations": float(np.sum((q < retarget.lower - 1e-9) | (q > retarget.upper + 1e-9))),
+    }
+    for k, target in enumerate(retarget.mapping.targets):
+        if target.position <= 0:
+            continue
+        error = np.linalg.norm(reached[:, k] - wanted[:, k], axis=-1) * 100
+        if target.contact:
+            planted = contacts[:, SIDES.index(target.contact)]
+            speed = np.linalg.norm(np.diff(reached[:, k, :2], axis=0), axis=-1) * fps * 100
+            both = planted[1:] & planted[:-1]
+            out[f"{target.name} skate [cm/s]"] = float(speed[both].mean()) if both.any() else 0.0
+            out[f"{target.name} below floor [cm]"] = float(
+                max(0.0, retarget.ankle_height - reached[:, k, 2].min()) * 100
+            )
+            error = error[~planted]
+        if len(error):
+            out[f"{target.name} error [cm]"] = float(error.mean())
+            out[f"{target.name} error p95 [cm]"] = float(np.percentile(error, 95))
+    return out

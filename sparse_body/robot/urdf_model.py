@@ -1,0 +1,257 @@
+"""A robot's kinematic tree read from its URDF, and its forward kinematics.
+
+Only what retargeting needs is read: links, and each joint's type, parent, child, origin,
+axis and limits. A URDF is user input: every way it can be unusable (not XML, too big, a
+joint naming a link that is not there, a link with two parents, a loop, a moving joint
+without limits) is a RobotFileError of one line naming the file and the element.
+"""
+
+from __future__ import annotations
+
+import math
+import xml.etree.ElementTree as ElementTree
+from dataclasses import dataclass, replace
+from pathlib import Path
+
+import numpy as np
+
+MAX_BYTES = 20_000_000  # the largest URDF read (a humanoid's is 20-60 kB; meshes are separate files)
+MAX_JOINTS = 1000
+MOVING = ("revolute", "continuous", "prismatic")
+# A floating or planar joint from a frame the URDF does not define ("world") only says that
+# the root moves freely, as the retargeting base does anyway: it is skipped.
+FREE = ("floating", "planar")
+
+
+class RobotFileError(ValueError):
+    """A robot file (URDF or mapping YAML) that cannot be used; the message is one line."""
+
+
+@dataclass(frozen=True)
+class Joint:
+    name: str
+    kind: str  # revolute, continuous, prismatic or fixed
+    parent: int  # link index
+    child: int  # link index
+    origin: np.ndarray  # (4, 4) child joint frame in the parent link's frame at q = 0
+    axis: np.ndarray  # (3,) unit, in the joint frame
+    lower: float  # limits (rad or m); -inf/inf for continuous
+    upper: float
+    index: int = -1  # its place among the moving joints (the URDF's order), -1 when fixed
+
+
+@dataclass(frozen=True)
+class RobotModel:
+    """A tree of links from one root; joints in an order where each parent comes first."""
+
+    name: str
+    links: tuple[str, ...]
+    joints: tuple[Joint, ...]
+    root: int  # link index
+
+    @property
+    def moving(self) -> tuple[Joint, ...]:
+        """The joints a JointState carries, in the URDF's order."""
+        return tuple(sorted((j for j in self.joints if j.index >= 0), key=lambda j: j.index))
+
+    def link(self, name: str) -> int:
+        try:
+            return self.links.index(name)
+        except ValueError:
+            raise RobotFileError(f"robot {self.name!r} has no link {name!r}") from None
+
+    def chain(self, link: int) -> list[int]:
+        """Indices into `moving` of the joints between the root and a link, root first."""
+        by_child = {j.child: j for j in self.joints}
+        found = []
+        while link != self.root:
+            joint = by_child[link]
+            if joint.index >= 0:
+                found.append(joint.index)
+            link = joint.parent
+        return found[::-1]
+
+    def limits(self) -> tuple[np.ndarray, np.ndarray]:
+        moving = self.moving
+        return np.array([j.lower for j in moving]), np.array([j.upper for j in moving])
+
+    def forward(self, q: np.ndarray, base: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(link transforms (links, 4, 4) in the world, joint frames (moving, 4, 4) after
+        each moving joint's origin and before its motion) for joint values q (moving,) and
+        the root link's world transform `base` (4, 4)."""
+        links = np.empty((len(self.links), 4, 4))
+        frames = np.empty((len(self.moving), 4, 4))
+        links[self.root] = base
+        for joint in self.joints:
+            frame = links[joint.parent] @ joint.origin
+            if joint.index >= 0:
+                frames[joint.index] = frame
+                frame = frame @ _motion(joint, float(q[joint.index]))
+            links[joint.child] = frame
+        return links, frames
+
+
+def _motion(joint: Joint, value: float) -> np.ndarray:
+    out = np.eye(4)
+    if joint.kind == "prismatic":
+        out[:3, 3] = joint.axis * value
+    else:
+        out[:3, :3] = axis_angle(joint.axis, value)
+    return out
+
+
+def axis_angle(axis: np.ndarray, angle: float) -> np.ndarray:
+    """The rotation matrix of angle (rad) about a unit axis (Rodrigues)."""
+    x, y, z = axis
+    c, s = math.cos(angle), math.sin(angle)
+    t = 1.0 - c
+    return np.array(
+        [
+            [t * x * x + c, t * x * y - s * z, t * x * z + s * y],
+            [t * x * y + s * z, t * y * y + c, t * y * z - s * x],
+            [t * x * z - s * y, t * y * z + s * x, t * z * z + c],
+        ]
+    )
+
+
+def rpy_matrix(roll: float, pitch: float, yaw: float) -> np.ndarray:
+    """URDF's rpy: about fixed x, then y, then z (R = Rz Ry Rx)."""
+    x, y, z = np.eye(3)
+    return axis_angle(z, yaw) @ axis_angle(y, pitch) @ axis_angle(x, roll)
+
+
+def load_urdf(path: str | Path) -> RobotModel:
+    """A URDF file as a RobotModel; RobotFileError (one line) when it cannot be one."""
+    path = Path(path)
+    try:
+        size = path.stat().st_size
+        if size > MAX_BYTES:
+            raise RobotFileError(
+                f"{path}: {size / 1e6:.0f} MB is too big for a URDF (at most {MAX_BYTES / 1e6:.0f} MB)"
+            )
+        text = path.read_bytes().decode("utf-8")
+    except OSError as err:
+        raise RobotFileError(f"{path}: cannot read the URDF ({err.strerror or err})") from None
+    except UnicodeDecodeError:
+        raise RobotFileError(f"{path}: a URDF is UTF-8 text; this file is not") from None
+    return parse_urdf(text, str(path))
+
+
+def _numbers(text: str | None, count: int, default: float, where: str) -> np.ndarray:
+    if text is None:
+        return np.full(count, default)
+    try:
+        values = np.array([float(v) for v in text.split()])
+    except ValueError:
+        raise RobotFileError(f"{where}: {text!r} is not {count} numbers") from None
+    if values.shape != (count,) or not np.all(np.isfinite(values)):
+        raise RobotFileError(f"{where}: {text!r} is not {count} finite numbers")
+    return values
+
+
+def parse_urdf(text: str, source: str = "URDF") -> RobotModel:
+    """A URDF's text as a RobotModel (see load_urdf)."""
+    if len(text) > MAX_BYTES:
+        raise RobotFileError(f"{source}: too big for a URDF (at most {MAX_BYTES / 1e6:.0f} MB)")
+    if "<!ENTITY" in text or "<!DOCTYPE" in text:  # entity expansion could blow up: a URDF needs neither
+        raise RobotFileError(f"{source}: a URDF with a DOCTYPE or entities is not read")
+    try:
+        root = ElementTree.fromstring(text)
+    except ElementTree.ParseError as err:
+        raise RobotFileError(f"{source}: not valid XML ({err})") from None
+    if root.tag != "robot":
+        raise RobotFileError(f"{source}: the top element is <{root.tag}>, not <robot>")
+    name = root.get("name") or Path(source).stem
+    links = [link.get("name", "") for link in root.findall("link")]
+    if not links or "" in links:
+        raise RobotFileError(f"{source}: every <link> needs a name, and a robot at least one link")
+    if len(set(links)) != len(links):
+        twice = next(n for n in links if links.count(n) > 1)
+        raise RobotFileError(f"{source}: link {twice!r} is defined twice")
+    index = {n: i for i, n in enumerate(links)}
+    elements = root.findall("joint")
+    if len(elements) > MAX_JOINTS:
+        raise RobotFileError(f"{source}: {len(elements)} joints; at most {MAX_JOINTS} are read")
+    joints: list[Joint] = []
+    for element in elements:
+        joint = _joint(element, index, source)
+        if joint is not None:
+            moving = sum(j.index >= 0 for j in joints)
+            joints.append(replace(joint, index=moving) if joint.kind in MOVING else joint)
+    names = [j.name for j in joints]
+    if len(set(names)) != len(names):
+        twice = next(n for n in names if names.count(n) > 1)
+        raise RobotFileError(f"{source}: joint {twice!r} is defined twice")
+    return RobotModel(name, tuple(links), _tree_order(joints, links, source), _root(joints, links, source))
+
+
+def _joint(element, index: dict[str, int], source: str) -> Joint | None:
+    name, kind = element.get("name", ""), element.get("type", "")
+    where = f"{source}: joint {name!r}"
+    if not name:
+        raise RobotFileError(f"{source}: a <joint> without a name")
+    parent_el, child_el = element.find("parent"), element.find("child")
+    parent = parent_el.get("link", "") if parent_el is not None else ""
+    child = child_el.get("link", "") if child_el is not None else ""
+    if kind in FREE and parent not in index:
+        return None
+    if kind not in MOVING + ("fixed",):
+        raise RobotFileError(f"{where}: type {kind!r} is not one of {', '.join(MOVING + ('fixed',) + FREE)}")
+    for role, link in (("parent", parent), ("child", child)):
+        if link not in index:
+            raise RobotFileError(f"{where}: its {role} link {link!r} is not defined")
+    origin_el = element.find("origin")
+    xyz = _numbers(origin_el.get("xyz") if origin_el is not None else None, 3, 0.0, f"{where} origin xyz")
+    rpy = _numbers(origin_el.get("rpy") if origin_el is not None else None, 3, 0.0, f"{where} origin rpy")
+    origin = np.eye(4)
+    origin[:3, :3], origin[:3, 3] = rpy_matrix(*rpy), xyz
+    axis_el = element.find("axis")
+    axis = _numbers(axis_el.get("xyz") if axis_el is not None else None, 3, 0.0, f"{where} axis")
+    if axis_el is None:
+        axis = np.array([1.0, 0.0, 0.0])  # URDF's default
+    if kind != "fixed" and np.linalg.norm(axis) < 1e-9:
+        raise RobotFileError(f"{where}: its axis is zero")
+    axis = axis / max(np.linalg.norm(axis), 1e-12)
+    lower, upper = -math.inf, math.inf
+    if kind in ("revolute", "prismatic"):
+        limit = element.find("limit")
+        if limit is None or limit.get("lower") is None or limit.get("upper") is None:
+            raise RobotFileError(f"{where}: a {kind} joint needs <limit lower=... upper=...>")
+        lower, upper = (float(_numbers(limit.get(k), 1, 0.0, f"{where} limit {k}")[0]) for k in ("lower", "upper"))
+        if lower > upper:
+            raise RobotFileError(f"{where}: its lower limit {lower:g} is above its upper limit {upper:g}")
+    return Joint(name, kind, index[parent], index[child], origin, axis, lower, upper)
+
+
+def _root(joints: list[Joint], links: list[str], source: str) -> int:
+    children = {j.child for j in joints}
+    roots = [i for i in range(len(links)) if i not in children]
+    if len(roots) != 1:
+        what = "no link without a parent (a loop)" if not roots else f"{len(roots)} links without a parent"
+        raise RobotFileError(f"{source}: a robot is one tree; found {what}")
+    return roots[0]
+
+
+def _tree_order(joints: list[Joint], links: list[str], source: str) -> tuple[Joint, ...]:
+    """Joints with each parent link placed before its children: a link with two parents, a
+    loop or a link no joint reaches is an error."""
+    parents: dict[int, Joint] = {}
+    for joint in joints:
+        if joint.child in parents:
+            raise RobotFileError(f"{source}: link {links[joint.child]!r} has two parent joints (a loop)")
+        parents[joint.child] = joint
+    root = _root(joints, links, source)
+    by_parent: dict[int, list[Joint]] = {}
+    for joint in joints:
+        by_parent.setdefault(joint.parent, []).append(joint)
+    ordered: list[Joint] = []
+    todo = [root]
+    while todo:
+        link = todo.pop()
+        for joint in by_parent.get(link, []):
+            ordered.append(joint)
+            todo.append(joint.child)
+    if len(ordered) != len(joints):
+        lost = sorted({links[j.child] for j in joints} - {links[j.child] for j in ordered})
+        raise RobotFileError(f"{source}: links {', '.join(map(repr, lost[:3]))} are not connected to the root (a loop)")
+    return tuple(ordered)

@@ -1,0 +1,83 @@
+"""A small humanoid robot made for the tests: its URDF and its mapping YAML, written to a
+folder. Human proportions at `scale` (so the retargeting's scaling is exercised), joints as
+a typical humanoid has them (hip yaw, roll, pitch; knee; ankle pitch, roll; a waist yaw;
+shoulder pitch, roll, yaw; elbow), arms hanging at the zero pose, limits like a robot's."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+# joint: (parent link, child link, origin xyz at scale 1, axis, lower, upper); None: fixed
+_SIDE = {"left": 1.0, "right": -1.0}
+
+
+def _joints(scale: float) -> list[tuple[str, str, str, tuple, str, tuple[float, float] | None]]:
+    out = []
+    for side, s in _SIDE.items():
+        leg = [
+            ("hip_yaw", (0.047, 0.102 * s, -0.112), "0 0 1", (-0.6, 0.6)),
+            ("hip_roll", (0.0, 0.0, 0.0), "1 0 0", (-0.4, 0.8) if s > 0 else (-0.8, 0.4)),
+            ("hip_pitch", (0.0, 0.0, 0.0), "0 1 0", (-2.5, 1.5)),
+            ("knee", (0.0, 0.0, -0.451), "0 1 0", (0.0, 2.4)),
+            ("ankle_pitch", (0.0, 0.0, -0.488), "0 1 0", (-0.9, 0.6)),
+            ("ankle_roll", (0.0, 0.0, 0.0), "1 0 0", (-0.3, 0.3)),
+        ]
+        parent = "pelvis"
+        for name, xyz, axis, limits in leg:
+            out.append((f"{side}_{name}_joint", parent, f"{side}_{name}_link", xyz, axis, limits))
+            parent = f"{side}_{name}_link"
+        out.append((f"{side}_sole_joint", parent, f"{side}_sole", (0.0, 0.0, -0.033), "", None))
+    out.append(("waist_yaw_joint", "pelvis", "torso_link", (0.0, 0.0, 0.0), "0 0 1", (-2.0, 2.0)))
+    out.append(("head_joint", "torso_link", "head_link", (0.004, 0.0, 0.508), "", None))
+    for side, s in _SIDE.items():
+        arm = [
+            ("shoulder_pitch", (0.004, 0.22 * s, 0.397), "0 1 0", (-3.0, 3.0)),
+            ("shoulder_roll", (0.0, 0.0, 0.0), "1 0 0", (-0.3, 3.0) if s > 0 else (-3.0, 0.3)),
+            ("shoulder_yaw", (0.0, 0.0, 0.0), "0 0 1", (-2.6, 2.6)),
+            ("elbow", (0.0, 0.0, -0.333), "0 1 0", (-2.5, 0.2)),
+        ]
+        parent = "torso_link"
+        for name, xyz, axis, limits in arm:
+            out.append((f"{side}_{name}_joint", parent, f"{side}_{name}_link", xyz, axis, limits))
+            parent = f"{side}_{name}_link"
+        out.append((f"{side}_hand_joint", parent, f"{side}_hand", (0.0, 0.0, -0.21), "", None))
+    return [(n, p, c, tuple(v * scale for v in xyz), a, lim) for n, p, c, xyz, a, lim in out]
+
+
+def urdf(scale: float = 0.8, name: str = "test_humanoid") -> str:
+    joints = _joints(scale)
+    links = ["pelvis"] + [c for _, _, c, _, _, _ in joints]
+    text = [f'<?xml version="1.0"?>\n<robot name="{name}">']
+    text += [f'  <link name="{link}"/>' for link in links]
+    for joint, parent, child, xyz, axis, limits in joints:
+        kind = "fixed" if limits is None else "revolute"
+        body = [f'    <parent link="{parent}"/>', f'    <child link="{child}"/>']
+        body.append(f'    <origin xyz="{xyz[0]:.4f} {xyz[1]:.4f} {xyz[2]:.4f}" rpy="0 0 0"/>')
+        if limits is not None:
+            body.append(f'    <axis xyz="{axis}"/>')
+            body.append(f'    <limit lower="{limits[0]}" upper="{limits[1]}" effort="100" velocity="10"/>')
+        text.append(f'  <joint name="{joint}" type="{kind}">\n' + "\n".join(body) + "\n  </joint>")
+    text.append("</robot>\n")
+    return "\n".join(text)
+
+
+MAPPING = """\
+# the tests' humanoid: its links <- the human's joints
+urdf: {urdf}
+base: pelvis
+targets:
+  left_foot: {{link: left_ankle_roll_link, joint: left_ankle, orientation: 0.3, contact: left}}
+  right_foot: {{link: right_ankle_roll_link, joint: right_ankle, orientation: 0.3, contact: right}}
+  left_hand: {{link: left_hand, joint: left_wrist}}
+  right_hand: {{link: right_hand, joint: right_wrist}}
+  head: {{link: head_link, joint: head, position: 0.5}}
+"""
+
+
+def write_robot(folder: Path, scale: float = 0.8) -> Path:
+    """The test robot's URDF and mapping in folder; the mapping's path."""
+    folder.mkdir(parents=True, exist_ok=True)
+    (folder / "test_humanoid.urdf").write_text(urdf(scale))
+    path = folder / "test_humanoid.yaml"
+    path.write_text(MAPPING.format(urdf="test_humanoid.urdf"))
+    return path

@@ -367,6 +367,14 @@ def cmd_process(args) -> int:
     if args.smooth:
         options["smooth"] = True
     body = person_body(args.calibration, args.height)
+    robot = None
+    if args.robot:
+        from .robot.retarget import load_retarget
+
+        load_retarget(args.robot, args.robot_urdf, body)  # one line on a bad robot file, before any work
+        robot = (str(Path(args.robot).resolve()), str(Path(args.robot_urdf).resolve()) if args.robot_urdf else "")
+    elif args.robot_urdf:
+        raise ValueError("--robot-urdf goes with --robot (the mapping of the robot's links to the body)")
     guards = TfGuards(clock_window=args.clock_window, future_window=args.future_window, play_radius=args.play_radius)
     inputs = [Path(p) for p in args.bag_in]
     many = len(inputs) > 1 or (inputs[0].is_dir() and not is_bag(inputs[0]))
@@ -386,6 +394,7 @@ def cmd_process(args) -> int:
             args.topics,
             args.compression,
             args.axis_links,
+            robot,
         )
         results = process_many(
             inputs, Path(args.bag_out), settings, args.jobs, progress=not args.quiet, cluster=args.cluster
@@ -416,6 +425,7 @@ def cmd_process(args) -> int:
         compression=args.compression,
         axis_links=args.axis_links,
         timings=timings,
+        robot=robot,
         **options,
     )
     rejected = ", ".join(f"{n} {reason}" for reason, n in sorted(refused.items())) or "none"
@@ -829,6 +839,12 @@ def build_parser() -> argparse.ArgumentParser:
         help="put the URDF's massless links inside each joint on /tf too, for a viewer without "
         "robot_state_publisher (about 40 %% more output)",
     )
+    p.add_argument(
+        "--robot",
+        help="a humanoid robot's mapping YAML (e.g. config/robots/unitree_h1.yaml): its joints on "
+        "/robot/joint_states beside the body's, its base on /tf as robot/<base link>",
+    )
+    p.add_argument("--robot-urdf", help="the robot's URDF, where the mapping names none or another")
     p.add_argument("--height", type=_height, default=1.75, help="the tracked person's height in metres")
     p.add_argument(
         "--calibration",

@@ -65,6 +65,7 @@ class Settings:
     topics: tuple[str, ...] = ESTIMATE_TOPICS  # what each output bag holds
     compression: str = "zstd"  # its chunks' (io/bagio.COMPRESSIONS)
     axis_links: bool = False  # the URDF's massless links on /tf too
+    robot: tuple[str, str] | None = None  # (mapping YAML, URDF or ""): the humanoid robot's joints too
 
 
 @dataclass
@@ -166,6 +167,7 @@ def _process_one(bag: Path, out: Path, settings: Settings, exit_on_stop: bool = 
             topics=settings.topics,
             compression=settings.compression,
             axis_links=settings.axis_links,
+            robot=settings.robot,
             **settings.options,
         )
         result.frames, result.invalid = processed.frames, processed.invalid
@@ -253,6 +255,7 @@ def process_many(
         settings.fps,
         settings.topics,
         settings.axis_links,
+        settings.robot,
     )
     results: dict[int, BagResult] = {}
     todo, other = [], []

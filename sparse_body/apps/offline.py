@@ -74,6 +74,7 @@ def process_bag(
     timings: dict | None = None,
     keep_poses: bool = False,
     parallel: bool | None = None,
+    robot: tuple[str, str] | None = None,
     **options,
 ) -> Processed:
     """Run an estimator over a tracker bag and write one estimate per input frame, a chunk of
@@ -81,7 +82,8 @@ def process_bag(
     fork) the reading and the writing run in child processes beside the estimation. Refused
     tracker samples are counted in `refused` (reason -> count) when a dict is given; the
     seconds spent reading, estimating and writing (each in its own process when parallel) and
-    the whole run's go into `timings`, likewise."""
+    the whole run's go into `timings`, likewise. `robot` (a mapping YAML and its URDF, empty:
+    the mapping's) adds the humanoid robot's joints (/robot/joint_states, robot/ on /tf)."""
     import time
     from collections import deque
 
@@ -89,10 +91,19 @@ def process_bag(
     check_topics(topics)
     check_compression(compression)
     parallel = can_fork() if parallel is None else parallel
-    made_with = settings_record(estimator, options, sensors, skeleton, fps, topics, axis_links)
+    made_with = settings_record(estimator, options, sensors, skeleton, fps, topics, axis_links, robot)
     bag = dict(
-        skeleton=skeleton, fixed_frame=sensors.fixed_frame, sensors=sensors, topics=topics, axis_links=axis_links
+        skeleton=skeleton,
+        fixed_frame=sensors.fixed_frame,
+        sensors=sensors,
+        topics=topics,
+        axis_links=axis_links,
+        robot=robot,
     )
+    if robot is not None:  # its files are checked before any work (the writer reads them again)
+        from ..robot.retarget import load_retarget
+
+        load_retarget(robot[0], robot[1], skeleton)
     done = Processed(poses=[] if keep_poses else None)
     seen = np.zeros(len(sensors.sites), bool)  # each tracker: ever usable?
     with ExitStack() as stack:  # left in reverse: the children end before the folder goes
@@ -180,6 +191,7 @@ def settings_record(
     fps: float,
     topics: tuple[str, ...] = ESTIMATE_TOPICS,
     axis_links: bool = False,
+    robot: tuple[str, str] | None = None,
 ) -> str:
     """What an estimate bag was made with, as one JSON line (kept in the bag's metadata): two
     bags are comparable only when it is the same."""
@@ -192,4 +204,7 @@ def settings_record(
         record["topics"] = list(topics)
     if axis_links:
         record["axis_links"] = True
+    if robot is not None:  # the robot by its files' contents, not their paths
+        texts = [Path(robot[0]).read_bytes()] + ([Path(robot[1]).read_bytes()] if robot[1] else [])
+        record["robot"] = hashlib.sha256(b"".join(texts)).hexdigest()[:12]
     return json.dumps(record, sort_keys=True, default=str)

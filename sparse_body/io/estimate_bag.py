@@ -13,8 +13,24 @@ from ..core.skeleton import Skeleton
 from ..core.types import BodyPose, BodyPoses, TrackerStream
 from . import cdr
 from .bagio import TF_TYPE, bag_writer, log_times, typestore
-from .output import TransformTable, axis_link_table, body_table, joint_angles, tracker_sites, tracker_table
-from .topics import CONTACTS_TOPIC, DESCRIPTION_TOPIC, ESTIMATE_TOPICS, JOINT_STATES_TOPIC, STATUS_TOPIC, TF_TOPIC
+from .output import (
+    TransformTable,
+    axis_link_table,
+    body_table,
+    joint_angles,
+    published_precision,
+    tracker_sites,
+    tracker_table,
+)
+from .topics import (
+    CONTACTS_TOPIC,
+    DESCRIPTION_TOPIC,
+    ESTIMATE_TOPICS,
+    JOINT_STATES_TOPIC,
+    ROBOT_JOINT_STATES_TOPIC,
+    STATUS_TOPIC,
+    TF_TOPIC,
+)
 from .urdf import body_urdf
 
 # robot_state_publisher's robot_description: kept for late subscribers, so `ros2 bag play`
@@ -30,6 +46,7 @@ LATCHED = Qos(
     QosTime(0, 0),
     False,
 )
+ROBOT_PREFIX = "robot/"  # the robot's TF frames: robot_state_publisher with frame_prefix robot/ draws it
 TYPES = {
     JOINT_STATES_TOPIC: "sensor_msgs/msg/JointState",
     CONTACTS_TOPIC: "sparse_body/msg/FootContacts",
@@ -64,6 +81,7 @@ class EstimateBagWriter:
         sensors: SensorConfig | None = None,
         topics: tuple[str, ...] = ESTIMATE_TOPICS,
         axis_links: bool = False,
+        robot: tuple[str, str] | None = None,
     ) -> None:
         check_topics(topics)
         self.writer, self.skeleton, self.fixed_frame, self.prefix = writer, skeleton, fixed_frame, prefix
@@ -76,6 +94,14 @@ class EstimateBagWriter:
         }
         self._last_ns = -1  # the last receive time written: they only grow (see write)
         self._described = DESCRIPTION_TOPIC not in topics  # the URDF goes before the first pose
+        self.robot = None
+        if robot is not None:  # (mapping YAML, URDF): the robot's joints beside the body's
+            from ..robot.retarget import load_retarget
+
+            self.robot = load_retarget(robot[0], robot[1], skeleton)
+            self.robot_connection = writer.add_connection(
+                ROBOT_JOINT_STATES_TOPIC, TYPES[JOINT_STATES_TOPIC], typestore=self.store
+            )
 
     def write(self, poses: BodyPoses, trackers: TrackerStream | None = None) -> None:
         """The next poses, and (with sensors) the tracker frames they were made from."""
@@ -84,11 +110,12 @@ class EstimateBagWriter:
         if not len(poses):
             return
         angles = joint_angles(poses.local_quats)
+        robot, robot_base = self._robot_poses(poses) if self.robot is not None else (None, None)
         js, contacts, status = cdr.estimate_messages(poses, self.skeleton, self.fixed_frame, angles=angles)
         per_frame = {JOINT_STATES_TOPIC: js, CONTACTS_TOPIC: contacts, STATUS_TOPIC: status}
         if TF_TOPIC in self.topics:
             shown = (self.sensors, trackers) if self.sensors is not None and trackers is not None else None
-            per_frame[TF_TOPIC] = self._tf_messages(poses, angles if self.axis_links else None, shown)
+            per_frame[TF_TOPIC] = self._tf_messages(poses, angles if self.axis_links else None, shown, robot_base)
         log_ns = log_times(poses.stamps, self._last_ns)
         self._last_ns = log_ns[-1]
         if not self._described:
@@ -99,18 +126,51 @@ class EstimateBagWriter:
             self.writer.write(c_urdf, log_ns[0], self.store.serialize_cdr(urdf, "std_msgs/msg/String"))
             self._described = True
         written = [(connection, per_frame[topic]) for topic, connection in self.connections.items()]
+        if robot is not None:
+            written.append((self.robot_connection, robot))
         for i, ns in enumerate(log_ns):
             for connection, messages in written:
                 self.writer.write(connection, ns, messages[i])
 
+    def _robot_poses(self, poses: BodyPoses) -> tuple[list[bytes], TransformTable]:
+        """The robot's JointState for each pose, retargeted in order (robot/retarget.py; an
+        invalid pose holds the robot's last angles), and its base link's place on /tf
+        (fixed frame -> robot/<base link>), which a JointState cannot carry."""
+        assert self.robot is not None
+        robot = [
+            self.robot.step(
+                BodyPose(
+                    float(poses.stamps[i]),
+                    poses.local_quats[i],
+                    poses.roots[i],
+                    poses.contact_probability[i],
+                    poses.contact[i],
+                    bool(poses.valid[i]),
+                )
+            )
+            for i in range(len(poses))
+        ]
+        messages = cdr.joint_state_messages(poses.stamps, self.robot.names, np.array([r.positions for r in robot]))
+        base = np.array([np.concatenate([r.base_position, r.base_quat]) for r in robot])[:, None]
+        table = TransformTable(
+            (self.fixed_frame,), (ROBOT_PREFIX + self.robot.mapping.base,), published_precision(base)
+        )
+        return messages, table
+
     def _tf_messages(
-        self, poses: BodyPoses, angles, trackers: tuple[SensorConfig, TrackerStream] | None
+        self,
+        poses: BodyPoses,
+        angles,
+        trackers: tuple[SensorConfig, TrackerStream] | None,
+        robot_base: TransformTable | None = None,
     ) -> list[bytes]:
         """One /tf message a pose: the body's links (and with `angles`, the URDF's massless
         links), and the trackers it was made from."""
         body = body_table(poses.local_quats, poses.roots, self.skeleton, self.fixed_frame, self.prefix)
         if angles is not None:
             body = body + axis_link_table(angles, self.skeleton, self.prefix)
+        if robot_base is not None:
+            body = body + robot_base
         tf: list[bytes] = [b""] * len(poses)
         shown = tracker_sites(*trackers) if trackers is not None else np.zeros((len(poses), 0), bool)
         for pattern, which in cdr.same_rows(shown):  # frames with the same trackers

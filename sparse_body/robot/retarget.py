@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 
@@ -23,8 +24,8 @@ from ..core.kinematics import forward_kinematics
 from ..core.rotations import matrix_to_quat, quat_to_matrix
 from ..core.skeleton import JOINT_INDEX, Skeleton
 from ..core.types import BodyPose
-from .mapping import SIDES, RobotMapping
-from .urdf_model import RobotFileError, RobotModel
+from .mapping import SIDES, RobotMapping, load_mapping
+from .urdf_model import RobotFileError, RobotModel, load_urdf
 
 BASE_POSITION = 1.0  # weight of the base (pelvis) place, per metre
 BASE_TURN = 0.5  # and of its turn, per radian
@@ -73,6 +74,16 @@ def _exp(v: np.ndarray) -> np.ndarray:
         return np.eye(3)
     k = _skew(v / angle)
     return np.eye(3) + math.sin(angle) * k + (1.0 - math.cos(angle)) * (k @ k)
+
+
+def load_retarget(mapping: str | Path, urdf: str | Path | None, skeleton: Skeleton) -> HumanoidRetarget:
+    """A retargeting from a mapping YAML and the robot's URDF (empty or None: the one the
+    mapping names); RobotFileError (one line) where either cannot be used."""
+    robot = load_mapping(mapping)
+    path = Path(urdf) if urdf else robot.urdf
+    if path is None:
+        raise RobotFileError(f"{mapping}: names no urdf; give the robot's URDF file")
+    return HumanoidRetarget(load_urdf(path), robot, skeleton)
 
 
 class HumanoidRetarget:

@@ -1,0 +1,203 @@
+"""Humanoid retargeting (sparse_body/robot): the estimated body as a robot's joints within
+the URDF's limits, hands where the scaled human's are, planted feet held on the floor; bad
+robot files end in one line; `process --robot` writes the robot's JointState beside the body."""
+
+import numpy as np
+import pytest
+from robot_files import urdf, write_robot
+
+from sparse_body.apps.evaluation import estimate_motion
+from sparse_body.core.rotations import matrix_to_quat
+from sparse_body.core.sensors import load_sensor_config
+from sparse_body.core.skeleton import Skeleton
+from sparse_body.core.types import BodyPose
+from sparse_body.data.synthetic import synthetic_walk
+from sparse_body.robot.mapping import load_mapping
+from sparse_body.robot.retarget import load_retarget, retarget_quality
+from sparse_body.robot.urdf_model import RobotFileError, load_urdf, parse_urdf
+
+
+@pytest.fixture(scope="module")
+def walk():
+    """A six-point IK estimate of a walk, as the node's input would be (field protocol)."""
+    return estimate_motion(synthetic_walk(6.0), "ik", load_sensor_config("six_point"))
+
+
+def _retarget(est, robot):
+    poses = []
+    for i in range(len(est.positions)):
+        body = BodyPose(
+            i / est.motion.fps, matrix_to_quat(est.local_rotations[i]), est.positions[i, 0], contact=est.contacts[i]
+        )
+        poses.append(robot.step(body))
+    return poses
+
+
+def test_a_walk_reaches_its_hands_holds_its_feet_and_keeps_every_limit(tmp_path, walk):
+    robot = load_retarget(write_robot(tmp_path), None, walk.view.skeleton)
+    assert 0.75 < robot.scale < 0.85  # the test robot is the body at 0.8
+    poses = _retarget(walk, robot)
+    quality = retarget_quality(poses, robot, walk.contacts, walk.motion.fps)
+    assert quality["limit violations"] == 0
+    q = np.array([p.positions for p in poses])
+    assert np.all(q >= robot.lower) and np.all(q <= robot.upper) and np.all(np.isfinite(q))
+    for hand in ("left_hand", "right_hand"):
+        assert quality[f"{hand} error [cm]"] < 2.0 and quality[f"{hand} error p95 [cm]"] < 5.0, quality
+    for foot in ("left_foot", "right_foot"):
+        assert quality[f"{foot} skate [cm/s]"] < 2.0, quality  # planted: held where it touched down
+        assert quality[f"{foot} below floor [cm]"] < 1.0, quality
+    # smooth in time: no joint jumps between frames of a walk
+    assert np.abs(np.diff(q, axis=0)).max() < 0.2
+
+
+def test_without_the_feet_lock_the_robot_feet_follow_the_human_feet_and_slide(tmp_path, walk):
+    robot = load_retarget(write_robot(tmp_path), None, walk.view.skeleton)
+    locked = retarget_quality(_retarget(walk, robot), robot, walk.contacts, walk.motion.fps)
+    never = np.zeros_like(walk.contacts)  # no foot ever planted: each follows its human foot
+    free = retarget_quality(_retarget_with(walk, robot, never), robot, walk.contacts, walk.motion.fps)
+    assert free["limit violations"] == 0
+    for foot in ("left_foot", "right_foot"):
+        assert locked[f"{foot} skate [cm/s]"] < 0.5 * free[f"{foot} skate [cm/s]"], (locked, free)
+
+
+def _retarget_with(est, robot, contacts):
+    robot.reset()
+    poses = []
+    for i in range(len(est.positions)):
+        body = BodyPose(i / 60, matrix_to_quat(est.local_rotations[i]), est.positions[i, 0], contact=contacts[i])
+        poses.append(robot.step(body))
+    return poses
+
+
+def test_invalid_or_non_finite_bodies_hold_the_last_robot_pose_marked_invalid(tmp_path, walk):
+    robot = load_retarget(write_robot(tmp_path), None, walk.view.skeleton)
+    first = robot.step(BodyPose(0.0, matrix_to_quat(walk.local_rotations[0]), walk.positions[0, 0]))
+    bad = BodyPose(0.1, np.full((22, 4), np.nan), np.zeros(3))
+    held = robot.step(bad)
+    assert not held.valid and np.array_equal(held.positions, first.positions)
+    leap = BodyPose(0.2, matrix_to_quat(walk.local_rotations[1]), np.array([1e6, -1e6, 1e6]))
+    far = robot.step(leap)
+    assert np.all(np.isfinite(far.positions)) and np.all(
+        (far.positions >= robot.lower) & (far.positions <= robot.upper)
+    )
+
+
+def test_the_model_reads_names_limits_and_order_from_the_urdf(tmp_path):
+    model = parse_urdf(urdf(1.0), "test.urdf")
+    names = [j.name for j in model.moving]
+    assert names[:2] == ["left_hip_yaw_joint", "left_hip_roll_joint"] and len(names) == 2 * 6 + 1 + 2 * 4
+    links, _ = model.forward(np.zeros(len(names)), np.eye(4))
+    # at the zero pose the hand hangs below the shoulder by the arm's length
+    hand, shoulder = links[model.link("left_hand")], links[model.link("left_shoulder_pitch_link")]
+    np.testing.assert_allclose(shoulder[:3, 3] - hand[:3, 3], [0, 0, 0.333 + 0.21], atol=1e-9)
+    lower, upper = model.limits()
+    assert lower[names.index("left_knee_joint")] == 0.0 and upper[names.index("left_knee_joint")] == 2.4
+
+
+GOOD = urdf(1.0)
+BAD_URDFS = {
+    "not XML": ("<robot><link", "not valid XML"),
+    "not a robot": ("<model/>", "not <robot>"),
+    "missing link": (GOOD.replace('<link name="left_knee_link"/>', ""), "'left_knee_link' is not defined"),
+    "two parents": (
+        GOOD.replace(
+            "</robot>",
+            '<joint name="extra" type="fixed"><parent link="torso_link"/><child link="left_hand"/></joint></robot>',
+        ),
+        "two parent joints",
+    ),
+    "a loop": (
+        GOOD.replace(
+            "</robot>",
+            '<link name="a"/><link name="b"/><joint name="ab" type="fixed"><parent link="a"/>'
+            '<child link="b"/></joint><joint name="ba" type="fixed"><parent link="b"/>'
+            '<child link="a"/></joint></robot>',
+        ),
+        "loop",
+    ),
+    "no limits": (GOOD.replace('<limit lower="0.0" upper="2.4" effort="100" velocity="10"/>', "", 1), "needs <limit"),
+    "entities": ('<!DOCTYPE r [<!ENTITY a "aaaa">]><robot name="r"><link name="x"/></robot>', "DOCTYPE"),
+    "bad numbers": (GOOD.replace('xyz="0 1 0"', 'xyz="0 one 0"', 1), "is not 3 numbers"),
+}
+
+
+@pytest.mark.parametrize("case", sorted(BAD_URDFS))
+def test_bad_urdfs_are_one_line_errors(tmp_path, case):
+    text, message = BAD_URDFS[case]
+    path = tmp_path / "robot.urdf"
+    path.write_text(text)
+    with pytest.raises(RobotFileError, match=message) as err:
+        load_urdf(path)
+    assert "\n" not in str(err.value) and str(path) in str(err.value)
+
+
+def test_huge_or_missing_urdfs_are_refused_before_reading(tmp_path, monkeypatch):
+    import sparse_body.robot.urdf_model as urdf_model
+
+    path = tmp_path / "huge.urdf"
+    path.write_text(GOOD)
+    monkeypatch.setattr(urdf_model, "MAX_BYTES", 1000)
+    with pytest.raises(RobotFileError, match="too big"):
+        load_urdf(path)
+    with pytest.raises(RobotFileError, match="cannot read"):
+        load_urdf(tmp_path / "absent.urdf")
+
+
+@pytest.mark.parametrize(
+    ("edit", "message"),
+    [
+        (lambda t: t.replace("base: pelvis", "base: nowhere"), "no link 'nowhere'"),
+        (lambda t: t.replace("joint: left_wrist", "joint: left_paw"), "not a body joint"),
+        (lambda t: t.replace("base: pelvis", "base: pelvis\ncolour: red"), "unknown key 'colour'"),
+        (lambda t: t.replace("contact: left", "contact: both"), "contact must be left or right"),
+        (lambda t: t + "scale: -1\n", "scale must be a number"),
+        (lambda t: t.replace("urdf: test_humanoid.urdf", "urdf: absent.urdf"), "cannot read the URDF"),
+        (lambda t: "[1, 2", "not a YAML mapping"),
+        (lambda t: t.replace("base: pelvis", "base: left_knee_link"), "root link or fixed to it"),
+    ],
+)
+def test_bad_mappings_are_one_line_errors(tmp_path, edit, message):
+    path = write_robot(tmp_path)
+    path.write_text(edit(path.read_text()))
+    with pytest.raises(RobotFileError, match=message) as err:
+        load_retarget(path, None, Skeleton.canonical(1.75))
+    assert "\n" not in str(err.value)
+
+
+def test_the_shipped_mappings_are_well_formed():
+    from pathlib import Path
+
+    folder = Path(__file__).resolve().parents[1] / "config" / "robots"
+    shipped = sorted(folder.glob("*.yaml"))
+    assert len(shipped) >= 2
+    for path in shipped:
+        mapping = load_mapping(path)
+        assert mapping.urdf is not None and {t.contact for t in mapping.targets} >= {"left", "right"}
+
+
+def test_process_writes_the_robots_joint_states_beside_the_body(tmp_path, capsys):
+    from sparse_body.apps.offline import make_bag
+    from sparse_body.cli import main
+    from sparse_body.io.bagio import TF_TOPIC, read_topic
+    from sparse_body.io.topics import ROBOT_JOINT_STATES_TOPIC
+
+    motion = synthetic_walk(2.0)
+    make_bag(motion, load_sensor_config("six_point"), tmp_path / "in")
+    robot = write_robot(tmp_path / "robot")
+    with pytest.raises(SystemExit) as done:
+        main(["process", str(tmp_path / "in"), str(tmp_path / "out"), "--robot", str(robot), "--quiet"])
+    assert done.value.code == 0
+    states = read_topic(tmp_path / "out", ROBOT_JOINT_STATES_TOPIC)
+    model = load_urdf(tmp_path / "robot" / "test_humanoid.urdf")
+    assert len(states) == len(motion) and list(states[0].name) == [j.name for j in model.moving]
+    q = np.array([s.position for s in states])
+    lower, upper = model.limits()
+    assert np.all(np.isfinite(q)) and np.all((q >= lower) & (q <= upper))
+    assert any(t.child_frame_id == "robot/pelvis" for t in read_topic(tmp_path / "out", TF_TOPIC)[0].transforms)
+    # a bad robot file: one line, exit 2, nothing written
+    robot.write_text("base: [")
+    with pytest.raises(SystemExit) as bad:
+        main(["process", str(tmp_path / "in"), str(tmp_path / "out2"), "--robot", str(robot), "--quiet"])
+    err = capsys.readouterr().err.strip()
+    assert bad.value.code != 0 and len(err.splitlines()) == 1 and "not a YAML mapping" in err
+    assert not (tmp_path / "out2").exists()

@@ -3,7 +3,8 @@
     ros2 launch sparse_body sparse_body.launch.py sensors:=four_point estimator:=lobstr bag:=/path/to/trackers
 
 Arguments: sensors, estimator, model_path, refine, step_budget, budget_fallback, foot_lock,
-predict_ahead, height, calibration (a T-pose calibration file: its fitted body replaces the height-scaled one),
+predict_ahead, robot and robot_urdf (the body as a humanoid robot's joints on robot/joint_states),
+height, calibration (a T-pose calibration file: its fitted body replaces the height-scaled one),
 bag (the tracker source; empty: trackers come from elsewhere on /tf), loop (replay the bag again and again), rviz,
 robot_state_publisher, foxglove_port and foxglove_host (the live view). The estimator is a
 lifecycle node; it is configured and activated here through its autostart parameter.
@@ -101,6 +102,26 @@ def _nodes(context):
                 remappings=[("input/joint_states", "joint_states")],
             )
         )
+    if arg("robot"):
+        from sparse_body.core.sensors import load_sensor_config
+
+        nodes.append(
+            LifecycleNode(
+                package="sparse_body",
+                executable="retarget_node",
+                name="sparse_body_retarget",
+                namespace="",
+                output="screen",
+                parameters=[
+                    {
+                        "robot": arg("robot"),
+                        "robot_urdf": arg("robot_urdf"),
+                        "fixed_frame": load_sensor_config(arg("sensors")).fixed_frame,
+                        "autostart": True,
+                    }
+                ],
+            )
+        )
     if arg("bag"):
         nodes.append(
             Node(
@@ -149,6 +170,15 @@ def generate_launch_description():
                 "predict_ahead",
                 default_value="0.0",
                 description="seconds past the trackers' stamp the body is forecast and stamped (0 to 0.2; 0: none)",
+            ),
+            DeclareLaunchArgument(
+                "robot",
+                default_value="",
+                description="a humanoid robot's mapping (unitree_h1, unitree_g1_29dof or a YAML path): its joints "
+                "on robot/joint_states (empty: none)",
+            ),
+            DeclareLaunchArgument(
+                "robot_urdf", default_value="", description="the robot's URDF (empty: the file its mapping names)"
             ),
             DeclareLaunchArgument("height", default_value="1.75", description="the person's height in metres"),
             DeclareLaunchArgument(

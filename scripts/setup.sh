@@ -187,7 +187,7 @@ if [ -d "$ROS_TOOLS/wheels" ] && ls "$ROS_TOOLS"/wheels/*.whl >/dev/null 2>&1; t
     rm -rf "$SHARE/launch"; mkdir -p "$SHARE/launch"
     for f in "$ROOT"/launch/*.py; do ln -sfn "$f" "$SHARE/launch/$(basename "$f")"; done
     ln -sfn "$ROOT/package.xml" "$SHARE/package.xml"
-    for exe in sparse-body estimator_node tracker_bridge constraint_node; do
+    for exe in sparse-body estimator_node tracker_bridge constraint_node retarget_node; do
       { echo "#!$VPY"; tail -n +2 "$ROOT/scripts/$exe"; } > "$VENV/lib/sparse_body/$exe"
       chmod +x "$VENV/lib/sparse_body/$exe"
     done

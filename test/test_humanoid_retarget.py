@@ -152,7 +152,9 @@ def test_huge_or_missing_urdfs_are_refused_before_reading(tmp_path, monkeypatch)
         (lambda t: t.replace("contact: left", "contact: both"), "contact must be left or right"),
         (lambda t: t + "scale: -1\n", "scale must be a number"),
         (lambda t: t.replace("urdf: test_humanoid.urdf", "urdf: absent.urdf"), "cannot read the URDF"),
-        (lambda t: "[1, 2", "not a YAML mapping"),
+        (lambda t: "[1, 2", "not valid YAML"),
+        (lambda t: "[1, 2]", "is a YAML mapping with keys"),
+        (lambda t: "unitree", "is a YAML mapping with keys"),
         (lambda t: t.replace("base: pelvis", "base: left_knee_link"), "root link or fixed to it"),
     ],
 )
@@ -199,5 +201,20 @@ def test_process_writes_the_robots_joint_states_beside_the_body(tmp_path, capsys
     with pytest.raises(SystemExit) as bad:
         main(["process", str(tmp_path / "in"), str(tmp_path / "out2"), "--robot", str(robot), "--quiet"])
     err = capsys.readouterr().err.strip()
-    assert bad.value.code != 0 and len(err.splitlines()) == 1 and "not a YAML mapping" in err
+    assert bad.value.code != 0 and len(err.splitlines()) == 1 and "not valid YAML" in err
     assert not (tmp_path / "out2").exists()
+
+
+def test_a_shipped_mapping_is_found_by_name_and_an_unknown_name_lists_them():
+    assert load_mapping("unitree_h1").base == "pelvis"
+    with pytest.raises(RobotFileError, match="shipped ones are .*unitree_h1"):
+        load_mapping("no_such_robot")
+
+
+def test_the_body_urdf_gives_back_its_skeleton():
+    from sparse_body.io.urdf import body_skeleton, body_urdf
+
+    skeleton = Skeleton.canonical(1.62)
+    np.testing.assert_allclose(body_skeleton(body_urdf(skeleton)).offsets, skeleton.offsets, atol=1e-6)
+    with pytest.raises(RobotFileError, match="not a sparse_body body"):
+        body_skeleton(urdf(1.0))

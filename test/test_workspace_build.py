@@ -20,7 +20,7 @@ import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
 UNDERLAY = Path(sys.prefix)
-EXECUTABLES = ("sparse-body", "estimator_node", "tracker_bridge", "constraint_node")
+EXECUTABLES = ("sparse-body", "estimator_node", "tracker_bridge", "constraint_node", "retarget_node")
 
 needs_cmake = [
     pytest.mark.skipif(shutil.which("cmake") is None, reason="no cmake on PATH (apt-get install cmake)"),

@@ -28,6 +28,19 @@ def config_dir() -> Path:
     return share_dir() / "config"
 
 
+def shipped_or_path(name_or_path: str | Path, folder: str, error: type[Exception], what: str) -> Path:
+    """A file given by name (config/FOLDER/NAME.yaml, what the package ships) or by path (it
+    has a suffix): an unknown name is `error`, naming the shipped ones."""
+    path = Path(name_or_path)
+    if path.suffix:
+        return path
+    path = config_dir() / folder / f"{name_or_path}.yaml"
+    if not path.is_file():
+        known = sorted(p.stem for p in (config_dir() / folder).glob("*.yaml"))
+        raise error(f"no {what} {str(name_or_path)!r}; shipped ones are {', '.join(known)}")
+    return path
+
+
 def models_dir() -> Path:
     """The shipped ONNX models and their model cards."""
     return share_dir() / "models"

@@ -165,14 +165,9 @@ def parse_sensor_config(data: dict, source: str = "<dict>") -> SensorConfig:
 
 def load_sensor_config(name_or_path: str | Path) -> SensorConfig:
     """A configuration by name (config/sensors/NAME.yaml) or by path."""
-    from .resources import config_dir
+    from .resources import shipped_or_path
 
-    path = Path(name_or_path)
-    if not path.suffix:
-        path = config_dir() / "sensors" / f"{name_or_path}.yaml"
-        if not path.is_file():
-            known = sorted(p.stem for p in (config_dir() / "sensors").glob("*.yaml"))
-            raise SensorConfigError(f"no sensor configuration {name_or_path!r}; shipped ones are {', '.join(known)}")
+    path = shipped_or_path(name_or_path, "sensors", SensorConfigError, "sensor configuration")
     return parse_sensor_config(read_yaml(path, SensorConfigError), str(path))
 
 

@@ -104,3 +104,16 @@ def body_urdf(skeleton: Skeleton, name: str = "sparse_body") -> str:
             parent = child
     parts.append("</robot>\n")
     return "".join(parts)
+
+
+def body_skeleton(text: str) -> Skeleton:
+    """The skeleton a body URDF (body_urdf's) was made for, each joint's offset read from its
+    z joint's origin: how a node that gets the body's robot_description knows the body the
+    estimator publishes. RobotFileError (a ValueError) when the text is no such URDF."""
+    from ..robot.urdf_model import RobotFileError, parse_urdf
+
+    origins = {j.name: j.origin[:3, 3] for j in parse_urdf(text, "the body's robot_description").joints}
+    missing = [name for name in JOINT_NAMES[1:] if f"{name}_rz" not in origins]
+    if missing:
+        raise RobotFileError(f"the body's robot_description has no joint {missing[0]}_rz: not a sparse_body body")
+    return Skeleton(np.array([np.zeros(3)] + [origins[f"{name}_rz"] for name in JOINT_NAMES[1:]]))

@@ -19,12 +19,9 @@ from __future__ import annotations
 from dataclasses import dataclass
 from pathlib import Path
 
-import yaml
-
 from ..core.skeleton import JOINT_NAMES
 from .urdf_model import RobotFileError
 
-MAX_BYTES = 1_000_000
 KEYS = {"urdf", "base", "targets", "scale", "ankle_height", "smoothing", "iterations", "description"}
 TARGET_KEYS = {"link", "joint", "point", "position", "orientation", "contact"}
 SIDES = ("left", "right")
@@ -54,19 +51,14 @@ class RobotMapping:
     description: str = ""
 
 
-def load_mapping(path: str | Path) -> RobotMapping:
-    """A robot mapping YAML; RobotFileError (one line) where it cannot be one."""
-    path = Path(path)
-    try:
-        if path.stat().st_size > MAX_BYTES:
-            raise RobotFileError(f"{path}: too big for a robot mapping (at most {MAX_BYTES // 1000} kB)")
-        data = yaml.safe_load(path.read_text(encoding="utf-8"))
-    except OSError as err:
-        raise RobotFileError(f"{path}: cannot read the robot mapping ({err.strerror or err})") from None
-    except (yaml.YAMLError, UnicodeDecodeError) as err:
-        first = str(err).strip().splitlines()[0] if str(err).strip() else type(err).__name__
-        raise RobotFileError(f"{path}: not a YAML mapping ({first})") from None
-    return mapping_from(data, path)
+def load_mapping(name_or_path: str | Path) -> RobotMapping:
+    """A robot mapping by name (config/robots/NAME.yaml: unitree_h1, unitree_g1_29dof) or by
+    path; RobotFileError (one line) where it cannot be one."""
+    from ..core.resources import shipped_or_path
+    from ..core.sensors import read_yaml
+
+    path = shipped_or_path(name_or_path, "robots", RobotFileError, "robot mapping")
+    return mapping_from(read_yaml(path, RobotFileError), path)
 
 
 def _number(value, where: str, low: float, high: float) -> float:

@@ -201,9 +201,14 @@ class HumanoidRetarget:
         return RobotPose(stamp, last.positions, last.base_position, last.base_quat, last.reached, last.wanted, False)
 
     def _links(self) -> np.ndarray:
+        return self.link_transforms(self.q, self.base_place, self.base_turn)
+
+    def link_transforms(self, positions: np.ndarray, base_position: np.ndarray, base_turn: np.ndarray) -> np.ndarray:
+        """Every link's transform (links, 4, 4) in the fixed frame for joint values and the base
+        link's place and turn (3, 3) (a RobotPose's, as the node and the bag publish them)."""
         base = np.eye(4)
-        base[:3, :3], base[:3, 3] = self.base_turn, self.base_place
-        links, _ = self.model.forward(self.q, base @ self._base_in_root)
+        base[:3, :3], base[:3, 3] = base_turn, base_position
+        links, _ = self.model.forward(np.asarray(positions, float), base @ self._base_in_root)
         return links
 
     def _solve(self, base_goal, base_goal_turn, goals, goal_turns, planted, iterations: int | None) -> None:

@@ -1,0 +1,249 @@
+"""The estimated body as a humanoid robot's joints, as a lifecycle node (issue 54).
+
+Input: the estimator's `joint_states` and its root on TF (`<input_prefix>pelvis` in
+fixed_frame, matched to the JointState by stamp), its `foot_contacts` (a planted foot is held
+on the floor), and the body's `robot_description` (latched: the body the estimator publishes,
+so a calibrated person is retargeted as they are). Output, one per body estimate:
+`robot/joint_states` (the URDF's moving joints, in its order, always within its limits),
+the robot's base on /tf (fixed_frame -> <frame_prefix><base link>) and the robot's URDF on
+`robot/robot_description` (latched), so robot_state_publisher with frame_prefix draws it.
+
+configure: read the mapping and the URDF (a bad file fails configure with one line), create
+the publishers and subscriptions; activate: publish; deactivate: stop; cleanup: release
+everything. Input from the network never stops the node: a JointState that is not the body's,
+non-finite values or a body URDF that is not one are counted on /diagnostics and dropped.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from rclpy.lifecycle import LifecycleNode, LifecyclePublisher, LifecycleState, TransitionCallbackReturn
+from rclpy.publisher import Publisher
+from rclpy.qos import DurabilityPolicy, QoSProfile
+from rclpy.subscription import Subscription
+from rclpy.timer import Timer
+from sensor_msgs.msg import JointState
+from std_msgs.msg import String
+
+from sparse_body.msg import FootContacts
+
+from ..io import cdr
+from ..io.output import pose_from_joint_state, published_precision
+from ..io.urdf import body_skeleton
+from ..robot.retarget import HumanoidRetarget, load_retarget
+from ..robot.urdf_model import RobotFileError
+from .estimator_node import check_parameter, parameter_descriptor
+from .messages import to_seconds
+from .spin import init, start_and_spin
+from .tf_input import TfReader
+
+PARAMETERS = {
+    # name: (default, description)
+    "robot": ("", "the robot's mapping YAML (config/robots/*.yaml): which robot links follow which human joints"),
+    "robot_urdf": ("", "the robot's URDF file; empty: the one the mapping names"),
+    "fixed_frame": ("world", "the frame the body's root is looked up in and the robot's base is placed in"),
+    "input_prefix": ("", "prefix of the body's TF frames (its root is <input_prefix>pelvis)"),
+    "frame_prefix": ("robot/", "prefix of the robot's TF frames: its base link is <frame_prefix><base>"),
+    "autostart": (False, "configure and activate on start-up (without a lifecycle manager)"),
+}
+SAME = 1000  # ns: stamps this close are the same estimate's
+KEPT = 8  # body JointStates waiting for their root on /tf (the estimator publishes the two together)
+
+
+class RetargetNode(LifecycleNode):
+    NAME = "sparse_body_retarget"
+
+    # Made in on_configure, destroyed in _release.
+    retarget: HumanoidRetarget | None = None
+    tf_in: TfReader | None = None
+    pub_joints: LifecyclePublisher | None = None
+    pub_tf: LifecyclePublisher | None = None
+    pub_diag: LifecyclePublisher | None = None
+    pub_description: Publisher | None = None
+    subs: list[Subscription] = []
+    diag_timer: Timer | None = None
+
+    def __init__(self, **kwargs) -> None:
+        super().__init__(self.NAME, **kwargs)
+        for name, (default, text) in PARAMETERS.items():
+            self.declare_parameter(name, default, parameter_descriptor(default, text, None))
+        self._release()
+
+    # -- lifecycle -------------------------------------------------------------------------
+    def on_configure(self, state: LifecycleState) -> TransitionCallbackReturn:
+        p = {name: self.get_parameter(name).value for name in PARAMETERS}
+        problems = [r for name, (default, _) in PARAMETERS.items() if (r := check_parameter(name, p[name], default))]
+        if not problems and not p["robot"]:
+            problems.append("robot is empty: give the robot's mapping YAML")
+        if not problems:
+            try:  # checked here with a stand-in body: the real one comes on robot_description
+                from ..core.skeleton import Skeleton
+
+                load_retarget(p["robot"], p["robot_urdf"], Skeleton.canonical(1.75))
+                self._urdf_text = _urdf_text(p["robot"], p["robot_urdf"])
+            except RobotFileError as err:
+                problems.append(str(err))
+        if problems:
+            self.get_logger().error(f"configure failed: {'; '.join(problems)}")
+            return TransitionCallbackReturn.FAILURE
+        self.params = p
+        root = p["input_prefix"] + "pelvis"
+        self.tf_in = TfReader(self, {root}, on_tracker=self._root_arrived)
+        self.pub_joints = self.create_lifecycle_publisher(JointState, "robot/joint_states", QoSProfile(depth=10))
+        from tf2_msgs.msg import TFMessage  # here, not at import: the stand-in exists only after setup
+
+        self.pub_tf = self.create_lifecycle_publisher(TFMessage, "/tf", QoSProfile(depth=100))
+        self.pub_diag = self.create_lifecycle_publisher(DiagnosticArray, "/diagnostics", QoSProfile(depth=10))
+        latched = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL)
+        self.pub_description = self.create_publisher(String, "robot/robot_description", latched)
+        self.pub_description.publish(String(data=self._urdf_text))
+        self.subs = [
+            self.create_subscription(JointState, "joint_states", self._on_body, 10),
+            self.create_subscription(FootContacts, "foot_contacts", self._on_contacts, 10),
+            self.create_subscription(String, "robot_description", self._on_description, latched),
+        ]
+        self.get_logger().info(f"configured: the body as {p['robot']} (waiting for the body's robot_description)")
+        return TransitionCallbackReturn.SUCCESS
+
+    def on_activate(self, state: LifecycleState) -> TransitionCallbackReturn:
+        if self.retarget is not None:
+            self.retarget.reset()
+        self.diag_timer = self.create_timer(1.0, self._publish_diagnostics)
+        return super().on_activate(state)
+
+    def on_deactivate(self, state: LifecycleState) -> TransitionCallbackReturn:
+        if self.diag_timer is not None:
+            self.destroy_timer(self.diag_timer)
+            self.diag_timer = None
+        return super().on_deactivate(state)
+
+    def on_cleanup(self, state: LifecycleState) -> TransitionCallbackReturn:
+        self._release()
+        return TransitionCallbackReturn.SUCCESS
+
+    def on_shutdown(self, state: LifecycleState) -> TransitionCallbackReturn:
+        self._release()
+        return TransitionCallbackReturn.SUCCESS
+
+    def _release(self) -> None:
+        if self.diag_timer is not None:
+            self.destroy_timer(self.diag_timer)
+        for pub in (self.pub_joints, self.pub_tf, self.pub_diag):
+            if pub is not None:
+                self.destroy_lifecycle_publisher(pub)
+        if self.pub_description is not None:
+            self.destroy_publisher(self.pub_description)
+        for sub in self.subs:
+            self.destroy_subscription(sub)
+        if self.tf_in is not None:
+            self.tf_in.destroy()
+        self.subs, self.tf_in, self.retarget, self.diag_timer = [], None, None, None
+        self.pub_joints = self.pub_tf = self.pub_diag = self.pub_description = None
+        self._waiting: dict[int, JointState] = {}  # body JointStates by stamp (ns), until their root comes
+        self._contacts: tuple[int, np.ndarray] = (-1, np.zeros(2, bool))  # the newest foot contacts
+        self._dropped: dict[str, int] = {}
+        self._published = 0
+
+    # -- work --------------------------------------------------------------------------------
+    def _drop(self, reason: str) -> None:
+        self._dropped[reason] = self._dropped.get(reason, 0) + 1
+        if self._dropped[reason] == 1:  # said once; counted on /diagnostics after that
+            self.get_logger().warning(f"input dropped: {reason}")
+
+    def _on_description(self, msg: String) -> None:
+        try:
+            skeleton = body_skeleton(msg.data)
+            self.retarget = load_retarget(self.params["robot"], self.params["robot_urdf"], skeleton)
+        except RobotFileError as err:  # (a body URDF from the network is input like any other)
+            self._drop(f"robot_description: {err}")
+            return
+        self.get_logger().info(f"retargeting a {skeleton.height():.2f} m body at scale {self.retarget.scale:.3f}")
+
+    def _on_contacts(self, msg: FootContacts) -> None:
+        contact = {c.name: bool(c.in_contact) for c in msg.contacts}
+        self._contacts = (
+            _nanoseconds(msg.header.stamp),
+            np.array([contact.get("left_foot", False), contact.get("right_foot", False)]),
+        )
+
+    def _on_body(self, msg: JointState) -> None:
+        self._waiting[_nanoseconds(msg.header.stamp)] = msg
+        while len(self._waiting) > KEPT:
+            self._waiting.pop(min(self._waiting))
+            self._drop("no root on /tf at the JointState's stamp")
+        self._root_arrived()
+
+    def _root_arrived(self) -> None:
+        """The body's root came on /tf, or a JointState: retarget each waiting JointState
+        whose root is there (matched by stamp), older ones first."""
+        if self.tf_in is None:
+            return
+        found = self.tf_in.lookup(self.params["fixed_frame"], self.params["input_prefix"] + "pelvis")
+        if found is None:
+            return
+        stamp, translation, rotation = found
+        key = round(stamp * 1e9)  # (the cache keeps seconds: a nanosecond of rounding either way)
+        for waiting in sorted(k for k in self._waiting if k <= key + SAME):
+            msg = self._waiting.pop(waiting)
+            if abs(waiting - key) <= SAME:
+                self._publish(msg, translation, rotation)
+            else:
+                self._drop("no root on /tf at the JointState's stamp")
+
+    def _publish(self, msg: JointState, translation, rotation) -> None:
+        if self.retarget is None or self.pub_joints is None or self.pub_tf is None:
+            self._drop("no body robot_description yet")
+            return
+        try:
+            body = pose_from_joint_state(msg.name, msg.position, translation, rotation, to_seconds(msg.header.stamp))
+        except ValueError as err:
+            self._drop(f"joint_states: {err}")
+            return
+        stamp_ns, contact = self._contacts
+        if stamp_ns >= 0:  # the newest: the estimator sends them with the JointState (a frame late at worst)
+            body.contact = contact.copy()
+        robot = self.retarget.step(body)
+        self.pub_joints.publish(cdr.joint_state_messages([body.stamp], self.retarget.names, robot.positions[None])[0])
+        base = published_precision(np.concatenate([robot.base_position, robot.base_quat]))[None, None]
+        child = self.params["frame_prefix"] + self.retarget.mapping.base
+        self.pub_tf.publish(cdr.tf_messages([body.stamp], (self.params["fixed_frame"],), (child,), base)[0])
+        self._published += 1
+
+    def _publish_diagnostics(self) -> None:
+        if self.pub_diag is None:
+            return
+        status = DiagnosticStatus(
+            name=f"{self.get_name()}: retargeting",
+            hardware_id="sparse_body",
+            level=DiagnosticStatus.WARN if self._dropped else DiagnosticStatus.OK,
+            message="inputs dropped" if self._dropped else "ok",
+            values=[KeyValue(key="published", value=str(self._published))]
+            + [KeyValue(key=f"dropped: {reason}", value=str(n)) for reason, n in sorted(self._dropped.items())],
+        )
+        array = DiagnosticArray(status=[status])
+        array.header.stamp = self.get_clock().now().to_msg()
+        self.pub_diag.publish(array)
+
+
+def _nanoseconds(stamp) -> int:
+    return int(stamp.sec) * 1_000_000_000 + int(stamp.nanosec)
+
+
+def _urdf_text(mapping: str, urdf: str) -> str:
+    from pathlib import Path
+
+    from ..robot.mapping import load_mapping
+
+    path = Path(urdf) if urdf else load_mapping(mapping).urdf
+    assert path is not None  # load_retarget refused a mapping without one
+    return path.read_text(encoding="utf-8")
+
+
+def main(args=None) -> None:
+    init(args)  # from here a signal ends the node, also while it starts
+    start_and_spin(RetargetNode)
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,129 @@
+"""The launch file with `robot:=`: a six-point walk replayed by the launch file's own tracker
+bridge, the estimate retargeted onto a humanoid generated here (test/robot_files.py) by the
+retarget node, as a user of the launch file relies on it: the robot's JointState names the
+URDF's moving joints, carries one robot pose for each body estimate, never leaves a joint
+limit over the replayed bag, and puts the robot's hands within 5 cm of the human hands scaled
+to the robot (the body as the estimator published it, the robot from its URDF)."""
+
+import os
+import tempfile
+import time
+import unittest
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+pytest.importorskip(
+    "launch_testing",
+    reason="launch_testing is not installed (a ROS install: ros-$ROS_DISTRO-launch-testing-ros; "
+    "or SPARSE_BODY_ROS_TOOLS=FOLDER of its wheels at make setup, README Install)",
+)
+pytest.importorskip("launch_ros", reason="launch_ros is not installed")
+launch_testing_ros = pytest.importorskip("launch_testing_ros", reason="launch_testing_ros is not installed")
+ament_index = pytest.importorskip("ament_index_python.packages")
+try:
+    SHARE = ament_index.get_package_share_directory("sparse_body")
+except Exception:  # noqa: BLE001 - PackageNotFoundError: not in a ROS prefix
+    pytest.skip("sparse_body is not in a ROS prefix (make setup, or a colcon install)", allow_module_level=True)
+
+import launch_testing.actions  # noqa: E402
+import launch_testing.asserts  # noqa: E402
+from launch.launch_description_sources import PythonLaunchDescriptionSource  # noqa: E402
+from launch_testing_ros import WaitForTopics  # noqa: E402
+from robot_files import write_robot  # noqa: E402
+from ros_helpers import isolated_domain  # noqa: E402
+from sensor_msgs.msg import JointState  # noqa: E402
+from tf2_msgs.msg import TFMessage  # noqa: E402
+
+import launch  # noqa: E402
+from sparse_body.apps.offline import make_bag  # noqa: E402
+from sparse_body.core.kinematics import forward_kinematics  # noqa: E402
+from sparse_body.core.rotations import quat_to_matrix  # noqa: E402
+from sparse_body.core.sensors import load_sensor_config  # noqa: E402
+from sparse_body.core.skeleton import JOINT_INDEX, Skeleton  # noqa: E402
+from sparse_body.data.synthetic import synthetic_walk  # noqa: E402
+from sparse_body.io.output import pose_from_joint_state  # noqa: E402
+from sparse_body.robot.retarget import load_retarget  # noqa: E402
+
+os.environ["ROS_DOMAIN_ID"] = isolated_domain()
+STARTUP = float(os.environ.get("SPARSE_BODY_LAUNCH_TEST_TIMEOUT", 600))
+FOLDER = Path(tempfile.mkdtemp(prefix="sparse_body_launch_robot_"))
+ROBOT = write_robot(FOLDER / "robot")
+BODY = Skeleton.canonical(1.75)  # the launch file's body at its default height
+
+
+@pytest.mark.launch_test
+def generate_test_description():
+    make_bag(synthetic_walk(5.0), load_sensor_config("six_point"), FOLDER / "walk")
+    source = PythonLaunchDescriptionSource(os.path.join(SHARE, "launch", "sparse_body.launch.py"))
+    arguments = {"estimator": "ik", "sensors": "six_point", "bag": str(FOLDER / "walk"), "robot": str(ROBOT)}
+    return launch.LaunchDescription(
+        [
+            launch.actions.IncludeLaunchDescription(source, launch_arguments=arguments.items()),
+            launch_testing.actions.ReadyToTest(),
+        ]
+    )
+
+
+def _stamp(header) -> int:
+    return header.stamp.sec * 1_000_000_000 + header.stamp.nanosec
+
+
+class TestTheRobotOfALaunch(unittest.TestCase):
+    def test_robot_joint_states_keep_the_limits_and_reach_the_hands(self):
+        topics = [("robot/joint_states", JointState), ("joint_states", JointState), ("/tf", TFMessage)]
+        with WaitForTopics(topics, timeout=STARTUP, messages_received_buffer_length=2000) as wait:
+            end = time.monotonic() + STARTUP
+            while len(wait.received_messages("robot/joint_states")) < 200:  # the walk is 300 frames
+                self.assertLess(time.monotonic(), end, "fewer than 200 robot poses")
+                time.sleep(0.2)
+            time.sleep(1.0)
+            robot_states = wait.received_messages("robot/joint_states")
+            body_states = wait.received_messages("joint_states")
+            tf = wait.received_messages("/tf")
+        retarget = load_retarget(ROBOT, None, BODY)
+        model = retarget.model
+        names = [j.name for j in model.moving]
+        positions = []
+        for msg in robot_states:
+            self.assertEqual(list(msg.name), names)
+            positions.append(msg.position)
+        q = np.array(positions)
+        self.assertTrue(np.all(np.isfinite(q)))
+        self.assertTrue(np.all((q >= retarget.lower) & (q <= retarget.upper)), "a joint limit left")
+        # each robot pose against the body estimate of the same stamp (both with their roots on /tf)
+        roots, bases = {}, {}
+        for msg in tf:
+            for t in msg.transforms:
+                value = (
+                    np.array([t.transform.translation.x, t.transform.translation.y, t.transform.translation.z]),
+                    np.array(
+                        [t.transform.rotation.x, t.transform.rotation.y, t.transform.rotation.z, t.transform.rotation.w]
+                    ),
+                )
+                if t.child_frame_id == "pelvis":
+                    roots[_stamp(t.header)] = value
+                elif t.child_frame_id == "robot/pelvis":
+                    bases[_stamp(t.header)] = value
+        bodies = {_stamp(m.header): m for m in body_states}
+        errors = []
+        for msg in robot_states:
+            key = _stamp(msg.header)
+            if key not in bodies or key not in roots or key not in bases:
+                continue
+            body = pose_from_joint_state(bodies[key].name, bodies[key].position, *roots[key], key * 1e-9)
+            _, joints = forward_kinematics(quat_to_matrix(body.local_quats), body.root_position, BODY.offsets)
+            links = retarget.link_transforms(msg.position, bases[key][0], quat_to_matrix(bases[key][1]))
+            for side in ("left", "right"):
+                hand = links[model.link(f"{side}_hand")][:3, 3]
+                wanted = retarget.to_robot(joints[JOINT_INDEX[f"{side}_wrist"]])
+                errors.append(np.linalg.norm(hand - wanted))
+        self.assertGreater(len(errors), 200, "too few robot poses matched to their body estimate")
+        self.assertLess(np.max(errors), 0.05, f"hands {np.mean(errors) * 100:.1f} cm from the human's on average")
+
+
+@launch_testing.post_shutdown_test()
+class TestShutdown(unittest.TestCase):
+    def test_every_process_exits_cleanly(self, proc_info):
+        launch_testing.asserts.assertExitCodes(proc_info)

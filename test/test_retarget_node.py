@@ -1,0 +1,142 @@
+"""The retarget node as a real process over real rclpy and DDS: the body's JointState, root
+and contacts in, the robot's JointState and base out; hostile input from the network (a
+JointState that is not the body's, non-finite values, a body URDF that is none, a root far
+away) is counted and dropped, and never stops the node nor yields a non-finite or
+out-of-limit joint; a bad robot file fails configure with its reason."""
+
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+rclpy = pytest.importorskip("rclpy", reason="rclpy is not installed (run the setup command)")
+pytest.importorskip("tf2_msgs.msg", reason="tf2_msgs is not available (run the setup command)")
+
+from diagnostic_msgs.msg import DiagnosticArray  # noqa: E402
+from geometry_msgs.msg import TransformStamped  # noqa: E402
+from lifecycle_msgs.msg import State, Transition  # noqa: E402
+from lifecycle_msgs.srv import ChangeState, GetState  # noqa: E402
+from rclpy.qos import DurabilityPolicy, QoSProfile  # noqa: E402
+from robot_files import write_robot  # noqa: E402
+from ros_helpers import STARTUP_LIMIT, Listener, start_node, stop  # noqa: E402
+from sensor_msgs.msg import JointState  # noqa: E402
+from std_msgs.msg import String  # noqa: E402
+from test_ros_nodes import _call  # noqa: E402
+from tf2_msgs.msg import TFMessage  # noqa: E402
+
+from sparse_body.apps.evaluation import estimate_motion  # noqa: E402
+from sparse_body.core.rotations import matrix_to_quat  # noqa: E402
+from sparse_body.core.sensors import load_sensor_config  # noqa: E402
+from sparse_body.data.synthetic import synthetic_walk  # noqa: E402
+from sparse_body.io.output import joint_angles, joint_state_names  # noqa: E402
+from sparse_body.io.urdf import body_urdf  # noqa: E402
+from sparse_body.msg import FootContact, FootContacts  # noqa: E402
+from sparse_body.robot.urdf_model import load_urdf  # noqa: E402
+from sparse_body.ros.messages import to_time  # noqa: E402
+
+pytestmark = pytest.mark.ros
+NODE = "sparse_body.ros.retarget_node"
+
+
+def _root(stamp, position, quat) -> TFMessage:
+    t = TransformStamped()
+    t.header.frame_id, t.child_frame_id, t.header.stamp = "world", "pelvis", to_time(stamp)
+    t.transform.translation.x, t.transform.translation.y, t.transform.translation.z = map(float, position)
+    t.transform.rotation.x, t.transform.rotation.y, t.transform.rotation.z, t.transform.rotation.w = map(float, quat)
+    return TFMessage(transforms=[t])
+
+
+def test_hostile_input_is_counted_and_the_robot_stays_finite_and_within_its_limits(ros_env, tmp_path):
+    walk = estimate_motion(synthetic_walk(4.0), "ik", load_sensor_config("six_point"))
+    robot = write_robot(tmp_path / "robot")
+    lower, upper = load_urdf(tmp_path / "robot" / "test_humanoid.urdf").limits()
+    node = start_node(NODE, {"robot": str(robot), "autostart": True}, "sparse_body_retarget", tmp_path, ros_env)
+    listener = Listener(rclpy, {"robot/joint_states": JointState, "/diagnostics": DiagnosticArray})
+    latched = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL)
+    pub_urdf = listener.node.create_publisher(String, "robot_description", latched)
+    pub_joints = listener.node.create_publisher(JointState, "joint_states", 10)
+    pub_tf = listener.node.create_publisher(TFMessage, "/tf", 10)
+    pub_contacts = listener.node.create_publisher(FootContacts, "foot_contacts", 10)
+    names, angles = joint_state_names(), joint_angles(matrix_to_quat(walk.local_rotations))
+    good = 0
+    try:
+        pub_urdf.publish(String(data=body_urdf(walk.view.skeleton)))
+        assert listener.spin_until(lambda: node.poll() is not None or _subscribed(listener), STARTUP_LIMIT)
+        for i in range(len(walk.positions)):
+            stamp = listener.node.get_clock().now().nanoseconds * 1e-9
+            position, quat = walk.positions[i, 0], matrix_to_quat(walk.local_rotations[i, 0])
+            msg = JointState(name=names, position=list(map(float, angles[i])))
+            msg.header.stamp = to_time(stamp)
+            if i % 20 == 5:  # a JointState that is not the body's
+                msg = JointState(name=["elbow"], position=[1.0])
+                msg.header.stamp = to_time(stamp)
+            elif i % 20 == 10:  # non-finite angles
+                msg.position = [float("nan")] * len(names)
+            elif i % 20 == 15:  # a root a kilometre away: bounded, finite, within limits
+                position = position + [1000.0, 0.0, 0.0]
+            else:
+                good += 1
+            if i == 100:  # a body URDF that is none: dropped, the body had before kept
+                pub_urdf.publish(String(data="<robot name='x'><link"))
+            contacts = FootContacts(
+                contacts=[
+                    FootContact(name=n, in_contact=bool(c))
+                    for n, c in zip(("left_foot", "right_foot"), walk.contacts[i], strict=True)
+                ]
+            )
+            contacts.header.stamp = msg.header.stamp
+            pub_contacts.publish(contacts)
+            pub_joints.publish(msg)
+            pub_tf.publish(_root(stamp, position, quat))
+            listener.spin_for(1.0 / 60)
+        listener.spin_for(1.5)
+        alive = node.poll() is None
+    finally:
+        listener.destroy()
+        stop(node)
+    log = (tmp_path / "sparse_body_retarget.log").read_text()
+    assert alive and "Traceback" not in log, log
+    states = listener.received["robot/joint_states"]
+    assert len(states) >= 0.8 * good, (len(states), good, log)
+    q = np.array([m.position for m in states])
+    assert np.all(np.isfinite(q)) and np.all((q >= lower) & (q <= upper))
+    values = {kv.key: kv.value for d in listener.received["/diagnostics"] for s in d.status for kv in s.values}
+    assert int(values["dropped: joint_states: JointState lacks 63 of the body's joints, e.g. 'left_hip_rz'"]) > 0
+    assert any(k.startswith("dropped: joint_states: JointState or root pose holds non-finite") for k in values)
+    assert any(k.startswith("dropped: robot_description:") for k in values)
+
+
+def _subscribed(listener) -> bool:
+    return listener.node.count_subscribers("joint_states") > 0
+
+
+@pytest.mark.parametrize(
+    ("robot", "reason"),
+    [
+        ("", "robot is empty"),
+        ("no_such_robot", "no robot mapping 'no_such_robot'"),
+        ("/nowhere/r.yaml", "cannot be read"),
+    ],
+)
+def test_a_bad_robot_file_refuses_configure_with_the_reason_and_the_node_stays_up(ros_env, tmp_path, robot, reason):
+    with open(tmp_path / "bad.log", "w") as log:
+        proc = subprocess.Popen(
+            [sys.executable, "-m", NODE, "--ros-args", "-p", f"robot:={robot!r}" if robot else "robot:=''"],
+            stdout=log,
+            stderr=subprocess.STDOUT,
+            env=ros_env,
+        )
+    listener = Listener(rclpy, {})
+    try:
+        change = listener.node.create_client(ChangeState, "/sparse_body_retarget/change_state")
+        get = listener.node.create_client(GetState, "/sparse_body_retarget/get_state")
+        configure = ChangeState.Request(transition=Transition(id=Transition.TRANSITION_CONFIGURE))
+        assert not _call(listener.node, change, configure).success
+        assert _call(listener.node, get, GetState.Request()).current_state.id == State.PRIMARY_STATE_UNCONFIGURED
+        assert proc.poll() is None
+    finally:
+        listener.destroy()
+        stop(proc)
+    text = (tmp_path / "bad.log").read_text()
+    assert "configure failed: " in text and reason in text and "Traceback" not in text, text

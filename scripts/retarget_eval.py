@@ -79,6 +79,14 @@ def main() -> int:
         print(f"| {key} | {mean:.2f} | {worst:.2f} |")
     steps_ms = np.array(steps) * 1e3
     print(f"| step p50 / p99 [ms] | {np.percentile(steps_ms, 50):.2f} / {np.percentile(steps_ms, 99):.2f} | |")
+    print("\nby motion kind (frame-weighted; each figure the mean of both sides):\n")
+    print("| kind | clips | frames | hands [cm] | feet, not planted [cm] | feet skate [cm/s] |")
+    print("| --- | ---: | ---: | ---: | ---: | ---: |")
+    for kind in sorted({r["kind"] for r in rows}):
+        mine = [r for r in rows if r["kind"] == kind]
+        figures = [_kind_mean(mine, end) for end in ("hand error [cm]", "foot error [cm]", "skate [cm/s]")]
+        count = int(sum(r["frames"] for r in mine))
+        print(f"| {kind} | {len(mine)} | {count} | " + " | ".join(f"{v:.2f}" for v in figures) + " |")
     if args.output:
         args.output.write_text(
             json.dumps(
@@ -95,6 +103,14 @@ def main() -> int:
             + "\n"
         )
     return 0
+
+
+def _kind_mean(rows: list[dict], ending: str) -> float:
+    """The frame-weighted mean over clips of the mean of a clip's figures whose name ends so."""
+    values = np.array([np.nanmean([v for k, v in r.items() if k.endswith(ending)] or [np.nan]) for r in rows])
+    weight = np.array([r["frames"] for r in rows])
+    ok = np.isfinite(values)
+    return float(np.sum(values[ok] * weight[ok]) / weight[ok].sum()) if ok.any() else float("nan")
 
 
 if __name__ == "__main__":

@@ -4,7 +4,6 @@ robot files end in one line; `process --robot` writes the robot's JointState bes
 
 import numpy as np
 import pytest
-from robot_files import urdf, write_robot
 
 from sparse_body.apps.evaluation import estimate_motion
 from sparse_body.core.rotations import matrix_to_quat
@@ -12,6 +11,7 @@ from sparse_body.core.sensors import load_sensor_config
 from sparse_body.core.skeleton import Skeleton
 from sparse_body.core.types import BodyPose
 from sparse_body.data.synthetic import synthetic_walk
+from sparse_body.robot.example import urdf, write_robot
 from sparse_body.robot.mapping import load_mapping
 from sparse_body.robot.retarget import load_retarget, retarget_quality
 from sparse_body.robot.urdf_model import RobotFileError, load_urdf, parse_urdf

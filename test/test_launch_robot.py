@@ -1,5 +1,5 @@
 """The launch file with `robot:=`: a six-point walk replayed by the launch file's own tracker
-bridge, the estimate retargeted onto a humanoid generated here (test/robot_files.py) by the
+bridge, the estimate retargeted onto a humanoid generated here (sparse_body/robot/example.py) by the
 retarget node, as a user of the launch file relies on it: the robot's JointState names the
 URDF's moving joints, carries one robot pose for each body estimate, never leaves a joint
 limit over the replayed bag, and puts the robot's hands within 5 cm of the human hands scaled
@@ -31,7 +31,6 @@ import launch_testing.actions  # noqa: E402
 import launch_testing.asserts  # noqa: E402
 from launch.launch_description_sources import PythonLaunchDescriptionSource  # noqa: E402
 from launch_testing_ros import WaitForTopics  # noqa: E402
-from robot_files import write_robot  # noqa: E402
 from ros_helpers import isolated_domain  # noqa: E402
 from sensor_msgs.msg import JointState  # noqa: E402
 from tf2_msgs.msg import TFMessage  # noqa: E402
@@ -44,6 +43,7 @@ from sparse_body.core.sensors import load_sensor_config  # noqa: E402
 from sparse_body.core.skeleton import JOINT_INDEX, Skeleton  # noqa: E402
 from sparse_body.data.synthetic import synthetic_walk  # noqa: E402
 from sparse_body.io.output import pose_from_joint_state  # noqa: E402
+from sparse_body.robot.example import write_robot  # noqa: E402
 from sparse_body.robot.retarget import load_retarget  # noqa: E402
 
 os.environ["ROS_DOMAIN_ID"] = isolated_domain()

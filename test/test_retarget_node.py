@@ -18,7 +18,6 @@ from geometry_msgs.msg import TransformStamped  # noqa: E402
 from lifecycle_msgs.msg import State, Transition  # noqa: E402
 from lifecycle_msgs.srv import ChangeState, GetState  # noqa: E402
 from rclpy.qos import DurabilityPolicy, QoSProfile  # noqa: E402
-from robot_files import write_robot  # noqa: E402
 from ros_helpers import STARTUP_LIMIT, Listener, start_node, stop  # noqa: E402
 from sensor_msgs.msg import JointState  # noqa: E402
 from std_msgs.msg import String  # noqa: E402
@@ -32,6 +31,7 @@ from sparse_body.data.synthetic import synthetic_walk  # noqa: E402
 from sparse_body.io.output import joint_angles, joint_state_names  # noqa: E402
 from sparse_body.io.urdf import body_urdf  # noqa: E402
 from sparse_body.msg import FootContact, FootContacts  # noqa: E402
+from sparse_body.robot.example import write_robot  # noqa: E402
 from sparse_body.robot.urdf_model import load_urdf  # noqa: E402
 from sparse_body.ros.messages import to_time  # noqa: E402
 

@@ -42,6 +42,9 @@ LATENCY_GOAL_MS = 1.0
 # bookkeeping, filter and sampling alone) in the same run holds on any machine.
 REFERENCE = "reference"
 RATIO_GOALS = {"ik": 1.5, "lobstr": 2.0, "dragposer": 8.0}
+# the retarget node's step beside an estimator's: a third of a 60 Hz frame (issue 54)
+RETARGET_GOAL_MS = 5.0
+RETARGET_RATIO = 25.0
 TRACKER_RATE = 60.0  # Hz: the live rate each estimator is judged against
 # `process` with the reader and writer beside the estimation: the whole run at most this many
 # times the estimation loop alone plus the estimator's start (issue 55: the estimator bounds
@@ -356,6 +359,34 @@ def bench_ratio(name: str, reference: str, sensors_name: str, seconds: float = 2
     return tuple(float(np.percentile(times[:, 0], q) / np.percentile(times[:, 1], q)) for q in (50, 99))  # type: ignore[return-value]
 
 
+def bench_retarget(seconds: float = 20.0) -> tuple[tuple[float, float], tuple[float, float]]:
+    """The humanoid retargeting's step (robot/retarget.py) on the example humanoid, fed the ik
+    estimate of a six-point walk: ((p50, p99) in ms, (p50, p99) over the reference estimator's
+    step, the two stepped in turn on each frame)."""
+    from ..core.types import BodyPose
+    from ..robot.example import write_robot
+    from ..robot.retarget import load_retarget
+
+    motion = synthetic_walk(seconds)
+    config = load_sensor_config("six_point")
+    ik, reference = (create_estimator(name, config, motion.skeleton) for name in ("ik", REFERENCE))
+    with tempfile.TemporaryDirectory() as folder:
+        robot = load_retarget(write_robot(Path(folder)), None, motion.skeleton)
+    times = np.zeros((len(motion), 2))
+    for i, frame in enumerate(synthesize_trackers(motion, config)):
+        pose = ik.step(frame)
+        t0 = time.perf_counter()
+        robot.step(BodyPose(pose.stamp, pose.local_quats, pose.root_position, contact=pose.contact))
+        t1 = time.perf_counter()
+        reference.step(frame)
+        times[i] = t1 - t0, time.perf_counter() - t1
+    times = times[10:]
+    ms = tuple(float(np.percentile(times[:, 0], q) * 1000) for q in (50, 99))
+    ratio = tuple(float(np.percentile(times[:, 0], q) / np.percentile(times[:, 1], q)) for q in (50, 99))
+    print(f"retarget: {len(times)} frames onto the example humanoid: step p50 {ms[0]:.2f} ms, p99 {ms[1]:.2f} ms")
+    return ms, ratio  # type: ignore[return-value]
+
+
 def bench_process(seconds: float = 300.0) -> tuple[float, float]:
     """(seconds of the estimation loop plus the estimator's start, seconds of the whole run):
     `process` of a six-point walk with ik, reading and writing beside the estimation, as the
@@ -416,6 +447,25 @@ def run_goals(latency: bool = True) -> None:
     for name, goal in RATIO_GOALS.items():
         ratio = bench_ratio(name, REFERENCE, "six_point")
         rows.append((f"{name} step / {REFERENCE} step, in turn", f"p50 <= {goal:g}x", ratio, ratio[0] <= goal, "x"))
+    retarget, ratio = bench_retarget()
+    rows.append(
+        (
+            "retarget step (example humanoid)",
+            f"p99 <= {RETARGET_GOAL_MS:g} ms",
+            retarget,
+            retarget[1] <= RETARGET_GOAL_MS,
+            " ms",
+        )
+    )
+    rows.append(
+        (
+            f"retarget step / {REFERENCE} step, in turn",
+            f"p50 <= {RETARGET_RATIO:g}x",
+            ratio,
+            ratio[0] <= RETARGET_RATIO,
+            "x",
+        )
+    )
     if latency:
         measured = bench_latency("ik", "six_point")
         goal = LATENCY_GOAL_MS + steps["ik"][1]

@@ -53,6 +53,18 @@ def _skew(v: np.ndarray) -> np.ndarray:
     return np.array([[0.0, -v[2], v[1]], [v[2], 0.0, -v[0]], [-v[1], v[0], 0.0]])
 
 
+def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Row-wise a x b of (k, 3) arrays (numpy's cross costs more than the product for three rows)."""
+    return np.stack(
+        [
+            a[:, 1] * b[:, 2] - a[:, 2] * b[:, 1],
+            a[:, 2] * b[:, 0] - a[:, 0] * b[:, 2],
+            a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0],
+        ],
+        axis=1,
+    )
+
+
 def _log(r: np.ndarray) -> np.ndarray:
     """The rotation vector of a rotation matrix."""
     cos = min(1.0, max(-1.0, (np.trace(r) - 1.0) / 2.0))
@@ -95,7 +107,10 @@ class HumanoidRetarget:
         self.lower, self.upper = model.limits()
         self.base = model.link(mapping.base)
         self.links = [model.link(t.link) for t in mapping.targets]
-        self.chains = [model.chain(link) for link in self.links]
+        self.chains = [np.array(model.chain(link), int) for link in self.links]
+        moving = model.moving
+        self._axes = [np.array([moving[i].axis for i in chain]).reshape(-1, 3) for chain in self.chains]
+        self._prismatic = [np.array([moving[i].kind == "prismatic" for i in chain], bool) for chain in self.chains]
         if model.chain(self.base):
             raise RobotFileError(f"{mapping.source}: base {mapping.base!r} must be the URDF's root link or fixed to it")
         self.points = np.array([t.point for t in mapping.targets], float)
@@ -235,18 +250,17 @@ class HumanoidRetarget:
             for k, target in enumerate(targets):
                 link = links[self.links[k]]
                 point = link[:3, :3] @ self.points[k] + link[:3, 3]
-                chain = self.chains[k]
-                axes = np.array([frames[i][:3, :3] @ self.model.moving[i].axis for i in chain]).reshape(-1, 3)
-                origins = np.array([frames[i][:3, 3] for i in chain]).reshape(-1, 3)
-                prismatic = np.array([self.model.moving[i].kind == "prismatic" for i in chain], bool)
+                chain, prismatic = self.chains[k], self._prismatic[k]
+                axes = np.einsum("kab,kb->ka", frames[chain, :3, :3], self._axes[k])
+                origins = frames[chain, :3, 3]
                 if target.position > 0:
                     weight = target.position * (PLANTED if planted[k] else 1.0)
                     row = np.zeros((3, 6 + n))
                     row[:, :3] = np.eye(3)
                     row[:, 3:6] = -_skew(point - self.base_place)
-                    moved = np.cross(axes, point - origins)
+                    moved = _cross(axes, point - origins)
                     moved[prismatic] = axes[prismatic]
-                    row[:, 6 + np.array(chain, int)] = moved.T
+                    row[:, 6 + chain] = moved.T
                     rows.append(row * weight)
                     residuals.append((goals[k] - point) * weight)
                 if target.orientation > 0:
@@ -254,7 +268,7 @@ class HumanoidRetarget:
                     row[:, 3:6] = np.eye(3)
                     turned = axes.copy()
                     turned[prismatic] = 0.0
-                    row[:, 6 + np.array(chain, int)] = turned.T
+                    row[:, 6 + chain] = turned.T
                     rows.append(row * target.orientation)
                     residuals.append(_log(goal_turns[k] @ link[:3, :3].T) * target.orientation)
             pull = np.zeros((2 * n, 6 + n))

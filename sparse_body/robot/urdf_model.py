@@ -11,6 +11,7 @@ from __future__ import annotations
 import math
 import xml.etree.ElementTree as ElementTree
 from dataclasses import dataclass, replace
+from functools import cached_property
 from pathlib import Path
 
 import numpy as np
@@ -49,7 +50,7 @@ class RobotModel:
     joints: tuple[Joint, ...]
     root: int  # link index
 
-    @property
+    @cached_property
     def moving(self) -> tuple[Joint, ...]:
         """The joints a JointState carries, in the URDF's order."""
         return tuple(sorted((j for j in self.joints if j.index >= 0), key=lambda j: j.index))
@@ -79,6 +80,7 @@ class RobotModel:
         """(link transforms (links, 4, 4) in the world, joint frames (moving, 4, 4) after
         each moving joint's origin and before its motion) for joint values q (moving,) and
         the root link's world transform `base` (4, 4)."""
+        motions = self._motions(np.asarray(q, float))
         links = np.empty((len(self.links), 4, 4))
         frames = np.empty((len(self.moving), 4, 4))
         links[self.root] = base
@@ -86,18 +88,29 @@ class RobotModel:
             frame = links[joint.parent] @ joint.origin
             if joint.index >= 0:
                 frames[joint.index] = frame
-                frame = frame @ _motion(joint, float(q[joint.index]))
+                frame = frame @ motions[joint.index]
             links[joint.child] = frame
         return links, frames
 
+    @cached_property
+    def _axes(self) -> tuple[np.ndarray, np.ndarray]:
+        moving = self.moving
+        return np.array([j.axis for j in moving]).reshape(-1, 3), np.array([j.kind == "prismatic" for j in moving])
 
-def _motion(joint: Joint, value: float) -> np.ndarray:
-    out = np.eye(4)
-    if joint.kind == "prismatic":
-        out[:3, 3] = joint.axis * value
-    else:
-        out[:3, :3] = axis_angle(joint.axis, value)
-    return out
+    def _motions(self, q: np.ndarray) -> np.ndarray:
+        """Each moving joint's motion (moving, 4, 4) at q: a turn about its axis (Rodrigues,
+        all at once) or a slide along it."""
+        axes, prismatic = self._axes
+        c, s = np.cos(q)[:, None, None], np.sin(q)[:, None, None]
+        skew = np.zeros((len(q), 3, 3))
+        skew[:, 0, 1], skew[:, 0, 2], skew[:, 1, 2] = -axes[:, 2], axes[:, 1], -axes[:, 0]
+        skew[:, 1, 0], skew[:, 2, 0], skew[:, 2, 1] = axes[:, 2], -axes[:, 1], axes[:, 0]
+        out = np.zeros((len(q), 4, 4))
+        out[:, :3, :3] = c * np.eye(3) + s * skew + (1 - c) * axes[:, :, None] * axes[:, None, :]
+        out[:, 3, 3] = 1.0
+        out[prismatic, :3, :3] = np.eye(3)
+        out[prismatic, :3, 3] = axes[prismatic] * q[prismatic, None]
+        return out
 
 
 def axis_angle(axis: np.ndarray, angle: float) -> np.ndarray:

@@ -1,18 +1,20 @@
-"""A small humanoid robot made for the tests: its URDF and its mapping YAML, written to a
-folder. Human proportions at `scale` (so the retargeting's scaling is exercised), joints as
-a typical humanoid has them (hip yaw, roll, pitch; knee; ankle pitch, roll; a waist yaw;
-shoulder pitch, roll, yaw; elbow), arms hanging at the zero pose, limits like a robot's."""
+"""A small humanoid robot made here: its URDF and its mapping YAML, written to a folder, for
+the tests, the bench and trying retargeting without a robot's files. Human proportions at
+`scale` (so the retargeting's scaling is exercised), joints as a typical humanoid has them
+(hip yaw, roll, pitch; knee; ankle pitch, roll; a waist yaw; shoulder pitch, roll, yaw;
+elbow), arms hanging at the zero pose, limits like a robot's."""
 
 from __future__ import annotations
 
 from pathlib import Path
 
-# joint: (parent link, child link, origin xyz at scale 1, axis, lower, upper); None: fixed
 _SIDE = {"left": 1.0, "right": -1.0}
+# joint, parent link, child link, origin xyz (at scale 1), axis, (lower, upper) or None: fixed
+JointRow = tuple[str, str, str, tuple, str, "tuple[float, float] | None"]
 
 
-def _joints(scale: float) -> list[tuple[str, str, str, tuple, str, tuple[float, float] | None]]:
-    out = []
+def _joints(scale: float) -> list[JointRow]:
+    out: list[JointRow] = []
     for side, s in _SIDE.items():
         leg = [
             ("hip_yaw", (0.047, 0.102 * s, -0.112), "0 0 1", (-0.6, 0.6)),
@@ -62,7 +64,7 @@ def urdf(scale: float = 0.8, name: str = "test_humanoid") -> str:
 
 
 MAPPING = """\
-# the tests' humanoid: its links <- the human's joints
+# the example humanoid (sparse_body/robot/example.py): its links <- the human's joints
 urdf: {urdf}
 base: pelvis
 targets:

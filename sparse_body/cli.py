@@ -472,6 +472,8 @@ def cmd_view(args) -> int:
     from .apps.viewer import bag_bodies, write_body_page
 
     source = Path(args.source) if args.source else None
+    if (args.robot or args.robot_urdf) and not (source is not None and is_bag(source)):
+        raise ValueError("--robot draws the robot of an estimate bag written with process --robot: give the bag")
     title = None
     parts: dict  # what the page draws, by name: arrays (None: not shown)
     if args.source and args.source.startswith(("ws://", "wss://")):
@@ -489,6 +491,13 @@ def cmd_view(args) -> int:
         positions, trackers, fps = bag_bodies(source)
         parts = {"estimate": positions, "trackers": trackers}
         name = source.name
+        if args.robot:  # the robot the bag was written with, beside the body
+            from .apps.viewer import bag_robot
+            from .core.skeleton import Skeleton
+            from .robot.retarget import load_retarget
+
+            retarget = load_retarget(args.robot, args.robot_urdf, Skeleton.canonical())
+            parts["robot"], parts["robot_bones"] = bag_robot(source, retarget, positions[:, 0])
     elif source is not None and is_results_file(source):
         from .apps.result_view import view_clip
         from .data.catalog import find_mocap_root
@@ -901,6 +910,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--overwrite", action="store_true", help="replace the page if it is one `view` wrote")
     p.add_argument("--fps", type=_fps, default=60.0, help="a motion file's frame rate where it has none")
     p.add_argument("--seconds", type=float, default=10.0, help="how long to record a live view (at most 600)")
+    p.add_argument(
+        "--robot", help="draw the robot of an estimate bag written with process --robot beside the body (its mapping)"
+    )
+    p.add_argument("--robot-urdf", help="the robot's URDF, where the mapping names none or another")
     p.set_defaults(func=cmd_view, motion=None)
 
     p = sub.add_parser("bench", help="step times and end-to-end latency over DDS, beside their goals")

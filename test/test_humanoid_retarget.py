@@ -196,6 +196,17 @@ def test_process_writes_the_robots_joint_states_beside_the_body(tmp_path, capsys
     lower, upper = model.limits()
     assert np.all(np.isfinite(q)) and np.all((q >= lower) & (q <= upper))
     assert any(t.child_frame_id == "robot/pelvis" for t in read_topic(tmp_path / "out", TF_TOPIC)[0].transforms)
+    # the page draws the robot beside the body
+    with pytest.raises(SystemExit) as viewed:
+        main(["view", str(tmp_path / "out"), "--robot", str(robot), "-o", str(tmp_path / "page.html")])
+    assert viewed.value.code == 0 and '"name":"robot"' in (tmp_path / "page.html").read_text()
+    with pytest.raises(SystemExit) as plain:
+        main(["process", str(tmp_path / "in"), str(tmp_path / "plain"), "--quiet"])
+    assert plain.value.code == 0
+    with pytest.raises(SystemExit) as unmade:  # a bag without the robot says so
+        main(["view", str(tmp_path / "plain"), "--robot", str(robot), "-o", str(tmp_path / "p2.html")])
+    assert unmade.value.code != 0 and "no /robot/joint_states" in capsys.readouterr().err
+    assert not (tmp_path / "p2.html").exists()
     # a bad robot file: one line, exit 2, nothing written
     robot.write_text("base: [")
     with pytest.raises(SystemExit) as bad:

@@ -84,9 +84,12 @@ def body_page(
     trackers: np.ndarray | None = None,
     title: str = "sparse_body",
     floor: float | None = None,
+    robot: np.ndarray | None = None,
+    robot_bones: tuple[tuple[int, int], ...] = (),
 ) -> str:
     """The page's HTML. estimate, truth: (frames, 22, 3) joint positions; trackers: (frames,
-    k, 3), NaN where a tracker has no sample; all in metres, z up."""
+    k, 3), NaN where a tracker has no sample; robot: (frames, links, 3) a robot's link origins
+    (robot_bones: the (parent, child) links drawn joined); all in metres, z up."""
     import plotly.graph_objects as go
 
     shown = [a for a in (estimate, truth) if a is not None]
@@ -97,7 +100,8 @@ def body_page(
         raise ViewError(f"a frame rate must be positive, got {fps}")
     step = max(int(np.ceil(fps / MAX_FPS - 1e-6)), int(np.ceil(frames / MAX_FRAMES)))
     picks = range(0, frames, step)
-    every = np.concatenate([a.reshape(-1, 3) for a in shown + ([trackers] if trackers is not None else [])])
+    extra = [a for a in (trackers, robot) if a is not None]
+    every = np.concatenate([a.reshape(-1, 3) for a in shown + extra])
     every = every[np.all(np.isfinite(every), axis=1)]
     if not len(every):
         raise ViewError("nothing to show: every position is missing or not finite")
@@ -137,6 +141,11 @@ def body_page(
         if trackers is not None:
             marker = {"size": 3, "color": "#d62728"}  # small: the body is what the page shows
             out.append(points(trackers[i], mode="markers", marker=marker, name="trackers"))
+        if robot is not None:
+            ends = np.full((len(robot_bones), 3, 3), np.nan)
+            ends[:, 0] = robot[i, [p for p, _ in robot_bones]]
+            ends[:, 1] = robot[i, [c for _, c in robot_bones]]
+            out.append(points(ends.reshape(-1, 3), mode="lines", line={"color": "#e07b00", "width": 5}, name="robot"))
         return out
 
     # The camera follows the body: each drawn frame moves the scene's box to be centred on
@@ -272,6 +281,52 @@ def write_body_page(path: Path, fps: float, overwrite: bool = False, **parts) ->
 
     html = body_page(fps, **parts).replace("<head>", "<head>" + PAGE_MARKER, 1)
     return write_file(Path(path), html, marker_in_head(PAGE_MARKER.encode()), overwrite, "page")
+
+
+def bag_robot(bag: Path, retarget, beside: np.ndarray) -> tuple[np.ndarray, tuple[tuple[int, int], ...]]:
+    """(link origins (frames, links, 3), the (parent, child) links) of the robot in an estimate
+    bag written with `process --robot` (/robot/joint_states, its base on /tf), placed beside the
+    body: each frame moved so that the robot's base stands 0.8 m to the body's left (beside:
+    (frames, 3) the body's pelvis, one a /tf message as bag_bodies gives them)."""
+    from rosbags.rosbag2 import Reader
+
+    from ..core.rotations import quat_to_matrix
+    from ..io.bagio import TF_TOPIC, typestore
+    from ..io.cdr import read_tf
+    from ..io.estimate_bag import ROBOT_PREFIX
+    from ..io.topics import ROBOT_JOINT_STATES_TOPIC
+
+    base_frame = ROBOT_PREFIX + retarget.mapping.base
+    store = typestore()
+    try:
+        with Reader(Path(bag)) as reader:
+            joints = [c for c in reader.connections if c.topic == ROBOT_JOINT_STATES_TOPIC]
+            if not joints:
+                raise ViewError(f"{bag}: no {ROBOT_JOINT_STATES_TOPIC} (write it with process --robot)")
+            angles = [
+                store.deserialize_cdr(raw, c.msgtype).position for c, _, raw in reader.messages(connections=joints)
+            ]
+            tf = [c for c in reader.connections if c.topic == TF_TOPIC]
+            bases = [
+                next((row for row in read_tf(raw) if row[1] == base_frame), None)
+                for _, _, raw in reader.messages(connections=tf)
+            ]
+    except ViewError:
+        raise
+    except Exception as err:  # noqa: BLE001 - rosbags raises many kinds for a broken file
+        raise ViewError(f"{bag}: cannot be read as a rosbag2 ({err})") from None
+    placed = [b[3] for b in bases if b is not None]
+    if len(angles) != len(placed) or len(angles) != len(beside):
+        raise ViewError(f"{bag}: {len(angles)} robot poses, {len(placed)} robot bases and {len(beside)} bodies")
+    if len(angles[0]) != len(retarget.names):
+        raise ViewError(f"{bag}: its robot has {len(angles[0])} joints, the mapping's {len(retarget.names)}")
+    links = np.empty((len(angles), len(retarget.model.links), 3))
+    for i, (q, values) in enumerate(zip(angles, placed, strict=True)):
+        place, turn = np.asarray(values[:3]), np.asarray(values[3:])
+        links[i] = retarget.link_transforms(np.asarray(q), place, quat_to_matrix(turn))[:, :3, 3]
+        links[i, :, :2] += beside[i, :2] - place[:2] + [0.0, 0.8]
+    bones = tuple((j.parent, j.child) for j in retarget.model.joints)
+    return links, bones
 
 
 def bag_bodies(bag: Path) -> tuple[np.ndarray, np.ndarray | None, float]:

@@ -1,7 +1,8 @@
 """predict_ahead's fading velocity (core/forecast.py): what a forecast 33 to 150 ms ahead buys
 against the present pose given as the later one, for each time constant of the fade, on the
 validation people (field protocol), by kind of motion. The kind absent from training (dance)
-chooses the constant (core/forecast.FADE).
+chooses the constant (core/forecast.FADE). "learned root": the shipped forecast, the joints
+faded at FADE and the root moved by the learned model (train/forecast.py), where it is there.
 
 Each clip is estimated once; the forecasts are applied to its poses afterwards (a forecast is
 a function of the poses alone, as in PoseForecast.forecast). The error is MPJPE [cm] of each
@@ -27,16 +28,13 @@ FADES = (0.03, 0.05, 0.1, 0.2, math.inf)  # s; inf: a constant velocity
 
 
 def main() -> int:
-    from sparse_body.apps.evaluation import filter_options, split_items
-    from sparse_body.core.contacts import estimate_floor
+    from sparse_body.apps.evaluation import estimated_clips
     from sparse_body.core.forecast import PoseForecast, faded_seconds
     from sparse_body.core.kinematics import forward_kinematics
     from sparse_body.core.rotations import quat_to_matrix
-    from sparse_body.core.sensors import load_sensor_config
     from sparse_body.data.catalog import find_mocap_root, split_clips
-    from sparse_body.data.field_protocol import FIELD, user_view
-    from sparse_body.data.motion import Motion
-    from sparse_body.estimators import create_estimator
+    from sparse_body.estimators.base import learned_root_available
+    from sparse_body.estimators.forecast_model import RootForecastModel
 
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("estimator")
@@ -49,19 +47,9 @@ def main() -> int:
         print("no motion capture folder found (sparse-body import-mocap)", file=sys.stderr)
         return 2
     kinds = {c.clip_id: c.category for c in split_clips(root, "validation")}
-    sensors = load_sensor_config(args.sensors)
+    model = RootForecastModel() if learned_root_available() else None
     clips = []
-    for item in split_items(root, "validation", limit=args.limit):
-        motion = item.load()
-        floor = estimate_floor(motion.positions)
-        motion = Motion(
-            motion.name, motion.fps, motion.skeleton, motion.local_quats, motion.root_positions - [0, 0, floor]
-        )
-        view = user_view(motion, sensors, FIELD, item.seed)
-        estimator = create_estimator(
-            args.estimator, view.sensors, view.skeleton, fps=motion.fps, **filter_options(FIELD.noise)
-        )
-        poses = estimator.process(view.stream)
+    for item, motion, view, poses in estimated_clips(root, "validation", args.estimator, args.sensors, args.limit):
 
         def joints(poses, view=view):
             local = quat_to_matrix(np.stack([p.local_quats for p in poses]))
@@ -78,6 +66,9 @@ def main() -> int:
                 forecast = PoseForecast(0.0)
                 forecast.ahead, forecast.carry = h / motion.fps, faded_seconds(h / motion.fps, fade)
                 variants[f"fade {fade:g}"] = joints([forecast.forecast(p) for p in poses])
+            if model is not None:  # the shipped forecast: joints faded (FADE), the root learned
+                learned = PoseForecast(h / motion.fps, root_model=model, lags=model.lags)
+                variants["learned root"] = joints([learned.forecast(p) for p in poses])
             row["errors"][str(h)] = {
                 name: [float(np.linalg.norm(pred[:count] - motion.positions[h:], axis=-1).mean(axis=1).sum()), count]
                 for name, pred in variants.items()
@@ -85,7 +76,7 @@ def main() -> int:
         clips.append(row)
     if args.output:
         args.output.write_text(json.dumps({"estimator": args.estimator, "sensors": args.sensors, "clips": clips}))
-    names = ["present"] + [f"fade {fade:g}" for fade in FADES]
+    names = ["present"] + [f"fade {fade:g}" for fade in FADES] + (["learned root"] if model is not None else [])
     print(f"| {args.estimator}/{args.sensors} | ms | " + " | ".join(names) + " |")
     print("| --- | ---: |" + " ---: |" * len(names))
     for group in ("dance", "other", "all"):

@@ -99,3 +99,60 @@ def test_forecast_poses_are_stamped_ahead_and_beat_the_present_pose_at_that_time
         )
     ]
     np.testing.assert_allclose(np.array(stamps) - forecast.view.stream.times, ahead)
+
+
+def _constant_root(velocities: np.ndarray, ahead: float) -> np.ndarray:
+    """A stand-in root model for the plumbing: the newest velocity carried on."""
+    return velocities[0] * ahead
+
+
+def test_a_root_model_gets_the_velocities_newest_first_in_the_heading_frame_and_its_move_is_turned_back():
+    seen = []
+
+    def model(velocities, ahead):
+        seen.append(velocities.copy())
+        return _constant_root(velocities, ahead)
+
+    forecast = PoseForecast(0.1, root_model=model, lags=3)
+    heading = matrix_to_quat(rotation_about([0.0, 0.0, 1.0], math.pi / 2))  # facing +y
+    for k in range(4):  # the root walks along +y at 1 m/s: forwards in its heading frame
+        pose = BodyPose(k / FPS, np.tile(heading, (22, 1)), np.array([0.0, k / FPS, 1.0]))
+        out = forecast.forecast(pose)
+    assert len(seen) == 1  # the first three poses have too few velocities: carried as the joints are
+    np.testing.assert_allclose(seen[0], [[1.0, 0.0, 0.0]] * 3, atol=1e-9)
+    np.testing.assert_allclose(out.root_position - pose.root_position, [0.0, 0.1, 0.0], atol=1e-9)
+
+
+def test_a_root_model_that_answers_nonsense_cannot_throw_the_forecast_away():
+    for answer in ([1e9, 0.0, 0.0], [np.nan, 0.0, 0.0]):
+        forecast = PoseForecast(MAX_AHEAD, root_model=lambda v, a, answer=answer: np.array(answer), lags=1)
+        forecast.forecast(_turning(0.0))
+        out = forecast.forecast(_turning(1 / FPS))
+        assert np.isfinite(out.root_position).all()
+        assert np.linalg.norm(out.root_position - _turning(1 / FPS).root_position) <= MAX_SPEED * MAX_AHEAD + 1e-9
+
+
+def test_the_shipped_learned_root_is_the_default_and_forecast_faded_turns_it_off():
+    from sparse_body.estimators.base import learned_root_available
+
+    if not learned_root_available():
+        pytest.skip("no learned root forecast in models/ (make train-forecast)")
+    sensors, skeleton = load_sensor_config("six_point"), Skeleton.canonical(1.75)
+    assert create_estimator("ik", sensors, skeleton, predict_ahead=0.1).forecast.root_model is not None
+    assert create_estimator("ik", sensors, skeleton, predict_ahead=0.1, forecast="faded").forecast.root_model is None
+    assert create_estimator("ik", sensors, skeleton).forecast.root_model is None  # nothing ahead: nothing loaded
+    with pytest.raises(ValueError, match="forecast must be one of learned, faded"):
+        create_estimator("ik", sensors, skeleton, predict_ahead=0.1, forecast="psychic")
+
+
+def test_the_learned_root_carries_a_walk_further_than_the_faded_velocity():
+    """A steady walk: the learned move is close to the constant velocity's, the faded one falls short."""
+    from sparse_body.estimators.base import learned_root_available
+    from sparse_body.estimators.forecast_model import RootForecastModel
+
+    if not learned_root_available():
+        pytest.skip("no learned root forecast in models/ (make train-forecast)")
+    model = RootForecastModel()
+    walking = np.tile([1.2, 0.0, 0.0], (model.lags, 1))
+    move = model(walking, 0.1)
+    assert np.isfinite(move).all() and abs(move[0] - 0.12) < abs(1.2 * faded_seconds(0.1, FADE) - 0.12)

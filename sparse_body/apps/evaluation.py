@@ -303,6 +303,24 @@ def filter_options(noise: TrackerNoise) -> dict[str, float]:
     return {"filter_position_noise": noise.position_std, "filter_rotation_noise": noise.rotation_max_deg / 3}
 
 
+def estimated_clips(mocap_root: Path, split: str, estimator: str, sensors_name: str, limit: int | None = None):
+    """Each clip of a split as a user's stack would estimate it, one at a time: (item, motion
+    moved so that its floor is z = 0, the user's view of it, the estimator's poses), under the
+    field protocol with the filter set for its noise (what the forecast's tools read)."""
+    from ..core.sensors import load_sensor_config
+
+    sensors = load_sensor_config(sensors_name)
+    for item in split_items(mocap_root, split, limit=limit):
+        motion = item.load()
+        floor = estimate_floor(motion.positions)
+        motion = Motion(
+            motion.name, motion.fps, motion.skeleton, motion.local_quats, motion.root_positions - [0, 0, floor]
+        )
+        view = user_view(motion, sensors, FIELD, item.seed)
+        est = create_estimator(estimator, view.sensors, view.skeleton, fps=motion.fps, **filter_options(FIELD.noise))
+        yield item, motion, view, est.process(view.stream)
+
+
 def split_items(mocap_root: Path, split: str, fps: float = DEFAULT_FPS, limit: int | None = None) -> list[EvalItem]:
     """The clips of a part of the CMU split (or of an imported folder's), seeded by their place
     in the split (the split's order is fixed, so the draws are too)."""

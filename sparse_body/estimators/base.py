@@ -136,10 +136,18 @@ class Estimator(ABC):
         contacts; the option foot_lock), from the next reset."""
         self.foot_lock = ContactHold(self.skeleton) if on else None
 
-    def use_forecast(self, ahead: float) -> None:
+    def use_forecast(self, ahead: float, root: str = "learned") -> None:
         """Give each pose `ahead` seconds past its frame, forecast (core/forecast.py; the
-        option predict_ahead), from the next reset."""
-        self.forecast = PoseForecast(ahead)
+        option predict_ahead), from the next reset; the root's move by the shipped learned model
+        (root "learned", where the package has it) or carried at its fading velocity ("faded",
+        the option forecast=faded)."""
+        if ahead > 0.0 and root == "learned" and learned_root_available():
+            from .forecast_model import RootForecastModel
+
+            model = RootForecastModel()
+            self.forecast = PoseForecast(ahead, root_model=model, lags=model.lags)
+        else:
+            self.forecast = PoseForecast(ahead)
 
     @property
     def ahead(self) -> float:
@@ -354,12 +362,24 @@ def parse_estimator_spec(spec: str) -> tuple[str, dict]:
     return name.strip(), options
 
 
+FORECASTS = ("learned", "faded")  # how predict_ahead moves the root (the option forecast)
+
+
+def learned_root_available() -> bool:
+    """Whether the package has the learned root forecast's model (make train-forecast)."""
+    from ..core.resources import models_dir
+    from .forecast_model import FILE
+
+    return (models_dir() / FILE).is_file()
+
+
 def create_estimator(name: str, sensors: SensorConfig, skeleton: Skeleton, fps: float = 60.0, **options) -> Estimator:
     """An estimator by name with its options; filter_<field> options (of FilterConfig) set
     the tracker filter every estimator has, filter=false turns it off; smooth=true smooths
     a whole recording in process() (offline) instead; predict_ahead=SECONDS gives each pose
-    that far past its frame, forecast (core/forecast.py); foot_lock=true holds a foot where it
-    touched down while in contact (core/contact_hold.py)."""
+    that far past its frame, forecast (core/forecast.py; forecast=faded: the root carried at
+    its fading velocity instead of the learned model's move); foot_lock=true holds a foot where
+    it touched down while in contact (core/contact_hold.py)."""
     from ..methods import METHODS, load
 
     if name not in METHODS:
@@ -374,6 +394,9 @@ def create_estimator(name: str, sensors: SensorConfig, skeleton: Skeleton, fps: 
     ahead = options.pop("predict_ahead", 0.0)
     if isinstance(ahead, bool) or not isinstance(ahead, (int, float)) or not 0.0 <= ahead <= MAX_AHEAD:
         raise ValueError(f"predict_ahead must be a number of seconds from 0 to {MAX_AHEAD:g}, got {ahead!r}")
+    root = options.pop("forecast", "learned")
+    if root not in FORECASTS:
+        raise ValueError(f"forecast must be one of {', '.join(FORECASTS)}, got {root!r}")
     cls = load(METHODS[name].estimator)
     known = cls.options()
     takes_more = any(
@@ -396,6 +419,6 @@ def create_estimator(name: str, sensors: SensorConfig, skeleton: Skeleton, fps: 
             raise
         raise ValueError(f"estimator {name!r}: {err}; its options are {', '.join(known)}") from None
     estimator.use_filter(filtering, smooth)
-    estimator.use_forecast(float(ahead))
+    estimator.use_forecast(float(ahead), root)
     estimator.use_foot_lock(foot_lock)
     return estimator

@@ -124,8 +124,9 @@ PARAMETERS = {
     "predict_ahead": (
         0.0,
         "seconds past the trackers' stamp the body is forecast and stamped (a teleoperation "
-        "loop cancels its own delay with it): each joint carried on at its fading velocity; 0: "
-        "the body at the trackers' stamp",
+        "loop cancels its own delay with it): each joint carried on at its fading velocity, the "
+        "root moved by the learned forecast (estimator option forecast=faded: at its velocity too); "
+        "0: the body at the trackers' stamp",
     ),
     "output_rate": (
         60.0,

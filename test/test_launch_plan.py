@@ -52,6 +52,8 @@ def test_a_missing_robot_state_publisher_is_said_and_nothing_is_started_for_it(m
         "budget_fallback": "ik",
         "predict_ahead": "0.0",
         "foot_lock": "false",
+        "robot": "",
+        "robot_urdf": "",
     }.items():
         context.launch_configurations[name] = value
     actions = module._nodes(context)
@@ -93,6 +95,8 @@ def test_a_calibration_file_is_the_body_of_the_estimator_and_of_robot_state_publ
         "budget_fallback": "ik",
         "predict_ahead": "0.0",
         "foot_lock": "false",
+        "robot": "",
+        "robot_urdf": "",
     }.items():
         context.launch_configurations[name] = value
     actions = module._nodes(context)
@@ -103,3 +107,46 @@ def test_a_calibration_file_is_the_body_of_the_estimator_and_of_robot_state_publ
     rsp = next(kw for kind, kw in actions if kind == "node" and kw["package"] == "robot_state_publisher")
     assert rsp["parameters"][0]["robot_description"] == body_urdf(Calibration.load(tmp_path / "me.yaml").body())
     assert rsp["parameters"][0]["robot_description"] != body_urdf(Skeleton.canonical(1.62))
+
+
+def test_robot_starts_the_retarget_node_with_the_mapping_and_the_sensors_fixed_frame(monkeypatch):
+    from launch import LaunchContext
+
+    module = _launch_module()
+    monkeypatch.setattr(module, "_installed", lambda package: True)
+    monkeypatch.setattr(module, "get_package_share_directory", lambda package: str(Path(__file__).resolve().parents[1]))
+    monkeypatch.setattr(module, "LifecycleNode", lambda **kw: ("lifecycle", kw))
+    monkeypatch.setattr(module, "Node", lambda **kw: ("node", kw))
+    context = LaunchContext()
+    settings = {
+        "sensors": "four_point",
+        "estimator": "ik",
+        "model_path": "",
+        "height": "1.75",
+        "calibration": "",
+        "bag": "",
+        "refine": "false",
+        "robot_state_publisher": "false",
+        "foxglove_port": "0",
+        "foxglove_host": "127.0.0.1",
+        "step_budget": "0.0",
+        "budget_fallback": "ik",
+        "predict_ahead": "0.1",
+        "foot_lock": "true",
+        "robot": "unitree_h1",
+        "robot_urdf": "/robots/h1.urdf",
+    }
+    for name, value in settings.items():
+        context.launch_configurations[name] = value
+    started = [kw for kind, kw in module._nodes(context) if kind == "lifecycle"]
+    retarget = next(kw for kw in started if kw["executable"] == "retarget_node")
+    assert retarget["parameters"][0] == {
+        "robot": "unitree_h1",
+        "robot_urdf": "/robots/h1.urdf",
+        "fixed_frame": "world",
+        "autostart": True,
+    }
+    context.launch_configurations["robot"] = ""  # none: no retarget node
+    assert not [
+        kw for kind, kw in module._nodes(context) if kind == "lifecycle" and kw["executable"] == "retarget_node"
+    ]

@@ -46,8 +46,9 @@ def test_a_walk_reaches_its_hands_holds_its_feet_and_keeps_every_limit(tmp_path,
     for foot in ("left_foot", "right_foot"):
         assert quality[f"{foot} skate [cm/s]"] < 2.0, quality  # planted: held where it touched down
         assert quality[f"{foot} below floor [cm]"] < 1.0, quality
-    # smooth in time: no joint jumps between frames of a walk
-    assert np.abs(np.diff(q, axis=0)).max() < 0.2
+    # smooth in time: once the walk is under way (the feet planted a first time), no joint
+    # turns more than 0.15 rad (9 degrees) between two frames
+    assert np.abs(np.diff(q[30:], axis=0)).max() < 0.15
 
 
 def test_without_the_feet_lock_the_robot_feet_follow_the_human_feet_and_slide(tmp_path, walk):
@@ -229,3 +230,20 @@ def test_the_body_urdf_gives_back_its_skeleton():
     np.testing.assert_allclose(body_skeleton(body_urdf(skeleton)).offsets, skeleton.offsets, atol=1e-6)
     with pytest.raises(RobotFileError, match="not a sparse_body body"):
         body_skeleton(urdf(1.0))
+
+
+def test_a_body_that_jumps_takes_the_robot_with_it_at_once(tmp_path, walk):
+    robot = load_retarget(write_robot(tmp_path), None, walk.view.skeleton)
+    _retarget(walk, robot)  # the robot at the end of the walk
+    start = BodyPose(99.0, matrix_to_quat(walk.local_rotations[0]), walk.positions[0, 0], contact=walk.contacts[0])
+    jumped = robot.step(start)  # back at the start, metres away: as a looped recording does
+    assert np.linalg.norm(jumped.reached - jumped.wanted, axis=1)[2:4].max() < 0.03  # its hands, at once
+
+
+def test_a_fresh_solve_reaches_the_hands_without_a_last_frame_to_stay_near(tmp_path, walk):
+    robot = load_retarget(write_robot(tmp_path), None, walk.view.skeleton)
+    for i in (50, 100, 150):
+        robot.reset()
+        body = BodyPose(0.0, matrix_to_quat(walk.local_rotations[i]), walk.positions[i, 0], contact=walk.contacts[i])
+        first = robot.step(body)
+        assert np.linalg.norm(first.reached - first.wanted, axis=1)[2:4].max() < 0.02  # the hands

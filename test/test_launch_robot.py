@@ -43,6 +43,7 @@ from sparse_body.core.sensors import load_sensor_config  # noqa: E402
 from sparse_body.core.skeleton import JOINT_INDEX, Skeleton  # noqa: E402
 from sparse_body.data.synthetic import synthetic_walk  # noqa: E402
 from sparse_body.io.output import pose_from_joint_state  # noqa: E402
+from sparse_body.msg import EstimateStatus  # noqa: E402
 from sparse_body.robot.example import write_robot  # noqa: E402
 from sparse_body.robot.retarget import load_retarget  # noqa: E402
 
@@ -72,7 +73,12 @@ def _stamp(header) -> int:
 
 class TestTheRobotOfALaunch(unittest.TestCase):
     def test_robot_joint_states_keep_the_limits_and_reach_the_hands(self):
-        topics = [("robot/joint_states", JointState), ("joint_states", JointState), ("/tf", TFMessage)]
+        topics = [
+            ("robot/joint_states", JointState),
+            ("joint_states", JointState),
+            ("/tf", TFMessage),
+            ("estimate_status", EstimateStatus),
+        ]
         with WaitForTopics(topics, timeout=STARTUP, messages_received_buffer_length=2000) as wait:
             end = time.monotonic() + STARTUP
             while len(wait.received_messages("robot/joint_states")) < 200:  # the walk is 300 frames
@@ -82,6 +88,7 @@ class TestTheRobotOfALaunch(unittest.TestCase):
             robot_states = wait.received_messages("robot/joint_states")
             body_states = wait.received_messages("joint_states")
             tf = wait.received_messages("/tf")
+            held = {_stamp(m.header) for m in wait.received_messages("estimate_status") if not m.valid}
         retarget = load_retarget(ROBOT, None, BODY)
         model = retarget.model
         names = [j.name for j in model.moving]
@@ -110,8 +117,8 @@ class TestTheRobotOfALaunch(unittest.TestCase):
         errors = []
         for msg in robot_states:
             key = _stamp(msg.header)
-            if key not in bodies or key not in roots or key not in bases:
-                continue
+            if key not in bodies or key not in roots or key not in bases or key in held:
+                continue  # (a held body holds the robot: no hands to reach)
             body = pose_from_joint_state(bodies[key].name, bodies[key].position, *roots[key], key * 1e-9)
             _, joints = forward_kinematics(quat_to_matrix(body.local_quats), body.root_position, BODY.offsets)
             links = retarget.link_transforms(msg.position, bases[key][0], quat_to_matrix(bases[key][1]))
@@ -120,6 +127,11 @@ class TestTheRobotOfALaunch(unittest.TestCase):
                 wanted = retarget.to_robot(joints[JOINT_INDEX[f"{side}_wrist"]])
                 errors.append(np.linalg.norm(hand - wanted))
         self.assertGreater(len(errors), 200, "too few robot poses matched to their body estimate")
+        # at the estimator's rate: a robot pose for (nearly) every body estimate of the window
+        first, last = _stamp(robot_states[0].header), _stamp(robot_states[-1].header)
+        window = [k for k in bodies if first <= k <= last]
+        robot_stamps = {_stamp(m.header) for m in robot_states}
+        self.assertGreaterEqual(len(robot_stamps & set(window)), 0.95 * len(window))
         self.assertLess(np.max(errors), 0.05, f"hands {np.mean(errors) * 100:.1f} cm from the human's on average")
 
 

@@ -36,6 +36,8 @@ PLANTED = 10.0  # a planted foot's position weighs this many times its own: the 
 LET_GO = 0.15  # m (robot's): a planted foot whose human foot has gone this far is planted again there
 MAX_TURN_STEP = 0.3  # rad: the largest joint or base turn of one step (a longer step is shortened)
 MAX_MOVE_STEP = 0.1  # m: the largest base move of one step
+JUMP = 0.3  # m (robot's): a base goal this far from the base is a jump of the body, not a motion
+GAP = 0.1  # s between two body poses over which the last solution is no longer a start
 
 
 @dataclass(frozen=True)
@@ -168,13 +170,29 @@ class HumanoidRetarget:
         self.base_place = np.zeros(3)
         self._locks: dict[int, np.ndarray] = {}
         self._last: RobotPose | None = None
+        self._fresh = True  # the next pose is solved from its own place (FIRST_ITERATIONS)
 
     def step(self, pose: BodyPose) -> RobotPose:
         """The robot's pose for a body pose. An invalid or non-finite body pose holds the last
         robot pose, marked invalid (the zero pose before the first)."""
         if not pose.valid or not pose.is_finite():
+            self._fresh = True  # what comes after is solved afresh
             return self._held(pose.stamp)
         turns, places = forward_kinematics(quat_to_matrix(pose.local_quats), pose.root_position, self.skeleton.offsets)
+        base_goal = self.to_robot(places[0])
+        # the first pose, the first after invalid ones or a gap, or a body that jumped (an estimate
+        # that starts over, a looped recording): solved from there at once, its feet planted
+        # again, rather than a trust region's steps behind
+        first = (
+            self._fresh
+            or self._last is None
+            or pose.stamp - self._last.stamp > GAP
+            or float(np.linalg.norm(base_goal - self.base_place)) > JUMP
+        )
+        self._fresh = False
+        if first:
+            self.base_place, self.base_turn = base_goal, turns[0].copy()
+            self._locks.clear()
         wanted = self.to_robot(places[self.joints])
         goals = wanted.copy()
         for k, target in enumerate(self.mapping.targets):
@@ -189,12 +207,8 @@ class HumanoidRetarget:
             else:
                 self._locks.pop(k, None)
         goal_turns = turns[self.joints] @ self.rest_turns
-        first = self._last is None
-        if first:
-            self.base_place = self.to_robot(places[0])
-            self.base_turn = turns[0].copy()
         planted = np.array([k in self._locks for k in range(len(goals))])
-        self._solve(self.to_robot(places[0]), turns[0], goals, goal_turns, planted, FIRST_ITERATIONS if first else None)
+        self._solve(base_goal, turns[0], goals, goal_turns, planted, FIRST_ITERATIONS if first else None)
         links = self._links()
         reached = np.array(
             [links[link][:3, :3] @ p + links[link][:3, 3] for link, p in zip(self.links, self.points, strict=True)]
@@ -229,7 +243,7 @@ class HumanoidRetarget:
     def _solve(self, base_goal, base_goal_turn, goals, goal_turns, planted, iterations: int | None) -> None:
         n = len(self.q)
         targets = self.mapping.targets
-        smooth = math.sqrt(self.mapping.smoothing)
+        smooth = 0.0 if iterations else math.sqrt(self.mapping.smoothing)  # fresh: no last frame to stay near
         rest = math.sqrt(REST)
         previous = self.q.copy()
         for _ in range(iterations or self.mapping.iterations):

@@ -2,8 +2,9 @@
 
 Input: the estimator's `joint_states` and its root on TF (`<input_prefix>pelvis` in
 fixed_frame, matched to the JointState by stamp), its `foot_contacts` (a planted foot is held
-on the floor), and the body's `robot_description` (latched: the body the estimator publishes,
-so a calibrated person is retargeted as they are). Output, one per body estimate:
+on the floor), its `estimate_status` (a body held for lack of input holds the robot too), and
+the body's `robot_description` (latched: the body the estimator publishes, so a calibrated
+person is retargeted as they are). Output, one per body estimate:
 `robot/joint_states` (the URDF's moving joints, in its order, always within its limits),
 the robot's base on /tf (fixed_frame -> <frame_prefix><base link>) and the robot's URDF on
 `robot/robot_description` (latched), so robot_state_publisher with frame_prefix draws it.
@@ -26,9 +27,10 @@ from rclpy.timer import Timer
 from sensor_msgs.msg import JointState
 from std_msgs.msg import String
 
-from sparse_body.msg import FootContacts
+from sparse_body.msg import EstimateStatus, FootContacts
 
 from ..io import cdr
+from ..io.cdr import MalformedMessage, read_tf
 from ..io.output import pose_from_joint_state, published_precision
 from ..io.urdf import body_skeleton
 from ..robot.retarget import HumanoidRetarget, load_retarget
@@ -36,7 +38,6 @@ from ..robot.urdf_model import RobotFileError
 from .estimator_node import check_parameter, parameter_descriptor
 from .messages import to_seconds
 from .spin import init, start_and_spin
-from .tf_input import TfReader
 
 PARAMETERS = {
     # name: (default, description)
@@ -48,7 +49,7 @@ PARAMETERS = {
     "autostart": (False, "configure and activate on start-up (without a lifecycle manager)"),
 }
 SAME = 1000  # ns: stamps this close are the same estimate's
-KEPT = 8  # body JointStates waiting for their root on /tf (the estimator publishes the two together)
+KEPT = 30  # body JointStates waiting for their root on /tf (half a second: the two come together, or nearly)
 
 
 class RetargetNode(LifecycleNode):
@@ -56,7 +57,6 @@ class RetargetNode(LifecycleNode):
 
     # Made in on_configure, destroyed in _release.
     retarget: HumanoidRetarget | None = None
-    tf_in: TfReader | None = None
     pub_joints: LifecyclePublisher | None = None
     pub_tf: LifecyclePublisher | None = None
     pub_diag: LifecyclePublisher | None = None
@@ -88,19 +88,19 @@ class RetargetNode(LifecycleNode):
             self.get_logger().error(f"configure failed: {'; '.join(problems)}")
             return TransitionCallbackReturn.FAILURE
         self.params = p
-        root = p["input_prefix"] + "pelvis"
-        self.tf_in = TfReader(self, {root}, on_tracker=self._root_arrived)
-        self.pub_joints = self.create_lifecycle_publisher(JointState, "robot/joint_states", QoSProfile(depth=10))
         from tf2_msgs.msg import TFMessage  # here, not at import: the stand-in exists only after setup
 
+        self.pub_joints = self.create_lifecycle_publisher(JointState, "robot/joint_states", QoSProfile(depth=10))
         self.pub_tf = self.create_lifecycle_publisher(TFMessage, "/tf", QoSProfile(depth=100))
         self.pub_diag = self.create_lifecycle_publisher(DiagnosticArray, "/diagnostics", QoSProfile(depth=10))
         latched = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL)
         self.pub_description = self.create_publisher(String, "robot/robot_description", latched)
         self.pub_description.publish(String(data=self._urdf_text))
         self.subs = [
-            self.create_subscription(JointState, "joint_states", self._on_body, 10),
-            self.create_subscription(FootContacts, "foot_contacts", self._on_contacts, 10),
+            self.create_subscription(TFMessage, "/tf", self._on_tf, QoSProfile(depth=50), raw=True),
+            self.create_subscription(JointState, "joint_states", self._on_body, 50),
+            self.create_subscription(FootContacts, "foot_contacts", self._on_contacts, 50),
+            self.create_subscription(EstimateStatus, "estimate_status", self._on_status, 50),
             self.create_subscription(String, "robot_description", self._on_description, latched),
         ]
         self.get_logger().info(f"configured: the body as {p['robot']} (waiting for the body's robot_description)")
@@ -136,12 +136,12 @@ class RetargetNode(LifecycleNode):
             self.destroy_publisher(self.pub_description)
         for sub in self.subs:
             self.destroy_subscription(sub)
-        if self.tf_in is not None:
-            self.tf_in.destroy()
-        self.subs, self.tf_in, self.retarget, self.diag_timer = [], None, None, None
+        self.subs, self.retarget, self.diag_timer = [], None, None
         self.pub_joints = self.pub_tf = self.pub_diag = self.pub_description = None
         self._waiting: dict[int, JointState] = {}  # body JointStates by stamp (ns), until their root comes
+        self._roots: dict[int, tuple[np.ndarray, np.ndarray]] = {}  # the body's roots by stamp (ns), lately
         self._contacts: tuple[int, np.ndarray] = (-1, np.zeros(2, bool))  # the newest foot contacts
+        self._invalid: set[int] = set()  # stamps (ns) of body estimates marked invalid (held) lately
         self._dropped: dict[str, int] = {}
         self._published = 0
 
@@ -167,29 +167,48 @@ class RetargetNode(LifecycleNode):
             np.array([contact.get("left_foot", False), contact.get("right_foot", False)]),
         )
 
+    def _on_status(self, msg: EstimateStatus) -> None:
+        if not msg.valid:  # a held body (too little tracker input): the robot holds too
+            self._invalid.add(_nanoseconds(msg.header.stamp))
+            while len(self._invalid) > 2 * KEPT:
+                self._invalid.discard(min(self._invalid))
+
+    def _on_tf(self, data: bytes) -> None:
+        """Every root of the body on /tf, kept by stamp: its JointState may come before or after
+        it, and other roots after it (each topic is delivered in order, not the two together)."""
+        try:
+            rows = read_tf(data)
+        except MalformedMessage:
+            self._drop("/tf: not a TFMessage")
+            return
+        root = self.params["input_prefix"] + "pelvis"
+        for parent, child, stamp, values in rows:
+            if child != root or parent != self.params["fixed_frame"]:
+                continue
+            value = np.asarray(values, float)
+            if not (np.all(np.isfinite(value)) and 0.5 < np.linalg.norm(value[3:]) < 2.0):
+                self._drop("/tf: a root that is not a finite pose")
+                continue
+            self._roots[round(stamp * 1e9)] = (value[:3], value[3:])
+            while len(self._roots) > 2 * KEPT:
+                self._roots.pop(min(self._roots))
+        self._match()
+
     def _on_body(self, msg: JointState) -> None:
         self._waiting[_nanoseconds(msg.header.stamp)] = msg
         while len(self._waiting) > KEPT:
             self._waiting.pop(min(self._waiting))
             self._drop("no root on /tf at the JointState's stamp")
-        self._root_arrived()
+        self._match()
 
-    def _root_arrived(self) -> None:
-        """The body's root came on /tf, or a JointState: retarget each waiting JointState
-        whose root is there (matched by stamp), older ones first."""
-        if self.tf_in is None:
-            return
-        found = self.tf_in.lookup(self.params["fixed_frame"], self.params["input_prefix"] + "pelvis")
-        if found is None:
-            return
-        stamp, translation, rotation = found
-        key = round(stamp * 1e9)  # (the cache keeps seconds: a nanosecond of rounding either way)
-        for waiting in sorted(k for k in self._waiting if k <= key + SAME):
-            msg = self._waiting.pop(waiting)
-            if abs(waiting - key) <= SAME:
-                self._publish(msg, translation, rotation)
-            else:
-                self._drop("no root on /tf at the JointState's stamp")
+    def _match(self) -> None:
+        """Retarget each waiting JointState whose root has come (by stamp), older ones first."""
+        for stamp in sorted(self._waiting):
+            root = self._roots.get(stamp)
+            if root is None:  # (the cache keeps seconds: a nanosecond of rounding either way)
+                root = next((r for k, r in self._roots.items() if abs(k - stamp) <= SAME), None)
+            if root is not None:
+                self._publish(self._waiting.pop(stamp), *root)
 
     def _publish(self, msg: JointState, translation, rotation) -> None:
         if self.retarget is None or self.pub_joints is None or self.pub_tf is None:
@@ -200,6 +219,7 @@ class RetargetNode(LifecycleNode):
         except ValueError as err:
             self._drop(f"joint_states: {err}")
             return
+        body.valid = _nanoseconds(msg.header.stamp) not in self._invalid  # (its status comes before its root)
         stamp_ns, contact = self._contacts
         if stamp_ns >= 0:  # the newest: the estimator sends them with the JointState (a frame late at worst)
             body.contact = contact.copy()

@@ -14,6 +14,7 @@ from ..core.types import BodyPose, BodyPoses, TrackerStream
 from ..data.motion import Motion
 from ..data.virtual_trackers import NO_NOISE, TrackerNoise, synthesize_trackers
 from ..estimators import create_estimator
+from ..estimators.kernels import compile_kernels
 from ..io.bagio import (
     ESTIMATE_TOPICS,
     bag_folder,
@@ -127,6 +128,11 @@ def process_bag(
             writer = stack.enter_context(Writer(tmp, made_with, compression, **bag))
         started = time.perf_counter()
         est = create_estimator(estimator, sensors, skeleton, fps=fps, **options)
+        # numba loads (or compiles) the per-frame kernels here, with Ctrl-C held until they are
+        # in: one landing inside numba's LLVM callback was swallowed there ("Exception ignored"),
+        # and the run went on to the end (1 in 32 beside 4 burners)
+        with interrupts_held():
+            compile_kernels()
         ready = time.perf_counter()
         pending: deque[TrackerStream] = deque()  # read chunks whose poses are not all made
 

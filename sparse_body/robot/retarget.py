@@ -36,7 +36,7 @@ PLANTED = 10.0  # a planted foot's position weighs this many times its own: the 
 LET_GO = 0.15  # m (robot's): a planted foot whose human foot has gone this far is planted again there
 MAX_TURN_STEP = 0.3  # rad: the largest joint or base turn of one step (a longer step is shortened)
 MAX_MOVE_STEP = 0.1  # m: the largest base move of one step
-JUMP = 0.3  # m (robot's): a base goal this far from the base is a jump of the body, not a motion
+JUMP = 0.3  # m (robot's): a body whose pelvis moved this far in a frame jumped (it did not walk there)
 GAP = 0.1  # s between two body poses over which the last solution is no longer a start
 
 
@@ -171,6 +171,7 @@ class HumanoidRetarget:
         self._locks: dict[int, np.ndarray] = {}
         self._last: RobotPose | None = None
         self._fresh = True  # the next pose is solved from its own place (FIRST_ITERATIONS)
+        self._last_goal = np.zeros(3)  # where the last body pose put the base (a jump of the body is from there)
 
     def step(self, pose: BodyPose) -> RobotPose:
         """The robot's pose for a body pose. An invalid or non-finite body pose holds the last
@@ -183,15 +184,12 @@ class HumanoidRetarget:
         # the first pose, the first after invalid ones or a gap, or a body that jumped (an estimate
         # that starts over, a looped recording): solved from there at once, its feet planted
         # again, rather than a trust region's steps behind
-        first = (
-            self._fresh
-            or self._last is None
-            or pose.stamp - self._last.stamp > GAP
-            or float(np.linalg.norm(base_goal - self.base_place)) > JUMP
-        )
-        self._fresh = False
+        jumped = self._last is None or float(np.linalg.norm(base_goal - self._last_goal)) > JUMP
+        first = jumped or self._fresh or (self._last is not None and pose.stamp - self._last.stamp > GAP)
+        self._fresh, self._last_goal = False, base_goal
         if first:
             self.base_place, self.base_turn = base_goal, turns[0].copy()
+        if jumped:  # (a foot planted before a short hold or gap is still where it was)
             self._locks.clear()
         wanted = self.to_robot(places[self.joints])
         goals = wanted.copy()

@@ -182,8 +182,8 @@ class HumanoidRetarget:
         turns, places = forward_kinematics(quat_to_matrix(pose.local_quats), pose.root_position, self.skeleton.offsets)
         base_goal = self.to_robot(places[0])
         # the first pose, the first after invalid ones or a gap, or a body that jumped (an estimate
-        # that starts over, a looped recording): solved from there at once, its feet planted
-        # again, rather than a trust region's steps behind
+        # that starts over, a looped recording): solved from the body's place at once rather than
+        # a trust region's steps behind; after a jump, its feet are planted again
         jumped = self._last is None or float(np.linalg.norm(base_goal - self._last_goal)) > JUMP
         first = jumped or self._fresh or (self._last is not None and pose.stamp - self._last.stamp > GAP)
         self._fresh, self._last_goal = False, base_goal

@@ -97,7 +97,8 @@ class RetargetNode(LifecycleNode):
         self.pub_description = self.create_publisher(String, "robot/robot_description", latched)
         self.pub_description.publish(String(data=self._urdf_text))
         self.subs = [
-            self.create_subscription(TFMessage, "/tf", self._on_tf, QoSProfile(depth=50), raw=True),
+            # deep: /tf also carries the trackers and this node's own base, three messages a frame
+            self.create_subscription(TFMessage, "/tf", self._on_tf, QoSProfile(depth=200), raw=True),
             self.create_subscription(JointState, "joint_states", self._on_body, 50),
             self.create_subscription(FootContacts, "foot_contacts", self._on_contacts, 50),
             self.create_subscription(EstimateStatus, "estimate_status", self._on_status, 50),

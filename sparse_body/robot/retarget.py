@@ -118,20 +118,16 @@ class HumanoidRetarget:
         self.points = np.array([t.point for t in mapping.targets], float)
         self.joints = [JOINT_INDEX[t.joint] for t in mapping.targets]
         self.rest_q = np.clip(0.0, self.lower, self.upper)
-        self._base_in_root = self._base_offset()
         rest_links, _ = model.forward(self.rest_q, np.eye(4))
         to_base = np.linalg.inv(rest_links[self.base])
+        # the root link in the base link's frame at the zero pose: the solver places the base,
+        # and the tree is computed from its root
+        self._base_in_root = to_base
         rest = [to_base @ rest_links[link] for link in self.links]
         self.rest_turns = np.array([r[:3, :3] for r in rest])  # each link's turn at the zero pose, base unturned
         rest_points = np.array([r[:3, :3] @ p + r[:3, 3] for r, p in zip(rest, self.points, strict=True)])
         self._scale_to(rest_points)
         self.reset()
-
-    def _base_offset(self) -> np.ndarray:
-        """The root link's transform in the base link's frame at the zero pose: the solver
-        places the base, and the tree is computed from its root."""
-        links, _ = self.model.forward(self.rest_q, np.eye(4))
-        return np.linalg.inv(links[self.base])
 
     def _scale_to(self, rest_points: np.ndarray) -> None:
         """The scale and the floor heights, from the feet targets (those with a contact)."""

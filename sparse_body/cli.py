@@ -272,6 +272,17 @@ def _ablate_augmentation(args, parts) -> None:
         print(f"written {path}")
 
 
+def cmd_options(args) -> int:
+    from .apps import option_docs
+    from .methods import METHODS
+
+    if args.markdown:
+        print(option_docs.markdown(), end="")
+    else:
+        print("\n\n".join(option_docs.text(m) for m in ([args.method] if args.method else METHODS)))
+    return 0
+
+
 def cmd_split(args) -> int:
     from .data.catalog import compute_split, read_index, split_path, split_yaml
 
@@ -1013,6 +1024,11 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--out", required=True, help="a new folder for clips.tsv and split.yaml")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=cmd_import_mocap)
+
+    p = sub.add_parser("options", help="every option of a method: type, default, range and what it does")
+    p.add_argument("method", nargs="?", choices=list(METHODS), help="the method (default: all)")
+    p.add_argument("--markdown", action="store_true", help="the table of docs/options.md, for every method")
+    p.set_defaults(func=cmd_options)
 
     p = sub.add_parser("split", help="compute the CMU train/validation/test split (by subject)")
     p.add_argument("--write", action="store_true", help="write config/splits/cmu.yaml")

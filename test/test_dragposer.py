@@ -259,7 +259,7 @@ def test_constraint_node_refines_an_estimator_over_dds_and_takes_new_constraints
     )
     refiner = start_node(
         "sparse_body.ros.constraint_node",
-        {"sensors": "four_point", "model_path": str(shipped_models), "autostart": True, "iterations": 2},
+        {"sensors": "four_point", "model_path": str(shipped_models), "autostart": True, "dragposer.iterations": 2},
         "sparse_body_constraint",
         tmp_path,
         ros_env,

@@ -157,9 +157,9 @@ def test_the_loss_options_are_range_checked():
 
     sensors = load_sensor_config("three_point")
     for option, bad, message in (
-        ("filter_carry_lost", 11.0, r"filter carry_lost must be from 0 to 10 \(seconds\)"),
-        ("filter_reacquire_speed", 101.0, r"filter reacquire_speed must be from 0 to 100 \(m/s\)"),
-        ("filter_frozen_after", -1.0, ">= 0"),
+        ("filter_carry_lost", 11.0, r"filter: carry_lost must be from 0 to 10 \(seconds\)"),
+        ("filter_reacquire_speed", 101.0, r"filter: reacquire_speed must be from 0 to 100 \(m/s\)"),
+        ("filter_frozen_after", -1.0, r"filter: frozen_after must be from 0 to 10 \(seconds\)"),
     ):
         with pytest.raises(ValueError, match=message):
             create_estimator("ik", sensors, Skeleton.canonical(), **{option: bad})

@@ -521,15 +521,27 @@ def test_the_tf_reader_ignores_the_frames_its_node_publishes(ros_env):
         node.destroy_node()
 
 
+def _position_noise(estimator):
+    return estimator.input_filter.config.position_noise
+
+
+def _floor_height(estimator):
+    return estimator.options.floor_height
+
+
 @pytest.mark.parametrize(
-    "spec,parameters,expected",
+    "spec,parameters,read,expected",
     [
-        ("ik:filter_position_noise=0.02", {}, 0.02),  # ran with 0.001: configure set it again
-        ("ik", {"filter_position_noise": 0.03}, 0.03),
-        ("ik:filter_position_noise=0.02", {"filter_position_noise": 0.03}, 0.03),  # a parameter set wins
+        ("ik:filter_position_noise=0.02", {}, _position_noise, 0.02),  # ran with 0.001: configure set it again
+        ("ik", {"filter_position_noise": 0.03}, _position_noise, 0.03),
+        ("ik:filter_position_noise=0.02", {"filter_position_noise": 0.03}, _position_noise, 0.03),  # a set one wins
+        ("ik:floor_height=0.2", {}, _floor_height, 0.2),
+        ("ik", {"ik.floor_height": 0.3}, _floor_height, 0.3),  # a method's option as the parameter NAME.<field>
+        ("ik:floor_height=0.2", {"ik.floor_height": 0.3}, _floor_height, 0.3),  # a set one wins, as the filter's
+        ("ik", {"lobstr.floor_height": 0.3}, _floor_height, 0.0),  # another method's: not this estimator's
     ],
 )
-def test_the_filter_takes_the_spec_string_then_the_parameters_set(ros_env, spec, parameters, expected):
+def test_options_come_from_the_spec_string_then_the_parameters_set(ros_env, spec, parameters, read, expected):
     from rclpy.parameter import Parameter
 
     from sparse_body.ros.estimator_node import EstimatorNode
@@ -543,7 +555,7 @@ def test_the_filter_takes_the_spec_string_then_the_parameters_set(ros_env, spec,
     try:
         node.trigger_configure()
         assert node.estimator is not None
-        assert node.estimator.input_filter.config.position_noise == expected
+        assert read(node.estimator) == expected
         assert node.estimator.input_filter.config.rotation_noise == 0.33  # the others keep their defaults
     finally:
         node.destroy_node()
@@ -685,7 +697,8 @@ def test_parameters_set_while_configured_apply_live_or_are_refused_with_the_reas
         from rcl_interfaces.srv import DescribeParameters
 
         describe = node.create_client(DescribeParameters, "/sparse_body_estimator/describe_parameters")
-        names = ["height", "predict_ahead", "foxglove_port", "estimator"]
+        names = ["height", "predict_ahead", "foxglove_port", "estimator", "dragposer.iterations", "filter_jump"]
+        names += ["lobstr.contact_threshold"]
         described = _call(node, describe, DescribeParameters.Request(names=names)).descriptors
         ranges = {
             d.name: [(r.from_value, r.to_value) for r in (*d.floating_point_range, *d.integer_range)] for d in described
@@ -695,7 +708,25 @@ def test_parameters_set_while_configured_apply_live_or_are_refused_with_the_reas
             "predict_ahead": [(0.0, 0.2)],
             "foxglove_port": [(0, 65535)],
             "estimator": [],
+            "dragposer.iterations": [(1, 100)],  # each method's options, from its dataclass
+            "filter_jump": [(0.0, 100.0)],  # the filter's, from FilterConfig
+            "lobstr.contact_threshold": [(0.0, 1.0)],
         }
+        help_text = {d.name: d.description for d in described}
+        assert help_text["dragposer.iterations"] == "search steps a frame at most (steps)"
+        zero = _call(
+            node,
+            setp,
+            SetParameters.Request(
+                parameters=[
+                    Parameter(
+                        name="dragposer.iterations",
+                        value=ParameterValue(type=ParameterType.PARAMETER_INTEGER, integer_value=0),
+                    )
+                ]
+            ),
+        ).results[0]
+        assert not zero.successful and "out of range" in zero.reason
     finally:
         listener.destroy()
         stop(proc)

@@ -73,6 +73,7 @@ class EvalResult:
     protocol_spec: dict = field(default_factory=dict)  # Protocol.to_json(): what `view` re-runs
     subjects: list[str] = field(default_factory=list)  # each clip's person, where known
     categories: list[str] = field(default_factory=list)  # each clip's kind of motion, where known
+    options: dict = field(default_factory=dict)  # every option of the method, as run (method_options)
 
     @property
     def summary(self) -> dict[str, float]:
@@ -134,6 +135,7 @@ class EvalResult:
             "split": self.split,
             "protocol": self.protocol,
             "settings": self.settings,
+            "options": self.options,
             "protocol_spec": self.protocol_spec,
             "frames": int(sum(self.frames)),
             "seconds": self.seconds,
@@ -172,7 +174,21 @@ class EvalResult:
             dict(data.get("protocol_spec", {})),  # absent from files written before it
             [r.get("subject", "") for r in rows],
             [r.get("category", "") for r in rows],  # absent from files written before it
+            dict(data.get("options", {})),  # absent from files written before it
         )
+
+
+def method_options(spec: str, options: dict | None = None) -> dict:
+    """Every option of a spec's method as it runs ("lobstr:contact_ik=false" and the options
+    given beside it over the defaults), as its options dataclass records them."""
+    from ..methods import METHODS, load
+
+    name, given = parse_estimator_spec(spec)
+    if name not in METHODS:
+        return {}
+    declared = load(METHODS[name].options)
+    given = {k: v for k, v in {**given, **(options or {})}.items() if k in declared.fields()}
+    return declared.parse(given, f"estimator {name!r}").as_dict()
 
 
 def clip_interval(
@@ -427,7 +443,13 @@ def run_evaluation(
         settings = {"fps": fps, "per_joint": per_joint, **{k: str(v) for k, v in options.items()}}
         results.append(
             EvalResult(
-                spec, sensors.name, split, protocol=protocol.label, settings=settings, protocol_spec=protocol.to_json()
+                spec,
+                sensors.name,
+                split,
+                protocol=protocol.label,
+                settings=settings,
+                protocol_spec=protocol.to_json(),
+                options=method_options(spec, options),
             )
         )
     if out is not None:

@@ -27,63 +27,92 @@ from dataclasses import dataclass
 import numpy as np
 
 from .mat3 import njit
+from .options import Options, option
 from .types import TrackerFrame
 
 MAX_LAG = 0.5  # seconds: past this a live pose is too late to steer anything; offline, use smooth=true
-# the fields with an upper bound besides 0 (every field is a finite number >= 0)
-UPPER = {
-    "lag": (MAX_LAG, "seconds"),
-    "reacquire_speed": (100.0, "m/s"),
-    "carry_lost": (10.0, "seconds"),
-    "frozen_after": (10.0, "seconds"),
-    "leap_speed": (1000.0, "m/s"),
-}
 
 
 @dataclass(frozen=True)
-class FilterConfig:
-    position_noise: float = 0.001  # metres: the trackers' position noise (std per axis); 0: no filter
-    rotation_noise: float = 0.33  # degrees: orientation noise (std per axis)
-    acceleration: float = 0.5  # m/s^2 / sqrt(Hz): how hard a tracked body part accelerates
-    spin_acceleration: float = 1.5  # rad/s^2 / sqrt(Hz), the same for turning
-    jump: float = 0.5  # metres: a sample this far from the prediction starts the site over
-    gap: float = 0.25  # seconds without a sample after which a site starts over
+class FilterConfig(Options):
+    """The tracker filter's options: estimator options and node parameters filter_<field>."""
+
+    owner = "filter"
+    position_noise: float = option(
+        0.001,
+        "the trackers' position noise (std per axis) the filter is set for; 0 with rotation_noise 0: no filtering",
+        0.0,
+        0.1,
+        "metres",
+    )
+    rotation_noise: float = option(0.33, "the trackers' orientation noise (std per axis)", 0.0, 10.0, "degrees")
+    acceleration: float = option(
+        0.5,
+        "how hard a tracked body part accelerates: higher follows faster motion with less lag and smooths less",
+        0.01,
+        1000.0,
+        "m/s^2/sqrt(Hz)",
+    )
+    spin_acceleration: float = option(1.5, "the same for turning", 0.01, 1000.0, "rad/s^2/sqrt(Hz)")
+    jump: float = option(0.5, "a sample this far from the prediction starts the site over", 0.0, 100.0, "metres")
+    gap: float = option(0.25, "seconds without a sample after which a site starts over", 0.0, 60.0, "seconds")
     # the offline smoother's (core/tracker_smoother.py, estimator option smooth=true): with the
     # future in view there is no lag to trade, so it follows harder accelerations
-    smooth_acceleration: float = 0.7
-    smooth_spin_acceleration: float = 2.0
-    # live smoothing (core/fixed_lag.py): each pose is of the frame this many seconds before the
-    # newest, smoothed by the frames after it; 0: none (the filter alone, no added latency)
-    lag: float = 0.0
-    # a tracker that comes back (lost, or leaping) starts where the estimate had its joint and
-    # catches up at this speed, m/s (core/reacquire.py); 0: at once (the target snaps back).
+    smooth_acceleration: float = option(0.7, "acceleration, for the offline smoother (smooth=true)", 0.01, 1000.0)
+    smooth_spin_acceleration: float = option(2.0, "spin_acceleration, for the offline smoother", 0.01, 1000.0)
+    # live smoothing (core/fixed_lag.py)
+    lag: float = option(
+        0.0,
+        "latency traded for steadiness: each estimate is of the trackers this long before the newest, smoothed by "
+        "the samples since, and stamped with their time; 0: none",
+        0.0,
+        MAX_LAG,
+        "seconds",
+    )
     # 2 m/s: of 0.5, 1 and 2, the lowest MPJPE and the shortest settle for every method, with
     # hands lost (validation, docs/methods.md#lost-trackers)
-    reacquire_speed: float = 2.0
-    # a lost tracker's target is carried with the head (its position and heading) for up to this
-    # many seconds, so every method keeps estimating (core/reacquire.py); 0: it is missing.
+    reacquire_speed: float = option(
+        2.0,
+        "a tracker that comes back starts where the estimate had its joint and catches up at this speed (no "
+        "snap); 0: at once",
+        0.0,
+        100.0,
+        "m/s",
+    )
     # 2 s: a controller out of the cameras' view is back within that
-    carry_lost: float = 2.0
-    # a tracker whose sample repeats bit for bit this many seconds is lost, not still (a runtime
-    # that freezes a controller it lost; core/reacquire.py); 0: a repeated sample is believed.
+    carry_lost: float = option(
+        2.0,
+        "how long a lost tracker's last pose is carried with the head (position and heading), so the estimate "
+        "goes on; 0: a lost tracker is missing",
+        0.0,
+        10.0,
+        "seconds",
+    )
     # Off by default: a still IMU whose output is quantised repeats its sample, and would be
     # carried with the head as it turns
-    frozen_after: float = 0.0
-    # a tracker whose sample leaps faster than this (m/s) between two frames has come back (a
-    # frozen controller resuming, a relocalisation) and is eased like a return from a loss; 0:
-    # a leap is given as it is. Off by default: a boxer's punch passes 11 m/s and CMU's wrists
-    # glitch at 40 (validation and test clips), and an occluded foot's report at the origin,
-    # eased, looked like a plausible foot to DTP, fine-tuned to recognise it (docs/methods.md)
-    leap_speed: float = 0.0
+    frozen_after: float = option(
+        0.0,
+        "a tracker sample repeated bit for bit this long counts as lost (a runtime that freezes a lost "
+        "controller); 0: repeated samples are believed",
+        0.0,
+        10.0,
+        "seconds",
+    )
+    # Off by default: a boxer's punch passes 11 m/s and CMU's wrists glitch at 40 (validation
+    # and test clips), and an occluded foot's report at the origin, eased, looked like a
+    # plausible foot to DTP, fine-tuned to recognise it (docs/methods.md)
+    leap_speed: float = option(
+        0.0,
+        "a tracker sample leaping faster than this between two frames has come back (a frozen controller "
+        "resuming) and is eased like a return; 0: a leap is given as it is",
+        0.0,
+        1000.0,
+        "m/s",
+    )
 
     def __post_init__(self) -> None:
-        for name in self.__dataclass_fields__:
-            value = getattr(self, name)
-            if isinstance(value, bool) or not isinstance(value, (int, float)) or not np.isfinite(value) or value < 0:
-                raise ValueError(f"filter {name} must be a finite number >= 0, got {value!r}")
-        for name, (high, unit) in UPPER.items():
-            if getattr(self, name) > high:
-                raise ValueError(f"filter {name} must be from 0 to {high:g} ({unit}), got {getattr(self, name)!r}")
+        for name, field in self.fields().items():
+            field.check(self.owner, getattr(self, name))
 
     @property
     def enabled(self) -> bool:
@@ -102,11 +131,11 @@ def filter_config(options: dict) -> FilterConfig:
     if not isinstance(on, bool):
         raise ValueError(f"filter must be true or false, got {on!r}")
     given = {k.removeprefix(PREFIX): options.pop(k) for k in list(options) if k.startswith(PREFIX)}
-    unknown = [PREFIX + k for k in given if k not in FilterConfig.__dataclass_fields__]
+    unknown = [PREFIX + k for k in given if k not in FilterConfig.fields()]
     if unknown:
-        fields = ", ".join(PREFIX + f for f in FilterConfig.__dataclass_fields__)
+        fields = ", ".join(PREFIX + f for f in FilterConfig.fields())
         raise ValueError(f"unknown filter option {', '.join(unknown)}; the filter's options are {fields}")
-    return FilterConfig(**given) if on else NO_FILTER
+    return FilterConfig.parse(given) if on else NO_FILTER
 
 
 # The filter runs on every frame of every estimator: its per-site arithmetic is compiled

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import inspect
 import math
 from abc import ABC, abstractmethod
 from collections.abc import Iterable, Iterator
@@ -26,7 +25,7 @@ from ..core.textfile import load_yaml
 from ..core.tracker_filter import FilterConfig, TrackerFilter, filter_config
 from ..core.tracker_smoother import smooth_frames
 from ..core.types import BodyPose, TrackerFrame, TrackerStream
-from .options import Option, Range, check_value, options_of
+from .options import EstimatorOptions, Option
 
 
 # name -> "module:Class"; modules are imported on first use so that an estimator's
@@ -104,15 +103,17 @@ class Estimator(ABC):
     name: ClassVar[str]
     # Sites the method cannot work without (checked against the sensor configuration).
     required_sites: ClassVar[frozenset[str]] = frozenset()
-    # The closed interval each numeric option must lie in (options.py; every one has one).
-    option_ranges: ClassVar[dict[str, Range]] = {}
+    # Its options (methods/NAME/options.py): the keywords the constructor takes, read into
+    # self.options, each checked against its declaration before anything is loaded.
+    Options: ClassVar[type[EstimatorOptions]] = EstimatorOptions
 
     @classmethod
-    def options(cls) -> dict[str, Option]:
-        """The options a user can give (the constructor's keywords), by name."""
-        return options_of(cls.__init__)
+    def option_fields(cls) -> dict[str, Option]:
+        """The options a user can give, by name."""
+        return cls.Options.fields()
 
-    def __init__(self, sensors: SensorConfig, skeleton: Skeleton, fps: float = 60.0) -> None:
+    def __init__(self, sensors: SensorConfig, skeleton: Skeleton, fps: float = 60.0, **given) -> None:
+        self.options = self.Options.parse(given, f"estimator {self.name!r}")
         missing = self.required_sites - set(sensors.site_names)
         if missing:
             raise ValueError(
@@ -397,27 +398,8 @@ def create_estimator(name: str, sensors: SensorConfig, skeleton: Skeleton, fps: 
     root = options.pop("forecast", "learned")
     if root not in FORECASTS:
         raise ValueError(f"forecast must be one of {', '.join(FORECASTS)}, got {root!r}")
-    cls = load(METHODS[name].estimator)
-    known = cls.options()
-    takes_more = any(
-        p.kind is inspect.Parameter.VAR_KEYWORD  # refined: its base's options
-        for p in inspect.signature(cls.__init__).parameters.values()
-    )
-    unknown = [k for k in options if k not in known]
-    if unknown and not takes_more:
-        raise ValueError(
-            f"estimator {name!r} has no option {', '.join(map(repr, unknown))}; "
-            f"its options are {', '.join(known) or 'none'} and the filter's (filter_...)"
-        )
-    for key, value in options.items():  # before any model is loaded
-        if key in known:
-            check_value(name, known[key], value, cls.option_ranges)
-    try:
-        estimator = cls(sensors, skeleton, fps=fps, **options)
-    except TypeError as err:
-        if "unexpected keyword argument" not in str(err):
-            raise
-        raise ValueError(f"estimator {name!r}: {err}; its options are {', '.join(known)}") from None
+    load(METHODS[name].options).parse(options, f"estimator {name!r}")  # before any model is loaded
+    estimator = load(METHODS[name].estimator)(sensors, skeleton, fps=fps, **options)
     estimator.use_filter(filtering, smooth)
     estimator.use_forecast(float(ahead), root)
     estimator.use_foot_lock(foot_lock)

@@ -44,6 +44,7 @@ class Training:
 class Method:
     name: str
     estimator: str  # "module:Class" of its estimators.base.Estimator
+    options: str  # "module:Class" of its options (an estimators.options.EstimatorOptions)
     # what `sparse-body eval` runs beside it unless told not to (ablations, baselines)
     compare_with: tuple[str, ...] = ()
     # published figures printed beside its results, by sensors or (sensors, faulty %): the

@@ -20,17 +20,19 @@ from ..core.types import BodyPose
 from ..estimators.base import Estimator
 from ..io.output import pose_from_joint_state
 from ..methods.dragposer.constraints import AboveFloor, AngleLimit, LookAt, Orientation, Position
+from .estimator_node import METHOD_OPTIONS, EstimatorNode
 from .estimator_node import PARAMETERS as ESTIMATOR_PARAMETERS
 from .estimator_node import RANGES as ESTIMATOR_RANGES
-from .estimator_node import EstimatorNode
 from .estimator_node import main as estimator_main
 from .messages import to_seconds
 
-# the refiner's input is the estimate: no estimator to choose, nor one to fall back on
+# the refiner's input is the estimate: no estimator to choose, nor one to fall back on; of the
+# methods' options, DragPoser's (dragposer.<field>) set the refiner
 PARAMETERS = {
     k: v
     for k, v in ESTIMATOR_PARAMETERS.items()
     if k not in ("estimator", "budget_fallback", "step_budget", "predict_ahead", "foot_lock")
+    and (k not in METHOD_OPTIONS or k.startswith("dragposer."))
 }
 PARAMETERS.update(
     {
@@ -38,10 +40,10 @@ PARAMETERS.update(
         "frame_prefix": ("refined/", "prefix of the refined body's TF frames"),
         "input_prefix": ("", "prefix of the input estimate's TF frames (its root is <input_prefix>pelvis)"),
         "input_timeout": (0.2, "seconds after which the newest input estimate no longer counts"),
-        "iterations": (3, "latent optimisation steps per frame"),
     }
 )
-RANGES = {**ESTIMATOR_RANGES, "input_timeout": (0.01, 60.0), "iterations": (1, 100)}
+RANGES = {**ESTIMATOR_RANGES, "input_timeout": (0.01, 60.0)}
+FIXED = ("temporal_weight", "tracker_prior")  # the input pose is the refiner's prior
 
 
 class InputRefiner(Estimator):
@@ -49,19 +51,12 @@ class InputRefiner(Estimator):
 
     name = "refine"
 
-    def __init__(self, sensors, skeleton, fps: float, model_path: str, iterations: int, timeout: float) -> None:
+    def __init__(self, sensors, skeleton, fps: float, options: dict, timeout: float) -> None:
         from ..methods.dragposer.estimator import DragPoserEstimator
 
         super().__init__(sensors, skeleton, fps)
-        self.refiner = DragPoserEstimator(
-            sensors,
-            skeleton,
-            fps,
-            model_path=model_path or None,
-            iterations=iterations,
-            temporal_weight=0.0,
-            tracker_prior=0.0,
-        )  # the input pose is the prior
+        # the input pose is the prior: no temporal or tracker prior
+        self.refiner = DragPoserEstimator(sensors, skeleton, fps, **options, **dict.fromkeys(FIXED, 0.0))
         self.timeout = timeout
         self.latest: BodyPose | None = None
         self.reset()
@@ -112,9 +107,10 @@ class ConstraintNode(EstimatorNode):
     srv_constraint: Service | None = None
 
     def _make_estimator(self, p: dict, sensors):
-        return InputRefiner(
-            sensors, self.skeleton, p["output_rate"], p["model_path"], int(p["iterations"]), p["input_timeout"]
-        )
+        options = {k: v for k, v in self._method_options(p, "dragposer").items() if k not in FIXED}
+        if p["model_path"]:
+            options["model_path"] = p["model_path"]
+        return InputRefiner(sensors, self.skeleton, p["output_rate"], options, p["input_timeout"])
 
     def _make_budget_fallback(self, p: dict, sensors) -> None:
         return None  # every refinement is waited for

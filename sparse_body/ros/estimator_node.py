@@ -35,11 +35,12 @@ from sparse_body.msg import EstimateStatus, FootContacts
 
 from ..core.calibration import CalibrationError, person_body
 from ..core.forecast import MAX_AHEAD
+from ..core.options import Option
 from ..core.rotations import matrix_to_quat
 from ..core.sensors import SensorConfigError, load_sensor_config
 from ..core.skeleton import JOINT_NAMES, standing_pose
 from ..core.tracker_filter import PREFIX as FILTER
-from ..core.tracker_filter import UPPER, FilterConfig
+from ..core.tracker_filter import FilterConfig
 from ..core.types import BodyPose, BodyPoses
 from ..estimators import create_estimator
 from ..estimators.base import Estimator, parse_estimator_spec
@@ -49,7 +50,7 @@ from ..io import cdr
 from ..io.output import HELD, axis_link_name, axis_link_table, body_table, joint_angles
 from ..io.tf_cache import TfGuards
 from ..io.urdf import body_urdf
-from ..methods import NAMES
+from ..methods import METHODS, NAMES, load
 from .estimate_stats import EstimateStats
 from .spin import init, start_and_spin
 from .tf_input import TfReader
@@ -57,7 +58,26 @@ from .tf_input import TfReader
 if TYPE_CHECKING:
     from .live_view import LiveView
 
-FILTER_DEFAULTS = FilterConfig()  # the filter's defaults are the estimators' (core/tracker_filter.py)
+
+def _text(option: Option) -> str:
+    unit = f" ({option.range.unit})" if option.range is not None and option.range.unit else ""
+    return option.help + unit
+
+
+# The tracker filter's options (core/tracker_filter.FilterConfig), each a parameter filter_<field>.
+FILTER_PARAMETERS = {FILTER + name: (o.default, _text(o)) for name, o in FilterConfig.fields().items()}
+
+
+def method_option_parameters() -> dict[str, Option]:
+    """Every registered method's options (methods/NAME/options.py), each a parameter
+    NAME.<field>: the options the estimator (or budget_fallback) of that method is made with,
+    over those its spec string gives."""
+    return {
+        f"{method}.{name}": o for method, record in METHODS.items() for name, o in load(record.options).fields().items()
+    }
+
+
+METHOD_OPTIONS = method_option_parameters()
 
 PARAMETERS = {
     # name: (default, description)
@@ -75,47 +95,7 @@ PARAMETERS = {
         "T-pose calibration YAML (the tracker bridge's ~/calibrate writes one): the body it fitted "
         "is the one estimated and published; empty: the canonical body at height",
     ),
-    "filter_position_noise": (
-        FILTER_DEFAULTS.position_noise,
-        "tracker position noise (m, std per axis) the input filter is set for; "
-        "0 with filter_rotation_noise 0: no filtering",
-    ),
-    "filter_rotation_noise": (
-        FILTER_DEFAULTS.rotation_noise,
-        "tracker orientation noise (degrees, std per axis) the input filter is set for",
-    ),
-    "filter_acceleration": (
-        FILTER_DEFAULTS.acceleration,
-        "how hard a tracked body part accelerates (m/s^2/sqrt(Hz)): higher follows faster "
-        "motion with less lag and smooths less",
-    ),
-    "filter_spin_acceleration": (FILTER_DEFAULTS.spin_acceleration, "the same for turning (rad/s^2/sqrt(Hz))"),
-    "filter_lag": (
-        FILTER_DEFAULTS.lag,
-        "seconds of latency traded for steadiness: each estimate is of the trackers this long "
-        "before the newest (counted in frames at output_rate), smoothed by the samples since, "
-        "and stamped with their time; 0: none",
-    ),
-    "filter_carry_lost": (
-        FILTER_DEFAULTS.carry_lost,
-        "seconds a lost tracker's last pose is carried with the head (position and heading), so "
-        "the estimate goes on; 0: a lost tracker is missing",
-    ),
-    "filter_frozen_after": (
-        FILTER_DEFAULTS.frozen_after,
-        "seconds after which a tracker sample repeated bit for bit counts as lost (a runtime "
-        "that freezes a lost controller); 0: repeated samples are believed",
-    ),
-    "filter_leap_speed": (
-        FILTER_DEFAULTS.leap_speed,
-        "m/s: a tracker sample leaping faster than this between two frames has come back (a "
-        "frozen controller resuming) and is eased like a return; 0: a leap is given as it is",
-    ),
-    "filter_reacquire_speed": (
-        FILTER_DEFAULTS.reacquire_speed,
-        "m/s: a tracker that comes back starts where the estimate had its joint and catches up "
-        "at this speed (no snap); 0: at once",
-    ),
+    **FILTER_PARAMETERS,
     "foot_lock": (
         False,
         "hold each foot where it touched down while the estimator says it is in contact (hip and "
@@ -178,15 +158,13 @@ PARAMETERS = {
         "(open ws://foxglove_host:PORT; needs foxglove-sdk); 0: off",
     ),
     "foxglove_host": ("127.0.0.1", "address the Foxglove WebSocket server listens on (0.0.0.0: every network)"),
+    **{name: (o.default, _text(o)) for name, o in METHOD_OPTIONS.items()},
 }
 # Numbers outside these bounds are refused with the reason (at configure and on a live set).
 RANGES = {
     "height": (0.5, 2.5),
-    "filter_position_noise": (0.0, 0.1),
-    "filter_rotation_noise": (0.0, 10.0),
-    "filter_acceleration": (0.01, 1000.0),
-    "filter_spin_acceleration": (0.01, 1000.0),
-    **{FILTER + name: (0.0, high) for name, (high, _) in UPPER.items()},
+    **{FILTER + name: (o.range.low, o.range.high) for name, o in FilterConfig.fields().items() if o.range},
+    **{name: (o.range.low, o.range.high) for name, o in METHOD_OPTIONS.items() if o.range},
     "output_rate": (0.1, 1000.0),
     "step_budget": (0.0, 1.0),
     "predict_ahead": (0.0, MAX_AHEAD),
@@ -228,6 +206,12 @@ TEXT_CHECKS = {
 
 def check_parameter(name: str, value, default, ranges: dict[str, tuple[float, float]] = RANGES) -> str | None:
     """Why value is not acceptable for parameter name (whose default shows its type), or None."""
+    if name in METHOD_OPTIONS:  # a method's option: its declaration says (null where it takes null)
+        try:
+            METHOD_OPTIONS[name].check(f"parameter {name.partition('.')[0]}", value)
+        except ValueError as err:
+            return str(err).replace(": ", ".", 1)
+        return None
     if isinstance(default, bool):
         return None if isinstance(value, bool) else f"{name} must be true or false, got {value!r}"
     if isinstance(default, (int, float)):
@@ -391,14 +375,25 @@ class EstimatorNode(LifecycleNode):
         return TransitionCallbackReturn.SUCCESS
 
     def _make_estimator(self, p: dict, sensors):
-        """One merge order for the filter: its defaults, then the spec string's filter_*
-        options, then the filter_* parameters a user set (those not at their defaults); the
-        estimator applies them (create_estimator), so nothing sets its filter a second time."""
+        """One merge order for the filter and the method's options: their defaults, then the
+        spec string's options, then the filter_* and NAME.<field> parameters a user set (those
+        not at their defaults); the estimator applies them (create_estimator), so nothing sets
+        its filter a second time."""
         name, options = parse_estimator_spec(p["estimator"])
+        options.update(self._method_options(p, name))
         if p["model_path"]:
             options["model_path"] = p["model_path"]
         options.update(self._shared_options(p))
         return create_estimator(name, sensors, self.skeleton, fps=p["output_rate"], **options)
+
+    def _method_options(self, p: dict, method: str) -> dict:
+        """The NAME.<field> parameters of a method that a user set (not at their defaults):
+        given over the spec's NAME:key=value options, as the filter_* parameters are."""
+        return {
+            key.partition(".")[2]: p[key]
+            for key, option in METHOD_OPTIONS.items()
+            if key.partition(".")[0] == method and p[key] != option.default
+        }
 
     def _make_budget_fallback(self, p: dict, sensors) -> Estimator | None:
         """The estimator for frames the estimator's step misses its budget on (None: none), with
@@ -406,6 +401,7 @@ class EstimatorNode(LifecycleNode):
         name, options = parse_estimator_spec(p["budget_fallback"]) if p["budget_fallback"] else ("", {})
         if not name or name == parse_estimator_spec(p["estimator"])[0]:
             return None
+        options.update(self._method_options(p, name))
         options.update(self._shared_options(p))
         return create_estimator(name, sensors, self.skeleton, fps=p["output_rate"], **options)
 

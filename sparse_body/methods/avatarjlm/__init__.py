@@ -23,6 +23,7 @@ def _output(config) -> str:
 METHOD = Method(
     "avatarjlm",
     "sparse_body.methods.avatarjlm.estimator:AvatarJlmEstimator",
+    "sparse_body.methods.avatarjlm.options:AvatarJlmOptions",
     compare_with=("avatarjlm:polish=false", "dragposer", "ik"),
     # Table 1 (AMASS Protocol 1: 90 % of CMU, BMLrub, HDM05 for training)
     paper_figures={

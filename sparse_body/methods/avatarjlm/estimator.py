@@ -46,8 +46,8 @@ from ...core.skeleton import JOINT_INDEX, PARENTS, body_scale
 from ...core.types import BodyPose, TrackerFrame, breaks_take
 from ...estimators.base import Estimator, full_target
 from ...estimators.onnx_model import load_model, shipped_model_path
-from ...estimators.options import FLOOR, MAX_GAP, THREADS
 from .features import SITES, features, reference
+from .options import AvatarJlmOptions
 
 HEAD = JOINT_INDEX["head"]
 LEGS = (LIMBS[JOINT_INDEX["left_ankle"]], LIMBS[JOINT_INDEX["right_ankle"]])  # hip, knee (a hinge), ankle
@@ -133,27 +133,16 @@ class AvatarJlmModel:
 class AvatarJlmEstimator(Estimator):
     name = "avatarjlm"
     required_sites = frozenset(SITES["three_point"])
-    option_ranges = {"floor_height": FLOOR, "max_gap": MAX_GAP, "threads": THREADS}
+    Options = AvatarJlmOptions
+    options: AvatarJlmOptions
 
-    def __init__(
-        self,
-        sensors,
-        skeleton,
-        fps: float = 60.0,
-        model: str = "auto",
-        model_path: str | None = None,
-        polish: bool = True,
-        end_orientations: bool = True,
-        hinge_knees: bool = True,
-        legs_from_positions: bool | None = None,
-        floor_height: float = 0.0,
-        max_gap: float = 0.5,
-        threads: int = 1,
-    ) -> None:
-        super().__init__(sensors, skeleton, fps)
+    def __init__(self, sensors, skeleton, fps: float = 60.0, **options) -> None:
+        super().__init__(sensors, skeleton, fps, **options)
+        o = self.options
+        model = o.model
         if model == "auto":
             model = "four_point" if "pelvis" in sensors.site_names else "three_point"
-        self.model = AvatarJlmModel(model_path or shipped_model_path("AvatarJLM", MODELS, model, "auto"), threads)
+        self.model = AvatarJlmModel(o.model_path or shipped_model_path("AvatarJLM", MODELS, model, "auto"), o.threads)
         missing = set(self.model.sites) - set(sensors.site_names)
         if missing:
             raise ValueError(
@@ -161,11 +150,12 @@ class AvatarJlmEstimator(Estimator):
                 f"{sensors.name!r} has {', '.join(sensors.site_names)} (use model:=three_point)"
             )
         self.scale = body_scale(skeleton)
-        self.polish, self.end_orientations, self.hinge_knees = polish, end_orientations, hinge_knees
+        self.polish, self.end_orientations, self.hinge_knees = o.polish, o.end_orientations, o.hinge_knees
         # None: rebuilt where the network's legs come out turned (AvatarJlmModel.turned_legs)
         self.four = "pelvis" in self.model.sites
-        self.legs_from_positions = self.model.turned_legs if legs_from_positions is None else bool(legs_from_positions)
-        self.floor, self.max_gap = floor_height, max_gap
+        turned = o.legs_from_positions
+        self.legs_from_positions = self.model.turned_legs if turned is None else bool(turned)
+        self.floor, self.max_gap = o.floor_height, o.max_gap
         self._joints = [sensors.site(s).joint_index for s in self.model.sites]
         self.reset()
 

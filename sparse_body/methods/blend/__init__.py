@@ -2,4 +2,6 @@
 
 from ..record import Method
 
-METHOD = Method("blend", "sparse_body.methods.blend.estimator:BlendEstimator")
+METHOD = Method(
+    "blend", "sparse_body.methods.blend.estimator:BlendEstimator", "sparse_body.methods.blend.options:BlendOptions"
+)

@@ -27,7 +27,7 @@ from ...core.skeleton import LOWER_BODY, joint_indices
 from ...core.tracker_filter import NO_FILTER
 from ...core.types import BodyPose
 from ...estimators.base import Estimator, create_estimator
-from ...estimators.options import Range
+from .options import BlendOptions
 
 
 def slerp(a: np.ndarray, b: np.ndarray, t: float) -> np.ndarray:
@@ -46,33 +46,22 @@ def slerp(a: np.ndarray, b: np.ndarray, t: float) -> np.ndarray:
 
 class BlendEstimator(Estimator):
     name = "blend"
-    option_ranges = {
-        "weight": Range(0.0, 1.0, "the second estimator's share while the two agree"),
-        "agree_within": Range(0.0, 10.0, "metres of leg disagreement with the full share"),
-        "disagree_from": Range(0.0, 10.0, "metres of leg disagreement with no share"),
-        "settle": Range(0.0, 10.0, "seconds: the share's time constant"),
-    }
-    # (parallel: bool, no range) the first estimator steps in a worker thread beside the second
+    Options = BlendOptions
+    options: BlendOptions
 
-    def __init__(
-        self,
-        sensors,
-        skeleton,
-        fps: float = 60.0,
-        first: str = "avatarjlm",
-        second: str = "dragposer",
-        weight: float = 0.7,
-        agree_within: float = 0.15,
-        disagree_from: float = 0.25,
-        settle: float = 0.1,
-        parallel: bool = True,
-    ) -> None:
-        super().__init__(sensors, skeleton, fps)
+    def __init__(self, sensors, skeleton, fps: float = 60.0, **options) -> None:
+        super().__init__(sensors, skeleton, fps, **options)
+        o = self.options
+        first, second, settle = o.first, o.second, o.settle
         if "blend" in (first, second):
             raise ValueError("a blend's estimators cannot be 'blend'")
-        if disagree_from <= agree_within:
-            raise ValueError(f"disagree_from ({disagree_from}) must be above agree_within ({agree_within})")
-        self.weight, self.agree_within, self.disagree_from = float(weight), float(agree_within), float(disagree_from)
+        if o.disagree_from <= o.agree_within:
+            raise ValueError(f"disagree_from ({o.disagree_from}) must be above agree_within ({o.agree_within})")
+        self.weight, self.agree_within, self.disagree_from = (
+            float(o.weight),
+            float(o.agree_within),
+            float(o.disagree_from),
+        )
         self.keep = float(np.exp(-1.0 / (settle * fps))) if settle > 0 else 0.0  # of the share, a frame
         self.share = self.weight
         self.legs = joint_indices(LOWER_BODY)
@@ -84,7 +73,7 @@ class BlendEstimator(Estimator):
         # the first (a network: ONNX Runtime, which lets go of the GIL) runs in a worker thread
         # while this thread runs the second: a step costs the longer of the two, not their sum
         # (issue 52), with the same poses as one after the other (test_blend).
-        self._worker = ThreadPoolExecutor(1, thread_name_prefix="blend_first") if parallel else None
+        self._worker = ThreadPoolExecutor(1, thread_name_prefix="blend_first") if o.parallel else None
 
     def _reset(self) -> None:
         for inner in self.parts:

@@ -21,6 +21,7 @@ def _paper(mpjpe: float, mpjre: float, mpjve: float, end_effector: float) -> dic
 METHOD = Method(
     "dragposer",
     "sparse_body.methods.dragposer.estimator:DragPoserEstimator",
+    "sparse_body.methods.dragposer.options:DragPoserOptions",
     compare_with=("dragposer:temporal_weight=0", "ik"),  # the paper's Table 3 ablation, the baseline
     # Table 2: joint position, rotation, velocity and end-effector error; Table 3: no predictor
     paper_figures={

@@ -107,7 +107,7 @@ def write_dragposer_card(out_dir: Path, mocap_root: Path, limit: int | None = No
     vae = json.loads((out_dir / "dragposer.train.json").read_text())
     temporal = json.loads((out_dir / "dragposer_temporal.train.json").read_text())
     tracker = json.loads((out_dir / "dragposer_tracker_prior.train.json").read_text())
-    from .estimator import TRACKER_PRIOR_WEIGHT
+    from .options import TRACKER_PRIOR_WEIGHT
 
     measured = measured_results(out_dir / "dragposer.onnx", evaluate_dragposer, mocap_root, limit, evaluate)
     refined = [EvalResult.from_json(r) for r in measured["refined"]]

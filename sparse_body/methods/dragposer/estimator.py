@@ -33,8 +33,8 @@ from ...core.skeleton import Skeleton, body_scale
 from ...core.types import BodyPose, TrackerFrame
 from ...estimators.base import Estimator
 from ...estimators.onnx_model import load_model
-from ...estimators.options import FLOOR, THREADS, Option, Range, options_of
 from .constraints import AboveFloor, ConstraintSet, Orientation, OverPoint, Position
+from .options import DragPoserOptions
 from .pose import HEIGHT_JOINTS, LATENT, dual_quaternions, split_heading
 from .search import CompiledSearch
 from .temporal import TemporalPrior
@@ -45,8 +45,6 @@ HEIGHT_INDEX = [J[j] for j in HEIGHT_JOINTS]
 MODEL_FILES = ("dragposer_encoder.onnx", "dragposer_decoder.onnx", "dragposer_temporal.onnx", TRACKER_PRIOR_FILE)
 # the root's children and the tracked end that the IK reaches through each
 ROOT_CHAINS = {J["left_hip"]: J["left_ankle"], J["right_hip"]: J["right_ankle"], J["spine1"]: J["head"]}
-# the tracker prior's pull, chosen on the validation people (models/dragposer.tracker_prior_*.json)
-TRACKER_PRIOR_WEIGHT = 0.001
 END_JOINTS = frozenset(J[j] for j in ("head", "left_wrist", "right_wrist", "left_ankle", "right_ankle"))
 
 
@@ -171,60 +169,13 @@ class LatentOptimizer:
 
 class DragPoserEstimator(Estimator):
     name = "dragposer"
-    option_ranges = {
-        "iterations": Range(1, 100, "search steps a frame"),
-        "position_weight": Range(0.0, 1e3),
-        "orientation_weight": Range(0.0, 1e3),
-        "floor_height": FLOOR,
-        "threads": THREADS,
-        "tolerance": Range(0.0, 1.0, "metres"),
-        "rotation_tolerance": Range(0.0, 3.1416, "radians"),
-        "temporal_weight": Range(0.0, 10.0),
-        "ahead": Range(1, 16, "frames"),
-        "root_prior": Range(0.0, 100.0),
-        "tracker_prior": Range(0.0, 100.0),
-        "cost_tolerance": Range(
-            0.0, 1.0, "the search ends when the next step would lower the cost by less than this share"
-        ),
-        # the optimiser's (LatentOptimizer)
-        "damping": Range(1e-9, 1e6),
-        "prior_weight": Range(0.0, 10.0),
-        "latent_weight": Range(0.0, 10.0),
-        "eps": Range(1e-9, 1.0, "the finite-difference step"),
-    }
+    Options = DragPoserOptions
+    options: DragPoserOptions
 
-    @classmethod
-    def options(cls) -> dict[str, Option]:
-        return options_of(cls.__init__, LatentOptimizer.__init__)  # **optimizer goes there
-
-    def __init__(
-        self,
-        sensors,
-        skeleton,
-        fps: float = 60.0,
-        model_dir: str | None = None,
-        model_path: str | None = None,
-        iterations: int = 3,
-        position_weight: float = 1.0,
-        orientation_weight: float = 0.1,
-        floor_height: float | None = 0.0,
-        tolerance: float = 0.01,
-        rotation_tolerance: float = 0.087,
-        threads: int = 1,
-        temporal_weight: float = 0.002,
-        ahead: int = 1,
-        temporal_ramp: bool = True,
-        polish: bool = True,
-        pelvis_orientation: bool = True,
-        root_prior: float = 0.3,
-        tracker_prior: float = TRACKER_PRIOR_WEIGHT,
-        cost_tolerance: float = 1e-3,
-        compiled: bool = True,
-        **optimizer,
-    ) -> None:
-        if iterations < 1:
-            raise ValueError(f"iterations must be at least 1, got {iterations}")
-        super().__init__(sensors, skeleton, fps)
+    def __init__(self, sensors, skeleton, fps: float = 60.0, **options) -> None:
+        super().__init__(sensors, skeleton, fps, **options)
+        o = self.options
+        model_dir, model_path, threads = o.model_dir, o.model_path, o.threads
         if model_path and not model_dir:  # the nodes' model_path: the folder, or one of its files
             if not Path(model_path).is_dir() and Path(model_path).name not in MODEL_FILES:
                 raise ValueError(
@@ -234,32 +185,30 @@ class DragPoserEstimator(Estimator):
             model_dir = model_path if Path(model_path).is_dir() else str(Path(model_path).parent)
         self.vae = PoseVaeRuntime(model_dir, threads)
         # the temporal predictor's pull on the latent (the paper's lambda_T); 0: without it
-        self.temporal_weight = temporal_weight
-        self.temporal = TemporalPrior(self.vae.dir, ahead, threads, temporal_ramp) if temporal_weight > 0 else None
+        self.temporal_weight = o.temporal_weight
+        self.temporal = (
+            TemporalPrior(self.vae.dir, o.ahead, threads, o.temporal_ramp) if o.temporal_weight > 0 else None
+        )
         # the tracker prior's pull on the latent (ours; tracker_prior.py); 0: without it
-        if not (np.isfinite(tracker_prior) and tracker_prior >= 0):
-            raise ValueError(f"tracker_prior must be a finite weight, 0 or more, got {tracker_prior}")
-        self.tracker_weight = tracker_prior
-        self.guesser = TrackerPrior(self.vae.dir, fps, threads) if tracker_prior > 0 else None
-        self.optimizer = LatentOptimizer(self.vae, skeleton.offsets, **optimizer)
+        self.tracker_weight = o.tracker_prior
+        self.guesser = TrackerPrior(self.vae.dir, fps, threads) if o.tracker_prior > 0 else None
+        self.optimizer = LatentOptimizer(self.vae, skeleton.offsets, o.damping, o.prior_weight, o.latent_weight, o.eps)
         # the same steps compiled (search.py); None: the decoder is not the MLP it knows, or
         # compiled=False asks for the ONNX Runtime search it is tested against
-        self.search = CompiledSearch.of(self.vae, skeleton.offsets, skeleton.parents, threads) if compiled else None
+        self.search = CompiledSearch.of(self.vae, skeleton.offsets, skeleton.parents, threads) if o.compiled else None
         # the paper's stopping rule: positional and rotational thresholds on the trackers
-        self.iterations, self.tolerance, self.rotation_tolerance = iterations, tolerance, rotation_tolerance
+        self.iterations, self.tolerance, self.rotation_tolerance = o.iterations, o.tolerance, o.rotation_tolerance
         # The trackers are seldom met within `tolerance` (a VAE with 1.6 cm reconstruction
         # error cannot always close it; the polish does): from the previous frame's state the
         # first step does the work and the next lower the cost by 0.03 % and 0.0003 % (six-
         # and four-point walk). Where the step's own Jacobian predicts the next one to lower
         # the cost by less than this share, the search ends without computing another.
-        self.cost_tolerance = cost_tolerance
-        self.weights = (position_weight, orientation_weight)
-        self.polish = polish
-        self.pelvis_orientation = pelvis_orientation
-        if not (np.isfinite(root_prior) and root_prior >= 0):
-            raise ValueError(f"root_prior must be a finite weight, 0 or more, got {root_prior}")
-        self.root_prior = root_prior
-        self.floor = floor_height
+        self.cost_tolerance = o.cost_tolerance
+        self.weights = (o.position_weight, o.orientation_weight)
+        self.polish = o.polish
+        self.pelvis_orientation = o.pelvis_orientation
+        self.root_prior = o.root_prior
+        self.floor = floor_height = o.floor_height
         self.constraints = ConstraintSet()  # the user's, kept across frames
         if floor_height is not None:
             for foot in FOOT_JOINTS:

@@ -18,6 +18,7 @@ def _card(out: Path, mocap, limit: int | None, evaluate: bool = True) -> Path:
 METHOD = Method(
     "dtp",
     "sparse_body.methods.dtp.estimator:DtpEstimator",
+    "sparse_body.methods.dtp.options:DtpOptions",
     compare_with=("dtp:model=pretrained", "dtp:model=lookahead", "dragposer", "lobstr", "ik"),
     # Table 2 (online, TotalCapture): mean joint position error, global rotation error, jerk
     paper_figures={

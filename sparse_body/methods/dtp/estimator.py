@@ -44,8 +44,8 @@ from ...core.skeleton import JOINT_INDEX, PARENTS, body_scale
 from ...core.types import BodyPose, TrackerFrame, TrackerStream, breaks_take
 from ...estimators.base import Estimator, full_target
 from ...estimators.onnx_model import load_model, shipped_model_path
-from ...estimators.options import FLOOR, MAX_GAP, THREADS, Range
 from .features import FEATURES, FOOT_LEAVES, INPUT_SITES, LEAF_SITES, leaf_features, window_features
+from .options import DtpOptions
 
 IDENTITY = np.array([0.0, 0.0, 0.0, 1.0])
 FOOT_JOINTS = frozenset(JOINT_INDEX[SITE_JOINTS[s]] for s in ("left_foot", "right_foot"))  # the ankles
@@ -92,35 +92,17 @@ class Sample:
 class DtpEstimator(Estimator):
     name = "dtp"
     required_sites = frozenset(INPUT_SITES)
-    option_ranges = {
-        "foot_trust": Range(0.0, 5.0, "metres between tracker and network foot fully trusted"),
-        "foot_speed": Range(0.0, 100.0, "m/s: a foot tracker jumping faster is not followed"),
-        "floor_height": FLOOR,
-        "max_gap": MAX_GAP,
-        "threads": THREADS,
-    }
+    Options = DtpOptions
+    options: DtpOptions
 
-    def __init__(
-        self,
-        sensors,
-        skeleton,
-        fps: float = 60.0,
-        model: str = "online",
-        model_path: str | None = None,
-        polish: bool = True,
-        foot_trust: float = 0.4,
-        foot_speed: float = 8.0,
-        end_orientations: bool = True,
-        floor_height: float = 0.0,
-        max_gap: float = 0.5,
-        threads: int = 1,
-    ) -> None:
-        super().__init__(sensors, skeleton, fps)
-        self.model = DtpModel(model_path or shipped_model_path("DTP", MODELS, model), threads)
+    def __init__(self, sensors, skeleton, fps: float = 60.0, **options) -> None:
+        super().__init__(sensors, skeleton, fps, **options)
+        o = self.options
+        self.model = DtpModel(o.model_path or shipped_model_path("DTP", MODELS, o.model), o.threads)
         self.scale = body_scale(skeleton)
-        self.polish, self.foot_trust, self.foot_speed = polish, foot_trust, foot_speed
-        self.end_orientations = end_orientations
-        self.floor, self.max_gap = floor_height, max_gap
+        self.polish, self.foot_trust, self.foot_speed = o.polish, o.foot_trust, o.foot_speed
+        self.end_orientations = o.end_orientations
+        self.floor, self.max_gap = o.floor_height, o.max_gap
         self._joints = [sensors.site(s).joint_index for s in INPUT_SITES]
         self.reset()
 

@@ -2,4 +2,4 @@
 
 from ..record import Method
 
-METHOD = Method("ik", "sparse_body.methods.ik.estimator:IKEstimator")
+METHOD = Method("ik", "sparse_body.methods.ik.estimator:IKEstimator", "sparse_body.methods.ik.options:IkOptions")

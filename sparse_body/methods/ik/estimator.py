@@ -22,7 +22,7 @@ from ...core.skeleton import JOINT_INDEX as J
 from ...core.skeleton import PARENTS, standing_pose
 from ...core.types import BodyPose, TrackerFrame
 from ...estimators.base import Estimator
-from ...estimators.options import FLOOR
+from .options import IkOptions
 
 END_SITES = ("head", "left_hand", "right_hand", "left_foot", "right_foot")
 _ANKLES = (J["left_ankle"], J["right_ankle"])
@@ -30,13 +30,14 @@ _ANKLES = (J["left_ankle"], J["right_ankle"])
 
 class IKEstimator(Estimator):
     name = "ik"
-    option_ranges = {"floor_height": FLOOR}
+    Options = IkOptions
+    options: IkOptions
 
-    def __init__(self, sensors, skeleton, fps: float = 60.0, floor_height: float = 0.0) -> None:
-        super().__init__(sensors, skeleton, fps)
+    def __init__(self, sensors, skeleton, fps: float = 60.0, **options) -> None:
+        super().__init__(sensors, skeleton, fps, **options)
         if not {"head", "pelvis"} & set(sensors.site_names):
             raise ValueError("the IK estimator needs a head or a pelvis tracker")
-        self.floor = floor_height
+        self.floor = self.options.floor_height
         self._sites = [s for s in END_SITES if s in sensors.site_names]
         self._head_above_pelvis = skeleton.rest_positions()[J["head"]]
         self.reset()

@@ -19,6 +19,7 @@ def _card(out: Path, mocap, limit: int | None, evaluate: bool = True) -> Path:
 METHOD = Method(
     "lobstr",
     "sparse_body.methods.lobstr.estimator:LobstrEstimator",
+    "sparse_body.methods.lobstr.options:LobstrOptions",
     compare_with=("lobstr:contact_ik=false", "ik"),
     paper_figures={
         "four_point": {"LoBSTr paper": {"Contact acc [%]": 85.77, "Lower RE [deg]": 8.53, "Toe PE [cm]": 6.63}}

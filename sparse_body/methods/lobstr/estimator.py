@@ -33,18 +33,11 @@ from ...core.skeleton import body_scale, standing_pose
 from ...core.types import BodyPose, TrackerFrame, breaks_take
 from ...estimators.base import Estimator
 from ...estimators.onnx_model import load_model
-from ...estimators.options import FLOOR, MAX_GAP, THREADS, Range
 from ..ik.estimator import IKEstimator
 from .features import INPUT_SITES, OUTPUTS, apply_legs, apply_upper, feature_count, features
+from .options import REACHED, LobstrOptions
 
 _ENDS = [J[SITE_JOINTS[site]] for site in INPUT_SITES[1:]]  # head and hands, in input order
-# metres: the IK's soft reach leaves an end at most 0.63 cm short; beyond this the predicted
-# torso put a tracker out of the arm's or the spine's reach (0.4 % of the validation frames)
-REACHED = 0.02
-# metres: the predicted spine curve is kept while it leaves the head this close to the
-# headset (body_ik.fit_spine); at the IK's 5 mm the spine flipped between the network's curve
-# and a uniform bend, and validation jitter was 22.8 against 16.6 here (models/lobstr.runtime.json)
-SPINE_TOLERANCE = 0.015
 
 
 def default_model_path() -> Path:
@@ -102,44 +95,31 @@ def _retime(x: np.ndarray, ratio: float) -> np.ndarray:
 class LobstrEstimator(Estimator):
     name = "lobstr"
     required_sites = frozenset(INPUT_SITES)
-    option_ranges = {
-        "contact_threshold": Range(0.0, 1.0, "a contact probability"),
-        "release_frames": Range(0, 600, "frames to let a contact go over"),
-        "floor_height": FLOOR,
-        "max_gap": MAX_GAP,
-        "threads": THREADS,
-        "spine_tolerance": Range(0.0, 0.0199, "metres the predicted spine may leave the head off"),
-    }
+    Options = LobstrOptions
+    options: LobstrOptions
 
     def __init__(
         self,
         sensors,
         skeleton,
         fps: float = 60.0,
-        model_path: str | None = None,
-        contact_ik: bool = True,
-        contact_threshold: float = 0.5,
-        release_frames: int = 10,
-        floor_height: float = 0.0,
-        max_gap: float = 0.5,
-        learned_upper: bool = True,
-        spine_tolerance: float = SPINE_TOLERANCE,
-        threads: int = 1,
+        **options,
     ) -> None:
-        super().__init__(sensors, skeleton, fps)
-        self.model = LobstrModel(model_path, threads)
-        self.learned_upper = learned_upper and self.model.learned_upper
-        if not (np.isfinite(spine_tolerance) and 0.0 <= spine_tolerance < REACHED):
-            raise ValueError(f"spine_tolerance must be between 0 and {REACHED} m, got {spine_tolerance}")
-        self.spine_tolerance = spine_tolerance
+        super().__init__(sensors, skeleton, fps, **options)
+        o = self.options
+        self.model = LobstrModel(o.model_path, o.threads)
+        self.learned_upper = o.learned_upper and self.model.learned_upper
+        # the predicted spine curve is kept while it leaves the head this close to the headset
+        # (body_ik.fit_spine)
+        self.spine_tolerance = o.spine_tolerance
         self._start = standing_pose()  # the network replaces all but the pelvis, and the legs after
         self.scale = body_scale(skeleton)
-        self.floor, self.max_gap, self.threshold = floor_height, max_gap, contact_threshold
-        self._floor = np.array([0.0, 0.0, floor_height])
+        self.floor, self.max_gap, self.threshold = o.floor_height, o.max_gap, o.contact_threshold
+        self._floor = np.array([0.0, 0.0, o.floor_height])
         # Feet trackers, if configured, are not LoBSTr's input: the upper body sees only its four.
         self.upper = IKEstimator(sensors.subset(INPUT_SITES), skeleton, fps)
         self.upper.read_targets_from(self)  # one conversion a frame, the lost-tracker options included
-        self.contacts = ContactHold(skeleton, release_frames) if contact_ik else None
+        self.contacts = ContactHold(skeleton, o.release_frames) if o.contact_ik else None
         self.reset()
 
     def _reset(self) -> None:

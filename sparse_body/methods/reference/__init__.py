@@ -2,4 +2,8 @@
 
 from ..record import Method
 
-METHOD = Method("reference", "sparse_body.methods.reference.estimator:ReferenceEstimator")
+METHOD = Method(
+    "reference",
+    "sparse_body.methods.reference.estimator:ReferenceEstimator",
+    "sparse_body.methods.reference.options:ReferenceOptions",
+)

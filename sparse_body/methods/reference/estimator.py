@@ -13,15 +13,17 @@ from ...core.rotations import matrix_to_quat, yaw_matrix_of
 from ...core.skeleton import JOINT_INDEX, standing_pose
 from ...core.types import BodyPose, TrackerFrame
 from ...estimators.base import Estimator, full_target
+from .options import ReferenceOptions
 
 HEAD = JOINT_INDEX["head"]
 
 
 class ReferenceEstimator(Estimator):
     name = "reference"
+    Options = ReferenceOptions
 
-    def __init__(self, sensors, skeleton, fps: float = 60.0) -> None:
-        super().__init__(sensors, skeleton, fps)
+    def __init__(self, sensors, skeleton, fps: float = 60.0, **options) -> None:
+        super().__init__(sensors, skeleton, fps, **options)
         if not {"head", "pelvis"} & set(sensors.site_names):
             raise ValueError("the reference estimator needs a head or a pelvis tracker")
         self._local = standing_pose()

@@ -2,4 +2,8 @@
 
 from ..record import Method
 
-METHOD = Method("refined", "sparse_body.methods.refined.estimator:RefinedEstimator")
+METHOD = Method(
+    "refined",
+    "sparse_body.methods.refined.estimator:RefinedEstimator",
+    "sparse_body.methods.refined.options:RefinedOptions",
+)

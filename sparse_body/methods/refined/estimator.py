@@ -9,31 +9,31 @@ from __future__ import annotations
 
 from ...core.tracker_filter import NO_FILTER
 from ...estimators.base import Estimator, create_estimator
-from ...estimators.options import Range
 from ..dragposer.estimator import DragPoserEstimator
+from .options import RefinedOptions
 
 
 class RefinedEstimator(Estimator):
     name = "refined"
-    option_ranges = {"iterations": Range(1, 100, "search steps a frame")}
+    Options = RefinedOptions
+    options: RefinedOptions
 
-    def __init__(
-        self,
-        sensors,
-        skeleton,
-        fps: float = 60.0,
-        base: str = "ik",
-        model_dir: str | None = None,
-        iterations: int = 3,
-        **base_options,
-    ) -> None:
-        super().__init__(sensors, skeleton, fps)
+    def __init__(self, sensors, skeleton, fps: float = 60.0, **options) -> None:
+        super().__init__(sensors, skeleton, fps, **options)
+        o = self.options
+        base = o.base
         if base == "refined":
             raise ValueError("a refined estimator's base cannot be 'refined'")
-        self.base = create_estimator(base, sensors, skeleton, fps, **base_options)
+        self.base = create_estimator(base, sensors, skeleton, fps, **RefinedOptions.rest(options))
         self.base.use_filter(NO_FILTER)  # this estimator's filter has done it
         self.refiner = DragPoserEstimator(
-            sensors, skeleton, fps, model_dir=model_dir, iterations=iterations, temporal_weight=0.0, tracker_prior=0.0
+            sensors,
+            skeleton,
+            fps,
+            model_dir=o.model_dir,
+            iterations=o.iterations,
+            temporal_weight=0.0,
+            tracker_prior=0.0,
         )  # the base pose is the prior
         for inner in (self.base, self.refiner):  # this estimator's targets: the lost-tracker options hold
             inner.read_targets_from(self)

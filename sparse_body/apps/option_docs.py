@@ -1,0 +1,57 @@
+"""The options table (docs/options.md, `sparse-body options`), read from the options
+dataclasses alone: every method's (methods/NAME/options.py) and the tracker filter's."""
+
+from __future__ import annotations
+
+from ..core.options import Option, Options
+from ..core.tracker_filter import PREFIX, FilterConfig
+from ..methods import METHODS, load
+
+HEADER = """# Options
+
+Generated from the options dataclasses by `sparse-body options --markdown` (a test keeps this file
+equal to it). A method's options are given as `NAME:key=value,...` to `--estimator` (eval, process,
+bench) and to the nodes' `estimator` parameter, or one by one as the nodes' parameters
+`NAME.<option>` (a parameter set wins over the spec string). The tracker filter's are every
+estimator's, as `filter_<option>` in both places.
+"""
+
+
+def _value(value: object) -> str:
+    if value is None or isinstance(value, bool):
+        return {None: "null", True: "true", False: "false"}[value]
+    if isinstance(value, float):
+        return f"{value:g}"
+    return repr(value) if isinstance(value, str) else str(value)
+
+
+def _rows(options: type[Options], prefix: str = "") -> list[str]:
+    def row(name: str, o: Option) -> str:
+        return f"| `{prefix}{name}` | {o.takes()} | `{_value(o.default)}` | {o.help} |"
+
+    return ["| option | takes | default | what it does |", "| --- | --- | --- | --- |"] + [
+        row(name, o) for name, o in options.fields().items()
+    ]
+
+
+def markdown() -> str:
+    parts = [HEADER]
+    for name, record in METHODS.items():
+        options = load(record.options)
+        parts.append(f"## {name}\n")
+        parts.append("\n".join(_rows(options)) + "\n" if options.fields() else "No options of its own.\n")
+        if options.passes_on:
+            parts.append("Any other option is its base estimator's.\n")
+    parts.append("## The tracker filter (every estimator)\n")
+    parts.append("\n".join(_rows(FilterConfig, PREFIX)) + "\n")
+    return "\n".join(parts)
+
+
+def text(method: str) -> str:
+    """One method's options, a line each, for a terminal."""
+    options = load(METHODS[method].options).fields()
+    if not options:
+        return f"{method}: no options of its own (the filter's: filter_...)"
+    width = max(map(len, options))
+    lines = [f"  {name:<{width}}  {_value(o.default):<10} {o.takes()}: {o.help}" for name, o in options.items()]
+    return f"{method} (NAME:key=value; besides these, the filter's filter_...):\n" + "\n".join(lines)

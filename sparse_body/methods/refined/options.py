@@ -1,0 +1,15 @@
+"""The refinement's own options; any other is its base estimator's."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from ...estimators.options import EstimatorOptions, option
+
+
+@dataclass(frozen=True)
+class RefinedOptions(EstimatorOptions):
+    passes_on = True  # options it has not are the base's (checked there)
+    base: str = option("ik", "the estimator whose pose is refined")
+    model_dir: str | None = option(None, "the DragPoser model folder; null: the shipped models")
+    iterations: int = option(3, "search steps a frame", 1, 100, "steps")

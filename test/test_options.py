@@ -1,0 +1,134 @@
+"""Options are declared once, in one dataclass per method (methods/NAME/options.py) and the
+filter's (core/tracker_filter.FilterConfig); the parser's errors, the nodes' parameters, the
+eval record and docs/options.md are read from it. A toy method in a temporary package shows
+that one folder and one registry entry put a method everywhere."""
+
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from sparse_body.apps import evaluation, option_docs
+from sparse_body.core.sensors import load_sensor_config
+from sparse_body.core.skeleton import Skeleton
+from sparse_body.core.tracker_filter import FilterConfig
+from sparse_body.data.synthetic import synthetic_walk
+from sparse_body.estimators.base import create_estimator
+from sparse_body.methods import METHODS, Method, load
+
+DOCS = Path(__file__).resolve().parents[1] / "docs" / "options.md"
+EVERY = [(name, load(record.options)) for name, record in METHODS.items()] + [("filter", FilterConfig)]
+
+
+@pytest.mark.parametrize("owner,options", EVERY, ids=[name for name, _ in EVERY])
+def test_every_option_says_what_it_does_and_every_number_has_a_range(owner, options):
+    for name, option in options.fields().items():
+        assert option.help, f"{owner}.{name} has no help"
+        if option.numeric:
+            assert option.range is not None, f"{owner}.{name} is a number without a range"
+            if isinstance(option.default, (int, float)):
+                assert option.range.low <= option.default <= option.range.high, f"{owner}.{name}"
+
+
+def test_each_estimator_reads_the_options_its_record_names():
+    for name, record in METHODS.items():
+        assert load(record.estimator).Options is load(record.options), name
+
+
+def test_a_spec_s_options_are_checked_against_the_declaration_before_a_model_is_loaded():
+    sensors, skeleton = load_sensor_config("four_point"), Skeleton.canonical()
+    with pytest.raises(ValueError, match=r"estimator 'lobstr' has no option 'bogus'; its options are model_path, "):
+        create_estimator("lobstr", sensors, skeleton, bogus=1, model_path="/nowhere.onnx")
+    with pytest.raises(ValueError, match=r"estimator 'dtp': foot_trust must be from 0 to 5 \(metres\), got 6"):
+        create_estimator("dtp", sensors, skeleton, foot_trust=6, model_path="/nowhere.onnx")
+    with pytest.raises(ValueError, match=r"estimator 'dragposer': iterations takes an integer, got 2.5"):
+        create_estimator("dragposer", sensors, skeleton, iterations=2.5)
+    with pytest.raises(ValueError, match=r"filter: jump must be from 0 to 100 \(metres\), got -1"):
+        create_estimator("ik", sensors, skeleton, filter_jump=-1)
+    assert create_estimator("ik", sensors, skeleton, floor_height=0.1).options.floor_height == 0.1
+
+
+def test_the_eval_record_holds_every_option_of_the_method_as_run():
+    recorded = evaluation.method_options("lobstr:contact_ik=false", {"threads": 2, "filter_lag": 0.1})
+    assert recorded["contact_ik"] is False and recorded["threads"] == 2
+    assert set(recorded) == set(METHODS["lobstr"] and load(METHODS["lobstr"].options).fields())
+
+
+def test_the_options_document_is_what_the_dataclasses_render():
+    assert DOCS.read_text() == option_docs.markdown(), "docs/options.md: run `sparse-body options --markdown`"
+
+
+TOY_OPTIONS = """
+from dataclasses import dataclass
+from sparse_body.estimators.options import EstimatorOptions, floor_height, option
+
+@dataclass(frozen=True)
+class ToyOptions(EstimatorOptions):
+    gain: float = option(1.0, "how far the toy leans", 0.0, 2.0, "metres")
+    floor_height: float = floor_height()
+"""
+TOY_ESTIMATOR = """
+from sparse_body.estimators.base import Estimator
+from sparse_body.methods.reference.estimator import ReferenceEstimator
+from .options import ToyOptions
+
+class ToyEstimator(ReferenceEstimator):
+    name = "toy"
+    Options = ToyOptions
+"""
+
+
+@pytest.fixture
+def toy_method(tmp_path, monkeypatch):
+    """A method in a package of its own, registered as the registry's line registers one."""
+    package = tmp_path / "toy_method"
+    package.mkdir()
+    (package / "__init__.py").write_text("")
+    (package / "options.py").write_text(TOY_OPTIONS)
+    (package / "estimator.py").write_text(TOY_ESTIMATOR)
+    monkeypatch.syspath_prepend(str(tmp_path))
+    monkeypatch.setitem(
+        METHODS, "toy", Method("toy", "toy_method.estimator:ToyEstimator", "toy_method.options:ToyOptions")
+    )
+    return tmp_path
+
+
+def test_a_toy_method_is_everywhere_once_registered(toy_method, capsys):
+    from sparse_body import cli
+
+    sensors, skeleton = load_sensor_config("three_point"), Skeleton.canonical()
+    with pytest.raises(ValueError, match=r"estimator 'toy': gain must be from 0 to 2 \(metres\), got 3"):
+        create_estimator("toy", sensors, skeleton, gain=3)
+    # the command line: its error, and the option listing
+    with pytest.raises(SystemExit) as stopped:
+        cli.main(["options", "toy"])
+    assert stopped.value.code == 0 and "gain" in capsys.readouterr().out
+    # the docs table
+    assert (
+        "## toy\n" in option_docs.markdown() and "| `gain` | a number from 0 to 2 (metres) |" in option_docs.markdown()
+    )
+    # the eval record, from a real run over a motion file
+    walk = toy_method / "walk.npz"
+    synthetic_walk(2.0).save(walk)
+    result = evaluation.evaluate("toy:gain=0.5", sensors, None, motions=[walk], progress=False)
+    assert result.to_json()["options"] == {"gain": 0.5, "floor_height": 0.0} and result.summary["MPJPE [cm]"] > 0
+
+
+@pytest.mark.ros
+def test_a_toy_method_s_options_are_node_parameters_with_their_ranges(toy_method):
+    pytest.importorskip("rclpy")
+    from sparse_body.ros.estimator_node import method_option_parameters
+
+    declared = method_option_parameters()
+    assert declared["toy.gain"].range is not None and (
+        declared["toy.gain"].range.low,
+        declared["toy.gain"].range.high,
+    ) == (0.0, 2.0)
+
+
+def test_the_options_command_is_one_line_for_an_unknown_method():
+    done = subprocess.run(
+        [sys.executable, "-m", "sparse_body.cli", "options", "bogus"], capture_output=True, text=True, timeout=120
+    )
+    assert done.returncode == 2 and "invalid choice: 'bogus'" in done.stderr

@@ -33,16 +33,12 @@ demo: setup
 	$(VENV)/bin/sparse-body demo
 
 eval: setup
-	$(VENV)/bin/sparse-body eval --estimator reference --estimator ik --sensors six_point
-	$(VENV)/bin/sparse-body eval --estimator lobstr --sensors four_point
-	$(VENV)/bin/sparse-body eval --estimator dragposer --sensors six_point
-	$(VENV)/bin/sparse-body eval --estimator dtp --sensors six_point
-	$(VENV)/bin/sparse-body eval --estimator avatarjlm --sensors three_point
+	$(PY) -m sparse_body.methods eval | while read method sensors; do \
+	  $(VENV)/bin/sparse-body eval --estimator $$method --sensors $$sensors || exit 1; done
 
 bench: setup-train
 	$(VENV)/bin/sparse-body bench
-	$(VENV)/bin/sparse-body bench --runtime lobstr
-	$(VENV)/bin/sparse-body bench --runtime dragposer
+	for m in $$($(PY) -m sparse_body.methods benched); do $(VENV)/bin/sparse-body bench --runtime $$m || exit 1; done
 
 # A million generated inputs into each parser of outside input: the serial stream, VMC
 # datagrams, /tf messages through the TF ingest, BVH and ASF/AMC motion files, sensor
@@ -55,7 +51,7 @@ fuzz: setup-test
 # only command that reads the test split. `sparse-body train M --render-only` renders a card
 # from its measured file without measuring.
 cards: setup-train
-	for m in lobstr dtp avatarjlm dragposer; do $(VENV)/bin/sparse-body train $$m --card-only || exit 1; done
+	for m in $$($(PY) -m sparse_body.methods trainable); do $(VENV)/bin/sparse-body train $$m --card-only || exit 1; done
 
 # Retrain the shipped LoBSTr model (11,848 steps: about 50 minutes on 2 CPU cores) and rewrite its model card.
 train-lobstr: setup-train

@@ -50,7 +50,13 @@ def test_the_commands_and_the_evaluation_hold_no_per_method_branches():
     names = "|".join(TRAINABLE)
     # a comparison with a method's name, or a flag named after one (`bench --dragposer` was)
     branch = re.compile(rf"(==|!=|\bin\b)\s*\(?\s*\"({names})\"|\"({names})\"\s*(==|!=)|args\.({names})\b")
-    for path in [ROOT / "cli.py", ROOT / "apps" / "evaluation.py", ROOT / "train", ROOT / "ros"]:
+    for path in [
+        ROOT / "cli.py",
+        ROOT / "apps" / "commands",
+        ROOT / "apps" / "evaluation.py",
+        ROOT / "train",
+        ROOT / "ros",
+    ]:
         for file in [path] if path.is_file() else sorted(path.glob("*.py")):
             found = [line for line in file.read_text().splitlines() if branch.search(line)]
             assert not found, (file.name, found)

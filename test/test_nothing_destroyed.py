@@ -13,6 +13,8 @@ from pathlib import Path
 import pytest
 
 from sparse_body import cli
+from sparse_body.apps.commands import exits
+from sparse_body.apps.commands import process as process_command
 from sparse_body.apps.offline import make_bag
 from sparse_body.cli import (
     EXIT_INPUT,
@@ -213,7 +215,7 @@ def _fails_inside_a_kernel(stop: BaseException | None):
     ],
 )
 def test_a_stop_wrapped_by_compiled_code_is_still_the_users_stop(bag, tmp_path, capsys, monkeypatch, stop, code, said):
-    monkeypatch.setattr(cli, "cmd_process", _fails_inside_a_kernel(stop))
+    monkeypatch.setattr(process_command, "run", _fails_inside_a_kernel(stop))
     with pytest.raises(SystemExit) as ended:
         main(["process", str(bag), str(tmp_path / "out")])
     assert ended.value.code == code
@@ -221,7 +223,7 @@ def test_a_stop_wrapped_by_compiled_code_is_still_the_users_stop(bag, tmp_path, 
 
 
 def test_a_bug_inside_compiled_code_keeps_its_traceback(bag, tmp_path, monkeypatch):
-    monkeypatch.setattr(cli, "cmd_process", _fails_inside_a_kernel(None))
+    monkeypatch.setattr(process_command, "run", _fails_inside_a_kernel(None))
     with pytest.raises(SystemError):  # not the user's doing: hiding it would hide the bug
         main(["process", str(bag), str(tmp_path / "out")])
 
@@ -317,7 +319,7 @@ def test_a_ctrl_c_that_an_import_swallowed_still_stops_the_command_before_it_sta
 
     def parser_after_a_swallowed_interrupt():
         with contextlib.suppress(KeyboardInterrupt):  # code that drops it
-            cli._interrupt(signal.SIGINT, None)  # what the signal does
+            exits.on_sigint(signal.SIGINT, None)  # what the signal does
         return real()
 
     monkeypatch.setattr(cli, "build_parser", parser_after_a_swallowed_interrupt)

@@ -132,3 +132,37 @@ def test_the_options_command_is_one_line_for_an_unknown_method():
         [sys.executable, "-m", "sparse_body.cli", "options", "bogus"], capture_output=True, text=True, timeout=120
     )
     assert done.returncode == 2 and "invalid choice: 'bogus'" in done.stderr
+
+
+def test_the_command_line_is_a_dispatcher_over_one_module_a_command():
+    from sparse_body import cli
+
+    root = Path(cli.__file__).parent
+    assert len((root / "cli.py").read_text().splitlines()) < 150
+    for name in cli.COMMANDS:
+        assert (root / "apps" / "commands" / f"{name}.py").is_file(), name
+    parsed = cli.build_parser().parse_args(["options", "ik"])
+    assert parsed.func.__module__ == "sparse_body.apps.commands.options"
+
+
+def test_every_card_is_a_template_and_no_card_code_imports_the_commands():
+    import ast
+
+    root = Path(__file__).resolve().parents[1] / "sparse_body" / "methods"
+    for name, record in METHODS.items():
+        if record.training is None:
+            continue
+        assert (root / name / "card.md").is_file(), name
+        for node in ast.walk(ast.parse((root / name / "card.py").read_text())):
+            if isinstance(node, ast.ImportFrom):
+                assert "apps" not in (node.module or ""), (name, node.module)
+
+
+def test_the_makefile_s_loops_read_the_registry():
+    listed = subprocess.run(
+        [sys.executable, "-m", "sparse_body.methods", "eval"], capture_output=True, text=True, timeout=120, check=True
+    )
+    assert listed.stdout.split("\n")[:2] == ["reference six_point", "ik six_point"]
+    assert {line.split()[0] for line in listed.stdout.split("\n") if line} == {
+        name for name, m in METHODS.items() if m.eval_sensors
+    }

@@ -140,7 +140,7 @@ def test_eval_without_mocap_says_where_to_point(tmp_path):
 
 
 def test_wide_eval_tables_fit_a_terminal_with_their_columns_named_below():
-    from sparse_body.apps.evaluation import EvalResult, format_table
+    from sparse_body.core.results import EvalResult, format_table
 
     metrics = {"MPJPE [cm]": 4.4, "Contact acc [%]": 79.3, "End-effector PE [cm]": 0.1}
     results = [
@@ -190,7 +190,7 @@ def test_eval_takes_a_users_own_motion_files(tmp_path, mocap_root, capsys):
 
 
 def test_intervals_drawn_by_person_are_wider_when_a_persons_clips_move_together():
-    from sparse_body.apps.evaluation import EvalResult, clip_interval, format_table
+    from sparse_body.core.results import EvalResult, clip_interval, format_table
 
     per_clip = [{"MPJPE [cm]": v} for v in (1.0, 1.0, 1.0, 3.0, 3.0, 3.0)]
     people = ["16", "16", "16", "43", "43", "43"]
@@ -208,7 +208,7 @@ def test_intervals_drawn_by_person_are_wider_when_a_persons_clips_move_together(
 
 
 def test_intervals_beside_every_mean_and_each_person_s_own_figure():
-    from sparse_body.apps.evaluation import EvalResult, clip_interval, format_groups, format_table
+    from sparse_body.core.results import EvalResult, clip_interval, format_groups, format_table
 
     per_clip = [{"MPJPE [cm]": v, "Jitter [100m/s3]": 10 * v} for v in (1.0, 1.2, 0.8, 3.0, 3.2, 2.8)]
     people = ["16", "16", "16", "43", "43", "43"]
@@ -227,7 +227,7 @@ def test_intervals_beside_every_mean_and_each_person_s_own_figure():
 
 
 def test_each_kind_of_motion_has_its_figure_and_those_no_training_clip_has_are_marked():
-    from sparse_body.apps.evaluation import EvalResult, format_groups
+    from sparse_body.core.results import EvalResult, format_groups
 
     per_clip = [{"MPJPE [cm]": v, "Lower PE [cm]": 2 * v} for v in (1.0, 1.2, 3.0, 3.2)]
     kinds = ["locomotion", "locomotion", "dance", "dance"]

@@ -96,8 +96,8 @@ def test_the_lobstr_card_is_rendered_from_its_measured_file_alone(tmp_path):
     (no motion capture is read): what the measured file says is what the card says."""
     import shutil
 
-    from sparse_body.apps.evaluation import EvalResult
     from sparse_body.core.resources import models_dir
+    from sparse_body.core.results import EvalResult
     from sparse_body.methods.lobstr.card import FIELD_RUNS, LAB_RUNS, write_lobstr_card
     from sparse_body.train.model_card import NOISE_SETUPS
 

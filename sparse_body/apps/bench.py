@@ -25,23 +25,19 @@ from ..data.synthetic import synthetic_walk
 from ..data.virtual_trackers import synthesize_trackers
 from ..estimators import create_estimator
 from ..estimators.base import parse_estimator_spec
+from ..methods import METHODS
 
 # (figure, estimator, goal for its p99 in ms on one thread of an idle machine of the kind CI
-# runs on: issue 28); the latency goal is 1 ms plus the step's p99
-STEP_GOALS = (
-    ("ik step", "ik", 0.1),
-    ("lobstr step (network, upper-body IK, contact IK)", "lobstr", 0.25),
-    ("dragposer step (search, predictor, polish)", "dragposer", 1.5),
-    ("blend step (avatarjlm and dragposer, slerped)", "blend", 3.0),  # issue 52
-    ("dtp step (21-frame window, transformer, polish)", "dtp", 1.0),
-    ("avatarjlm step (streaming joint tokens, polish)", "avatarjlm", 2.0),
+# runs on: issue 28), from each method's record; the latency goal is 1 ms plus the step's p99
+STEP_GOALS = tuple(
+    (f"{name} step ({m.step_goal[0]})", name, m.step_goal[1]) for name, m in METHODS.items() if m.step_goal
 )
 LATENCY_GOAL_MS = 1.0
 # Absolute times differ several-fold between machines and with load; a step as a multiple of
 # the reference estimator's step (a standing pose turned to the headset: the cost of a step's
 # bookkeeping, filter and sampling alone) in the same run holds on any machine.
 REFERENCE = "reference"
-RATIO_GOALS = {"ik": 1.5, "lobstr": 2.0, "dragposer": 8.0}
+RATIO_GOALS = {name: m.ratio_goal for name, m in METHODS.items() if m.ratio_goal}
 # the retarget node's step beside an estimator's: a third of a 60 Hz frame (issue 54)
 RETARGET_GOAL_MS = 5.0
 RETARGET_RATIO = 25.0

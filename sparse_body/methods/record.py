@@ -54,3 +54,10 @@ class Method:
     # "module:function" timing its runtime against its reference implementation (no arguments;
     # it prints), run by `sparse-body bench --runtime NAME`
     runtime_bench: str | None = None
+    # `sparse-body bench`'s goals for its step on one thread of an idle machine of the kind CI
+    # runs on: (what a step does, its p99 in ms), and its p50 as a multiple of the reference
+    # estimator's step in the same run (which holds on any machine); None: no goal
+    step_goal: tuple[str, float] | None = None
+    ratio_goal: float | None = None
+    # the sensor configuration `make eval` evaluates it on (None: not in `make eval`)
+    eval_sensors: str | None = None

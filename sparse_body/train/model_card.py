@@ -41,7 +41,7 @@ def augmentation_table(report_path: Path, columns: dict[str, str]) -> str:
 def _interval(run: dict, metric: str, by_person: bool = False) -> list[float] | None:
     """A results file's 95 % bootstrap interval of metric from the per-clip figures it keeps:
     clips drawn, or people drawn with all their clips (a person's clips move together)."""
-    from ..apps.evaluation import clip_interval
+    from ..core.results import clip_interval
 
     rows = [c for c in run["clips"] if metric in c and (c.get("subject") or not by_person)]
     units = [c["subject"] for c in rows] if by_person else None
@@ -223,3 +223,11 @@ def measure_card(path: Path, jobs: list[tuple], noise: dict[str, list[tuple]], w
         done += len(part)
     path.write_text(json.dumps(measured, indent=1))
     return path
+
+
+def render_card(template: Path, values: dict[str, str]) -> str:
+    """A card's text: its template (methods/NAME/card.md, string.Template: ${name} where a
+    measured value goes) filled from the measured values, each already formatted."""
+    from string import Template
+
+    return Template(template.read_text()).substitute(values)

@@ -45,4 +45,6 @@ METHOD = Method(
         "models/avatarjlm_four_point.onnx), paper (d1 1024, d2 512, 6 loops: for a GPU) or tiny",
         out_help="the .onnx file",
     ),
+    step_goal=("streaming joint tokens, polish", 2.0),
+    eval_sensors="three_point",
 )

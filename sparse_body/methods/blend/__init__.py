@@ -3,5 +3,8 @@
 from ..record import Method
 
 METHOD = Method(
-    "blend", "sparse_body.methods.blend.estimator:BlendEstimator", "sparse_body.methods.blend.options:BlendOptions"
+    "blend",
+    "sparse_body.methods.blend.estimator:BlendEstimator",
+    "sparse_body.methods.blend.options:BlendOptions",
+    step_goal=("avatarjlm and dragposer, slerped", 3.0),  # issue 52
 )

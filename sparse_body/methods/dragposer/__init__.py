@@ -61,4 +61,7 @@ METHOD = Method(
         out_help="the folder for its encoder, decoder, temporal predictor and tracker prior",
     ),
     runtime_bench="sparse_body.apps.bench:bench_dragposer",
+    step_goal=("search, predictor, polish", 1.5),
+    ratio_goal=8.0,  # issue 52
+    eval_sensors="six_point",
 )

@@ -17,6 +17,7 @@ from ...train.model_card import (
     measured_results,
     noise_jobs,
     noise_table,
+    render_card,
 )
 from ...train.model_card import runtime_choices_table as choices_table
 
@@ -100,7 +101,7 @@ def write_dragposer_card(out_dir: Path, mocap_root: Path, limit: int | None = No
     predictor + optimiser on the test split for the paper's Table 2 setups, with the Table 3
     ablation and the IK baseline, and the refinement of other estimators) and write
     dragposer.md."""
-    from ...apps.evaluation import EvalResult, format_table
+    from ...core.results import EvalResult, format_table
     from .. import paper_figures
 
     out_dir = Path(out_dir)
@@ -165,193 +166,102 @@ def write_dragposer_card(out_dir: Path, mocap_root: Path, limit: int | None = No
         if "extrapolate_mse_next" in tval
         else ""
     )
-    text = f"""# DragPoser model card: `dragposer_encoder.onnx`, `dragposer_decoder.onnx`, `dragposer_temporal.onnx`, `dragposer_tracker_prior.onnx`
-
-DragPoser (Ponton et al. 2024): a pose VAE whose 24-D latent space a pose optimiser searches
-each frame until the constraints (trackers, floor, look-at, limits) hold, pulled towards the
-latent a temporal predictor expects. The files: the VAE's encoder (dual quaternions in root
-space -> latent mean) and decoder (latent -> 22 local rotations, the root's without heading),
-the temporal predictor (past latents with their context -> next latents), and the tracker
-prior (ours: the trackers' recent motion -> the latent they probably mean). Runtime: ONNX
-Runtime and a damped Gauss-Newton step whose Jacobian comes from one batched decoder pass
-(`sparse_body/methods/dragposer/estimator.py`, `temporal.py`, `tracker_prior.py`);
-no torch.
-
-## Data
-- CMU motion capture (allasfamc.zip from mocap.cs.cmu.edu: free use, no resale; indexed with `sparse-body import-mocap`), retargeted onto the
-  22-joint body at 60 fps; rotations on the canonical body, root height scaled by leg length.
-- Split `config/splits/cmu.yaml` (by subject: no validation or test person in training):
-  {len(split["train"])} train / {len(split["validation"])} validation / {len(split["test"])} test clips. Both networks train on the train clips
-  and their augmented variants (below; the VAE on {vae["train_frames"]} frames); the best validation
-  checkpoint is exported.
-
-## Pose VAE
-- Command: `{vae.get("command", "sparse-body train dragposer")}`
-- MLP encoder and decoder, hidden {cfg["hidden"]} (the paper uses skeleton-aware convolutions of
-  about the same size), latent {cfg["latent"]}; AdamW lr {cfg["lr"]}, weight decay {cfg["weight_decay"]},
-  batch {cfg["batch"]}; losses reconstruction + {cfg["w_fk"]:g} FK + {cfg["w_kld"]:g} KL + {cfg["w_continuity"]:g} continuity
-  (the paper's weights).
-- {vae["steps"]} steps in {vae["minutes"]:.1f} minutes on {vae["hardware"]} (torch {vae["torch"]}).
-
-| step | minutes | train loss | val position [cm] | val rotation [deg] |
-|---|---|---|---|---|
-{curve(vae.get("history", []), ["step", "minutes", "total", "position_error_cm", "rotation_error_deg"])}
-
-Validation encode-decode error (exported weights): {val["position_error_cm"]:.2f} cm, {val["rotation_error_deg"]:.2f} deg.
-
-Augmentation: {cfg.get("augment", "none")} ({cfg.get("variants", 0)} variant of each clip besides itself; the VAE
-sees single poses on the canonical body without heading, so only mirroring changes them).
-
-{vae_augmentation}
-
-## Temporal predictor
-- Command: `{temporal.get("command", "sparse-body train dragposer --part temporal")}` (after the VAE: it learns
-  on the latents the exported encoder gives, every {tcfg["every"]} frames, from each of the {tcfg["every"]} phases).
-- Transformer encoder/decoder: width {tcfg["width"]}, {tcfg["heads"]} heads, {tcfg["layers"]}+{tcfg["layers"]} layers,
-  feed-forward {tcfg["feedforward"]} (paper: 2048), past window {tcfg["past"]}, future window {tcfg["future"]}
-  (the paper's W_p, W_f), {temporal["parameters"]} parameters; AdamW lr {tcfg["lr"]}, batch {tcfg["batch"]}, MSE.
-- Limb noise: probability {tcfg["limb_noise"]} per limb and step. With the paper's 0.1 (each noisy limb
-  turned by {tcfg["limb_noise_deg"]:g} degrees per axis before encoding; an earlier try swapped the limb for a
-  random train frame's) the validation error grew with training on our 245 clips, so the shipped
-  predictor trains on clean latents; `--config paper` keeps the noise and the 2048 width.
-- {temporal["steps"]} steps in {temporal["minutes"]:.1f} minutes on {temporal["hardware"]}.
-
-| step | minutes | train MSE | val MSE | val MSE, next step |
-|---|---|---|---|---|
-{curve(temporal.get("history", []), ["step", "minutes", "loss", "mse", "mse_next"])}
-
-Validation latent MSE (exported weights; every {tcfg["future"]}-step window, teacher-forced):
-{tval["mse"]:.4f} over the window, {tval["mse_next"]:.4f} for the next step; holding the newest
-latent instead: {tval["hold_mse"]:.4f} / {tval["hold_mse_next"]:.4f}{extrapolated}.
-
-Augmentation: {tcfg.get("augment", "none")} ({tcfg.get("variants", 0)} variants of each clip besides itself).
-
-{temporal_augmentation}
-
-## Tracker prior (ours, not the paper's)
-- Command: `{tracker.get("command", "sparse-body train dragposer --part tracker_prior")}` (after the VAE: its targets
-  are the latents the exported encoder gives each train frame).
-- Why: the temporal predictor reads only the search's own past latents, which carry no gait
-  when no tracker is on the legs; on the walking validation person DragPoser's four-point legs
-  were 10-16 cm off where LoBSTr's GRU, which reads the trackers' velocities, was 5-9.
-- A GRU ({pcfg["hidden"]} wide, {pcfg["layers"]} layer, dropout {pcfg["dropout"]:g}, {tracker["parameters"]} parameters) reads each frame's
-  trackers in the headset's heading frame (each site's position, 6D rotation, velocity and a
-  presence flag; 79 values) and gives the latent; one model serves every sensor set, each
-  {pcfg["chunk"]}-frame training chunk seeing the three-, four- or six-point set. Tracker noise
-  {pcfg["position_noise"] * 100:g} cm and up to {pcfg["rotation_noise_deg"]:g} degrees on {pcfg["noise_copies"]} copies beside the clean one;
-  AdamW lr {pcfg["lr"]}, weight decay {pcfg["weight_decay"]:g}, batch {pcfg["batch"]}, latent MSE.
-- {tracker["steps"]} steps in {tracker["minutes"]:.1f} minutes on {tracker["hardware"]}; the checkpoint with the lowest
-  validation latent MSE is exported.
-
-| step | minutes | train MSE | val latent MSE | val decoded PE [cm] | val decoded lower PE [cm] |
-|---|---|---|---|---|---|
-{curve(tracker.get("history", []), ["step", "minutes", "loss", "mse", "pe", "lower_pe"])}
-
-Validation (exported weights, clean trackers, per set three / four / six-point): latent MSE
-{pval["mse_three_point"]:.3f} / {pval["mse_four_point"]:.3f} / {pval["mse_six_point"]:.3f} (the latents' own mean square: {pval["zero_mse"]:.3f}); the decoded
-guess alone, root-relative, {pval["pe_three_point"]:.1f} / {pval["pe_four_point"]:.1f} / {pval["pe_six_point"]:.1f} cm, lower body {pval["lower_pe_three_point"]:.1f} / {pval["lower_pe_four_point"]:.1f} / {pval["lower_pe_six_point"]:.1f}.
-The guess alone is no pose estimate (the train MSE falls far below the validation MSE within
-a few thousand steps: the validation people move in ways the train people do not), but as one
-pull among the search's priors it carries what the trackers leave open.
-
-Also tried, in runs stopped early (validation people, four-point, DragPoser MPJPE / lower body
-with the prior at 0.003): a loss on the decoded joint positions beside the latent MSE
-(`--set w_positions=100`), 8.17 / 18.61 cm; a smaller, more regularised GRU (`--set hidden=128
---set dropout=0.3 --set weight_decay=0.01`), 8.01 / 18.20; the latent MSE alone, 7.80 / 17.57.
-
-Augmentation: {pcfg.get("augment", "none")} ({pcfg.get("variants", 0)} variants of each clip besides itself).
-
-{tracker_augmentation}
-
-At 800 steps a run (the shipped model took 10,022), mirroring helps most (latent MSE 1.651
-without it against 1.520 with all three); playback speed and proportions add less, and the
-run without proportions decodes a little better (13.88 against 14.27 cm) at a higher latent
-MSE, the figure that picks the checkpoint, so all three stay.
-
-The prior reads the trackers in the headset's frame, so without a headset pose (the hip and
-hands set below) it gives no guess and DragPoser runs as before. Its weight (`tracker_prior`;
-0: off), measured on the validation people:
-
-{tracker_tables}
-
-## Test split (`sparse-body eval --estimator dragposer --sensors S [--faulty 1]`)
-
-Optimiser defaults: 3 Levenberg-Marquardt iterations a frame (30 on the first), position
-weight 1, orientation weight 0.1; the latent is pulled towards the previous frame's (weight
-0.001), the temporal predictor's (weight 0.002; run every 4 frames with W_f = 1, its target
-ramped from the latent solved at its tick to the predicted one over the 4 frames) and the
-tracker prior's (weight {TRACKER_PRIOR_WEIGHT:g}; the search also starts from its guess), latent-norm
-weight 0.0002, feet above the floor; then the closed-form IK (core/body_ik.py) puts the tracked
-pelvis and end effectors on their trackers. `dragposer:temporal_weight=0` is the paper's "no temporal
-predictor" ablation (only the previous latent's pull).
-
-Runtime choices, measured on the validation people (field-exact protocol, four-point; the default is `dragposer`; `prior_weight=0` drops the previous latent's pull, `temporal_ramp=false` holds
-each prediction for the 4 frames instead of ramping to it):
-
-{runtime_table}
-
-The polish's root takes the pelvis tracker's orientation (`pelvis_orientation`, the default;
-false: the orientation the search found), a leg or the spine whose end is not tracked keeping
-its decoded direction; measured on the validation people:
-
-{pelvis_tables}
-
-Without a pelvis tracker (three-point) the search may slide the root under a leaning spine;
-`root_prior` (0.3, the default) pulls it over the point below the headset where a standing
-body's pelvis hangs, as the IK places it. Chosen on the validation people, where most of the
-gain is on takes whose root the search alone had put 30-40 cm off (before the tracker prior:
-16.03 -> 12.94 cm MPJPE, root 17.09 -> 9.83; on the test people it cost a little, 9.29 ->
-10.00, and over both sets of unseen people together it was a clear gain; the README has the
-figures). Measured again with the tracker prior (the table) it is still the best weight, its
-gain smaller:
-
-{root_prior_table}
-
-Also tried with earlier models (clip-wise split, on the first 10 test clips), and not kept:
-the predictor fed the final pose re-encoded instead of the search's latent (MPJPE 5.66 against
-5.54); a more regularised predictor (dropout 0.3, 2+2 layers, feed-forward 128, weight decay
-0.05, 12 minutes; validation next-step MSE 0.0743) gave 5.64 there and 1.05 against 1.07 cm at
-six-point; the paper's limb noise (probability 0.1, 10 degrees)
-made the validation error rise from the first check (0.089 -> 0.100 over 1,000 steps).
-
-On the whole test split (tables below) the predictor moves joint errors by up to about 0.2 cm
-either way and raises jitter; beside the tracker prior it is a little worse everywhere but with
-faulty sensors (three-point {mpjpe("three_point")} against {mpjpe("three_point", 1)} cm without it, four-point {mpjpe("four_point")} against
-{mpjpe("four_point", 1)}), and
-on the validation people it no longer earns its place either (four-point 7.94 against 7.92,
-jitter 22.6 against 21.3). It stays on as the paper's method, a choice to revisit. On
-validation it predicts the next latent only a little better than holding the newest one, so
-there is little for it to add. Feeding it its own predictions (the paper's W_f = 16
-for four sensors) drifts. Read differences of a few hundredths with care: `dragposer:temporal_weight=0`
-gave six-point MPJVE 6.05 cm/s in an earlier card run and 6.38 in this one. A clip parsed
-afresh differed from the same clip read back from the parse cache (float32 quaternions) by
-about 1e-7, and the optimiser's accept/refuse decisions grow that into such changes; clips now
-load exactly as the cache holds them, and repeated runs give identical figures.
-
-Each setup under the {FIELD_PROTOCOL[0].lower() + FIELD_PROTOCOL[1:]}, and the lab protocol the
-papers use beside it (`--protocol lab`); with faulty sensors, the paper's faults alone on the
-field-exact protocol (`--protocol field-exact --faulty 1`).
-
-{chr(10).join(text_tables)}
-The paper's figures come from its own data and protocol (a guide, not a like-for-like comparison).
-
-{NOISE_HEADING}
-
-LoBSTr's noise (1 cm, 1.5 degrees) with the input filter set for it, and smoothed over the
-whole clip as `sparse-body process --smooth` does (`E:smooth=true`), against clean trackers (no
-filter). No live filter can take this noise out without lag: on the tracked points alone the
-best one leaves about 51 cm/s of velocity error (`scripts/noise_floor.py`; the README's
-"Offline smoothing").
-
-{(chr(10) * 2).join(noise_tables)}
-
-
-## Refining other estimators (four-point, field protocol, `sparse-body eval --estimator E --estimator refined:base=E`)
-
-```
-{format_table(refined)}
-```
-"""
+    text = render_card(
+        Path(__file__).with_name("card.md"),
+        {
+            "len_split_train": f"{len(split['train'])}",
+            "len_split_validation": f"{len(split['validation'])}",
+            "len_split_test": f"{len(split['test'])}",
+            "vae_train_frames": f"{vae['train_frames']}",
+            "vae_command": f"{vae.get('command', 'sparse-body train dragposer')}",
+            "cfg_hidden": f"{cfg['hidden']}",
+            "cfg_latent": f"{cfg['latent']}",
+            "cfg_lr": f"{cfg['lr']}",
+            "cfg_weight_decay": f"{cfg['weight_decay']}",
+            "cfg_batch": f"{cfg['batch']}",
+            "cfg_w_fk": f"{cfg['w_fk']:g}",
+            "cfg_w_kld": f"{cfg['w_kld']:g}",
+            "cfg_w_continuity": f"{cfg['w_continuity']:g}",
+            "vae_steps": f"{vae['steps']}",
+            "vae_minutes": f"{vae['minutes']:.1f}",
+            "vae_hardware": f"{vae['hardware']}",
+            "vae_torch": f"{vae['torch']}",
+            "vae_curve": f"{curve(vae.get('history', []), ['step', 'minutes', 'total', 'position_error_cm', 'rotation_error_deg'])}",
+            "val_position_error_cm": f"{val['position_error_cm']:.2f}",
+            "val_rotation_error_deg": f"{val['rotation_error_deg']:.2f}",
+            "cfg_augment": f"{cfg.get('augment', 'none')}",
+            "cfg_variants": f"{cfg.get('variants', 0)}",
+            "vae_augmentation": f"{vae_augmentation}",
+            "temporal_command": f"{temporal.get('command', 'sparse-body train dragposer --part temporal')}",
+            "tcfg_every": f"{tcfg['every']}",
+            "tcfg_width": f"{tcfg['width']}",
+            "tcfg_heads": f"{tcfg['heads']}",
+            "tcfg_layers": f"{tcfg['layers']}",
+            "tcfg_feedforward": f"{tcfg['feedforward']}",
+            "tcfg_past": f"{tcfg['past']}",
+            "tcfg_future": f"{tcfg['future']}",
+            "temporal_parameters": f"{temporal['parameters']}",
+            "tcfg_lr": f"{tcfg['lr']}",
+            "tcfg_batch": f"{tcfg['batch']}",
+            "tcfg_limb_noise": f"{tcfg['limb_noise']}",
+            "tcfg_limb_noise_deg": f"{tcfg['limb_noise_deg']:g}",
+            "temporal_steps": f"{temporal['steps']}",
+            "temporal_minutes": f"{temporal['minutes']:.1f}",
+            "temporal_hardware": f"{temporal['hardware']}",
+            "temporal_curve": f"{curve(temporal.get('history', []), ['step', 'minutes', 'loss', 'mse', 'mse_next'])}",
+            "tval_mse": f"{tval['mse']:.4f}",
+            "tval_mse_next": f"{tval['mse_next']:.4f}",
+            "tval_hold_mse": f"{tval['hold_mse']:.4f}",
+            "tval_hold_mse_next": f"{tval['hold_mse_next']:.4f}",
+            "extrapolated": f"{extrapolated}",
+            "tcfg_augment": f"{tcfg.get('augment', 'none')}",
+            "tcfg_variants": f"{tcfg.get('variants', 0)}",
+            "temporal_augmentation": f"{temporal_augmentation}",
+            "tracker_command": f"{tracker.get('command', 'sparse-body train dragposer --part tracker_prior')}",
+            "pcfg_hidden": f"{pcfg['hidden']}",
+            "pcfg_layers": f"{pcfg['layers']}",
+            "pcfg_dropout": f"{pcfg['dropout']:g}",
+            "tracker_parameters": f"{tracker['parameters']}",
+            "pcfg_chunk": f"{pcfg['chunk']}",
+            "tracker_position_noise_cm": f"{pcfg['position_noise'] * 100:g}",
+            "pcfg_rotation_noise_deg": f"{pcfg['rotation_noise_deg']:g}",
+            "pcfg_noise_copies": f"{pcfg['noise_copies']}",
+            "pcfg_lr": f"{pcfg['lr']}",
+            "pcfg_weight_decay": f"{pcfg['weight_decay']:g}",
+            "pcfg_batch": f"{pcfg['batch']}",
+            "tracker_steps": f"{tracker['steps']}",
+            "tracker_minutes": f"{tracker['minutes']:.1f}",
+            "tracker_hardware": f"{tracker['hardware']}",
+            "tracker_curve": f"{curve(tracker.get('history', []), ['step', 'minutes', 'loss', 'mse', 'pe', 'lower_pe'])}",
+            "pval_mse_three_point": f"{pval['mse_three_point']:.3f}",
+            "pval_mse_four_point": f"{pval['mse_four_point']:.3f}",
+            "pval_mse_six_point": f"{pval['mse_six_point']:.3f}",
+            "pval_zero_mse": f"{pval['zero_mse']:.3f}",
+            "pval_pe_three_point": f"{pval['pe_three_point']:.1f}",
+            "pval_pe_four_point": f"{pval['pe_four_point']:.1f}",
+            "pval_pe_six_point": f"{pval['pe_six_point']:.1f}",
+            "pval_lower_pe_three_point": f"{pval['lower_pe_three_point']:.1f}",
+            "pval_lower_pe_four_point": f"{pval['lower_pe_four_point']:.1f}",
+            "pval_lower_pe_six_point": f"{pval['lower_pe_six_point']:.1f}",
+            "pcfg_augment": f"{pcfg.get('augment', 'none')}",
+            "pcfg_variants": f"{pcfg.get('variants', 0)}",
+            "tracker_augmentation": f"{tracker_augmentation}",
+            "tracker_tables": f"{tracker_tables}",
+            "tracker_prior_weight": f"{TRACKER_PRIOR_WEIGHT:g}",
+            "runtime_table": f"{runtime_table}",
+            "pelvis_tables": f"{pelvis_tables}",
+            "root_prior_table": f"{root_prior_table}",
+            "three_point_mpjpe": f"{mpjpe('three_point')}",
+            "three_point_mpjpe_without_predictor": f"{mpjpe('three_point', 1)}",
+            "four_point_mpjpe": f"{mpjpe('four_point')}",
+            "four_point_mpjpe_without_predictor": f"{mpjpe('four_point', 1)}",
+            "field_protocol_in_a_sentence": f"{FIELD_PROTOCOL[0].lower() + FIELD_PROTOCOL[1:]}",
+            "field_tables": f"{chr(10).join(text_tables)}",
+            "noise_heading": f"{NOISE_HEADING}",
+            "noise_tables": f"{(chr(10) * 2).join(noise_tables)}",
+            "refined_table": f"{format_table(refined)}",
+        },
+    )
     path = out_dir / "dragposer.md"
     path.write_text(text)
     return path

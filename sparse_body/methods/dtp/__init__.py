@@ -39,4 +39,6 @@ METHOD = Method(
         "lookahead (small with 5 future frames: models/dtp_lookahead.onnx), paper or tiny",
         out_help="the .onnx file",
     ),
+    step_goal=("21-frame window, transformer, polish", 1.0),
+    eval_sensors="six_point",
 )

@@ -12,6 +12,7 @@ from ...train.model_card import (
     augmentation_table,
     evaluate_jobs,
     measured_results,
+    render_card,
     results_table,
     runtime_choices_table,
 )
@@ -108,87 +109,50 @@ def write_dtp_card(onnx_path: Path, mocap_root: Path, limit: int | None = None, 
         else f"`{lookahead.get('command', '')}`, {lookahead['minutes']:.1f} minutes:\n"
         + stage_lines(lookahead).replace("- ", "  - ")
     )
-    text = f"""# DTP model card: `{onnx_path.name}` (online), `dtp_lookahead.onnx`, `{pretrained_path(onnx_path).name}`
-
-DTP, Deep Tracker Poser (Zeng et al.): headset and five trackers (pelvis, hands, feet) -> the 21
-local joint rotations, through a two-layer embedding, a transformer encoder over a window of
-frames and a linear decoder; fine-tuned on occluded feet. Runtime: ONNX Runtime over the
-window each frame (`sparse_body/methods/dtp/estimator.py`); no torch.
-
-- `{onnx_path.name}`: online ({cfg["past"]} past frames and the current one), occlusion fine-tuned: the node's default.
-- `dtp_lookahead.onnx`: the paper's window with {lookahead["config"]["future"] if lookahead else 5} future frames, for offline processing (`dtp:model=lookahead`).
-- `{pretrained_path(onnx_path).name}`: the online model before fine-tuning, kept to measure the fine-tuning
-  (`dtp:model=pretrained`).
-
-## Data
-- CMU motion capture (allasfamc.zip from mocap.cs.cmu.edu: free use, no resale; indexed with `sparse-body import-mocap`), retargeted onto the
-  22-joint body at {cfg["fps"]:.0f} fps, positions scaled to the canonical leg length, floor at z = 0.
-- Split `config/splits/cmu.yaml` (by subject: no validation or test person in training):
-  {len(split["train"])} train / {len(split["validation"])} validation / {len(split["test"])} test clips. Trained on {report["train_clips"]} train clips
-  with augmented variants ({cfg["augment"]}: {cfg["variants"]} of each clip besides itself; {report["train_frames"]} frames
-  in all), each clean and with LoBSTr's tracker noise; validated on {report["validation_frames"]} frames of the
-  validation people (fixed windows, clean and with feet occluded).
-- Occlusion fine-tuning (the paper's AMASS-OCC): in {cfg["occluded_share"] * 100:.0f} % of the windows one or both
-  feet are occluded from a random frame on, reported as the origin with (near) identity rotation
-  or as a position within a leg's length with a random rotation.
-
-## Training
-- Command: `{report.get("command", "sparse-body train dtp")}` (pre-training, then fine-tuning, one command).
-- Width {cfg["d_model"]} (paper: 256), {cfg["heads"]} heads, {cfg["layers"]} layers, feed-forward {cfg["feedforward"]},
-  dropout {cfg["dropout"]}; Adam lr {cfg["lr"]} halved every {cfg["lr_half_every"]} steps (paper: 1e-4 every
-  10,000), batch {cfg["batch"]} windows, the loss on every frame of a window (causal attention);
-  losses rotation + {cfg["w_end_effector"]} end effector + {cfg["w_foot_velocity"]} foot velocity (the paper's weights).
-- {report["minutes"]:.1f} minutes on {report["hardware"]} (torch {report["torch"]}):
-{stage_lines(report)}
-- Lookahead model: {lookahead_text}
-
-| stage | step | minutes | train loss | val clean [cm] | val feet occluded [cm] |
-|---|---|---|---|---|---|
-{curve(report)}
-
-## Augmentation (the network alone, per-window errors in the pelvis frame)
-
-{augmentation_table(onnx_path.with_suffix(".train.json"), VALIDATION)}
-
-Shorter runs than the shipped model's (the steps column: pre-training and fine-tuning
-together), so they show the early effect; read small differences with care.
-
-## Test split, six-point (`sparse-body eval --estimator dtp --sensors six_point`)
-
-{FIELD_PROTOCOL}:
-
-{results_table(measured["field"])}
-
-`dtp:polish=false` is the paper's method as it is (the network's rotations, no IK after it).
-Lab protocol (`--protocol lab`, the papers' setting; the DTP paper reports
-1.04 cm position error with the root aligned, 4.22 deg global rotation error, jitter 2.31
-(100 m/s^3) on TotalCapture, trained on most of AMASS: a guide, not a like-for-like comparison):
-
-{results_table(measured["lab"])}
-
-## Feet occluded (`--protocol field-exact --occlusion {OCCLUSION_PERCENT:g}`: the paper's occlusion alone)
-
-In about {OCCLUSION_PERCENT:g} % of the frames one or both foot trackers lose sight for half a second and
-report the origin with the identity rotation or noise within a leg's length (both ways, equal
-chances). Every estimator gets the same corrupted streams:
-
-{results_table(measured["occluded"])}
-
-## The polish, chosen on the validation people
-
-The network's pose, then (ours, not the paper's) the closed-form IK brings head, hands and
-the feet whose trackers agree with the network onto their trackers, and they take their
-trackers' orientation. Its options were chosen
-on the validation split, clean and with feet occluded (the test people were not looked at):
-
-{runtime_choices_table(onnx_path.with_name("dtp.runtime.json"), RUNTIME_COMMAND, RUNTIME_METRICS)}
-
-{runtime_choices_table(onnx_path.with_name("dtp.runtime_occluded.json"), RUNTIME_COMMAND, RUNTIME_METRICS)}
-
-## Limits
-- Trained on CMU only; the pelvis tracker must be there (it carries the root).
-- The lookahead model needs frames at its rate (60 fps) offline; live it sees no future.
-"""
+    text = render_card(
+        Path(__file__).with_name("card.md"),
+        {
+            "model_file": f"{onnx_path.name}",
+            "pretrained_model_file": f"{pretrained_path(onnx_path).name}",
+            "cfg_past": f"{cfg['past']}",
+            "lookahead_future": f"{(lookahead['config']['future'] if lookahead else 5)}",
+            "cfg_fps": f"{cfg['fps']:.0f}",
+            "len_split_train": f"{len(split['train'])}",
+            "len_split_validation": f"{len(split['validation'])}",
+            "len_split_test": f"{len(split['test'])}",
+            "report_train_clips": f"{report['train_clips']}",
+            "cfg_augment": f"{cfg['augment']}",
+            "cfg_variants": f"{cfg['variants']}",
+            "report_train_frames": f"{report['train_frames']}",
+            "report_validation_frames": f"{report['validation_frames']}",
+            "occluded_percent": f"{cfg['occluded_share'] * 100:.0f}",
+            "report_command": f"{report.get('command', 'sparse-body train dtp')}",
+            "cfg_d_model": f"{cfg['d_model']}",
+            "cfg_heads": f"{cfg['heads']}",
+            "cfg_layers": f"{cfg['layers']}",
+            "cfg_feedforward": f"{cfg['feedforward']}",
+            "cfg_dropout": f"{cfg['dropout']}",
+            "cfg_lr": f"{cfg['lr']}",
+            "cfg_lr_half_every": f"{cfg['lr_half_every']}",
+            "cfg_batch": f"{cfg['batch']}",
+            "cfg_w_end_effector": f"{cfg['w_end_effector']}",
+            "cfg_w_foot_velocity": f"{cfg['w_foot_velocity']}",
+            "report_minutes": f"{report['minutes']:.1f}",
+            "report_hardware": f"{report['hardware']}",
+            "report_torch": f"{report['torch']}",
+            "stages": f"{stage_lines(report)}",
+            "lookahead_text": f"{lookahead_text}",
+            "curve": f"{curve(report)}",
+            "augmentation": f"{augmentation_table(onnx_path.with_suffix('.train.json'), VALIDATION)}",
+            "field_protocol": f"{FIELD_PROTOCOL}",
+            "field_table": f"{results_table(measured['field'])}",
+            "lab_table": f"{results_table(measured['lab'])}",
+            "occlusion_percent": f"{OCCLUSION_PERCENT:g}",
+            "occluded_table": f"{results_table(measured['occluded'])}",
+            "runtime_table": f"{runtime_choices_table(onnx_path.with_name('dtp.runtime.json'), RUNTIME_COMMAND, RUNTIME_METRICS)}",
+            "runtime_occluded_table": f"{runtime_choices_table(onnx_path.with_name('dtp.runtime_occluded.json'), RUNTIME_COMMAND, RUNTIME_METRICS)}",
+        },
+    )
     path = onnx_path.with_suffix(".md")
     path.write_text(text)
     return path

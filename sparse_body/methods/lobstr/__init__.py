@@ -39,4 +39,7 @@ METHOD = Method(
         out_help="the .onnx file",
     ),
     runtime_bench="sparse_body.apps.bench:bench_network",
+    step_goal=("network, upper-body IK, contact IK", 0.25),
+    ratio_goal=2.0,
+    eval_sensors="four_point",
 )

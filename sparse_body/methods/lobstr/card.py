@@ -15,6 +15,7 @@ from ...train.model_card import (
     measured_results,
     noise_jobs,
     noise_table,
+    render_card,
     runtime_choices_table,
 )
 
@@ -92,7 +93,7 @@ def write_lobstr_card(
     without its contact IK and the paper's figures, field protocol and lab protocol beside it,
     LoBSTr's tracker noise against none) and write <model>.md."""
     augmentation = augmentation_table(Path(onnx_path).with_suffix(".train.json"), LOBSTR_VALIDATION)
-    from ...apps.evaluation import EvalResult, format_table
+    from ...core.results import EvalResult, format_table
     from .. import paper_figures
 
     measured = measured_results(Path(onnx_path), evaluate_lobstr, mocap_root, limit, evaluate)
@@ -108,78 +109,56 @@ def write_lobstr_card(
         for h in history[:: max(1, len(history) // 12)]
     )
     learned = cfg.get("learned_upper", False)
-    text = f"""# LoBSTr model card: `{Path(onnx_path).name}`
-
-LoBSTr (Yang et al., Eurographics 2021): a GRU over the velocities of pelvis, head and hands
-(4 x 9 + 1 inputs per frame, in the pelvis's yaw-only reference frame) predicting the 8 leg
-joints in 6D and the two feet's contact probabilities; contacts held by IK.
-{"Ours, not the paper's (`learned_upper`): the network also sees the current pose (head and hands relative to the pelvis, and the pelvis's tilt: 33 more inputs) and predicts the 13 upper-body joints too, which the closed-form IK then turns onto the headset and hands; the paper solves the upper body by IK alone (`lobstr:learned_upper=false` below)." if learned else "Upper body by IK (the paper's)."}
-Runtime: ONNX Runtime, one GRU step per frame (`sparse_body/methods/lobstr/estimator.py`).
-
-## Data
-- CMU motion capture (allasfamc.zip from mocap.cs.cmu.edu: free use, no resale; indexed with `sparse-body import-mocap`), retargeted onto the
-  22-joint body at {cfg["fps"]:.0f} fps, every clip scaled to the canonical leg length, floor at z = 0.
-- Split `config/splits/cmu.yaml` (by subject: no validation or test person in training):
-  {len(split["train"])} train / {len(split["validation"])} validation / {len(split["test"])} test clips. Trained on {report["train_clips"]} train clips,
-  augmented ({cfg.get("augment", "none")}: {cfg.get("variants", 0)} variants of each clip besides itself,
-  `sparse_body/train/augment.py`; {report["train_frames"]} frames in all), each clean plus
-  {cfg["noise_copies"]} copies with the paper's tracker noise (1 cm Gaussian per axis, rotations up
-  to 1.5 degrees); the checkpoint with the best validation leg rotation + toe position{" + upper-body rotation" if learned else ""}
-  ({report["validation_clips"]} clips) is exported.
-- Contact labels: toe within 2 cm of the floor and slower than 0.3 m/s (`core/contacts.py`).
-
-## Training
-- Command: `{report.get("command", "sparse-body train lobstr")}`
-- Configuration: hidden {cfg["hidden"]} (paper: 1024), latent {cfg["latent"]}, chunks of {cfg["chunk"]} frames
-  ({cfg["burn_in"]} warm-up frames without loss), batch {cfg["batch"]}, Adam lr {cfg["lr"]} x {cfg["lr_decay"]}
-  every {cfg["steps_per_epoch"]} steps; losses pose + {cfg["w_fk"]} FK + {cfg["w_velocity"]} toe velocity +
-  {cfg["w_contact"]:g} contact (the paper's weights){f"; dropout {cfg['dropout']:g} on the GRU's output (ours)" if cfg.get("dropout") else ""}.
-- {report["steps"]} steps in {report["minutes"]:.1f} minutes on {report["hardware"]} (torch {report["torch"]}).
-
-| step | minutes | train loss | val contact [%] | val leg rot [deg] | val toe [cm] | val upper rot [deg] |
-|---|---|---|---|---|---|---|
-{curve}
-
-Validation (exported weights): contact {val["contact_accuracy_pct"]:.1f} %, leg rotation
-{val["lower_rot_error_deg"]:.2f} deg, toe position {val["toe_error_cm"]:.2f} cm (toe relative to the true pelvis){f", upper-body local rotation {val['upper_rot_error_deg']:.2f} deg (before the IK turns it onto the trackers)" if learned else ""}.
-
-### Augmentation, with and without
-
-{augmentation}
-
-## Test split (`sparse-body eval --estimator lobstr --sensors four_point`)
-
-{FIELD_PROTOCOL} and, beside it, the lab protocol the papers use (`--protocol lab`: the
-subject's true skeleton, clean trackers).
-
-```
-{table}
-```
-
-Skate with contact IK: {results[0].summary["Skate [cm/s]"]:.2f} cm/s; without: {results[1].summary["Skate [cm/s]"]:.2f} cm/s (field protocol).
-
-## The learned upper body, chosen on the validation people
-
-{runtime_choices_table(Path(onnx_path).with_name("lobstr.runtime.json"), LOBSTR_RUNTIME_COMMAND, LOBSTR_RUNTIME_METRICS)}
-
-{DROPOUT_SECTION if cfg.get("dropout") else ""}{NOISE_HEADING}
-
-LoBSTr's noise (1 cm, 1.5 degrees) with the input filter set for it, and smoothed over the
-whole clip as `sparse-body process --smooth` does (`E:smooth=true`), against clean trackers (no
-filter). No live filter can take this noise out without lag: on the tracked points alone the
-best one leaves about 51 cm/s of velocity error (`scripts/noise_floor.py`; the README's
-"Offline smoothing").
-
-{noise}
-
-The paper's figures come from its own data (PFNN, CMU and MHAD locomotion at 45 fps) and
-protocol: a guide, not a like-for-like comparison.
-
-## Limits
-- Trained on CMU only ({report["train_frames"] / cfg["fps"] / 60:.0f} minutes of motion); no sitting on chairs, few
-  sharp turns. Contact prediction is weakest at sharp turns and leg crossings (as the paper reports).
-- The reference frame is yaw only (as in the paper): lying, rolling or crawling are out of scope.
-"""
+    text = render_card(
+        Path(__file__).with_name("card.md"),
+        {
+            "model_file": f"{Path(onnx_path).name}",
+            "upper_body_sentence": f"""{("Ours, not the paper's (`learned_upper`): the network also sees the current pose (head and hands relative to the pelvis, and the pelvis's tilt: 33 more inputs) and predicts the 13 upper-body joints too, which the closed-form IK then turns onto the headset and hands; the paper solves the upper body by IK alone (`lobstr:learned_upper=false` below)." if learned else "Upper body by IK (the paper's).")}""",
+            "cfg_fps": f"{cfg['fps']:.0f}",
+            "len_split_train": f"{len(split['train'])}",
+            "len_split_validation": f"{len(split['validation'])}",
+            "len_split_test": f"{len(split['test'])}",
+            "report_train_clips": f"{report['train_clips']}",
+            "cfg_augment": f"{cfg.get('augment', 'none')}",
+            "cfg_variants": f"{cfg.get('variants', 0)}",
+            "report_train_frames": f"{report['train_frames']}",
+            "cfg_noise_copies": f"{cfg['noise_copies']}",
+            "upper_in_the_choice": f"{(' + upper-body rotation' if learned else '')}",
+            "report_validation_clips": f"{report['validation_clips']}",
+            "report_command": f"{report.get('command', 'sparse-body train lobstr')}",
+            "cfg_hidden": f"{cfg['hidden']}",
+            "cfg_latent": f"{cfg['latent']}",
+            "cfg_chunk": f"{cfg['chunk']}",
+            "cfg_burn_in": f"{cfg['burn_in']}",
+            "cfg_batch": f"{cfg['batch']}",
+            "cfg_lr": f"{cfg['lr']}",
+            "cfg_lr_decay": f"{cfg['lr_decay']}",
+            "cfg_steps_per_epoch": f"{cfg['steps_per_epoch']}",
+            "cfg_w_fk": f"{cfg['w_fk']}",
+            "cfg_w_velocity": f"{cfg['w_velocity']}",
+            "cfg_w_contact": f"{cfg['w_contact']:g}",
+            "dropout_clause": f"""{(f"; dropout {cfg['dropout']:g} on the GRU's output (ours)" if cfg.get("dropout") else "")}""",
+            "report_steps": f"{report['steps']}",
+            "report_minutes": f"{report['minutes']:.1f}",
+            "report_hardware": f"{report['hardware']}",
+            "report_torch": f"{report['torch']}",
+            "curve": f"{curve}",
+            "val_contact_accuracy_pct": f"{val['contact_accuracy_pct']:.1f}",
+            "val_lower_rot_error_deg": f"{val['lower_rot_error_deg']:.2f}",
+            "val_toe_error_cm": f"{val['toe_error_cm']:.2f}",
+            "upper_validation_clause": f"""{(f", upper-body local rotation {val['upper_rot_error_deg']:.2f} deg (before the IK turns it onto the trackers)" if learned else "")}""",
+            "augmentation": f"{augmentation}",
+            "field_protocol": f"{FIELD_PROTOCOL}",
+            "table": f"{table}",
+            "skate_with_contact_ik": f"{results[0].summary['Skate [cm/s]']:.2f}",
+            "skate_without_contact_ik": f"{results[1].summary['Skate [cm/s]']:.2f}",
+            "runtime_table": f"{runtime_choices_table(Path(onnx_path).with_name('lobstr.runtime.json'), LOBSTR_RUNTIME_COMMAND, LOBSTR_RUNTIME_METRICS)}",
+            "dropout_section": f"{(DROPOUT_SECTION if cfg.get('dropout') else '')}",
+            "noise_heading": f"{NOISE_HEADING}",
+            "noise": f"{noise}",
+            "train_minutes": f"{report['train_frames'] / cfg['fps'] / 60:.0f}",
+        },
+    )
     path = Path(onnx_path).with_suffix(".md")
     path.write_text(text)
     return path

@@ -6,4 +6,5 @@ METHOD = Method(
     "reference",
     "sparse_body.methods.reference.estimator:ReferenceEstimator",
     "sparse_body.methods.reference.options:ReferenceOptions",
+    eval_sensors="six_point",
 )

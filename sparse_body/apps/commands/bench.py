@@ -1,0 +1,42 @@
+"""`sparse-body bench`: its arguments (add_parser) and what it runs (run)."""
+
+from __future__ import annotations
+
+
+def run(args) -> int:
+    from ...methods import METHODS, load
+    from ..bench import run, run_goals
+
+    if args.runtime:
+        bench = METHODS[args.runtime].runtime_bench
+        if bench is None:
+            raise ValueError(f"{args.runtime} has no runtime bench")
+        load(bench)()
+        return 0
+    if args.estimator:
+        run(args.estimator, args.sensors, latency=not args.no_latency)
+    else:
+        run_goals(latency=not args.no_latency)
+    return 0
+
+
+def add_parser(sub) -> None:
+    from ...methods import METHODS
+
+    p = sub.add_parser("bench", help="step times and end-to-end latency over DDS, beside their goals")
+    p.add_argument(
+        "--estimator",
+        action="append",
+        help="estimator(s) to measure on --sensors (default: the goal table: ik, lobstr, dragposer, dtp, avatarjlm "
+        "step times and ik's TF -> JointState latency)",
+    )
+    p.add_argument("--sensors", default="six_point")
+    p.add_argument("--no-latency", action="store_true", help="only the offline speed (no ROS needed)")
+    benched = {name: m for name, m in METHODS.items() if m.runtime_bench}
+    p.add_argument(
+        "--runtime",
+        choices=sorted(benched),
+        metavar="METHOD",
+        help="only that method's runtime against its torch reference, on one core",
+    )
+    p.set_defaults(func=run)

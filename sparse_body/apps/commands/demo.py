@@ -1,0 +1,36 @@
+"""`sparse-body demo`: its arguments (add_parser) and what it runs (run)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from .common import seconds
+
+
+def run(args) -> int:
+    from ...core.sensors import load_sensor_config
+    from ...data.catalog import find_mocap_root
+    from ..demo import run_demo
+
+    run_demo(
+        Path(args.out),
+        load_sensor_config(args.sensors),
+        args.estimator,
+        find_mocap_root(args.mocap),
+        args.motion,
+        args.seconds,
+        gif=not args.no_gif,
+    )
+    return 0
+
+
+def add_parser(sub) -> None:
+    p = sub.add_parser("demo", help="motion -> tracker bag -> estimator -> metrics and an animation")
+    p.add_argument("--out", default="sparse_body_demo", help="folder for the bags and demo.gif")
+    p.add_argument("--sensors", default="six_point")
+    p.add_argument("--estimator", default="ik")
+    p.add_argument("--motion", help="a motion file to use instead of the CMU demo clip")
+    p.add_argument("--mocap", help="the CMU folder")
+    p.add_argument("--seconds", type=seconds, default=6.0, help="the length of the synthetic walk")
+    p.add_argument("--no-gif", action="store_true", help="skip the animation")
+    p.set_defaults(func=run)

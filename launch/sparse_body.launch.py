@@ -19,7 +19,7 @@ from launch.substitutions import LaunchConfiguration
 from launch_ros.actions import LifecycleNode, Node
 
 from launch import LaunchDescription
-from sparse_body.estimators.base import estimator_names
+from sparse_body.methods.factory import estimator_names
 
 
 def _installed(package: str) -> bool:

@@ -14,10 +14,10 @@ import argparse
 
 import numpy as np
 
-from sparse_body.apps.evaluation import estimate_motion, split_items
 from sparse_body.core.metrics import LOWER
 from sparse_body.core.sensors import load_sensor_config
 from sparse_body.data.catalog import find_mocap_root
+from sparse_body.evaluation import estimate_motion, split_items
 
 BANDS = (0.0, 0.10, 0.15, 0.20, 0.30, np.inf)  # metres of leg disagreement
 

@@ -28,13 +28,13 @@ FADES = (0.03, 0.05, 0.1, 0.2, math.inf)  # s; inf: a constant velocity
 
 
 def main() -> int:
-    from sparse_body.apps.evaluation import estimated_clips
     from sparse_body.core.forecast import PoseForecast, faded_seconds
     from sparse_body.core.kinematics import forward_kinematics
     from sparse_body.core.rotations import quat_to_matrix
     from sparse_body.data.catalog import find_mocap_root, split_clips
     from sparse_body.estimators.base import learned_root_available
     from sparse_body.estimators.forecast_model import RootForecastModel
+    from sparse_body.evaluation import estimated_clips
 
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("estimator")

@@ -35,10 +35,10 @@ KEPT = ("MPJPE [cm]", "MPJVE [cm/s]", "Jitter [100m/s3]")
 
 
 def _evaluate(job: tuple) -> dict:
-    from sparse_body.apps.evaluation import evaluate
     from sparse_body.core.sensors import load_sensor_config
     from sparse_body.data.catalog import find_mocap_root
     from sparse_body.data.field_protocol import Protocol
+    from sparse_body.evaluation import evaluate
 
     spec, sensors, noise, split, limit = job
     result = evaluate(
@@ -65,7 +65,6 @@ def _evaluate(job: tuple) -> dict:
 def _floor(job: tuple) -> dict:
     """The tracked points' own velocity error and jitter after the smoother at each lag:
     the sensors' virtual trackers with the noise, against the same trackers clean."""
-    from sparse_body.apps.evaluation import filter_options
     from sparse_body.core.fixed_lag import FixedLagSmoother
     from sparse_body.core.metrics import jitter, mpjve
     from sparse_body.core.sensors import load_sensor_config
@@ -73,6 +72,7 @@ def _floor(job: tuple) -> dict:
     from sparse_body.data.catalog import find_mocap_root, load_clip, split_clips
     from sparse_body.data.field_protocol import NOISE_MODELS
     from sparse_body.data.virtual_trackers import NO_NOISE, synthesize_trackers
+    from sparse_body.evaluation import filter_options
 
     sensors_name, noise, split, limit = job
     sensors, model = load_sensor_config(sensors_name), NOISE_MODELS[noise]

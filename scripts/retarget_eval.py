@@ -23,12 +23,12 @@ import numpy as np
 
 
 def main() -> int:
-    from sparse_body.apps.evaluation import estimate_motion, split_items
     from sparse_body.core.rotations import matrix_to_quat
     from sparse_body.core.sensors import load_sensor_config
     from sparse_body.core.types import BodyPose
     from sparse_body.data.catalog import find_mocap_root, split_clips
     from sparse_body.data.field_protocol import FIELD
+    from sparse_body.evaluation import estimate_motion, split_items
     from sparse_body.robot.mapping import load_mapping
     from sparse_body.robot.retarget import HumanoidRetarget, retarget_quality
     from sparse_body.robot.urdf_model import load_urdf

@@ -228,7 +228,7 @@ fi
 # (sparse_body/*/__pycache__); compiling them here spares the first node its seconds.
 say "compiling the per-frame kernels (numba) and the package's bytecode"
 "$VPY" -m compileall -q "$ROOT/sparse_body" > /dev/null || die "compiling sparse_body's bytecode failed"
-"$VPY" -c 'from sparse_body.estimators.kernels import compile_kernels; compile_kernels()' \
+"$VPY" -c 'from sparse_body.methods.kernels import compile_kernels; compile_kernels()' \
   || die "compiling the per-frame kernels failed"
 
 say "ready: activate with 'source $VENV/bin/activate'"

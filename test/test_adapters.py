@@ -298,7 +298,7 @@ def test_orientation_only_foot_imus_turn_the_ankles_and_invent_no_position():
     from sparse_body.core.sensors import load_sensor_config
     from sparse_body.data.synthetic import synthetic_walk
     from sparse_body.data.virtual_trackers import synthesize_trackers
-    from sparse_body.estimators import create_estimator
+    from sparse_body.methods.factory import create_estimator
 
     config = load_sensor_config("four_point_foot_imus")
     motion = synthetic_walk(2.0)

@@ -18,8 +18,8 @@ from sparse_body.core.sensors import load_sensor_config
 from sparse_body.core.skeleton import JOINT_INDEX as J
 from sparse_body.data.catalog import load_clip
 from sparse_body.data.virtual_trackers import VR_NOISE, synthesize_trackers
-from sparse_body.estimators import create_estimator
 from sparse_body.methods.avatarjlm.features import SITES, input_joints, sequence_features
+from sparse_body.methods.factory import create_estimator
 
 THREE, FOUR = load_sensor_config("three_point"), load_sensor_config("four_point")
 WRISTS = [J["left_wrist"], J["right_wrist"]]
@@ -235,9 +235,9 @@ def test_a_finished_training_trains_further_from_its_kept_checkpoint(tmp_path, m
 def test_shipped_three_point_model_beats_ik_on_a_held_out_walk(clip_index):
     """A test person's walk, field protocol, headset and controllers only: the body is
     closer than the IK's and the hands stay on their controllers."""
-    from sparse_body.apps.evaluation import evaluate_motion
     from sparse_body.data.catalog import load_split
     from sparse_body.data.field_protocol import FIELD
+    from sparse_body.evaluation import evaluate_motion
 
     assert "16_17" in load_split()["test"]
     motion = load_clip(clip_index["16_17"])

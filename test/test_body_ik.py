@@ -207,7 +207,7 @@ def test_ik_puts_every_tracked_joint_on_its_tracker(sensors):
     from sparse_body.core.sensors import SITE_JOINTS, load_sensor_config
     from sparse_body.data.synthetic import synthetic_walk
     from sparse_body.data.virtual_trackers import synthesize_trackers
-    from sparse_body.estimators import create_estimator
+    from sparse_body.methods.factory import create_estimator
 
     config = load_sensor_config(sensors)
     motion = synthetic_walk(3.0)

@@ -11,9 +11,9 @@ import pytest
 from sparse_body.core.sensors import load_sensor_config
 from sparse_body.data.synthetic import synthetic_walk
 from sparse_body.data.virtual_trackers import synthesize_trackers
-from sparse_body.estimators import create_estimator
 from sparse_body.estimators.base import Estimator
 from sparse_body.estimators.budget import BudgetedStep
+from sparse_body.methods.factory import create_estimator
 
 FOUR = load_sensor_config("four_point")
 FAR = math.inf  # no deadline

@@ -16,7 +16,6 @@ from sparse_body.core.skeleton import JOINT_INDEX as J
 from sparse_body.core.skeleton import Skeleton
 from sparse_body.data.synthetic import synthetic_walk
 from sparse_body.data.virtual_trackers import TrackerNoise, synthesize_trackers
-from sparse_body.estimators import create_estimator
 from sparse_body.estimators.onnx_model import ModelMissing
 from sparse_body.methods.dragposer.constraints import (
     AboveFloor,
@@ -28,6 +27,7 @@ from sparse_body.methods.dragposer.constraints import (
     Position,
 )
 from sparse_body.methods.dragposer.pose import dual_quaternions, split_heading
+from sparse_body.methods.factory import create_estimator
 
 
 @pytest.fixture(scope="module")

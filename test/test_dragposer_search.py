@@ -12,7 +12,6 @@ from sparse_body.core.sensors import load_sensor_config
 from sparse_body.core.skeleton import Skeleton
 from sparse_body.data.synthetic import synthetic_walk
 from sparse_body.data.virtual_trackers import synthesize_trackers
-from sparse_body.estimators import create_estimator
 from sparse_body.methods.dragposer.constraints import (
     AboveFloor,
     AngleLimit,
@@ -31,6 +30,7 @@ from sparse_body.methods.dragposer.search import (
     mlp_weights,
     pack,
 )
+from sparse_body.methods.factory import create_estimator
 
 
 @pytest.fixture(scope="module")

@@ -17,8 +17,8 @@ from sparse_body.core.sensors import load_sensor_config
 from sparse_body.data.catalog import load_clip
 from sparse_body.data.field_protocol import FIELD_EXACT, Protocol, user_view
 from sparse_body.data.virtual_trackers import NO_NOISE, VR_NOISE, synthesize_trackers
-from sparse_body.estimators import create_estimator
 from sparse_body.methods.dtp.features import INPUT_JOINTS, leaf_features, window_features
+from sparse_body.methods.factory import create_estimator
 
 SIX = load_sensor_config("six_point")
 
@@ -298,8 +298,8 @@ def test_resume_after_the_pre_training_goes_on_with_the_fine_tuning(tmp_path, mo
 def test_shipped_fine_tuning_pays_off_on_occluded_feet(clip_index):
     """A held-out person's walk with feet occluded in a fifth of the frames: the fine-tuned
     model places the body better than the one before fine-tuning."""
-    from sparse_body.apps.evaluation import evaluate_motion
     from sparse_body.data.catalog import load_split
+    from sparse_body.evaluation import evaluate_motion
 
     assert "16_17" in load_split()["test"]
     motion = load_clip(clip_index["16_17"])

@@ -11,7 +11,7 @@ import shutil
 import generated_mocap as gen
 import pytest
 
-from sparse_body.apps import evaluation
+from sparse_body import evaluation
 from sparse_body.cli import EXIT_INPUT, main
 from sparse_body.data import catalog
 from sparse_body.data.motion_inputs import balanced, find_inputs

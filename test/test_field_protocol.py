@@ -7,7 +7,6 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from sparse_body.apps.evaluation import evaluate_motion
 from sparse_body.core.body_shape import arm_length, arm_span, fit_skeleton, leg_length
 from sparse_body.core.calibration import Calibration, CalibrationError
 from sparse_body.core.sensors import load_sensor_config
@@ -18,6 +17,7 @@ from sparse_body.core.types import TrackerFrame
 from sparse_body.data.field_protocol import FIELD, FIELD_EXACT, LAB, Protocol, user_view
 from sparse_body.data.synthetic import synthetic_walk
 from sparse_body.data.virtual_trackers import LOBSTR_NOISE, NO_NOISE
+from sparse_body.evaluation import evaluate_motion
 
 
 def _tpose_joints(skeleton: Skeleton) -> dict:

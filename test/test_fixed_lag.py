@@ -13,7 +13,7 @@ from sparse_body.core.tracker_smoother import smooth_frames
 from sparse_body.core.types import TrackerFrame
 from sparse_body.data.synthetic import synthetic_walk
 from sparse_body.data.virtual_trackers import LOBSTR_NOISE, NO_NOISE, synthesize_trackers
-from sparse_body.estimators import create_estimator
+from sparse_body.methods.factory import create_estimator
 
 SITES = ("head", "left_hand", "right_hand", "pelvis", "left_foot", "right_foot")
 NOISY = FilterConfig(position_noise=0.01, rotation_noise=1.5, gap=0.1)

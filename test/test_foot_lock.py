@@ -4,13 +4,13 @@ they touched down while its own contacts say so."""
 import numpy as np
 import pytest
 
-from sparse_body.apps.evaluation import estimate_motion, score
 from sparse_body.core.contacts import FOOT_JOINTS
 from sparse_body.core.sensors import load_sensor_config
 from sparse_body.core.skeleton import Skeleton
 from sparse_body.data.field_protocol import FIELD
 from sparse_body.data.synthetic import synthetic_walk
-from sparse_body.estimators import create_estimator
+from sparse_body.evaluation import estimate_motion, score
+from sparse_body.methods.factory import create_estimator
 
 
 def test_a_locked_foot_stays_where_it_touched_down_while_in_contact():

@@ -5,7 +5,6 @@ import math
 import numpy as np
 import pytest
 
-from sparse_body.apps.evaluation import estimate_motion, score
 from sparse_body.core.forecast import FADE, MAX_AHEAD, MAX_GAP, MAX_SPEED, MAX_TURN, PoseForecast, faded_seconds
 from sparse_body.core.rotations import matrix_to_quat, rotation_about
 from sparse_body.core.sensors import load_sensor_config
@@ -13,7 +12,8 @@ from sparse_body.core.skeleton import Skeleton
 from sparse_body.core.types import BodyPose
 from sparse_body.data.field_protocol import FIELD
 from sparse_body.data.synthetic import synthetic_walk
-from sparse_body.estimators import create_estimator
+from sparse_body.evaluation import estimate_motion, score
+from sparse_body.methods.factory import create_estimator
 
 FPS = 60.0
 

@@ -5,12 +5,12 @@ robot files end in one line; `process --robot` writes the robot's JointState bes
 import numpy as np
 import pytest
 
-from sparse_body.apps.evaluation import estimate_motion
 from sparse_body.core.rotations import matrix_to_quat
 from sparse_body.core.sensors import load_sensor_config
 from sparse_body.core.skeleton import Skeleton
 from sparse_body.core.types import BodyPose
 from sparse_body.data.synthetic import synthetic_walk
+from sparse_body.evaluation import estimate_motion
 from sparse_body.robot.example import urdf, write_robot
 from sparse_body.robot.mapping import load_mapping
 from sparse_body.robot.retarget import load_retarget, retarget_quality

@@ -1,10 +1,10 @@
 import numpy as np
 import pytest
 
-from sparse_body.apps.evaluation import evaluate_motion
 from sparse_body.core.sensors import load_sensor_config, parse_sensor_config
 from sparse_body.data.field_protocol import FIELD_EXACT
 from sparse_body.data.synthetic import synthetic_walk
+from sparse_body.evaluation import evaluate_motion
 
 
 @pytest.mark.parametrize("config,max_ee", [("three_point", 1.0), ("four_point", 1.0), ("six_point", 1.0)])

@@ -70,3 +70,42 @@ def test_core_imports_nothing_above_it():
     graph = _imports()
     upward = {m: sorted(t for t in graph[m] if not t.startswith("sparse_body.core")) for m in graph}
     assert {m: t for m, t in upward.items() if m.startswith("sparse_body.core") and t} == {}
+
+
+# The floors, lowest first: a module imports only from its own floor or below. A method's
+# folder spans two: its runtime (estimator, options, features, ONNX runtimes) sits on the
+# methods floor, its training side (model, train, card, *_model, *_train, the torch
+# reference, its runtime bench) on the training floor, with the harness it uses.
+FLOORS = {
+    "core": 0,
+    "robot": 1,
+    "adapters": 1,
+    "io": 2,
+    "data": 3,
+    "estimators": 4,
+    "methods": 5,
+    "evaluation": 6,
+    "train": 7,
+    "ros": 8,
+    "apps": 9,
+    "cli": 10,
+}
+TRAINING_SIDE = ("model", "train", "card", "bench", "torch_reference")
+
+
+def _floor(module: str) -> int:
+    parts = module.split(".")
+    if len(parts) == 1:
+        return 0  # the package itself: its version
+    if parts[1] == "methods" and len(parts) >= 4:
+        leaf = parts[3]
+        if leaf in TRAINING_SIDE or leaf.endswith(("_model", "_train")):
+            return FLOORS["train"]
+    return FLOORS[parts[1]]
+
+
+def test_no_arrow_runs_back_up_the_floors():
+    graph = _imports()
+    assert all(m.split(".")[1] in FLOORS for m in graph if "." in m), "a new top-level module: give it a floor"
+    upward = sorted(f"{m} -> {t}" for m, targets in graph.items() for t in targets if _floor(t) > _floor(m))
+    assert upward == []

@@ -18,8 +18,8 @@ from sparse_body.core.skeleton import JOINT_INDEX as J
 from sparse_body.core.skeleton import Skeleton, standing_pose
 from sparse_body.data.catalog import load_clip
 from sparse_body.data.virtual_trackers import TrackerNoise, synthesize_trackers
-from sparse_body.estimators import create_estimator
 from sparse_body.estimators.onnx_model import ModelMissing
+from sparse_body.methods.factory import create_estimator
 from sparse_body.methods.lobstr.features import (
     INPUT_JOINTS,
     apply_legs,
@@ -334,8 +334,8 @@ def test_shipped_model_beats_the_ik_baseline_on_a_test_clip(clip_index):
     """The trained model on a held-out person's walk with a 90-degree turn: legs and contacts
     better than the IK baseline's standing legs. (On a boxing clip, 17_10, standing legs get
     as many contacts right as the model, 77 %: a boxer mostly stands.)"""
-    from sparse_body.apps.evaluation import evaluate_motion
     from sparse_body.data.catalog import load_split
+    from sparse_body.evaluation import evaluate_motion
 
     assert "16_17" in load_split()["test"]
     motion = load_clip(clip_index["16_17"])

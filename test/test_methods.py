@@ -53,7 +53,7 @@ def test_the_commands_and_the_evaluation_hold_no_per_method_branches():
     for path in [
         ROOT / "cli.py",
         ROOT / "apps" / "commands",
-        ROOT / "apps" / "evaluation.py",
+        ROOT / "evaluation.py",
         ROOT / "train",
         ROOT / "ros",
     ]:

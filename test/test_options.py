@@ -9,13 +9,14 @@ from pathlib import Path
 
 import pytest
 
-from sparse_body.apps import evaluation, option_docs
+from sparse_body import evaluation
+from sparse_body.apps import option_docs
 from sparse_body.core.sensors import load_sensor_config
 from sparse_body.core.skeleton import Skeleton
 from sparse_body.core.tracker_filter import FilterConfig
 from sparse_body.data.synthetic import synthetic_walk
-from sparse_body.estimators.base import create_estimator
 from sparse_body.methods import METHODS, Method, load
+from sparse_body.methods.factory import create_estimator
 
 DOCS = Path(__file__).resolve().parents[1] / "docs" / "options.md"
 EVERY = [(name, load(record.options)) for name, record in METHODS.items()] + [("filter", FilterConfig)]

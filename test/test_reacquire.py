@@ -107,10 +107,10 @@ def test_carried_and_eased_hands_never_snap_back_for_any_three_point_method(mode
     options, every three-point method's largest recovery jump is a few centimetres (measured
     1.8-3.0), where without them the hands snapped back 7-203 cm (AvatarJLM's with its whole
     body, held while a hand was lost; a frozen hand wherever the method had believed it)."""
-    from sparse_body.apps.evaluation import evaluate_motion
     from sparse_body.core.sensors import load_sensor_config
     from sparse_body.data.field_protocol import Protocol
     from sparse_body.data.synthetic import synthetic_walk
+    from sparse_body.evaluation import evaluate_motion
 
     motion = synthetic_walk(30.0)
     sensors = load_sensor_config("three_point")
@@ -153,7 +153,7 @@ def test_a_sample_repeated_bit_for_bit_is_lost_after_frozen_after_and_a_live_one
 def test_the_loss_options_are_range_checked():
     from sparse_body.core.sensors import load_sensor_config
     from sparse_body.core.skeleton import Skeleton
-    from sparse_body.estimators import create_estimator
+    from sparse_body.methods.factory import create_estimator
 
     sensors = load_sensor_config("three_point")
     for option, bad, message in (

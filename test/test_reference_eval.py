@@ -6,12 +6,12 @@ import sys
 import numpy as np
 import pytest
 
-from sparse_body.apps.evaluation import evaluate_motion
 from sparse_body.core.sensors import load_sensor_config
 from sparse_body.core.types import TrackerFrame
 from sparse_body.data.synthetic import synthetic_walk
 from sparse_body.data.virtual_trackers import synthesize_trackers
-from sparse_body.estimators import create_estimator
+from sparse_body.evaluation import evaluate_motion
+from sparse_body.methods.factory import create_estimator
 
 
 def test_reference_estimator_places_the_body_under_the_headset():
@@ -241,8 +241,8 @@ def test_each_kind_of_motion_has_its_figure_and_those_no_training_clip_has_are_m
 
 
 def test_untrained_categories_are_those_of_no_training_clip(mocap_root):
-    from sparse_body.apps.evaluation import untrained_categories
     from sparse_body.data.catalog import split_clips
+    from sparse_body.evaluation import untrained_categories
 
     trained = {c.category for c in split_clips(mocap_root, "train")}
     validation = [c.category for c in split_clips(mocap_root, "validation")]

@@ -24,10 +24,10 @@ from std_msgs.msg import String  # noqa: E402
 from test_ros_nodes import _call  # noqa: E402
 from tf2_msgs.msg import TFMessage  # noqa: E402
 
-from sparse_body.apps.evaluation import estimate_motion  # noqa: E402
 from sparse_body.core.rotations import matrix_to_quat  # noqa: E402
 from sparse_body.core.sensors import load_sensor_config  # noqa: E402
 from sparse_body.data.synthetic import synthetic_walk  # noqa: E402
+from sparse_body.evaluation import estimate_motion  # noqa: E402
 from sparse_body.io.output import joint_angles, joint_state_names  # noqa: E402
 from sparse_body.io.urdf import body_urdf  # noqa: E402
 from sparse_body.msg import FootContact, FootContacts  # noqa: E402

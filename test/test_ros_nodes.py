@@ -766,7 +766,7 @@ def test_trackers_on_a_static_chain_count_as_current(ros_env, tmp_path):
 
 
 def test_the_estimator_parameter_names_every_estimator():
-    from sparse_body.estimators.base import estimator_names
+    from sparse_body.methods.factory import estimator_names
     from sparse_body.ros.estimator_node import PARAMETERS
 
     text = PARAMETERS["estimator"][1]

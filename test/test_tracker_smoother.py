@@ -4,7 +4,6 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from sparse_body.apps.evaluation import evaluate_motion
 from sparse_body.core.sensors import load_sensor_config
 from sparse_body.core.tracker_filter import FilterConfig, TrackerFilter
 from sparse_body.core.tracker_smoother import smooth_frames
@@ -12,7 +11,8 @@ from sparse_body.core.types import TrackerFrame
 from sparse_body.data.catalog import load_clip
 from sparse_body.data.field_protocol import Protocol
 from sparse_body.data.virtual_trackers import LOBSTR_NOISE, NO_NOISE, synthesize_trackers
-from sparse_body.estimators import create_estimator
+from sparse_body.evaluation import evaluate_motion
+from sparse_body.methods.factory import create_estimator
 
 NOISY = FilterConfig(position_noise=0.01, rotation_noise=0.5)
 

@@ -16,16 +16,15 @@ import sys
 import tempfile
 import time
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 
 from ..core.sensors import load_sensor_config
 from ..data.synthetic import synthetic_walk
 from ..data.virtual_trackers import synthesize_trackers
-from ..estimators import create_estimator
 from ..estimators.base import parse_estimator_spec
 from ..methods import METHODS
+from ..methods.factory import create_estimator
 
 # (figure, estimator, goal for its p99 in ms on one thread of an idle machine of the kind CI
 # runs on: issue 28), from each method's record; the latency goal is 1 ms plus the step's p99
@@ -170,159 +169,6 @@ def bench_latency(estimator: str, sensors_name: str, seconds: float = 10.0, rate
         f"{len(ms)} samples): p50 {np.percentile(ms, 50):.2f} ms, p99 {np.percentile(ms, 99):.2f} ms"
     )
     return float(np.percentile(ms, 50)), float(np.percentile(ms, 99))
-
-
-def _percentiles(times) -> str:
-    ms = np.asarray(times) * 1000
-    return f"p50 {np.percentile(ms, 50):6.3f} ms   p99 {np.percentile(ms, 99):6.3f} ms"
-
-
-def bench_network(frames: int = 3000) -> None:
-    """LoBSTr's per-frame network step on one core: torch against ONNX Runtime, for the small
-    and the paper's sizes (random weights: the cost does not depend on their values), and the
-    shipped model. One GRU step with the state carried, batch 1, as the estimator runs it."""
-    import tempfile
-
-    import torch
-
-    from ..methods.lobstr.estimator import LobstrModel, default_model_path
-    from ..methods.lobstr.features import feature_count
-    from ..methods.lobstr.model import LobstrConfig, LobstrNet, LobstrStep
-    from ..methods.lobstr.train import export_onnx
-
-    torch.set_num_threads(1)
-    rng = np.random.default_rng(0)
-    x = rng.normal(size=(frames, feature_count(True))).astype(np.float32)  # a model reads its first columns
-    print(f"LoBSTr network step, {frames} frames, 1 thread (torch {torch.__version__})")
-
-    def time_ort(model: LobstrModel):
-        state, times = model.initial_state(), []
-        for row in x[:, : model.features]:
-            t0 = time.perf_counter()
-            _, _, state = model.step(row, state)
-            times.append(time.perf_counter() - t0)
-        return times[100:]
-
-    for name in ("small", "paper"):
-        config = LobstrConfig.named(name)
-        net = LobstrNet(config).eval()
-        step = LobstrStep(net)
-        state, times = torch.zeros(1, 1, config.hidden), []
-        with torch.inference_mode():
-            for row in torch.from_numpy(x[:, : feature_count(config.learned_upper)]):
-                t0 = time.perf_counter()
-                _, _, state = step(row[None], state)
-                times.append(time.perf_counter() - t0)
-        print(f"  {name:<6} hidden {config.hidden:<5} torch        {_percentiles(times[100:])}")
-        with tempfile.TemporaryDirectory() as tmp:
-            path = Path(tmp) / "lobstr.onnx"
-            export_onnx(net, path, {"method": "lobstr", "config": config.to_dict()})
-            print(f"  {name:<6} hidden {config.hidden:<5} onnxruntime  {_percentiles(time_ort(LobstrModel(path)))}")
-    if default_model_path().is_file():
-        model = LobstrModel()
-        shipped = f"shipped {default_model_path().name} (hidden {model.hidden})"
-        print(f"  {shipped} onnxruntime  {_percentiles(time_ort(model))}")
-
-
-def bench_dragposer(
-    frames: int = 600,
-    max_iterations: int = 20,
-    tolerance: float = 0.01,
-    rotation_tolerance: float = 0.087,
-    torch_frames: int = 10,
-) -> None:
-    """DragPoser's pose optimiser, six-point, on the demo's CMU test clip (the synthetic walk
-    where no motion capture is indexed: `sparse-body import-mocap`): milliseconds per frame and
-    iterations until the trackers are met (1 cm, 5 degrees), for the ONNX Runtime Gauss-Newton
-    runtime and the torch autograd reference
-    (Adam, the paper's kind of step), both starting each frame from the runtime's previous
-    solution."""
-    import torch
-
-    from ..data.catalog import find_mocap_root, load_clip, read_index
-    from ..methods.dragposer.estimator import END_JOINTS, DragPoserEstimator
-    from ..methods.dragposer.torch_reference import load_vae, optimise
-    from .demo import DEMO_CLIP
-
-    torch.set_num_threads(1)
-    root = find_mocap_root()
-    if root is not None:
-        motion, where = load_clip({c.clip_id: c for c in read_index(root)}[DEMO_CLIP]).slice(0, frames), DEMO_CLIP
-    else:
-        motion, where = synthetic_walk(frames / 60.0), "synthetic walk"
-    config = load_sensor_config("six_point")
-    stream = synthesize_trackers(motion, config)
-    # the search alone, as the reference does it: no temporal prior, no IK polish
-    est = DragPoserEstimator(
-        config,
-        motion.skeleton,
-        iterations=max_iterations,
-        tolerance=tolerance,
-        rotation_tolerance=rotation_tolerance,
-        temporal_weight=0.0,
-        polish=False,
-    )
-    times, states = [], []
-    for frame in stream:
-        states.append(est._state)
-        t0 = time.perf_counter()
-        est.step(frame)
-        times.append(time.perf_counter() - t0)
-    its = np.array(est.iterations_used[1:])
-    print(
-        f"DragPoser optimiser, six-point, {where}, {len(stream)} frames, trackers met within "
-        f"{tolerance * 100:g} cm / {np.degrees(rotation_tolerance):.0f} deg, 1 thread"
-    )
-    print(
-        f"  onnxruntime Gauss-Newton: {_percentiles(times[1:])} per frame; iterations to converge: mean "
-        f"{its.mean():.2f}, p99 {np.percentile(its, 99):.0f} (cap {max_iterations}); "
-        f"{1000 * np.mean(times[1:]) / its.mean():.2f} ms per iteration"
-    )
-    vae = load_vae(est.vae.dir)
-    picks = np.linspace(10, len(stream) - 1, torch_frames).astype(int)
-    t_iters, t_ms = [], []
-    for i in picks:
-        z, root, yaw = states[i]
-        frame = stream.frame(i)
-        constraints = est.tracker_constraints(frame)
-        for c in est.constraints:
-            constraints.add(c)
-        stats: dict[str, float] = {}
-        t0 = time.perf_counter()
-        optimise(
-            vae,
-            constraints,
-            motion.skeleton.offsets,
-            z,
-            root,
-            yaw,
-            z,
-            iterations=2000,
-            lr=0.01,
-            tolerance=tolerance,
-            rotation_tolerance=rotation_tolerance,
-            stats=stats,
-            skip_orientation=END_JOINTS,
-        )
-        t_ms.append((time.perf_counter() - t0) * 1000)
-        t_iters.append(stats["iterations"])
-    print(
-        f"  torch autograd (Adam):    {np.mean(t_ms):8.1f} ms per frame over {torch_frames} frames; iterations to "
-        f"converge: mean {np.mean(t_iters):.1f} (cap 2000); {np.sum(t_ms) / np.sum(t_iters):.2f} ms per iteration"
-    )
-    runs: list[tuple[str, dict[str, Any]]] = [
-        ("live defaults", {}),
-        ("without the temporal predictor", {"temporal_weight": 0.0}),
-        ("without the IK polish", {"polish": False}),
-    ]
-    for label, options in runs:
-        live = DragPoserEstimator(config, motion.skeleton, **options)
-        times = []
-        for frame in stream:
-            t0 = time.perf_counter()
-            live.step(frame)
-            times.append(time.perf_counter() - t0)
-        print(f"  estimator step, {label} ({live.iterations} iterations): {_percentiles(times[1:])} per frame")
 
 
 def run(estimators, sensors_name: str, latency: bool = True) -> None:

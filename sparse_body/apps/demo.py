@@ -19,11 +19,9 @@ from .offline import make_bag, process_bag
 
 HEAD = JOINT_INDEX["head"]
 
-DEMO_CLIP = "17_10"  # boxing, from the test split: a person no model trained on
-
 
 def pick_motion(mocap_root: Path | None, motion_file: str | None, seconds: float, fps: float) -> tuple[Motion, str]:
-    from ..data.catalog import load_clip, load_motion_file, read_index
+    from ..data.catalog import DEMO_CLIP, load_clip, load_motion_file, read_index
     from ..data.synthetic import synthetic_walk
 
     if motion_file:

@@ -13,8 +13,6 @@ from ..core.skeleton import Skeleton
 from ..core.types import BodyPose, BodyPoses, TrackerStream
 from ..data.motion import Motion
 from ..data.virtual_trackers import NO_NOISE, TrackerNoise, synthesize_trackers
-from ..estimators import create_estimator
-from ..estimators.kernels import compile_kernels
 from ..io.bagio import (
     ESTIMATE_TOPICS,
     bag_folder,
@@ -26,6 +24,8 @@ from ..io.bagio import (
 )
 from ..io.estimate_bag import check_topics
 from ..io.tf_guards import TfGuards
+from ..methods.factory import create_estimator
+from ..methods.kernels import compile_kernels
 from .pipeline import ForkedReader, ForkedWriter, Reader, Writer, can_fork
 
 

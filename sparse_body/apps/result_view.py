@@ -19,7 +19,7 @@ from ..data.catalog import DEFAULT_FPS
 from ..data.field_protocol import Protocol
 from ..data.motion_inputs import find_inputs
 from ..estimators.base import parse_estimator_spec
-from .evaluation import Estimated, EvalItem, estimate_motion, file_items, score, split_items
+from ..evaluation import Estimated, EvalItem, estimate_motion, file_items, score, split_items
 from .viewer import ViewError, stream_trackers
 
 METRIC = "MPJPE [cm]"

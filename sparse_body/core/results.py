@@ -14,7 +14,7 @@ from .metrics import weighted_mean
 
 
 class Clip(Protocol):
-    """What a result records of a clip (apps/evaluation.EvalItem is one)."""
+    """What a result records of a clip (evaluation.EvalItem is one)."""
 
     name: str
     key: str

@@ -25,6 +25,7 @@ class MocapFolderError(ValueError):
     """A motion capture folder that is not an indexed one, or lacks clips its split names."""
 
 
+DEMO_CLIP = "17_10"  # boxing, from the test split: a person no model trained on (the demo's, bench's)
 DEFAULT_FPS = 60.0
 # Bump when loading or retargeting changes, so stale cache entries are not used.
 CACHE_VERSION = 3  # 3: absurd values refused at load (a cached motion of 2 may hold them)

@@ -1,5 +1,6 @@
-"""Estimators: one module per method behind one streaming interface (base.Estimator)."""
+"""Estimators: one module per method behind one streaming interface (base.Estimator); they
+are made by name with methods.factory.create_estimator."""
 
-from .base import Estimator, create_estimator, estimator_names
+from .base import Estimator
 
-__all__ = ["Estimator", "create_estimator", "estimator_names"]
+__all__ = ["Estimator"]

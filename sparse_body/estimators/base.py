@@ -14,7 +14,7 @@ import yaml
 from ..core import mat3
 from ..core.contact_hold import ContactHold
 from ..core.fixed_lag import FixedLagSmoother
-from ..core.forecast import MAX_AHEAD, PoseForecast
+from ..core.forecast import PoseForecast
 from ..core.kinematics import forward_kinematics
 from ..core.mat3 import njit
 from ..core.reacquire import FreezeGuard, Reacquisition
@@ -22,19 +22,10 @@ from ..core.rotations import matrix_to_quat, quat_to_matrix, rotations_to_quat
 from ..core.sensors import SensorConfig
 from ..core.skeleton import Skeleton, standing_pose
 from ..core.textfile import load_yaml
-from ..core.tracker_filter import FilterConfig, TrackerFilter, filter_config
+from ..core.tracker_filter import FilterConfig, TrackerFilter
 from ..core.tracker_smoother import smooth_frames
 from ..core.types import BodyPose, TrackerFrame, TrackerStream
 from .options import EstimatorOptions, Option
-
-
-# name -> "module:Class"; modules are imported on first use so that an estimator's
-# dependencies (onnxruntime, a model file) are needed only when it is chosen.
-def estimator_names() -> list[str]:
-    """The registered methods' names (sparse_body.methods)."""
-    from ..methods import METHODS  # the registry holds import paths only: no cycle at import
-
-    return sorted(METHODS)
 
 
 def full_target(target) -> TypeGuard[tuple[np.ndarray, np.ndarray]]:
@@ -372,35 +363,3 @@ def learned_root_available() -> bool:
     from .forecast_model import FILE
 
     return (models_dir() / FILE).is_file()
-
-
-def create_estimator(name: str, sensors: SensorConfig, skeleton: Skeleton, fps: float = 60.0, **options) -> Estimator:
-    """An estimator by name with its options; filter_<field> options (of FilterConfig) set
-    the tracker filter every estimator has, filter=false turns it off; smooth=true smooths
-    a whole recording in process() (offline) instead; predict_ahead=SECONDS gives each pose
-    that far past its frame, forecast (core/forecast.py; forecast=faded: the root carried at
-    its fading velocity instead of the learned model's move); foot_lock=true holds a foot where
-    it touched down while in contact (core/contact_hold.py)."""
-    from ..methods import METHODS, load
-
-    if name not in METHODS:
-        raise ValueError(f"unknown estimator {name!r}; available: {', '.join(estimator_names())}")
-    filtering = filter_config(options)
-    smooth = options.pop("smooth", False)
-    if not isinstance(smooth, bool):
-        raise ValueError(f"smooth must be true or false, got {smooth!r}")
-    foot_lock = options.pop("foot_lock", False)
-    if not isinstance(foot_lock, bool):
-        raise ValueError(f"foot_lock must be true or false, got {foot_lock!r}")
-    ahead = options.pop("predict_ahead", 0.0)
-    if isinstance(ahead, bool) or not isinstance(ahead, (int, float)) or not 0.0 <= ahead <= MAX_AHEAD:
-        raise ValueError(f"predict_ahead must be a number of seconds from 0 to {MAX_AHEAD:g}, got {ahead!r}")
-    root = options.pop("forecast", "learned")
-    if root not in FORECASTS:
-        raise ValueError(f"forecast must be one of {', '.join(FORECASTS)}, got {root!r}")
-    load(METHODS[name].options).parse(options, f"estimator {name!r}")  # before any model is loaded
-    estimator = load(METHODS[name].estimator)(sensors, skeleton, fps=fps, **options)
-    estimator.use_filter(filtering, smooth)
-    estimator.use_forecast(float(ahead), root)
-    estimator.use_foot_lock(foot_lock)
-    return estimator

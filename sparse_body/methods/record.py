@@ -33,9 +33,10 @@ class Training:
     # the default output under the package's models/, given a function making the (first
     # trained part's) configuration: a .onnx file, or "" (the folder) for several files
     output: Callable[[Callable[[], Any]], str]
-    # card(out, mocap, limit, evaluate) -> the card's path: evaluate on the test split into
-    # <model>.eval.json (unless evaluate=False and it is there), then render the card from it
-    card: Callable[..., Path]
+    # "module:function", card(out, mocap, limit, evaluate) -> the card's path: evaluate on the
+    # test split into <model>.eval.json (unless evaluate=False and it is there), then render
+    # the card from it (methods/NAME/card.md filled in)
+    card: str
     config_help: str  # the presets, for `train --config`
     out_help: str  # what --out names
 

@@ -42,15 +42,15 @@ from ..core.skeleton import JOINT_NAMES, standing_pose
 from ..core.tracker_filter import PREFIX as FILTER
 from ..core.tracker_filter import FilterConfig
 from ..core.types import BodyPose, BodyPoses
-from ..estimators import create_estimator
 from ..estimators.base import Estimator, parse_estimator_spec
 from ..estimators.budget import BudgetedStep
-from ..estimators.kernels import compile_kernels
 from ..io import cdr
 from ..io.output import HELD, axis_link_name, axis_link_table, body_table, joint_angles
 from ..io.tf_cache import TfGuards
 from ..io.urdf import body_urdf
 from ..methods import METHODS, NAMES, load
+from ..methods.factory import create_estimator
+from ..methods.kernels import compile_kernels
 from .estimate_stats import EstimateStats
 from .spin import init, start_and_spin
 from .tf_input import TfReader
@@ -185,7 +185,7 @@ LIVE = {"stale_timeout", "tracker_timeout", "publish_link_tf", "autostart"}
 
 
 def _check_estimator_spec(value: str) -> str | None:
-    from ..estimators.base import estimator_names
+    from ..methods.factory import estimator_names
 
     try:
         method, _ = parse_estimator_spec(value)

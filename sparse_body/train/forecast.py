@@ -86,7 +86,7 @@ class Samples:
 def estimate_split(mocap_root: Path, split: str, config: ForecastConfig, limit: int | None = None) -> list[dict]:
     """Each clip of a split: the estimator's poses under the field protocol (floor at z = 0),
     the true joints, the person's body and the kind of motion."""
-    from ..apps.evaluation import estimated_clips
+    from ..evaluation import estimated_clips
 
     return [
         {

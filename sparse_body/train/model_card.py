@@ -134,7 +134,7 @@ def results_table(results: list[dict], columns=COLUMNS) -> str:
 
 
 def _evaluate(job):
-    from ..apps.evaluation import evaluate
+    from ..evaluation import evaluate
 
     _, spec, sensors_name, protocol, mocap_root, limit, options = job
     return evaluate(

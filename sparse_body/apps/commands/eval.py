@@ -27,14 +27,14 @@ def run(args) -> int:
     from ...core.results import format_groups, format_table
     from ...core.sensors import load_sensor_config
     from ...data.field_protocol import Protocol
-    from ...methods import METHODS, paper_figures
-    from ..evaluation import (
+    from ...evaluation import (
         check_results_path,
         file_items,
         run_evaluation,
         split_items,
         untrained_categories,
     )
+    from ...methods import METHODS, paper_figures
 
     sensors = load_sensor_config(args.sensors)
     if args.horizon is not None and not 0.0 <= args.horizon <= MAX_AHEAD:

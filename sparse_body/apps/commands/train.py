@@ -110,6 +110,7 @@ def run(args) -> int:
 
     import torch
 
+    from ...methods import load
     from ...train.harness import TrainRun, beside, with_earlier_runs
 
     parts = _trainers(args)
@@ -136,7 +137,7 @@ def run(args) -> int:
             print(f"written {out} and {report_path}")
     if not args.no_card:
         mocap = None if args.render_only else mocap_root(args)  # rendering reads only the measured JSON
-        card = _training(args.method).card(parts[0][2], mocap, args.limit, not args.render_only)
+        card = load(_training(args.method).card)(parts[0][2], mocap, args.limit, not args.render_only)
         print(f"written {card}")
     return 0
 

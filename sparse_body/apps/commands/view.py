@@ -8,8 +8,8 @@ from .common import fps, motion_of
 
 
 def run(args) -> int:
+    from ...evaluation import is_results_file
     from ..batch import is_bag
-    from ..evaluation import is_results_file
     from ..viewer import bag_bodies, write_body_page
 
     source = Path(args.source) if args.source else None

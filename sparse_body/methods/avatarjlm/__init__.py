@@ -3,16 +3,7 @@ or with the pelvis (four-point), polished by IK onto the trackers."""
 
 from __future__ import annotations
 
-from pathlib import Path
-
 from ..record import Method, Training, TrainPart
-
-
-def _card(out: Path, mocap, limit: int | None, evaluate: bool = True) -> Path:
-    from .card import write_avatarjlm_card
-
-    # one card: both models
-    return write_avatarjlm_card(out.with_name("avatarjlm.onnx"), mocap, limit=limit, evaluate=evaluate)
 
 
 def _output(config) -> str:
@@ -40,7 +31,7 @@ METHOD = Method(
             ),
         ),
         output=_output,
-        card=_card,
+        card="sparse_body.methods.avatarjlm.card:card",
         config_help="small (three-point, 88 minutes on one core), four_point (the same with the pelvis: "
         "models/avatarjlm_four_point.onnx), paper (d1 1024, d2 512, 6 loops: for a GPU) or tiny",
         out_help="the .onnx file",

@@ -186,3 +186,9 @@ def write_avatarjlm_card(onnx_path: Path, mocap_root: Path, limit: int | None = 
     path = onnx_path.with_suffix(".md")
     path.write_text(text)
     return path
+
+
+def card(out: Path, mocap, limit: int | None, evaluate: bool = True) -> Path:
+    """The record's card step (methods/record.Training.card)."""
+    # one card: both models
+    return write_avatarjlm_card(out.with_name("avatarjlm.onnx"), mocap, limit=limit, evaluate=evaluate)

@@ -26,7 +26,8 @@ from ...core.mat3 import quat_matrices
 from ...core.skeleton import LOWER_BODY, joint_indices
 from ...core.tracker_filter import NO_FILTER
 from ...core.types import BodyPose
-from ...estimators.base import Estimator, create_estimator
+from ...estimators.base import Estimator
+from ..factory import create_estimator
 from .options import BlendOptions
 
 

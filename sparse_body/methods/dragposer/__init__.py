@@ -3,15 +3,7 @@ trackers, with a temporal predictor and a tracker prior in the latent space."""
 
 from __future__ import annotations
 
-from pathlib import Path
-
 from ..record import Method, Training, TrainPart
-
-
-def _card(out: Path, mocap, limit: int | None, evaluate: bool = True) -> Path:
-    from .card import write_dragposer_card
-
-    return write_dragposer_card(out, mocap, limit=limit, evaluate=evaluate)
 
 
 def _paper(mpjpe: float, mpjre: float, mpjve: float, end_effector: float) -> dict[str, float]:
@@ -56,11 +48,11 @@ METHOD = Method(
             ),
         ),
         output=lambda config: "",  # the models folder itself: dragposer_{encoder,decoder,temporal,tracker_prior}.onnx
-        card=_card,
+        card="sparse_body.methods.dragposer.card:card",
         config_help="small (30 minutes a part) or tiny, and paper for its temporal predictor",
         out_help="the folder for its encoder, decoder, temporal predictor and tracker prior",
     ),
-    runtime_bench="sparse_body.apps.bench:bench_dragposer",
+    runtime_bench="sparse_body.methods.dragposer.bench:bench_dragposer",
     step_goal=("search, predictor, polish", 1.5),
     ratio_goal=8.0,  # issue 52
     eval_sensors="six_point",

@@ -265,3 +265,8 @@ def write_dragposer_card(out_dir: Path, mocap_root: Path, limit: int | None = No
     path = out_dir / "dragposer.md"
     path.write_text(text)
     return path
+
+
+def card(out: Path, mocap, limit: int | None, evaluate: bool = True) -> Path:
+    """The record's card step (methods/record.Training.card)."""
+    return write_dragposer_card(out, mocap, limit=limit, evaluate=evaluate)

@@ -3,17 +3,7 @@ occluded feet), online or with future frames (lookahead, offline)."""
 
 from __future__ import annotations
 
-from pathlib import Path
-
 from ..record import Method, Training, TrainPart
-
-
-def _card(out: Path, mocap, limit: int | None, evaluate: bool = True) -> Path:
-    from .card import write_dtp_card
-
-    # one card: online, lookahead, pre-trained
-    return write_dtp_card(out.with_name("dtp.onnx"), mocap, limit=limit, evaluate=evaluate)
-
 
 METHOD = Method(
     "dtp",
@@ -34,7 +24,7 @@ METHOD = Method(
             ),
         ),
         output=lambda config: "dtp_lookahead.onnx" if config().future else "dtp.onnx",
-        card=_card,
+        card="sparse_body.methods.dtp.card:card",
         config_help="small (pre-training and occlusion fine-tuning in under an hour on 2 CPU cores), "
         "lookahead (small with 5 future frames: models/dtp_lookahead.onnx), paper or tiny",
         out_help="the .onnx file",

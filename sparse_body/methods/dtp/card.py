@@ -156,3 +156,9 @@ def write_dtp_card(onnx_path: Path, mocap_root: Path, limit: int | None = None, 
     path = onnx_path.with_suffix(".md")
     path.write_text(text)
     return path
+
+
+def card(out: Path, mocap, limit: int | None, evaluate: bool = True) -> Path:
+    """The record's card step (methods/record.Training.card)."""
+    # one card: online, lookahead, pre-trained
+    return write_dtp_card(out.with_name("dtp.onnx"), mocap, limit=limit, evaluate=evaluate)

@@ -3,18 +3,7 @@ the upper body by IK; contact IK holds the feet."""
 
 from __future__ import annotations
 
-import json
-from pathlib import Path
-
 from ..record import Method, Training, TrainPart
-
-
-def _card(out: Path, mocap, limit: int | None, evaluate: bool = True) -> Path:
-    from .card import write_lobstr_card
-
-    report = json.loads(out.with_suffix(".train.json").read_text())
-    return write_lobstr_card(out, report, mocap, limit=limit, evaluate=evaluate)
-
 
 METHOD = Method(
     "lobstr",
@@ -34,11 +23,11 @@ METHOD = Method(
             ),
         ),
         output=lambda config: "lobstr.onnx",
-        card=_card,
+        card="sparse_body.methods.lobstr.card:card",
         config_help="paper, small (under an hour on 2 CPU cores) or tiny",
         out_help="the .onnx file",
     ),
-    runtime_bench="sparse_body.apps.bench:bench_network",
+    runtime_bench="sparse_body.methods.lobstr.bench:bench_network",
     step_goal=("network, upper-body IK, contact IK", 0.25),
     ratio_goal=2.0,
     eval_sensors="four_point",

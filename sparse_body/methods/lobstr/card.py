@@ -4,6 +4,7 @@ then rendered with the training report into models/lobstr.md."""
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 from ...data.catalog import load_split
@@ -162,3 +163,9 @@ def write_lobstr_card(
     path = Path(onnx_path).with_suffix(".md")
     path.write_text(text)
     return path
+
+
+def card(out: Path, mocap, limit: int | None, evaluate: bool = True) -> Path:
+    """The record's card step (methods/record.Training.card)."""
+    report = json.loads(out.with_suffix(".train.json").read_text())
+    return write_lobstr_card(out, report, mocap, limit=limit, evaluate=evaluate)

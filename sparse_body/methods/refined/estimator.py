@@ -8,8 +8,9 @@ constraint node does live, packaged as an estimator for `sparse-body eval` and `
 from __future__ import annotations
 
 from ...core.tracker_filter import NO_FILTER
-from ...estimators.base import Estimator, create_estimator
+from ...estimators.base import Estimator
 from ..dragposer.estimator import DragPoserEstimator
+from ..factory import create_estimator
 from .options import RefinedOptions
 
 

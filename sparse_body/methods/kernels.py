@@ -6,7 +6,7 @@ path runs `compile_kernels` once, so that no node spends its first start compili
 setup script, and the CMake install that colcon runs (CMakeLists.txt). The estimator node
 runs it again at configure, which then only loads.
 
-It lives here, above the methods, because warming a kernel means running the estimator
+It lives with the methods, because warming a kernel means running the estimator
 that calls it: the body IK (every method's polish) through `ik`, DragPoser's search
 through `dragposer` (skipped where its models are missing).
 """
@@ -29,7 +29,7 @@ def compile_kernels(estimators: tuple[str, ...] = WARM_ESTIMATORS) -> None:
     from ..core.skeleton import Skeleton, standing_pose
     from ..core.types import TrackerFrame
     from ..estimators.onnx_model import ModelMissing
-    from .base import create_estimator
+    from .factory import create_estimator
 
     skeleton = Skeleton.canonical()
     local, root = standing_pose(), np.array([0.0, 0.0, 0.9])

@@ -15,17 +15,17 @@ from pathlib import Path
 
 import numpy as np
 
-from ..core.contacts import contact_labels, estimate_floor
-from ..core.kinematics import forward_kinematics
-from ..core.metrics import loss_metrics, per_joint_metrics, sequence_metrics
-from ..core.results import EvalResult
-from ..core.rotations import quat_to_matrix
-from ..core.sensors import SensorConfig
-from ..data import MotionFileError
-from ..data.catalog import DEFAULT_FPS, load_clip, split_clips
-from ..data.field_protocol import FIELD, Protocol, UserView, user_view
-from ..data.motion import Motion
-from ..data.motion_inputs import (
+from .core.contacts import contact_labels, estimate_floor
+from .core.kinematics import forward_kinematics
+from .core.metrics import loss_metrics, per_joint_metrics, sequence_metrics
+from .core.results import EvalResult
+from .core.rotations import quat_to_matrix
+from .core.sensors import SensorConfig
+from .data import MotionFileError
+from .data.catalog import DEFAULT_FPS, load_clip, split_clips
+from .data.field_protocol import FIELD, Protocol, UserView, user_view
+from .data.motion import Motion
+from .data.motion_inputs import (
     AMC_FPS,
     MotionInput,
     balanced,
@@ -35,9 +35,9 @@ from ..data.motion_inputs import (
     implausible,
     load_input,
 )
-from ..data.virtual_trackers import TrackerNoise
-from ..estimators import create_estimator
-from ..estimators.base import parse_estimator_spec
+from .data.virtual_trackers import TrackerNoise
+from .estimators.base import parse_estimator_spec
+from .methods.factory import create_estimator
 
 
 @dataclass
@@ -59,7 +59,7 @@ class EvalItem:
 def method_options(spec: str, options: dict | None = None) -> dict:
     """Every option of a spec's method as it runs ("lobstr:contact_ik=false" and the options
     given beside it over the defaults), as its options dataclass records them."""
-    from ..methods import METHODS, load
+    from .methods import METHODS, load
 
     name, given = parse_estimator_spec(spec)
     if name not in METHODS:
@@ -167,7 +167,7 @@ def estimated_clips(mocap_root: Path, split: str, estimator: str, sensors_name: 
     """Each clip of a split as a user's stack would estimate it, one at a time: (item, motion
     moved so that its floor is z = 0, the user's view of it, the estimator's poses), under the
     field protocol with the filter set for its noise (what the forecast's tools read)."""
-    from ..core.sensors import load_sensor_config
+    from .core.sensors import load_sensor_config
 
     sensors = load_sensor_config(sensors_name)
     for item in split_items(mocap_root, split, limit=limit):
@@ -378,7 +378,7 @@ def is_results_file(path: Path) -> bool:
 def check_results_path(path: Path) -> Path:
     """Refuse, before any evaluation, a results path that is not ours to write: an existing
     file other than an earlier results file, a folder, a link, a device; its folder must exist."""
-    from ..core.file_output import check_target
+    from .core.file_output import check_target
 
     return check_target(Path(path), is_results_file, True, "results file")
 
@@ -386,7 +386,7 @@ def check_results_path(path: Path) -> Path:
 def write_json(results: list[EvalResult], path: Path, intervals: bool = True) -> None:
     """The results as JSON, written through io/file_output.py: only an earlier results file
     is replaced (each write after a clip replaces the one before)."""
-    from ..core.file_output import write_file
+    from .core.file_output import write_file
 
     text = json.dumps([r.to_json(intervals) for r in results], indent=1, allow_nan=True)
     write_file(path, text, is_results_file, overwrite=True, what="results file")

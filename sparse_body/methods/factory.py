@@ -1,0 +1,47 @@
+"""Estimators by name (the lazy factory): the registry (methods/__init__.py) holds import
+paths, and a method's code is imported only when one of its estimators is made. Above the
+methods and the Estimator base, so neither imports the registry."""
+
+from __future__ import annotations
+
+from ..core.forecast import MAX_AHEAD
+from ..core.sensors import SensorConfig
+from ..core.skeleton import Skeleton
+from ..core.tracker_filter import filter_config
+from ..estimators.base import FORECASTS, Estimator
+from . import METHODS, load
+
+
+def estimator_names() -> list[str]:
+    """The registered methods' names."""
+    return sorted(METHODS)
+
+
+def create_estimator(name: str, sensors: SensorConfig, skeleton: Skeleton, fps: float = 60.0, **options) -> Estimator:
+    """An estimator by name with its options; filter_<field> options (of FilterConfig) set
+    the tracker filter every estimator has, filter=false turns it off; smooth=true smooths
+    a whole recording in process() (offline) instead; predict_ahead=SECONDS gives each pose
+    that far past its frame, forecast (core/forecast.py; forecast=faded: the root carried at
+    its fading velocity instead of the learned model's move); foot_lock=true holds a foot where
+    it touched down while in contact (core/contact_hold.py)."""
+    if name not in METHODS:
+        raise ValueError(f"unknown estimator {name!r}; available: {', '.join(estimator_names())}")
+    filtering = filter_config(options)
+    smooth = options.pop("smooth", False)
+    if not isinstance(smooth, bool):
+        raise ValueError(f"smooth must be true or false, got {smooth!r}")
+    foot_lock = options.pop("foot_lock", False)
+    if not isinstance(foot_lock, bool):
+        raise ValueError(f"foot_lock must be true or false, got {foot_lock!r}")
+    ahead = options.pop("predict_ahead", 0.0)
+    if isinstance(ahead, bool) or not isinstance(ahead, (int, float)) or not 0.0 <= ahead <= MAX_AHEAD:
+        raise ValueError(f"predict_ahead must be a number of seconds from 0 to {MAX_AHEAD:g}, got {ahead!r}")
+    root = options.pop("forecast", "learned")
+    if root not in FORECASTS:
+        raise ValueError(f"forecast must be one of {', '.join(FORECASTS)}, got {root!r}")
+    load(METHODS[name].options).parse(options, f"estimator {name!r}")  # before any model is loaded
+    estimator = load(METHODS[name].estimator)(sensors, skeleton, fps=fps, **options)
+    estimator.use_filter(filtering, smooth)
+    estimator.use_forecast(float(ahead), root)
+    estimator.use_foot_lock(foot_lock)
+    return estimator

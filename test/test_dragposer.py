@@ -164,7 +164,7 @@ def test_estimator_works_on_any_sensor_subset_and_survives_faulty_sensors(shippe
         config = load_sensor_config(name)
         noise = TrackerNoise(fault_probability=0.05, fault_frames=20) if name == "six_point" else TrackerNoise()
         stream = synthesize_trackers(motion, config, noise, seed=1)
-        est = create_estimator("dragposer", config, motion.skeleton, model_dir=str(shipped_models), iterations=3)
+        est = create_estimator("dragposer", config, motion.skeleton, model_path=str(shipped_models), iterations=3)
         poses = est.process(stream)
         assert len(poses) == len(stream) and all(p.is_finite() for p in poses), name
         assert all(p.valid for p in poses), name  # some tracker is always there
@@ -172,7 +172,7 @@ def test_estimator_works_on_any_sensor_subset_and_survives_faulty_sensors(shippe
     stream.valid[50:60] = False  # every tracker gone
     stream.positions[50:60] = np.nan
     est = create_estimator(
-        "dragposer", load_sensor_config("four_point"), motion.skeleton, model_dir=str(shipped_models)
+        "dragposer", load_sensor_config("four_point"), motion.skeleton, model_path=str(shipped_models)
     )
     poses = est.process(stream)
     assert [p.valid for p in poses[48:62]] == [True] * 2 + [False] * 10 + [True] * 2
@@ -182,7 +182,7 @@ def test_user_constraints_are_added_and_removed_at_runtime(shipped_models):
     motion = synthetic_walk(1.0)
     config = load_sensor_config("four_point")
     stream = synthesize_trackers(motion, config)
-    est = create_estimator("dragposer", config, motion.skeleton, model_dir=str(shipped_models), iterations=10)
+    est = create_estimator("dragposer", config, motion.skeleton, model_path=str(shipped_models), iterations=10)
     for frame in list(stream)[:10]:
         est.step(frame)
     assert sorted(est.constraints.names()) == ["floor:10", "floor:11"]
@@ -201,7 +201,7 @@ def test_user_constraints_are_added_and_removed_at_runtime(shipped_models):
 
 def test_missing_model_is_a_clear_error(tmp_path):
     with pytest.raises(ModelMissing, match="train one with `sparse-body train dragposer`"):
-        create_estimator("dragposer", load_sensor_config("six_point"), Skeleton.canonical(), model_dir=str(tmp_path))
+        create_estimator("dragposer", load_sensor_config("six_point"), Skeleton.canonical(), model_path=str(tmp_path))
 
 
 @pytest.mark.train
@@ -517,20 +517,20 @@ def test_missing_temporal_predictor_names_the_file_and_the_way_out(shipped_model
     for part in ("encoder", "decoder"):
         (tmp_path / f"dragposer_{part}.onnx").write_bytes((shipped_models / f"dragposer_{part}.onnx").read_bytes())
     with pytest.raises(ModelMissing, match="dragposer_temporal.onnx.*temporal_weight to 0"):
-        create_estimator("dragposer", load_sensor_config("six_point"), Skeleton.canonical(), model_dir=str(tmp_path))
+        create_estimator("dragposer", load_sensor_config("six_point"), Skeleton.canonical(), model_path=str(tmp_path))
     with pytest.raises(ModelMissing, match="dragposer_tracker_prior.onnx.*tracker_prior to 0"):
         create_estimator(
             "dragposer",
             load_sensor_config("six_point"),
             Skeleton.canonical(),
-            model_dir=str(tmp_path),
+            model_path=str(tmp_path),
             temporal_weight=0,
         )
     est = create_estimator(
         "dragposer",
         load_sensor_config("six_point"),
         Skeleton.canonical(),
-        model_dir=str(tmp_path),
+        model_path=str(tmp_path),
         temporal_weight=0,
         tracker_prior=0,
     )
@@ -540,7 +540,7 @@ def test_missing_temporal_predictor_names_the_file_and_the_way_out(shipped_model
             "dragposer",
             load_sensor_config("six_point"),
             Skeleton.canonical(),
-            model_dir=str(tmp_path),
+            model_path=str(tmp_path),
             temporal_weight=0,
             tracker_prior=-1,
         )
@@ -684,7 +684,7 @@ def test_tracker_prior_pulls_the_latent_towards_its_guess_and_leaves_the_tracker
     gaps, reach = {}, {}
     for weight in (1e-6, 1.0):
         est = create_estimator(
-            "dragposer", config, motion.skeleton, model_dir=str(shipped_models), tracker_prior=weight
+            "dragposer", config, motion.skeleton, model_path=str(shipped_models), tracker_prior=weight
         )
         guesses, predict = [], est.guesser.predict
         est.guesser.predict = lambda targets, guesses=guesses, predict=predict: (  # a spy
@@ -705,7 +705,7 @@ def test_tracker_prior_pulls_the_latent_towards_its_guess_and_leaves_the_tracker
         gaps[weight], reach[weight] = np.mean(gap[1:]), np.mean(miss)
     assert gaps[1.0] < 0.5 * gaps[1e-6]
     assert reach[1.0] < 0.01  # the polish still puts them on their trackers
-    prior = create_estimator("dragposer", config, motion.skeleton, model_dir=str(shipped_models)).guesser
+    prior = create_estimator("dragposer", config, motion.skeleton, model_path=str(shipped_models)).guesser
     assert prior.predict({"head": None}) is None  # no headset: no guess
 
 

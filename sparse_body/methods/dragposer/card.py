@@ -72,7 +72,7 @@ def evaluate_dragposer(onnx_path: Path, mocap_root: Path, limit: int | None = No
     from ...data.field_protocol import FIELD, Protocol
 
     out_dir = Path(onnx_path).parent
-    mine = {"model_dir": str(out_dir.resolve())}
+    mine = {"model_path": str(out_dir.resolve())}
     jobs = []
     for setup in DRAGPOSER_SETUPS:
         sensors_name, faulty = setup

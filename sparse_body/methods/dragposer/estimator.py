@@ -175,8 +175,9 @@ class DragPoserEstimator(Estimator):
     def __init__(self, sensors, skeleton, fps: float = 60.0, **options) -> None:
         super().__init__(sensors, skeleton, fps, **options)
         o = self.options
-        model_dir, model_path, threads = o.model_dir, o.model_path, o.threads
-        if model_path and not model_dir:  # the nodes' model_path: the folder, or one of its files
+        model_dir: str | None = None
+        model_path, threads = o.model_path, o.threads
+        if model_path:  # the folder, or one of its files
             if not Path(model_path).is_dir() and Path(model_path).name not in MODEL_FILES:
                 raise ValueError(
                     f"{model_path}: not a DragPoser model; name the folder holding "

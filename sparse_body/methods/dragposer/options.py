@@ -4,15 +4,17 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from ...estimators.options import EstimatorOptions, floor_height, model_path, option, threads
+from ...estimators.options import EstimatorOptions, floor_height, option, threads
 
 TRACKER_PRIOR_WEIGHT = 0.001  # chosen on the validation people (models/dragposer.tracker_prior_*.json)
 
 
 @dataclass(frozen=True)
 class DragPoserOptions(EstimatorOptions):
-    model_dir: str | None = option(None, "the folder of the DragPoser models; null: the shipped ones")
-    model_path: str | None = model_path()
+    # one option for the models: the nodes' model_path names a file, a user's folder names a folder
+    model_path: str | None = option(
+        None, "the folder of the DragPoser models, or one of its files; null: the shipped ones"
+    )
     iterations: int = option(3, "search steps a frame at most", 1, 100, "steps")
     position_weight: float = option(1.0, "the trackers' position residual's weight", 0.0, 1e3)
     orientation_weight: float = option(0.1, "the trackers' orientation residual's weight", 0.0, 1e3)

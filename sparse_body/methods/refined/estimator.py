@@ -31,7 +31,7 @@ class RefinedEstimator(Estimator):
             sensors,
             skeleton,
             fps,
-            model_dir=o.model_dir,
+            model_path=o.model_path,
             iterations=o.iterations,
             temporal_weight=0.0,
             tracker_prior=0.0,

@@ -11,5 +11,5 @@ from ...estimators.options import EstimatorOptions, option
 class RefinedOptions(EstimatorOptions):
     passes_on = True  # options it has not are the base's (checked there)
     base: str = option("ik", "the estimator whose pose is refined")
-    model_dir: str | None = option(None, "the DragPoser model folder; null: the shipped models")
+    model_path: str | None = option(None, "the DragPoser models' folder, or one of its files; null: the shipped ones")
     iterations: int = option(3, "search steps a frame", 1, 100, "steps")

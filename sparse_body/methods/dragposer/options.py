@@ -3,10 +3,16 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any
 
 from ...estimators.options import EstimatorOptions, floor_height, option, threads
 
 TRACKER_PRIOR_WEIGHT = 0.001  # chosen on the validation people (models/dragposer.tracker_prior_*.json)
+
+
+def iterations(default: int = 3) -> Any:
+    """The search's step count, an option of DragPoser and of any estimator it refines."""
+    return option(default, "search steps a frame at most", 1, 100, "steps")
 
 
 @dataclass(frozen=True)
@@ -15,7 +21,7 @@ class DragPoserOptions(EstimatorOptions):
     model_path: str | None = option(
         None, "the folder of the DragPoser models, or one of its files; null: the shipped ones"
     )
-    iterations: int = option(3, "search steps a frame at most", 1, 100, "steps")
+    iterations: int = iterations()
     position_weight: float = option(1.0, "the trackers' position residual's weight", 0.0, 1e3)
     orientation_weight: float = option(0.1, "the trackers' orientation residual's weight", 0.0, 1e3)
     floor_height: float | None = floor_height()

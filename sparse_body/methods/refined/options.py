@@ -5,6 +5,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from ...estimators.options import EstimatorOptions, option
+from ..dragposer.options import iterations
 
 
 @dataclass(frozen=True)
@@ -12,4 +13,4 @@ class RefinedOptions(EstimatorOptions):
     passes_on = True  # options it has not are the base's (checked there)
     base: str = option("ik", "the estimator whose pose is refined")
     model_path: str | None = option(None, "the DragPoser models' folder, or one of its files; null: the shipped ones")
-    iterations: int = option(3, "search steps a frame", 1, 100, "steps")
+    iterations: int = iterations()

@@ -72,9 +72,7 @@ class Option:
         prefix = f"{owner}: {self.name}"
         is_bool = isinstance(value, bool)
         if not isinstance(value, self.types) or (is_bool and bool not in self.types):
-            raise ValueError(
-                f"{prefix} takes {' or '.join(dict.fromkeys(WORDS.get(k, k) for k in self.kinds))}, got {value!r}"
-            )
+            raise ValueError(f"{prefix} takes {self.words()}, got {value!r}")
         if self.numeric and not is_bool and isinstance(value, (int, float)):
             bounds = self.range
             if not math.isfinite(value) or (bounds is not None and not bounds.low <= value <= bounds.high):
@@ -135,7 +133,3 @@ class Options:
     def as_dict(self) -> dict[str, Any]:
         """Every option's value, for a record (JSON)."""
         return dataclasses.asdict(self)
-
-    def changed(self) -> dict[str, Any]:
-        """The options not at their defaults."""
-        return {name: value for name, value in self.as_dict().items() if value != self.fields()[name].default}

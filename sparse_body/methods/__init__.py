@@ -1,5 +1,6 @@
-"""The methods, one record each (record.Method): estimator, training parts and presets, model
-card, paper figures and what `eval` compares it with. The commands, the nodes and the
+"""The methods, one record each (record.Method): estimator, options, training parts and
+presets, model card, paper figures, bench goals and what `eval` compares it with; estimators
+are made by name with factory.create_estimator. The commands, the nodes and the
 evaluation look methods up here and hold no per-method branches. Each method is a folder,
 methods/NAME/, whose __init__ holds its record and nothing that imports its code (so listing
 the methods imports neither torch nor ONNX Runtime); adding a method is its folder and one

@@ -207,7 +207,11 @@ def test_predict_ahead_publishes_the_body_stamped_that_far_past_its_trackers(ros
     keys = [stamp_key(s.header.stamp) for s in valid]
     ahead_of_a_frame = [k for k in keys if {k - shift - 1, k - shift, k - shift + 1} & tracker]
     assert len(ahead_of_a_frame) >= 0.9 * len(keys), sorted(set(keys) - set(ahead_of_a_frame))[:5]
-    assert not [k for k in keys if k in tracker]
+    # none at a tracker stamp without being ahead of one (a pose not forecast): the bridge stamps
+    # with the wall clock, so on a starved machine a forecast stamp can meet a later tracker's
+    # stamp by chance (once in a burner run), and that one is ahead of its own frame too
+    ahead = set(ahead_of_a_frame)
+    assert not [k for k in keys if k in tracker and k not in ahead]
     states = listener.received["joint_states"]
     assert all(np.all(np.isfinite(m.position)) for m in states)
 

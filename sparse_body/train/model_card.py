@@ -231,3 +231,11 @@ def render_card(template: Path, values: dict[str, str]) -> str:
     from string import Template
 
     return Template(template.read_text()).substitute(values)
+
+
+def split_sizes() -> dict[str, str]:
+    """The clips in each part of the split, as every card's Data section names them."""
+    from ..data.catalog import load_split
+
+    split = load_split()
+    return {f"len_split_{part}": str(len(split[part])) for part in ("train", "validation", "test")}

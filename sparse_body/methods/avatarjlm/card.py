@@ -6,7 +6,6 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
-from ...data.catalog import load_split
 from ...train.model_card import (
     FIELD_PROTOCOL,
     LOSS_COLUMNS,
@@ -16,6 +15,7 @@ from ...train.model_card import (
     render_card,
     results_table,
     runtime_choices_table,
+    split_sizes,
 )
 
 COLUMNS = (
@@ -137,7 +137,7 @@ def write_avatarjlm_card(onnx_path: Path, mocap_root: Path, limit: int | None = 
     report = json.loads(onnx_path.with_suffix(".train.json").read_text())
     four_report_path = four_point_path(onnx_path).with_suffix(".train.json")
     four = json.loads(four_report_path.read_text()) if four_report_path.is_file() else None
-    c, split = report["config"], load_split()
+    c = report["config"]
 
     def table(key: str) -> str:
         return results_table(measured[key], COLUMNS) if key in measured else "(not measured)"
@@ -148,9 +148,7 @@ def write_avatarjlm_card(onnx_path: Path, mocap_root: Path, limit: int | None = 
             "model_file": f"{onnx_path.name}",
             "four_point_model_file": f"{four_point_path(onnx_path).name}",
             "c_fps": f"{c['fps']:.0f}",
-            "len_split_train": f"{len(split['train'])}",
-            "len_split_validation": f"{len(split['validation'])}",
-            "len_split_test": f"{len(split['test'])}",
+            **split_sizes(),
             "report_train_clips": f"{report['train_clips']}",
             "c_augment": f"{c['augment']}",
             "c_variants": f"{c['variants']}",

@@ -8,7 +8,6 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
-from ...data.catalog import load_split
 from ...train.model_card import (
     FIELD_PROTOCOL,
     NOISE_HEADING,
@@ -18,6 +17,7 @@ from ...train.model_card import (
     noise_jobs,
     noise_table,
     render_card,
+    split_sizes,
 )
 from ...train.model_card import runtime_choices_table as choices_table
 
@@ -120,7 +120,6 @@ def write_dragposer_card(out_dir: Path, mocap_root: Path, limit: int | None = No
         text_tables.append(
             f"### {title}\n\n```\n{format_table(results, paper_figures('dragposer', sensors_name, faulty))}\n```\n"
         )
-    split = load_split()
     cfg, val = vae["config"], vae["validation"]
     tcfg, tval = temporal["config"], temporal["validation"]
     vae_augmentation = augmentation_table(out_dir / "dragposer.train.json", VAE_VALIDATION)
@@ -169,9 +168,7 @@ def write_dragposer_card(out_dir: Path, mocap_root: Path, limit: int | None = No
     text = render_card(
         Path(__file__).with_name("card.md"),
         {
-            "len_split_train": f"{len(split['train'])}",
-            "len_split_validation": f"{len(split['validation'])}",
-            "len_split_test": f"{len(split['test'])}",
+            **split_sizes(),
             "vae_train_frames": f"{vae['train_frames']}",
             "vae_command": f"{vae.get('command', 'sparse-body train dragposer')}",
             "cfg_hidden": f"{cfg['hidden']}",

@@ -6,7 +6,6 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
-from ...data.catalog import load_split
 from ...train.model_card import (
     FIELD_PROTOCOL,
     augmentation_table,
@@ -15,6 +14,7 @@ from ...train.model_card import (
     render_card,
     results_table,
     runtime_choices_table,
+    split_sizes,
 )
 from .train import pretrained_path
 
@@ -80,7 +80,7 @@ def write_dtp_card(onnx_path: Path, mocap_root: Path, limit: int | None = None, 
     report = json.loads(onnx_path.with_suffix(".train.json").read_text())
     lookahead_path = onnx_path.with_name("dtp_lookahead.train.json")
     lookahead = json.loads(lookahead_path.read_text()) if lookahead_path.is_file() else None
-    cfg, split = report["config"], load_split()
+    cfg = report["config"]
 
     def stage_lines(r: dict) -> str:
         return "\n".join(
@@ -117,9 +117,7 @@ def write_dtp_card(onnx_path: Path, mocap_root: Path, limit: int | None = None, 
             "cfg_past": f"{cfg['past']}",
             "lookahead_future": f"{(lookahead['config']['future'] if lookahead else 5)}",
             "cfg_fps": f"{cfg['fps']:.0f}",
-            "len_split_train": f"{len(split['train'])}",
-            "len_split_validation": f"{len(split['validation'])}",
-            "len_split_test": f"{len(split['test'])}",
+            **split_sizes(),
             "report_train_clips": f"{report['train_clips']}",
             "cfg_augment": f"{cfg['augment']}",
             "cfg_variants": f"{cfg['variants']}",

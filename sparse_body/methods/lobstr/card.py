@@ -7,7 +7,6 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
-from ...data.catalog import load_split
 from ...train.model_card import (
     FIELD_PROTOCOL,
     NOISE_HEADING,
@@ -18,6 +17,7 @@ from ...train.model_card import (
     noise_table,
     render_card,
     runtime_choices_table,
+    split_sizes,
 )
 
 LOBSTR_VALIDATION = {
@@ -101,7 +101,6 @@ def write_lobstr_card(
     results = [EvalResult.from_json(r) for r in measured["field"] + measured["lab"]]
     table = format_table(results, paper_figures("lobstr", "four_point"))
     noise = noise_table(measured["noise"]["four_point"])
-    split = load_split()
     cfg, val = report["config"], report["validation"]
     history = report.get("history", [])
     curve = "\n".join(
@@ -116,9 +115,7 @@ def write_lobstr_card(
             "model_file": f"{Path(onnx_path).name}",
             "upper_body_sentence": f"""{("Ours, not the paper's (`learned_upper`): the network also sees the current pose (head and hands relative to the pelvis, and the pelvis's tilt: 33 more inputs) and predicts the 13 upper-body joints too, which the closed-form IK then turns onto the headset and hands; the paper solves the upper body by IK alone (`lobstr:learned_upper=false` below)." if learned else "Upper body by IK (the paper's).")}""",
             "cfg_fps": f"{cfg['fps']:.0f}",
-            "len_split_train": f"{len(split['train'])}",
-            "len_split_validation": f"{len(split['validation'])}",
-            "len_split_test": f"{len(split['test'])}",
+            **split_sizes(),
             "report_train_clips": f"{report['train_clips']}",
             "cfg_augment": f"{cfg.get('augment', 'none')}",
             "cfg_variants": f"{cfg.get('variants', 0)}",

@@ -980,3 +980,25 @@ def test_a_signal_during_a_cold_start_ends_the_node_at_once(ros_env, tmp_path, s
     assert "stopped while starting" in text and "Traceback" not in text, text[-3000:]
     print(f"{signal_name} during a cold start: ended {took:.2f} s after the signal")
     assert took < 5.0, f"{took:.1f} s from the signal to the end"
+
+
+def test_a_stopped_start_stays_quiet_about_what_its_interrupt_left_half_built(ros_env, monkeypatch):
+    """An interrupt inside numba's compile can leave an llvmlite object unbuilt, whose __del__
+    then fails as it is collected: while stopping, that is not printed; anything else is."""
+    import types
+
+    import llvmlite.binding.ffi as ffi
+
+    from sparse_body.ros import spin
+
+    printed = []
+    monkeypatch.setattr(spin.sys, "__unraisablehook__", printed.append)
+    half_built = types.SimpleNamespace(object=ffi.ObjectRef.__del__, exc_value=AttributeError("_as_parameter_"))
+    other = types.SimpleNamespace(object=print, exc_value=AttributeError("x"))
+    monkeypatch.setattr(spin, "_STOP", types.SimpleNamespace(is_set=lambda: True))
+    spin._quiet_dropped_interrupts(half_built)
+    spin._quiet_dropped_interrupts(other)
+    assert printed == [other]
+    monkeypatch.setattr(spin, "_STOP", types.SimpleNamespace(is_set=lambda: False))
+    spin._quiet_dropped_interrupts(half_built)  # not stopping: said
+    assert printed == [other, half_built]

@@ -55,8 +55,14 @@ def _keep_interrupting() -> None:
 
 def _quiet_dropped_interrupts(unraisable) -> None:
     """Where a C callback dropped our interrupt, Python prints it as "Exception ignored"
-    with a traceback; the start is being stopped, so that is not news."""
-    if not (_STOP.is_set() and isinstance(unraisable.exc_value, KeyboardInterrupt)):
+    with a traceback; the start is being stopped, so that is not news. Nor is the failing
+    __del__ of an llvmlite object whose construction the interrupt cut short (numba was
+    compiling: it has no handle to free, and says so as it is collected)."""
+    dropped = isinstance(unraisable.exc_value, KeyboardInterrupt)
+    half_built = type(unraisable.object).__module__.startswith("llvmlite") or getattr(
+        unraisable.object, "__module__", ""
+    ).startswith("llvmlite")
+    if not (_STOP.is_set() and (dropped or half_built)):
         sys.__unraisablehook__(unraisable)
 
 

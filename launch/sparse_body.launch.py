@@ -163,7 +163,7 @@ def generate_launch_description():
             ),
             DeclareLaunchArgument(
                 "foot_lock",
-                default_value="false",
+                default_value="true",
                 description="hold each foot where it touched down while the estimator calls it planted",
             ),
             DeclareLaunchArgument(

@@ -15,14 +15,14 @@ from pathlib import Path
 
 import numpy as np
 
-from .core.contacts import contact_labels, estimate_floor
+from .core.contacts import LABEL_VERSION, contact_labels, estimate_floor
 from .core.kinematics import forward_kinematics
 from .core.metrics import loss_metrics, per_joint_metrics, sequence_metrics
 from .core.results import EvalResult
 from .core.rotations import quat_to_matrix
 from .core.sensors import SensorConfig
 from .data import MotionFileError
-from .data.catalog import DEFAULT_FPS, load_clip, split_clips
+from .data.catalog import DEFAULT_FPS, SELECTION, load_clip, split_clips
 from .data.field_protocol import FIELD, Protocol, UserView, user_view
 from .data.motion import Motion
 from .data.motion_inputs import (
@@ -130,7 +130,7 @@ def score(run: Estimated, per_joint: bool = False) -> dict[str, float]:
     # pose t against the body at t + horizon: the first frames have no pose of their time
     made, true = slice(0, len(motion) - run.horizon), slice(run.horizon, len(motion))
     gt_pos = motion.positions[true]
-    gt_contacts = contact_labels(motion.positions, motion.fps, floor)[true]
+    gt_contacts = contact_labels(motion.positions, motion.fps)[true]
     tracked = sorted({s.joint_index for s in run.view.sensors.sites})
     metrics = sequence_metrics(
         run.positions[made],
@@ -183,26 +183,28 @@ def estimated_clips(mocap_root: Path, split: str, estimator: str, sensors_name: 
 
 def split_items(mocap_root: Path, split: str, fps: float = DEFAULT_FPS, limit: int | None = None) -> list[EvalItem]:
     """The clips of a part of the CMU split (or of an imported folder's), seeded by their place
-    in the split (the split's order is fixed, so the draws are too)."""
+    in the split (the split's order is fixed, so the draws are too); a selection clip by its
+    place in validation, so that it meets the same draws in both."""
+    seeds = {c.clip_id: k for k, c in enumerate(split_clips(mocap_root, "validation" if split == SELECTION else split))}
     return [
         EvalItem(
             c.clip_id,
             c.clip_id,
-            k,
+            seeds[c.clip_id],
             partial(load_clip, c, fps),
             c.subject,
             str(c.path),
             subject=c.subject,
-            category=c.category,
+            category=c.kind,
         )
-        for k, c in enumerate(split_clips(mocap_root, split, limit))
+        for c in split_clips(mocap_root, split, limit)
     ]
 
 
 def untrained_categories(mocap_root: Path, categories: list[str]) -> dict[str, str]:
     """A note for each kind of motion of which no training clip has one: on those, a learned
     estimator meets motion it never saw (the split is by person, not by motion)."""
-    trained = {c.category for c in split_clips(mocap_root, "train")}
+    trained = {c.kind for c in split_clips(mocap_root, "train")}
     return {c: ", not in training" for c in set(categories) if c and c not in trained}
 
 
@@ -284,7 +286,8 @@ def run_evaluation(
     their skeleton."""
     results = []
     for spec in specs:
-        settings = {"fps": fps, "per_joint": per_joint, **{k: str(v) for k, v in options.items()}}
+        settings: dict[str, object] = {"fps": fps, "per_joint": per_joint, "contact_labels": LABEL_VERSION}
+        settings.update({k: str(v) for k, v in options.items()})
         results.append(
             EvalResult(
                 spec,

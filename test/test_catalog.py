@@ -5,7 +5,7 @@ import time
 import numpy as np
 import pytest
 
-from sparse_body.data.catalog import SPLITS, compute_split, load_clip, load_split
+from sparse_body.data.catalog import SELECTION, SPLITS, compute_split, load_clip, load_split, split_clips
 
 pytestmark = pytest.mark.mocap
 
@@ -33,6 +33,18 @@ def test_committed_split_is_the_computed_one_and_keeps_people_apart(clip_index):
         assert 0.10 <= share <= 0.15, (part, share)
 
 
+def test_the_selection_holds_every_kind_of_motion_the_validation_people_bring_and_training_lacks(mocap_root):
+    train = {c.kind for c in split_clips(mocap_root, "train")}
+    validation = split_clips(mocap_root, "validation")
+    selection = split_clips(mocap_root, SELECTION)
+    assert {c.kind for c in selection} == {"dance", "acrobatics", "balance"}  # cartwheels, ropes, one leg
+    assert not {c.kind for c in selection} & train
+    assert {c.clip_id for c in selection} == {c.clip_id for c in validation if c.kind not in train}
+    assert sum(c.seconds for c in selection) > 4 * 60  # enough to choose on: 36 clips, 5 minutes
+    # "other" is split by what its clips show: ladders and a motorcycle trained, cartwheels not
+    assert "climbing" in train and {"acrobatics", "balance"} <= {c.kind for c in validation}
+
+
 def test_second_load_comes_from_the_cache(clip_index, tmp_path, monkeypatch):
     monkeypatch.setenv("SPARSE_BODY_CACHE", str(tmp_path))
     clip = clip_index["02_05"]
@@ -49,3 +61,26 @@ def test_second_load_comes_from_the_cache(clip_index, tmp_path, monkeypatch):
     np.testing.assert_array_equal(second.root_positions, first.root_positions)
     np.testing.assert_array_equal(second.skeleton.offsets, first.skeleton.offsets)
     assert cached < parse / 3
+
+
+def test_eval_on_the_selection_meets_each_clip_with_its_validation_draws(mocap_root, tmp_path, capsys):
+    import json
+
+    from sparse_body.cli import main
+
+    def run(split, limit, out):
+        with pytest.raises(SystemExit) as ended:
+            main(
+                ["eval", "--estimator", "ik", "--sensors", "four_point", "--no-compare", "--quiet"]
+                + ["--split", split, "--limit", str(limit), "--output", str(out)]
+            )
+        assert ended.value.code == 0, capsys.readouterr().err
+        return json.loads(out.read_text())[0]
+
+    validation = run("validation", 2, tmp_path / "v.json")  # 05_01, a walk; 05_02, a dance
+    selection = run(SELECTION, 1, tmp_path / "s.json")  # the walk is not in it
+    assert [c["clip"] for c in selection["clips"]] == ["05_02"]
+    assert selection["settings"]["contact_labels"] == 2  # which definition its skate and contacts used
+    same = next(c for c in validation["clips"] if c["clip"] == "05_02")
+    assert same["category"] == selection["clips"][0]["category"] == "dance"
+    assert same["Lower PE [cm]"] == selection["clips"][0]["Lower PE [cm]"]  # the same field draws

@@ -19,11 +19,24 @@ def test_contact_labels_from_height_and_speed():
     pos = _still(6)
     pos[:, RF, 2] = [0.0, 0.0, 0.1, 0.1, 0.0, 0.0]  # right foot lifted in frames 2-3
     pos[:, LF, 0] = np.arange(6) * 0.01  # left toe slides 1 cm/frame = 0.6 m/s at 60 Hz
-    labels = contact_labels(pos, fps=60.0, floor=0.0)
+    labels = contact_labels(pos, fps=60.0)
     np.testing.assert_array_equal(labels[:, 0], False)
-    np.testing.assert_array_equal(labels[:, 1], [True, True, False, False, True, True])
+    # frame 3 is still but 10 cm up; frames 2 and 4 move 6 m/s up and down
+    np.testing.assert_array_equal(labels[:, 1], [True, True, False, False, False, True])
     assert toe_speeds(pos, 60.0)[3, 0] == pytest.approx(0.6)
     assert estimate_floor(pos) == pytest.approx(0.0)
+
+
+def test_contact_labels_follow_a_floor_that_drifts_through_the_take_and_leave_a_raised_foot_out():
+    fps, T = 60.0, 600  # ten seconds
+    pos = _still(T)
+    pos[:, [LF, RF], 2] = np.linspace(0.0, 0.045, T)[:, None]  # the floor rises 4.5 cm (CMU's walks drift so)
+    pos[300:, RF, 2] += 0.12  # from 5 s the right foot is held still 12 cm up: a balance on one leg
+    labels = contact_labels(pos, fps)
+    assert labels[:, 0].all()  # the standing foot, though 2.5 cm over the take's lowest toe by 5 s
+    assert labels[:300, 1].all() and not labels[301:, 1].any()
+    first_version = (pos[:, [LF, RF], 2] - estimate_floor(pos) < 0.02).mean()  # one floor, 2 cm: what it missed
+    assert first_version < 0.5
 
 
 def test_position_velocity_and_jitter_errors():
@@ -125,3 +138,20 @@ def test_the_settle_time_is_how_long_a_returned_hand_takes_to_come_back_to_its_u
     pred[150:, hand, 0] = 0.20  # lost again, and never back
     out = M.loss_metrics(pred, gt, lost, [hand], fps=fps)
     assert out["Settle time [s]"] == pytest.approx((27 / fps + (T - 180) / fps) / 2)
+
+
+def test_live_contacts_change_only_once_the_rule_has_held_for_50_ms():
+    from sparse_body.core.contacts import LIVE_SPEED, ToeContacts
+
+    fps = 60.0
+    live = ToeContacts(fps)
+    toes = np.zeros((2, 3))
+    assert live(toes).all()  # both standing from the first frame
+    step = np.array([[2 * LIVE_SPEED / fps, 0.0, 0.0], [0.0, 0.0, 0.0]])  # the left toe moves at twice the limit
+    said = [live(toes := toes + step)[0] for _ in range(4)]
+    assert said == [True, True, False, False]  # taken on the third frame in a row: 50 ms at 60 Hz
+    toes[0, 2] = 0.2  # then lifted and held still 20 cm up: not in contact
+    assert not any(live(toes)[0] for _ in range(5))
+    toes[0, 2] = 0.0
+    assert [live(toes)[0] for _ in range(4)] == [False, False, False, True]  # the move down, then 3 still frames
+    assert live(toes)[1]  # the right foot never moved

@@ -187,7 +187,7 @@ def run_demo(
         motion.local_rotations,
         motion.fps,
         floor,
-        contact_labels(motion.positions, motion.fps, floor),
+        contact_labels(motion.positions, motion.fps),
         np.stack([p.contact for p in poses]),
         sorted({s.joint_index for s in sensors.sites}),
     )

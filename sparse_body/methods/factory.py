@@ -22,15 +22,19 @@ def create_estimator(name: str, sensors: SensorConfig, skeleton: Skeleton, fps: 
     the tracker filter every estimator has, filter=false turns it off; smooth=true smooths
     a whole recording in process() (offline) instead; predict_ahead=SECONDS gives each pose
     that far past its frame, forecast (core/forecast.py; forecast=faded: the root carried at
-    its fading velocity instead of the learned model's move); foot_lock=true holds a foot where
-    it touched down while in contact (core/contact_hold.py)."""
+    its fading velocity instead of the learned model's move); foot_lock (default true) holds a
+    foot where it touched down while in contact (core/contact_hold.py), foot_lock=false leaves
+    the method's legs as they are."""
     if name not in METHODS:
         raise ValueError(f"unknown estimator {name!r}; available: {', '.join(estimator_names())}")
     filtering = filter_config(options)
     smooth = options.pop("smooth", False)
     if not isinstance(smooth, bool):
         raise ValueError(f"smooth must be true or false, got {smooth!r}")
-    foot_lock = options.pop("foot_lock", False)
+    # on by default: on the kinds of motion no model trained on it halves the skate of the
+    # estimators without a contact IK of their own and moves their lower-body error by under 1 %
+    # either way (docs/methods.md, "Feet held where they touch down")
+    foot_lock = options.pop("foot_lock", True)
     if not isinstance(foot_lock, bool):
         raise ValueError(f"foot_lock must be true or false, got {foot_lock!r}")
     ahead = options.pop("predict_ahead", 0.0)

@@ -97,7 +97,7 @@ PARAMETERS = {
     ),
     **FILTER_PARAMETERS,
     "foot_lock": (
-        False,
+        True,
         "hold each foot where it touched down while the estimator says it is in contact (hip and "
         "knee move, LoBSTr's contact IK): less sliding; false: the estimator's legs as they are",
     ),
@@ -411,8 +411,7 @@ class EstimatorNode(LifecycleNode):
         shared = {k: p[k] for k, (default, _) in self.PARAMETERS.items() if k.startswith(FILTER) and p[k] != default}
         if p.get("predict_ahead"):
             shared["predict_ahead"] = p["predict_ahead"]
-        if p.get("foot_lock"):
-            shared["foot_lock"] = True
+        shared["foot_lock"] = bool(p["foot_lock"])
         return shared
 
     def _step_budget(self) -> float:

@@ -138,7 +138,13 @@ def add_parser(sub) -> None:
         help="estimator name, optionally with options: lobstr:contact_ik=false (repeat to compare several)",
     )
     p.add_argument("--sensors", default="three_point", help="sensor configuration name or YAML path")
-    p.add_argument("--split", default="test", choices=["train", "validation", "test"])
+    p.add_argument(
+        "--split",
+        default="test",
+        choices=("train", "validation", "test", "selection"),  # data/catalog.PARTS, not imported for --help
+        help="part of the split (default test); selection: the validation clips of the kinds of motion "
+        "no train clip has, the set every accuracy choice is made on",
+    )
     p.add_argument("--fps", type=fps, default=60.0, help="frame rate the clips are resampled to")
     p.add_argument(
         "--protocol",

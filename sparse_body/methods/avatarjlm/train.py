@@ -63,7 +63,7 @@ def clip_frames(
     x = np.stack([sequence_features(p, r) for p, r in streams])
     yaw = np.stack([reference(p[:, 0], r[:, 0])[1] for p, r in streams])
     head = np.stack([p[:, 0] for p, _ in streams])
-    toes = contact_labels(motion.positions, fps, floor)  # (T, 2) left, right
+    toes = contact_labels(motion.positions, fps)  # (T, 2) left, right
     return x, yaw, head, motion.global_rotations[:, 0], matrix_to_6d(motion.local_rotations), np.tile(toes, (1, 2))
 
 

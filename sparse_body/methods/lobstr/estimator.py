@@ -122,6 +122,11 @@ class LobstrEstimator(Estimator):
         self.contacts = ContactHold(skeleton, o.release_frames) if o.contact_ik else None
         self.reset()
 
+    def use_foot_lock(self, on: bool) -> None:
+        """With its own contact IK (contact_ik, the paper's) the feet are held already: a second
+        hold on the same contacts would only cost time."""
+        super().use_foot_lock(on and getattr(self, "contacts", None) is None)  # (None while built)
+
     def _reset(self) -> None:
         self.upper.reset()
         if self.contacts:

@@ -68,7 +68,7 @@ def clip_tensors(motion, copies: int, rng: np.random.Generator, learned_upper: b
         upper.astype(np.float32),
         (np.swapaxes(ref, -1, -2) @ glob[:, 0]).astype(np.float32),
         heading(glob[:, 0]).astype(np.float32),
-        contact_labels(motion.positions, motion.fps, floor).astype(np.float32),
+        contact_labels(motion.positions, motion.fps).astype(np.float32),
     )
 
 

@@ -20,6 +20,7 @@ def walk():
 
 def _run(spec, walk, **options):
     motion, stream = walk
+    options = {"foot_lock": False, **options}  # the mean as it is (the blend's own lock would hold the first's feet)
     return create_estimator(spec, FOUR, motion.skeleton, fps=motion.fps, filter=False, **options).process(stream)
 
 

@@ -23,7 +23,9 @@ from ..evaluation import Estimated, EvalItem, estimate_motion, file_items, score
 from .viewer import ViewError, stream_trackers
 
 METRIC = "MPJPE [cm]"
-RERUN_SETTINGS = {"fps", "per_joint"}  # what `view` can take from a result's settings
+# what `view` can take from a result's settings (contact_labels: which labels its skate and contact
+# figures used; the estimate does not depend on it)
+RERUN_SETTINGS = {"fps", "per_joint", "contact_labels"}
 
 
 @dataclass

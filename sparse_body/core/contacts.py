@@ -78,15 +78,17 @@ class ToeContacts:
     """toe_contacts frame after frame, each foot's state changing only once the rule has said
     so for LIVE_HOLD (every estimator without a contact model of its own uses one)."""
 
-    def __init__(self, fps: float, hold: float = LIVE_HOLD) -> None:
-        self.fps = fps
-        self.hold = max(1, round(hold * fps))  # frames
+    def __init__(
+        self, fps: float, height: float = LIVE_HEIGHT, speed: float = LIVE_SPEED, hold: float = LIVE_HOLD
+    ) -> None:
+        self.fps, self.height, self.speed = fps, height, speed
+        self.hold = max(1, round(hold * fps))  # frames the rule must agree (1: at once)
         self._last: np.ndarray | None = None
         self._state = np.zeros(2, dtype=bool)
         self._against = np.zeros(2, dtype=int)  # frames in a row the rule has said otherwise
 
     def __call__(self, toes: np.ndarray, floor: float = 0.0) -> np.ndarray:
-        said = toe_contacts(toes, self._last, self.fps, floor)
+        said = toe_contacts(toes, self._last, self.fps, floor, self.height, self.speed)
         if self._last is None:
             self._state = said
         self._last = np.array(toes, dtype=float)  # a copy: a caller may reuse its array

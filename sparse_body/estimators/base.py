@@ -24,7 +24,7 @@ from ..core.skeleton import Skeleton, standing_pose
 from ..core.textfile import load_yaml
 from ..core.tracker_filter import FilterConfig, TrackerFilter
 from ..core.tracker_smoother import smooth_frames
-from ..core.types import BodyPose, TrackerFrame, TrackerStream
+from ..core.types import BodyPose, TrackerFrame, TrackerStream, breaks_take
 from .options import EstimatorOptions, Option
 
 
@@ -127,6 +127,8 @@ class Estimator(ABC):
         moving hip and knee (core/contact_hold.py: LoBSTr's contact IK, from the method's own
         contacts; the option foot_lock), from the next reset."""
         self.foot_lock = ContactHold(self.skeleton) if on else None
+        self._locked_at: float | None = None  # the stamp of the last pose held
+        self._lock_gap = float(getattr(self.options, "max_gap", 0.5))
 
     def use_forecast(self, ahead: float, root: str = "learned") -> None:
         """Give each pose `ahead` seconds past its frame, forecast (core/forecast.py; the
@@ -204,8 +206,17 @@ class Estimator(ABC):
         """A pose on its way out, live and offline alike: its feet held where they touched down
         (foot_lock; a held pose as it is), then forecast (predict_ahead)."""
         if self.foot_lock is not None and pose.valid:
-            local = self.foot_lock.apply(mat3.quat_matrices(pose.local_quats), pose.root_position, pose.contact)
-            pose = replace(pose, local_quats=rotations_to_quat(local))
+            # a gap the method starts over after lets go of the points held before it too
+            if self._locked_at is not None and breaks_take(self._locked_at, pose.stamp, self._lock_gap):
+                self.foot_lock.reset()
+            self._locked_at = pose.stamp
+            before = mat3.quat_matrices(pose.local_quats)
+            after = self.foot_lock.apply(before, pose.root_position, pose.contact)
+            moved = np.any(after != before, axis=(1, 2))  # hips and knees at most: the rest as they were, to the bit
+            if moved.any():
+                quats = pose.local_quats.copy()
+                quats[moved] = rotations_to_quat(after[moved])
+                pose = replace(pose, local_quats=quats)
         return self.forecast.forecast(pose)
 
     def _forget_given(self) -> None:
@@ -213,6 +224,7 @@ class Estimator(ABC):
         self.forecast.reset()
         if self.foot_lock is not None:
             self.foot_lock.reset()
+            self._locked_at = None
 
     def _step_filtered(self, frame: TrackerFrame) -> BodyPose:
         """step() on a frame the filter (or the offline smoother) has already seen."""

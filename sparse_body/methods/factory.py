@@ -6,7 +6,7 @@ from __future__ import annotations
 
 from ..core.forecast import MAX_AHEAD
 from ..core.sensors import SensorConfig
-from ..core.skeleton import Skeleton
+from ..core.skeleton import JOINT_INDEX, Skeleton
 from ..core.tracker_filter import filter_config
 from ..estimators.base import FORECASTS, Estimator
 from . import METHODS, load
@@ -17,23 +17,30 @@ def estimator_names() -> list[str]:
     return sorted(METHODS)
 
 
+def feet_tracked(sensors: SensorConfig) -> bool:
+    """Whether trackers give both feet's positions (six-point)."""
+    ankles = {JOINT_INDEX["left_ankle"], JOINT_INDEX["right_ankle"]}
+    return ankles <= {site.joint_index for site in sensors.sites if site.has_position}
+
+
 def create_estimator(name: str, sensors: SensorConfig, skeleton: Skeleton, fps: float = 60.0, **options) -> Estimator:
     """An estimator by name with its options; filter_<field> options (of FilterConfig) set
     the tracker filter every estimator has, filter=false turns it off; smooth=true smooths
     a whole recording in process() (offline) instead; predict_ahead=SECONDS gives each pose
     that far past its frame, forecast (core/forecast.py; forecast=faded: the root carried at
-    its fading velocity instead of the learned model's move); foot_lock (default true) holds a
-    foot where it touched down while in contact (core/contact_hold.py), foot_lock=false leaves
-    the method's legs as they are."""
+    its fading velocity instead of the learned model's move); foot_lock holds a foot where it
+    touched down while in contact (core/contact_hold.py; default true; feet whose positions
+    trackers give are never held), foot_lock=false leaves the method's legs as they are."""
     if name not in METHODS:
         raise ValueError(f"unknown estimator {name!r}; available: {', '.join(estimator_names())}")
     filtering = filter_config(options)
     smooth = options.pop("smooth", False)
     if not isinstance(smooth, bool):
         raise ValueError(f"smooth must be true or false, got {smooth!r}")
-    # on by default: on the kinds of motion no model trained on it halves the skate of the
-    # estimators without a contact IK of their own and moves their lower-body error by under 1 %
-    # either way (docs/methods.md, "Feet held where they touch down")
+    # on by default: on the kinds of motion no model trained on it halves the four-point skate
+    # of the estimators without a contact IK of their own and moves their lower-body error by
+    # under 1 % either way (docs/methods.md, "Feet held where they touch down"); where trackers
+    # give the feet's positions they say where the feet are, and nothing is held
     foot_lock = options.pop("foot_lock", True)
     if not isinstance(foot_lock, bool):
         raise ValueError(f"foot_lock must be true or false, got {foot_lock!r}")
@@ -47,5 +54,5 @@ def create_estimator(name: str, sensors: SensorConfig, skeleton: Skeleton, fps: 
     estimator = load(METHODS[name].estimator)(sensors, skeleton, fps=fps, **options)
     estimator.use_filter(filtering, smooth)
     estimator.use_forecast(float(ahead), root)
-    estimator.use_foot_lock(foot_lock)
+    estimator.use_foot_lock(foot_lock and not feet_tracked(sensors))
     return estimator

@@ -99,7 +99,8 @@ PARAMETERS = {
     "foot_lock": (
         True,
         "hold each foot where it touched down while the estimator says it is in contact (hip and "
-        "knee move, LoBSTr's contact IK): less sliding; false: the estimator's legs as they are",
+        "knee move, LoBSTr's contact IK): less sliding; feet trackers give positions of are never "
+        "held; false: the estimator's legs as they are",
     ),
     "predict_ahead": (
         0.0,

@@ -66,7 +66,8 @@ class BlendEstimator(Estimator):
         self.keep = float(np.exp(-1.0 / (settle * fps))) if settle > 0 else 0.0  # of the share, a frame
         self.share = self.weight
         self.legs = joint_indices(LOWER_BODY)
-        self.parts = [create_estimator(name, sensors, skeleton, fps) for name in (first, second)]
+        # each part's legs as its method gives them: the blend's own foot_lock holds the mean's
+        self.parts = [create_estimator(name, sensors, skeleton, fps, foot_lock=False) for name in (first, second)]
         for inner in self.parts:
             inner.use_filter(NO_FILTER)  # this estimator's filter has done it
             inner.read_targets_from(self)

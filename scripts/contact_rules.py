@@ -9,8 +9,12 @@ right, on the kinds of motion no train clip has and on the others. The toes are 
 own (foot_lock=false), as the rule reads them live. "own" is the estimator's published
 contacts (LoBSTr's network's; the shipped rule's for the others).
 
+With --label-rates, only the labels: each kind of motion's share of (frame, foot) contacts
+under contact_labels and under its first version (one floor for the take, 2 cm, horizontal
+speed), over the train and validation clips.
+
 Usage: .venv/bin/python scripts/contact_rules.py [--estimator avatarjlm --estimator dragposer
-       --estimator lobstr] [--sensors four_point] [--split validation]
+       --estimator lobstr] [--sensors four_point] [--split validation] [--label-rates]
 """
 
 import argparse
@@ -18,12 +22,34 @@ import itertools
 
 import numpy as np
 
-from sparse_body.core.contacts import FOOT_JOINTS, ToeContacts, contact_labels
+from sparse_body.core.contacts import FOOT_JOINTS, ToeContacts, contact_labels, estimate_floor, toe_speeds
 from sparse_body.core.sensors import load_sensor_config
-from sparse_body.data.catalog import find_mocap_root
+from sparse_body.data.catalog import find_mocap_root, load_clip, split_clips
 from sparse_body.evaluation import estimate_motion, split_items, untrained_categories
 
 HEIGHTS, SPEEDS, HOLDS = (0.05, 0.08, 0.12), (0.3, 0.5, 0.8), (0.0, 0.05)  # m, m/s, s
+
+
+def first_version(positions: np.ndarray, fps: float) -> np.ndarray:
+    """contact_labels before 2026-12-05: one floor for the take, a 2 cm band, horizontal speed."""
+    low = positions[:, FOOT_JOINTS, 2] - estimate_floor(positions) < 0.02
+    return low & (toe_speeds(positions, fps) < 0.3)
+
+
+def label_rates(root) -> None:
+    print("contacts [% of (frame, foot)]: kind of motion, part, frames, labels now, first version")
+    for part in ("train", "validation"):
+        shares: dict[str, np.ndarray] = {}
+        for clip in split_clips(root, part):
+            motion = load_clip(clip)
+            now, first = contact_labels(motion.positions, motion.fps), first_version(motion.positions, motion.fps)
+            shares.setdefault(clip.kind, np.zeros(3))[:] += [
+                len(motion),
+                now.mean() * len(motion),
+                first.mean() * len(motion),
+            ]
+        for kind, (frames, now, first) in sorted(shares.items()):
+            print(f"  {kind:18s} {part:10s} {int(frames):7d} {100 * now / frames:6.1f} {100 * first / frames:6.1f}")
 
 
 def main() -> None:
@@ -31,8 +57,11 @@ def main() -> None:
     parser.add_argument("--estimator", action="append")
     parser.add_argument("--sensors", default="four_point")
     parser.add_argument("--split", default="validation")
+    parser.add_argument("--label-rates", action="store_true")
     args = parser.parse_args()
     root, sensors = find_mocap_root(), load_sensor_config(args.sensors)
+    if args.label_rates:
+        return label_rates(root)
     items = split_items(root, args.split)
     unseen = untrained_categories(root, [i.category for i in items])
     rules = list(itertools.product(HEIGHTS, SPEEDS, HOLDS))

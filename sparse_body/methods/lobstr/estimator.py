@@ -20,6 +20,8 @@ from pathlib import Path
 import numpy as np
 
 from ...core.contact_hold import ContactHold
+from ...core.contacts import FOOT_JOINTS, ToeContacts
+from ...core.kinematics import LEG_JOINTS, forward_kinematics
 from ...core.rotations import (
     axis_angle_to_matrix,
     matrix_to_6d,
@@ -120,6 +122,7 @@ class LobstrEstimator(Estimator):
         self.upper = IKEstimator(sensors.subset(INPUT_SITES), skeleton, fps)
         self.upper.read_targets_from(self)  # one conversion a frame, the lost-tracker options included
         self.contacts = ContactHold(skeleton, o.release_frames) if o.contact_ik else None
+        self._toes = ToeContacts(fps) if o.toe_contacts else None
         self.reset()
 
     def use_foot_lock(self, on: bool) -> None:
@@ -129,6 +132,8 @@ class LobstrEstimator(Estimator):
 
     def _reset(self) -> None:
         self.upper.reset()
+        if self._toes is not None:
+            self._toes = ToeContacts(self.fps)
         if self.contacts:
             self.contacts.reset()
         self._state = self.model.initial_state()
@@ -169,11 +174,15 @@ class LobstrEstimator(Estimator):
             return None
         upper_local, root = upper[0], np.asarray(upper[1], float)
         local = apply_legs(upper_local, out[:OUTPUTS])
-        contact = prob > self.threshold
-        if self.contacts:
-            local = self.contacts.apply(local, root, contact)
-        if not math.isfinite(prob.sum()):
+        if not math.isfinite(prob.sum()):  # the network's output gone bad (NaN in, NaN out): start over
             self.reset()
             return None
+        contact = prob > self.threshold
+        if self._toes is not None:  # the network's legs judged as every other method's are
+            toes = forward_kinematics(local, root, self.skeleton.offsets, joints=LEG_JOINTS)[1][list(FOOT_JOINTS)]
+            contact = self._toes(toes, self.floor)
+            prob = contact.astype(float)  # what is published: the contacts taken, as the others publish them
+        if self.contacts:
+            local = self.contacts.apply(local, root, contact)
         self._state, self._prev = state, (frame.stamp, pos, rot)
         return BodyPose(frame.stamp, rotations_to_quat(local), root.copy(), prob.astype(float), contact)

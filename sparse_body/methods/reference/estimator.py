@@ -28,6 +28,11 @@ class ReferenceEstimator(Estimator):
             raise ValueError("the reference estimator needs a head or a pelvis tracker")
         self._local = standing_pose()
         self._head_above_pelvis = skeleton.rest_positions()[HEAD]
+
+    def use_foot_lock(self, on: bool) -> None:
+        """Never: the floor to beat is the standing pose as it is (and the bench's yardstick of
+        a step's cost stays one)."""
+        super().use_foot_lock(False)
         self.reset()
 
     def _estimate(self, frame: TrackerFrame) -> BodyPose | None:

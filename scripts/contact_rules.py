@@ -37,19 +37,30 @@ def first_version(positions: np.ndarray, fps: float) -> np.ndarray:
 
 
 def label_rates(root) -> None:
-    print("contacts [% of (frame, foot)]: kind of motion, part, frames, labels now, first version")
+    print(
+        "contacts [% of (frame, foot)]: kind of motion, part, frames, labels now, first version; "
+        "then the shipped live rule on the motion's own toes, right against the labels now [%]"
+    )
     for part in ("train", "validation"):
         shares: dict[str, np.ndarray] = {}
         for clip in split_clips(root, part):
             motion = load_clip(clip)
             now, first = contact_labels(motion.positions, motion.fps), first_version(motion.positions, motion.fps)
-            shares.setdefault(clip.kind, np.zeros(3))[:] += [
-                len(motion),
-                now.mean() * len(motion),
-                first.mean() * len(motion),
+            floor = estimate_floor(motion.positions)  # (as the estimators have it: the take's floor)
+            live = ToeContacts(motion.fps)
+            said = np.stack([live(toes, floor) for toes in motion.positions[:, FOOT_JOINTS]])
+            n = len(motion)
+            shares.setdefault(clip.kind, np.zeros(4))[:] += [
+                n,
+                now.mean() * n,
+                first.mean() * n,
+                (said == now).mean() * n,
             ]
-        for kind, (frames, now, first) in sorted(shares.items()):
-            print(f"  {kind:18s} {part:10s} {int(frames):7d} {100 * now / frames:6.1f} {100 * first / frames:6.1f}")
+        for kind, (frames, now, first, right) in sorted(shares.items()):
+            print(
+                f"  {kind:18s} {part:10s} {int(frames):7d} {100 * now / frames:6.1f} {100 * first / frames:6.1f}"
+                f" {100 * right / frames:6.1f}"
+            )
 
 
 def main() -> None:

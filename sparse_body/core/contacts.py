@@ -70,7 +70,7 @@ def contact_labels(
 # contact_labels, over the field-protocol estimates of avatarjlm, dragposer and lobstr
 # (docs/methods.md, "Feet held where they touch down"): a toe's estimated height and speed are
 # rougher than the mocap's, so the bands are wider than the labels' and a state must hold for
-# 50 ms before it is taken. The labels' own 5 cm / 0.3 m/s / no hold: 58-70 % right there.
+# 50 ms before it is taken. The rule before (5 cm, 0.3 m/s, no hold): 58-71 % right there.
 LIVE_HEIGHT, LIVE_SPEED, LIVE_HOLD = 0.08, 0.5, 0.05  # metres, metres per second (3-D), seconds
 
 

@@ -18,9 +18,10 @@ def estimator_names() -> list[str]:
 
 
 def feet_tracked(sensors: SensorConfig) -> bool:
-    """Whether trackers give both feet's positions (six-point)."""
+    """Whether both feet wear trackers (six-point, or IMUs: a hold would turn the shin and so
+    the ankle away from the orientation an IMU measures)."""
     ankles = {JOINT_INDEX["left_ankle"], JOINT_INDEX["right_ankle"]}
-    return ankles <= {site.joint_index for site in sensors.sites if site.has_position}
+    return ankles <= {site.joint_index for site in sensors.sites}
 
 
 def create_estimator(name: str, sensors: SensorConfig, skeleton: Skeleton, fps: float = 60.0, **options) -> Estimator:
@@ -29,8 +30,8 @@ def create_estimator(name: str, sensors: SensorConfig, skeleton: Skeleton, fps: 
     a whole recording in process() (offline) instead; predict_ahead=SECONDS gives each pose
     that far past its frame, forecast (core/forecast.py; forecast=faded: the root carried at
     its fading velocity instead of the learned model's move); foot_lock holds a foot where it
-    touched down while in contact (core/contact_hold.py; default true; feet whose positions
-    trackers give are never held), foot_lock=false leaves the method's legs as they are."""
+    touched down while in contact (core/contact_hold.py; default true; feet that wear trackers
+    are never held), foot_lock=false leaves the method's legs as they are."""
     if name not in METHODS:
         raise ValueError(f"unknown estimator {name!r}; available: {', '.join(estimator_names())}")
     filtering = filter_config(options)
@@ -39,8 +40,8 @@ def create_estimator(name: str, sensors: SensorConfig, skeleton: Skeleton, fps: 
         raise ValueError(f"smooth must be true or false, got {smooth!r}")
     # on by default: on the kinds of motion no model trained on it halves the four-point skate
     # of the estimators without a contact IK of their own and moves their lower-body error by
-    # under 1 % either way (docs/methods.md, "Feet held where they touch down"); where trackers
-    # give the feet's positions they say where the feet are, and nothing is held
+    # under 1 % either way (docs/methods.md, "Feet held where they touch down"); feet that wear
+    # trackers are as the trackers say, and never held
     foot_lock = options.pop("foot_lock", True)
     if not isinstance(foot_lock, bool):
         raise ValueError(f"foot_lock must be true or false, got {foot_lock!r}")

@@ -99,7 +99,7 @@ PARAMETERS = {
     "foot_lock": (
         True,
         "hold each foot where it touched down while the estimator says it is in contact (hip and "
-        "knee move, LoBSTr's contact IK): less sliding; feet trackers give positions of are never "
+        "knee move, LoBSTr's contact IK): less sliding; feet that wear trackers are never "
         "held; false: the estimator's legs as they are",
     ),
     "predict_ahead": (

@@ -76,8 +76,9 @@ LIVE_HEIGHT, LIVE_SPEED, LIVE_HOLD = 0.08, 0.5, 0.05  # metres, metres per secon
 
 
 class ToeContacts:
-    """toe_contacts frame after frame, each foot's state changing only once the rule has said
-    so for LIVE_HOLD (every estimator without a contact model of its own uses one). In plain
+    """Live contact flags frame after frame: a toe low over the floor and slower than `speed`
+    (m/s, 3-D) since the last frame, each foot's state changing only once that has held for
+    `hold` (every estimator without a contact model of its own uses one). In plain
     floats, foot by foot: numpy's per-call cost was most of a step's 40 us (LoBSTr's bench)."""
 
     def __init__(
@@ -104,19 +105,3 @@ class ToeContacts:
                 self._against[foot] = 0
         self._last = now
         return np.array(self._state)
-
-
-def toe_contacts(
-    toes: np.ndarray,
-    last_toes: np.ndarray | None,
-    fps: float,
-    floor: float = 0.0,
-    height: float = LIVE_HEIGHT,
-    speed: float = LIVE_SPEED,
-) -> np.ndarray:
-    """Live contact flags (2,) for one frame, without the hold: toe (2, 3) low and slower than
-    speed (m/s, 3-D) since the last frame's toes (ToeContacts with a hold of one frame)."""
-    live = ToeContacts(fps, height, speed, hold=0.0)
-    if last_toes is not None:
-        live(last_toes, floor)
-    return live(toes, floor)

@@ -92,6 +92,8 @@ def start_and_spin(make_node, threads: int = 1) -> None:
         node = make_node()
         if node.get_parameter("autostart").value:
             if node.trigger_configure() != TransitionCallbackReturn.SUCCESS:
+                if _STOP.is_set():  # the signal cut numba's compile short, which made it its own error
+                    raise KeyboardInterrupt
                 node.get_logger().fatal("configure failed; exiting")
                 node.destroy_node()
                 rclpy.try_shutdown()

@@ -12,10 +12,13 @@ from sparse_body.train.augment import (
     KINDS,
     MIRROR,
     SEGMENTS,
+    SPLICED,
     Augmentation,
+    augmented,
     mirrored,
     played_at,
     random_variant,
+    spliced,
     variants,
     with_proportions,
 )
@@ -24,6 +27,11 @@ from sparse_body.train.augment import (
 @pytest.fixture(scope="module")
 def walk(clip_index):
     return load_clip(clip_index["02_01"])
+
+
+@pytest.fixture(scope="module")
+def box(clip_index):
+    return load_clip(clip_index["02_05"])
 
 
 def test_the_mirror_image_is_the_reflected_motion_with_sides_swapped(walk):
@@ -66,9 +74,43 @@ def test_proportions_change_segment_lengths_and_keep_the_feet_on_the_floor(walk)
     assert np.median(new_height / pelvis_height) == pytest.approx(legs, rel=0.02)
 
 
-def test_variants_start_with_the_clip_and_its_mirror_image_and_stay_in_range(walk):
+def test_a_splice_puts_the_donors_arms_and_head_on_the_clips_legs_and_spine(walk, box):
+    both = spliced(walk, box)
+    T = min(len(walk), len(box))
+    assert len(both) == T and both.skeleton is walk.skeleton
+    legs = [J[n] for n in ("pelvis", "spine3", "left_knee", "right_ankle", "left_foot")]
+    # the legs, the pelvis path and the spine are the clip's: the feet stand where they stood
+    np.testing.assert_allclose(both.positions[:, legs], walk.positions[:T, legs], atol=1e-9)
+    np.testing.assert_allclose(both.local_quats[:, SPLICED], box.local_quats[:T, SPLICED])
+    assert {J["head"], J["left_wrist"], J["right_collar"]} <= set(SPLICED) and J["spine3"] not in SPLICED
+    # the hands move as the boxer's arms do, on the walker's torso
+    hand = both.positions[:, J["right_wrist"]] - both.positions[:, J["spine3"]]
+    walker_hand = walk.positions[:T, J["right_wrist"]] - walk.positions[:T, J["spine3"]]
+    assert np.abs(hand - walker_hand).max() > 0.2
+
+
+def test_splices_take_donors_from_other_clips_and_need_one(walk, box):
+    rng = np.random.default_rng(3)
+    out = augmented([walk, box], Augmentation(("splice",), 6), rng)
+    assert len(out) == 14 and out[0] is walk and out[7] is box
+    names = [m.name for m in out]
+    assert any(n.startswith("02_01/arms:02_05") for n in names) and any(n.startswith("02_05/arms:02_01") for n in names)
+    for name in names:  # "<clip>[/mirror]/arms:<donor>[...]": never the clip's own arms
+        if "arms:" in name:
+            assert name.split("arms:")[1].split("/")[0] != name.split("/")[0]
+    with pytest.raises(ValueError, match="splice augmentation needs at least two"):
+        [random_variant(walk, Augmentation(("splice",)), rng, [walk]) for _ in range(20)]
+    # without splice, the draws are variants' own, clip by clip
+    plain = Augmentation(("mirror", "speed"), 3)
+    a = augmented([walk, box], plain, np.random.default_rng(9))
+    r = np.random.default_rng(9)
+    b = variants(walk, plain, r) + variants(box, plain, r)
+    assert [len(m) for m in a] == [len(m) for m in b]
+
+
+def test_variants_start_with_the_clip_and_its_mirror_image_and_stay_in_range(walk, box):
     rng = np.random.default_rng(5)
-    out = variants(walk, Augmentation(KINDS, 4), rng)
+    out = variants(walk, Augmentation(KINDS, 4), rng, [walk, box])
     assert len(out) == 5 and out[0] is walk
     np.testing.assert_allclose(out[1].positions, mirrored(walk).positions)
     for v in [random_variant(walk, Augmentation(("speed", "proportions")), rng) for _ in range(8)]:

@@ -329,6 +329,21 @@ def test_train_is_one_command(tmp_path, mocap_root):
     assert out.is_file() and report["steps"] == 2 and report["train_clips"] == 1
 
 
+@pytest.mark.train
+def test_noisy_copies_wear_their_trackers_off_the_same_way_through_a_clip(clip):
+    from sparse_body.methods.lobstr.train import clip_tensors
+
+    # LoBSTr's own noise, then a 6-degree mounting turn and 2 cm mounting shift per site
+    plain = clip_tensors(clip, 8, np.random.default_rng(0))
+    worn = clip_tensors(clip, 8, np.random.default_rng(0), mounting=(6.0, 0.02))
+    np.testing.assert_array_equal(plain.x[0], worn.x[0])  # the clean copy is the clip's
+    np.testing.assert_array_equal(plain.legs, worn.legs)
+    # per-frame noise averages out over a clip; a mounting error does not
+    off_plain = np.abs((plain.x[1:] - plain.x[:1]).mean(axis=1)).mean()
+    off_worn = np.abs((worn.x[1:] - worn.x[:1]).mean(axis=1)).mean()
+    assert off_worn > 3 * off_plain
+
+
 @pytest.mark.skipif(not (models_dir() / "lobstr.onnx").is_file(), reason="no shipped LoBSTr model")
 def test_shipped_model_beats_the_ik_baseline_on_a_test_clip(clip_index):
     """The trained model on a held-out person's walk with a 90-degree turn: legs and contacts

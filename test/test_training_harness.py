@@ -21,6 +21,20 @@ def tiny():
 
 
 @pytest.mark.train
+@pytest.mark.parametrize("method", ["lobstr", "avatarjlm", "dtp"])
+def test_only_validation_or_the_selection_may_pick_the_weights(tmp_path, mocap_root, method, capsys):
+    from sparse_body.cli import main
+
+    out = tmp_path / "m.onnx"
+    args = ["train", method, "--config", "tiny", "--limit", "1", "--out", str(out), "--no-card"]
+    with pytest.raises(SystemExit) as done:
+        main([*args, "--set", "select_on=test"])
+    assert done.value.code != 0 and not out.exists()
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "select_on must be validation or selection, got 'test'" in err[0]
+
+
+@pytest.mark.train
 def test_an_interrupted_training_resumes_from_its_checkpoint(tmp_path, mocap_root, tiny):
     from sparse_body.methods.lobstr.train import train
     from sparse_body.train.harness import TrainRun

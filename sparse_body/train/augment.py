@@ -8,7 +8,16 @@ skeleton), from which a trainer derives its inputs and targets as it does for th
 - speed: played 0.8-1.25 times as fast (resampled, then read at the original rate);
 - proportions: arms, legs and torso lengthened or shortened, each segment by its own factor,
   5 % standard deviation: the spread of the 25 CMU bodies relative to their height (arm
-  3.5 %, leg 2.4 %, torso 5.5 %, upper arm / forearm split 5 %; measured on their ASFs).
+  3.5 %, leg 2.4 %, torso 5.5 %, upper arm / forearm split 5 %; measured on their ASFs);
+- splice: the head and arms of another train clip (a donor) on this clip's pelvis, spine and
+  legs, so that a model cannot read the legs off what the hands do: dance arms over walking
+  legs, a reach over a squat. The spine stays with the legs because its lean carries the
+  weight the feet balance, so the feet still allow the body above them; only the neck, head,
+  collars and arms (local rotations, each on its own parent) come from the donor. The
+  copy is as long as the shorter of the two.
+
+'all' names every kind; a report written before 2026-12-05 that says 'all' means the first
+three (splice did not exist yet).
 
 No random heading: every model here sees the body in a heading-free frame (LoBSTr's
 pelvis-yaw reference, DragPoser's heading-split pose), so turning the clip changes nothing
@@ -17,6 +26,7 @@ they see. Tracker noise and limb noise stay with the trainers that already add t
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -24,7 +34,8 @@ import numpy as np
 from ..core.skeleton import JOINT_INDEX, JOINT_NAMES, Skeleton
 from ..data.motion import Motion
 
-KINDS = ("mirror", "speed", "proportions")
+_ARM_ENDS = ("_collar", "_shoulder", "_elbow", "_wrist")
+KINDS = ("mirror", "speed", "proportions", "splice")
 SPEED_RANGE = (0.8, 1.25)
 PROPORTION_STD = 0.05
 
@@ -42,6 +53,8 @@ SEGMENTS = {
     "torso": ("spine2", "spine3", "neck", "left_collar", "right_collar", "head"),
     "hips": ("left_hip", "right_hip"),
 }
+# what a splice takes from its donor: everything above spine3
+SPLICED = np.array([JOINT_INDEX[n] for n in JOINT_NAMES if n in ("neck", "head") or n.endswith(_ARM_ENDS)])
 
 
 @dataclass(frozen=True)
@@ -53,7 +66,7 @@ class Augmentation:
 
     @classmethod
     def parse(cls, spec: str, variants: int = 3) -> Augmentation:
-        """'mirror,speed,proportions' (any subset), 'all' or 'none'."""
+        """'mirror,speed,proportions,splice' (any subset), 'all' or 'none'."""
         spec = spec.strip()
         kinds = KINDS if spec == "all" else () if spec in ("none", "") else tuple(s.strip() for s in spec.split(","))
         unknown = [k for k in kinds if k not in KINDS]
@@ -96,11 +109,28 @@ def with_proportions(motion: Motion, factors: dict[str, float]) -> Motion:
     return Motion(motion.name + "/body", motion.fps, skeleton, motion.local_quats, motion.root_positions * legs)
 
 
-def random_variant(motion: Motion, augmentation: Augmentation, rng: np.random.Generator) -> Motion:
-    """One augmented copy: each kind applied at random (mirror with probability 1/2)."""
+def spliced(motion: Motion, donor: Motion) -> Motion:
+    """motion's pelvis, spine and legs under donor's neck, head and arms (SPLICED), for the
+    frames both have; motion's skeleton."""
+    T = min(len(motion), len(donor))
+    q = motion.local_quats[:T].copy()
+    q[:, SPLICED] = donor.local_quats[:T, SPLICED]
+    return Motion(f"{motion.name}/arms:{donor.name}", motion.fps, motion.skeleton, q, motion.root_positions[:T])
+
+
+def random_variant(
+    motion: Motion, augmentation: Augmentation, rng: np.random.Generator, donors: Sequence[Motion] = ()
+) -> Motion:
+    """One augmented copy: each kind applied at random (mirror and splice with probability
+    1/2 each; the donor drawn from donors, never the clip itself)."""
     kinds = augmentation.kinds
     if "mirror" in kinds and rng.random() < 0.5:
         motion = mirrored(motion)
+    if "splice" in kinds and rng.random() < 0.5:
+        others = [d for d in donors if d.name.split("/")[0] != motion.name.split("/")[0]]
+        if not others:
+            raise ValueError("the splice augmentation needs at least two train clips")
+        motion = spliced(motion, others[rng.integers(len(others))])
     if "proportions" in kinds:
         draws = np.clip(rng.normal(0.0, PROPORTION_STD, len(SEGMENTS)), -2 * PROPORTION_STD, 2 * PROPORTION_STD)
         motion = with_proportions(motion, {s: 1.0 + d for s, d in zip(SEGMENTS, draws, strict=True)})
@@ -110,13 +140,21 @@ def random_variant(motion: Motion, augmentation: Augmentation, rng: np.random.Ge
     return motion
 
 
-def variants(motion: Motion, augmentation: Augmentation, rng: np.random.Generator) -> list[Motion]:
+def variants(
+    motion: Motion, augmentation: Augmentation, rng: np.random.Generator, donors: Sequence[Motion] = ()
+) -> list[Motion]:
     """The clip and its augmented copies; with mirroring, the first copy is the plain mirror
-    image, so that both sides are always seen."""
+    image, so that both sides are always seen. donors: the clips a splice takes arms from."""
     out = [motion]
     for k in range(augmentation.variants):
         if k == 0 and "mirror" in augmentation.kinds:
             out.append(mirrored(motion))
         else:
-            out.append(random_variant(motion, augmentation, rng))
+            out.append(random_variant(motion, augmentation, rng, donors))
     return out
+
+
+def augmented(motions: Sequence[Motion], augmentation: Augmentation, rng: np.random.Generator) -> list[Motion]:
+    """Every clip of a split with its variants, in order; each other clip may be a splice's
+    donor. Without splice the draws are those of variants() clip by clip."""
+    return [m for motion in motions for m in variants(motion, augmentation, rng, motions)]

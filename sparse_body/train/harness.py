@@ -20,6 +20,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from ..data.catalog import SELECTION
 from .model_card import beside  # noqa: F401 (the trainers' and the command's name for it)
 
 
@@ -39,6 +40,19 @@ class TrainRun:
         """Seed torch; the run's numpy generator."""
         torch.manual_seed(self.seed)
         return np.random.default_rng(self.seed)
+
+
+# the splits whose figures may keep a trainer's best weights (a configuration's select_on):
+# the validation people's clips, or the selection, those of kinds of motion no train clip has
+SELECT_ON = ("validation", SELECTION)
+
+
+def held_out_split(select_on: str) -> str:
+    """A configuration's select_on, refused before any data is read when it is not one of
+    SELECT_ON (the test split never picks weights)."""
+    if select_on not in SELECT_ON:
+        raise ValueError(f"select_on must be {' or '.join(SELECT_ON)}, got {select_on!r}")
+    return select_on
 
 
 @dataclass

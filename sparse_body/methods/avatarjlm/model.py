@@ -83,9 +83,11 @@ class AvatarJlmConfig(Presets):
     # tracker noise on the noisy copy of each clip: lobstr (1 cm, 1.5 degrees, LoBSTr's
     # training noise) or vr (the field protocol's: 1 mm, 1 degree)
     train_noise: str = "lobstr"
-    augment: str = "all"  # train/augment.py: mirror, speed, proportions (all), or none
+    augment: str = "mirror,speed,proportions"  # train/augment.py: any of mirror, speed, proportions, splice; all; none
     variants: int = 2
     steps_per_check: int = 200
+    select_on: str = "validation"  # the split whose figures keep the best weights: validation,
+    #                                 or selection (its clips of kinds no train clip has)
     minutes: float = 0.0  # time budget (0: only steps counts)
     steps: int = 100_000  # paper
 

@@ -22,8 +22,8 @@ from ...core.rotations import matrix_to_6d
 from ...core.skeleton import Skeleton, body_scale
 from ...data.catalog import load_clip, split_clips
 from ...data.virtual_trackers import LOBSTR_NOISE, NOISE_MODELS, TrackerNoise, _random_rotations
-from ...train.augment import NO_AUGMENTATION, Augmentation, variants
-from ...train.harness import TrainRun, fit
+from ...train.augment import NO_AUGMENTATION, Augmentation, augmented
+from ...train.harness import TrainRun, fit, held_out_split
 from ...train.harness import export_onnx as export
 from ...train.torch_body import sixd_to_matrix
 from .features import input_joints, reference, sequence_features
@@ -71,17 +71,15 @@ def load_frames(mocap_root: Path, split: str, config: AvatarJlmConfig, rng, limi
     augmentation = Augmentation.parse(config.augment, config.variants) if split == "train" else NO_AUGMENTATION
     joints = input_joints(config.sites)
     parts, starts, offset = [], [], 0
-    for clip in split_clips(mocap_root, split, limit):
-        for motion in variants(load_clip(clip, config.fps), augmentation, rng):
-            parts.append(
-                clip_frames(
-                    motion, joints, 1 if split == "train" else 0, config.fps, rng, NOISE_MODELS[config.train_noise]
-                )
-            )
-            T = len(motion)
-            if config.sequence <= T:
-                starts.append(offset + np.arange(T - config.sequence + 1))
-            offset += T
+    motions = [load_clip(clip, config.fps) for clip in split_clips(mocap_root, split, limit)]
+    for motion in augmented(motions, augmentation, rng):
+        parts.append(
+            clip_frames(motion, joints, 1 if split == "train" else 0, config.fps, rng, NOISE_MODELS[config.train_noise])
+        )
+        T = len(motion)
+        if config.sequence <= T:
+            starts.append(offset + np.arange(T - config.sequence + 1))
+        offset += T
     x, yaw, head, root_rot, pose, contact = (
         np.concatenate([p[k] for p in parts], axis=1 if k < 3 else 0).astype(np.float32) for k in range(6)
     )
@@ -160,11 +158,12 @@ def train(config: AvatarJlmConfig, run: TrainRun) -> dict:
     """Train, export out (an .onnx path) and return what the model card reports."""
     if config.train_noise not in NOISE_MODELS:
         raise ValueError(f"train_noise must be one of {', '.join(NOISE_MODELS)}, got {config.train_noise!r}")
+    held_out = held_out_split(config.select_on)
     rng = run.start()
     out = run.out
     t0 = time.perf_counter()
     train_frames = load_frames(run.mocap_root, "train", config, rng, run.limit)
-    val_frames = load_frames(run.mocap_root, "validation", config, rng, run.limit)
+    val_frames = load_frames(run.mocap_root, held_out, config, rng, run.limit)
     sampler = WindowSampler(train_frames, config)
     val_windows = WindowSampler(val_frames, config).sample(
         min(1024, 64 * config.batch), np.random.default_rng(run.seed + 1), clean=True

@@ -23,7 +23,7 @@ from scipy.spatial.transform import Rotation
 from ...core.contacts import estimate_floor
 from ...core.skeleton import JOINT_INDEX, Skeleton, body_scale
 from ...data.catalog import load_clip, split_clips
-from ...train.augment import NO_AUGMENTATION, Augmentation, variants
+from ...train.augment import NO_AUGMENTATION, Augmentation, augmented
 from ...train.harness import TrainRun, export_onnx, fit
 from .estimator import PoseVaeRuntime
 from .pose import HEIGHT_JOINTS, LIMBS, split_heading, temporal_context
@@ -139,8 +139,7 @@ def load_clips(
 ):
     return [
         clip_arrays(m)
-        for c in split_clips(mocap_root, split, limit)
-        for m in variants(load_clip(c, fps), augmentation, rng)
+        for m in augmented([load_clip(c, fps) for c in split_clips(mocap_root, split, limit)], augmentation, rng)
     ]
 
 

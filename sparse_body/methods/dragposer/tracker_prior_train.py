@@ -30,7 +30,7 @@ from ...core.sensors import SITE_JOINTS
 from ...core.skeleton import JOINT_INDEX, LOWER_BODY, Skeleton, body_scale, joint_indices
 from ...data.catalog import load_clip, split_clips
 from ...data.virtual_trackers import _random_rotations
-from ...train.augment import NO_AUGMENTATION, Augmentation, variants
+from ...train.augment import NO_AUGMENTATION, Augmentation, augmented
 from ...train.harness import TrainRun, export_onnx, fit
 from ...train.presets import Presets
 from ...train.torch_body import forward_kinematics as torch_fk
@@ -59,7 +59,7 @@ class TrackerPriorConfig(Presets):
     noise_copies: int = 2
     position_noise: float = 0.01  # metres per axis: LoBSTr's tracker noise
     rotation_noise_deg: float = 5.0  # up to: tracker noise and what the calibration leaves
-    augment: str = "all"
+    augment: str = "mirror,speed,proportions"  # train/augment.py (all: splice too)
     variants: int = 2
     minutes: float = 0.0
     steps: int = 1_000_000
@@ -181,8 +181,7 @@ def load_clips(mocap_root: Path, split: str, config: TrackerPriorConfig, vae, rn
     augmentation = Augmentation.parse(config.augment, config.variants) if train else NO_AUGMENTATION
     return [
         clip_tensors(m, vae, config, rng, config.noise_copies if train else 0)
-        for c in split_clips(mocap_root, split, limit)
-        for m in variants(load_clip(c, config.fps), augmentation, rng)
+        for m in augmented([load_clip(c, config.fps) for c in split_clips(mocap_root, split, limit)], augmentation, rng)
     ]
 
 

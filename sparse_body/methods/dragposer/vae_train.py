@@ -19,7 +19,7 @@ from ...core.kinematics import forward_kinematics
 from ...core.rotations import angle_between, matrix_to_6d
 from ...core.skeleton import Skeleton, body_scale
 from ...data.catalog import load_clip, split_clips
-from ...train.augment import NO_AUGMENTATION, Augmentation, variants
+from ...train.augment import NO_AUGMENTATION, Augmentation, augmented
 from ...train.harness import TrainRun, export_onnx, fit
 from ...train.torch_body import sixd_to_matrix
 from .pose import dual_quaternions, split_heading
@@ -45,8 +45,7 @@ def load_frames(
     offsets = Skeleton.canonical().offsets
     return [
         clip_arrays(m, offsets)
-        for c in split_clips(mocap_root, split, limit)
-        for m in variants(load_clip(c, fps), augmentation, rng)
+        for m in augmented([load_clip(c, fps) for c in split_clips(mocap_root, split, limit)], augmentation, rng)
     ]
 
 

@@ -41,9 +41,11 @@ class DtpConfig(Presets):
     w_rotation: float = 1.0  # paper's loss weights
     w_end_effector: float = 0.5
     w_foot_velocity: float = 0.01
-    augment: str = "all"  # train/augment.py: mirror, speed, proportions (all), or none
+    augment: str = "mirror,speed,proportions"  # train/augment.py: any of mirror, speed, proportions, splice; all; none
     variants: int = 2
     steps_per_check: int = 200
+    select_on: str = "validation"  # the split whose figures keep the best weights: validation,
+    #                                 or selection (its clips of kinds no train clip has)
     minutes: float = 0.0  # pre-training budget (0: only steps counts)
     steps: int = 200_000
     # occlusion fine-tuning (the paper's AMASS-OCC): in this share of windows one or both feet

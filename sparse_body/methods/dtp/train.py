@@ -28,8 +28,8 @@ from ...core.rotations import matrix_to_6d
 from ...core.skeleton import Skeleton, body_scale
 from ...data.catalog import load_clip, split_clips
 from ...data.virtual_trackers import LOBSTR_NOISE, _random_rotations
-from ...train.augment import NO_AUGMENTATION, Augmentation, variants
-from ...train.harness import TrainRun, fit, load_best, machine
+from ...train.augment import NO_AUGMENTATION, Augmentation, augmented
+from ...train.harness import TrainRun, fit, held_out_split, load_best, machine
 from ...train.harness import export_onnx as export
 from ...train.torch_body import sixd_to_matrix
 from .features import FOOT_LEAVES, INPUT_JOINTS, leaf_features, window_features
@@ -73,13 +73,13 @@ def clip_frames(motion, copies: int, rng: np.random.Generator):
 def load_frames(mocap_root: Path, split: str, config: DtpConfig, rng, limit: int | None = None) -> Frames:
     augmentation = Augmentation.parse(config.augment, config.variants) if split == "train" else NO_AUGMENTATION
     parts, starts, offset = [], [], 0
-    for clip in split_clips(mocap_root, split, limit):
-        for motion in variants(load_clip(clip, config.fps), augmentation, rng):
-            parts.append(clip_frames(motion, 1 if split == "train" else 0, rng))
-            T = len(motion)
-            if config.window <= T:
-                starts.append(offset + np.arange(T - config.window + 1))
-            offset += T
+    motions = [load_clip(clip, config.fps) for clip in split_clips(mocap_root, split, limit)]
+    for motion in augmented(motions, augmentation, rng):
+        parts.append(clip_frames(motion, 1 if split == "train" else 0, rng))
+        T = len(motion)
+        if config.window <= T:
+            starts.append(offset + np.arange(T - config.window + 1))
+        offset += T
     pelvis_pos, pelvis_rot, leaves, feet_pos, pose = (
         np.concatenate([p[k] for p in parts], axis=1 if k == 2 else 0).astype(np.float32) for k in range(5)
     )
@@ -186,11 +186,12 @@ def _log_stage(log: Callable[[str], None], stage: str, message: str) -> None:
 def train(config: DtpConfig, run: TrainRun) -> dict:
     """Pre-train, export the pre-trained model, fine-tune on occluded feet, export out (an
     .onnx path) and return what the model card reports."""
+    held_out = held_out_split(config.select_on)
     rng = run.start()
     out = run.out
     t0 = time.perf_counter()
     train_frames = load_frames(run.mocap_root, "train", config, rng, run.limit)
-    val_frames = load_frames(run.mocap_root, "validation", config, rng, run.limit)
+    val_frames = load_frames(run.mocap_root, held_out, config, rng, run.limit)
     sampler, val_sampler = WindowSampler(train_frames, config), WindowSampler(val_frames, config)
     n_val = min(2048, 64 * config.batch)  # fixed validation windows (tiny configurations: fewer)
     val_batches = [

@@ -37,7 +37,14 @@ class LobstrConfig(Presets):
     w_velocity: float = 0.1
     w_contact: float = 1e-6
     noise_copies: int = 3  # tracker-noise realisations per clip, besides the clean one
-    augment: str = "all"  # train/augment.py: mirror, speed, proportions (all), or none
+    # each noisy copy's trackers also sit off their sites, the same way through the clip: what
+    # the field's calibration leaves (its T-pose is off by up to 2 degrees a segment; the
+    # mounting translation found from movement, by about a centimetre)
+    mounting_deg: float = 0.0  # each site's rotation turned by up to this (degrees)
+    mounting_std: float = 0.0  # each site's translation off by this per axis (metres)
+    select_on: str = "validation"  # the split whose figures keep the best weights: validation,
+    #                                 or selection (its clips of kinds no train clip has)
+    augment: str = "mirror,speed,proportions"  # train/augment.py: any of mirror, speed, proportions, splice; all; none
     variants: int = 3  # augmented copies per train clip, besides the clip
     minutes: float = 0.0  # stop after this long (0: only steps counts)
     steps: int = 75_000  # paper: 1,500 epochs

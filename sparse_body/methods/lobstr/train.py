@@ -4,7 +4,8 @@ Every clip is put on the canonical body (positions scaled by leg length, floor a
 its four tracked joints become input vectors (clean, plus noisy copies with the paper's
 tracker noise), and 90-frame chunks are drawn with probability proportional to clip length
 (the paper's sampling). The checkpoint with the best validation leg rotation and toe
-position is exported.
+position is exported (`select_on`: on all validation clips, or on the selection's, the kinds of
+motion no train clip has).
 """
 
 from __future__ import annotations
@@ -21,8 +22,8 @@ from ...core.rotations import angle_between, heading
 from ...core.skeleton import Skeleton, body_scale
 from ...data.catalog import load_clip, split_clips
 from ...data.virtual_trackers import LOBSTR_NOISE, _random_rotations
-from ...train.augment import NO_AUGMENTATION, Augmentation, variants
-from ...train.harness import TrainRun, fit
+from ...train.augment import NO_AUGMENTATION, Augmentation, augmented
+from ...train.harness import TrainRun, fit, held_out_split
 from ...train.harness import export_onnx as export
 from ...train.torch_body import sixd_to_matrix
 from .features import (
@@ -48,7 +49,11 @@ class ClipTensors:
     contact: np.ndarray  # (T, 2)
 
 
-def clip_tensors(motion, copies: int, rng: np.random.Generator, learned_upper: bool = False) -> ClipTensors:
+def clip_tensors(
+    motion, copies: int, rng: np.random.Generator, learned_upper: bool = False, mounting: tuple[float, float] = (0, 0)
+) -> ClipTensors:
+    """A clip's inputs (clean, then `copies` noisy ones) and targets; mounting: (degrees,
+    metres) of each noisy copy's constant mounting error per site (LobstrConfig)."""
     floor = estimate_floor(motion.positions)
     scale = body_scale(motion.skeleton)
     glob, local = motion.global_rotations, motion.local_rotations
@@ -59,7 +64,13 @@ def clip_tensors(motion, copies: int, rng: np.random.Generator, learned_upper: b
     for _ in range(copies):
         noisy_pos = pos + rng.normal(0.0, LOBSTR_NOISE.position_std, size=pos.shape)
         r = _random_rotations(rng, T * 4, LOBSTR_NOISE.rotation_max_deg).as_matrix().reshape(T, 4, 3, 3)
-        xs.append(sequence_features(noisy_pos, r @ rot, pose=learned_upper))
+        worn = rot
+        if mounting[0] or mounting[1]:  # a tracker at m in its site's frame turned by M: R M at p + R m
+            turn = _random_rotations(rng, 4, mounting[0]).as_matrix()
+            off = rng.normal(0.0, mounting[1], size=(4, 3)) * scale
+            noisy_pos = noisy_pos + np.einsum("tsij,sj->tsi", rot, off)
+            worn = rot @ turn
+        xs.append(sequence_features(noisy_pos, r @ worn, pose=learned_upper))
     ref = reference_frames(glob[:, 0])
     upper = upper_targets(local) if learned_upper else np.zeros((T, 0))
     return ClipTensors(
@@ -158,23 +169,31 @@ def load_clips(mocap_root: Path, split: str, config: LobstrConfig, rng, limit: i
     """The split's clips as tensors; train clips with their augmented variants and noisy copies."""
     augmentation = Augmentation.parse(config.augment, config.variants) if split == "train" else NO_AUGMENTATION
     return [
-        clip_tensors(m, config.noise_copies if split == "train" else 0, rng, config.learned_upper)
-        for c in split_clips(mocap_root, split, limit)
-        for m in variants(load_clip(c, config.fps), augmentation, rng)
+        clip_tensors(
+            m,
+            config.noise_copies if split == "train" else 0,
+            rng,
+            config.learned_upper,
+            (config.mounting_deg, config.mounting_std),
+        )
+        for m in augmented([load_clip(c, config.fps) for c in split_clips(mocap_root, split, limit)], augmentation, rng)
     ]
 
 
 def train(config: LobstrConfig, run: TrainRun) -> dict:
     """Train, export out (an .onnx path) and return what the model card reports."""
+    held_out = held_out_split(config.select_on)
     rng = run.start()
     out = run.out
     t0 = time.perf_counter()
     train_clips = load_clips(run.mocap_root, "train", config, rng, run.limit)
-    val_clips = load_clips(run.mocap_root, "validation", config, rng, run.limit)
+    val_clips = load_clips(run.mocap_root, held_out, config, rng, run.limit)
+    if not val_clips:
+        raise ValueError(f"no {config.select_on} clips to keep the best weights by (--set select_on=validation)")
     sampler = ChunkSampler(train_clips, config.chunk)
     run.log(
         f"data: {len(train_clips)} train clips ({len(sampler.legs)} frames x {sampler.x.shape[0]} copies), "
-        f"{len(val_clips)} validation clips, {time.perf_counter() - t0:.0f} s"
+        f"{len(val_clips)} {config.select_on} clips, {time.perf_counter() - t0:.0f} s"
     )
     net = LobstrNet(config)
     clean = sampler.x[0]

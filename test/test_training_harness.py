@@ -129,7 +129,12 @@ def test_the_lobstr_card_is_rendered_from_its_measured_file_alone(tmp_path):
     (tmp_path / "lobstr.eval.json").write_text(json.dumps(measured))
     report = json.loads((tmp_path / "lobstr.train.json").read_text())
     text = write_lobstr_card(onnx, report, mocap_root=None, evaluate=False).read_text()
-    assert "Skate with contact IK: 5.00 cm/s; without: 10.00 cm/s" in text  # field runs 1 and 2, Skate = 5 x scale
+    # field runs 1 and 2, Skate = 5 x scale; the second holds no foot at all
+    assert "Skate with contact IK: 5.00 cm/s; without it or any other hold" in text and "10.00 cm/s" in text
+    assert "`lobstr:contact_ik=false,foot_lock=false`" in text
+    # the shipped model kept the selection's weights, and its card says so
+    assert "on the selection, the validation clips of kinds of motion no train clip has" in text
+    assert "Selection (exported weights)" in text and "Contact labels (version 2" in text
     # two equal clips: each interval is the mean itself
     assert (
         "| lobstr/four_point | clean | 1.00 [1.00, 1.00] | 2.00 [2.00, 2.00] | 3.00 [3.00, 3.00] | 4.00 [4.00, 4.00] |"

@@ -170,7 +170,7 @@ def train(config: AvatarJlmConfig, run: TrainRun) -> dict:
     )
     run.log(
         f"data: {train_frames.x.shape[1]} train frames x {train_frames.x.shape[0]} copies, "
-        f"{val_frames.x.shape[1]} validation frames, {time.perf_counter() - t0:.0f} s"
+        f"{val_frames.x.shape[1]} {held_out} frames, {time.perf_counter() - t0:.0f} s"
     )
     net = AvatarJlmNet(config)
     x = sampler.sample(min(4096, 64 * config.batch), rng)["x"].flatten(0, 1)

@@ -200,7 +200,7 @@ def train(config: DtpConfig, run: TrainRun) -> dict:
     ]
     run.log(
         f"data: {len(train_frames.pose)} train frames x {train_frames.leaves.shape[0]} copies, "
-        f"{len(val_frames.pose)} validation frames, {time.perf_counter() - t0:.0f} s"
+        f"{len(val_frames.pose)} {held_out} frames, {time.perf_counter() - t0:.0f} s"
     )
     net = DtpNet(config)
     x = sampler.sample(min(4096, 64 * config.batch), rng, clean=True)["x"].flatten(0, 1)

@@ -9,7 +9,7 @@ METHOD = Method(
     "lobstr",
     "sparse_body.methods.lobstr.estimator:LobstrEstimator",
     "sparse_body.methods.lobstr.options:LobstrOptions",
-    compare_with=("lobstr:contact_ik=false", "ik"),
+    compare_with=("lobstr:contact_ik=false,foot_lock=false", "ik"),
     paper_figures={
         "four_point": {"LoBSTr paper": {"Contact acc [%]": 85.77, "Lower RE [deg]": 8.53, "Toe PE [cm]": 6.63}}
     },

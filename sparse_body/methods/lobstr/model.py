@@ -39,7 +39,7 @@ class LobstrConfig(Presets):
     noise_copies: int = 3  # tracker-noise realisations per clip, besides the clean one
     # each noisy copy's trackers also sit off their sites, the same way through the clip: what
     # the field's calibration leaves (its T-pose is off by up to 2 degrees a segment; the
-    # mounting translation found from movement, by about a centimetre)
+    # movement calibration finds the translations within millimetres)
     mounting_deg: float = 0.0  # each site's rotation turned by up to this (degrees)
     mounting_std: float = 0.0  # each site's translation off by this per axis (metres)
     select_on: str = "validation"  # the split whose figures keep the best weights: validation,

@@ -122,15 +122,14 @@ def random_variant(
     motion: Motion, augmentation: Augmentation, rng: np.random.Generator, donors: Sequence[Motion] = ()
 ) -> Motion:
     """One augmented copy: each kind applied at random (mirror and splice with probability
-    1/2 each; the donor drawn from donors, never the clip itself)."""
+    1/2 each; the donor drawn from donors, the other clips of the split)."""
     kinds = augmentation.kinds
     if "mirror" in kinds and rng.random() < 0.5:
         motion = mirrored(motion)
     if "splice" in kinds and rng.random() < 0.5:
-        others = [d for d in donors if d.name.split("/")[0] != motion.name.split("/")[0]]
-        if not others:
+        if not donors:
             raise ValueError("the splice augmentation needs at least two train clips")
-        motion = spliced(motion, others[rng.integers(len(others))])
+        motion = spliced(motion, donors[int(rng.integers(len(donors)))])
     if "proportions" in kinds:
         draws = np.clip(rng.normal(0.0, PROPORTION_STD, len(SEGMENTS)), -2 * PROPORTION_STD, 2 * PROPORTION_STD)
         motion = with_proportions(motion, {s: 1.0 + d for s, d in zip(SEGMENTS, draws, strict=True)})
@@ -144,7 +143,7 @@ def variants(
     motion: Motion, augmentation: Augmentation, rng: np.random.Generator, donors: Sequence[Motion] = ()
 ) -> list[Motion]:
     """The clip and its augmented copies; with mirroring, the first copy is the plain mirror
-    image, so that both sides are always seen. donors: the clips a splice takes arms from."""
+    image, so that both sides are always seen. donors: the other clips, whose arms a splice takes."""
     out = [motion]
     for k in range(augmentation.variants):
         if k == 0 and "mirror" in augmentation.kinds:
@@ -157,4 +156,8 @@ def variants(
 def augmented(motions: Sequence[Motion], augmentation: Augmentation, rng: np.random.Generator) -> list[Motion]:
     """Every clip of a split with its variants, in order; each other clip may be a splice's
     donor. Without splice the draws are those of variants() clip by clip."""
-    return [m for motion in motions for m in variants(motion, augmentation, rng, motions)]
+    out = []
+    for k, motion in enumerate(motions):
+        donors = [*motions[:k], *motions[k + 1 :]] if "splice" in augmentation.kinds else ()
+        out += variants(motion, augmentation, rng, donors)
+    return out

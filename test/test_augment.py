@@ -131,6 +131,15 @@ def test_augmentation_names_parse_and_unknown_ones_are_refused():
     assert set(SEGMENTS) >= {"thigh", "shin", "upper_arm", "forearm", "torso"}
 
 
+def test_the_train_commands_help_names_every_kind(capsys):
+    from sparse_body.cli import main
+
+    with pytest.raises(SystemExit):
+        main(["train", "--help"])
+    text = " ".join(capsys.readouterr().out.split())
+    assert ",".join(KINDS) in text
+
+
 @pytest.mark.train
 def test_ablation_command_writes_each_runs_validation(tmp_path, mocap_root):
     from sparse_body.cli import main

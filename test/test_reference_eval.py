@@ -87,6 +87,9 @@ def test_eval_command_prints_the_table_and_writes_json(mocap_root, tmp_path):
         and "MPJPE [cm]" in proc.stdout
         and "3 clips of the test split" in proc.stdout
     )
+    # the three clips are three kinds of motion: each kind's feet (skate, ground, contacts) has its table
+    for metric in ("MPJPE [cm]", "Lower PE [cm]", "Skate [cm/s]", "Ground [cm]", "Contact acc [%]"):
+        assert f"{metric} by motion" in proc.stdout, metric
     result = json.loads(out.read_text())[0]
     assert result["estimator"] == "reference" and len(result["clips"]) == 3
     assert 2.0 < result["summary"]["MPJPE [cm]"] < 40.0

@@ -114,7 +114,7 @@ def run(args) -> int:
         print(format_groups(results, label="person", by="subject"))
     if not args.motion and len(set(results[0].categories)) > 1:  # each kind of motion, unseen ones marked
         notes = untrained_categories(mocap_root(args), results[0].categories)
-        for metric in ("MPJPE [cm]", "Lower PE [cm]", "Skate [cm/s]", "Contact acc [%]"):
+        for metric in ("MPJPE [cm]", "Lower PE [cm]", "Skate [cm/s]", "Ground [cm]", "Contact acc [%]"):
             print(format_groups(results, metric, label="motion", by="category", notes=notes))
     print(f"written {out}")
     skipped = {s["clip"]: s["reason"] for r in results for s in r.skipped}

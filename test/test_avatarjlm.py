@@ -194,6 +194,8 @@ def test_train_avatarjlm_is_one_command(tmp_path, mocap_root):
     )
     report = json.loads(out.with_suffix(".train.json").read_text())
     assert report["steps"] == 2 and report["train_clips"] == 1 and "mpjpe_cm" in report["validation"]
+    # the worst joint's rotation error: what a joint turned about its own bone shows in
+    assert report["validation"]["worst_joint_re_deg"] >= report["validation"]["mpjre_deg"] > 0
     meta = ort.InferenceSession(str(out), providers=["CPUExecutionProvider"]).get_modelmeta().custom_metadata_map
     assert json.loads(meta["config"]) == report["config"] and json.loads(meta["method"]) == "avatarjlm"
 

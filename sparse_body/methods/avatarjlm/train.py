@@ -124,7 +124,9 @@ def token_masks(net: AvatarJlmNet, batch: int, rng: np.random.Generator) -> torc
 @torch.no_grad()
 def validate(net: AvatarJlmNet, windows: dict[str, torch.Tensor]) -> dict[str, float]:
     """The last frame of each fixed validation sequence (what a stream reads), clean trackers:
-    joint position error (the body placed by head alignment), hand error, rotation error."""
+    joint position error (the body placed by head alignment), hand error, rotation error, and
+    the worst joint's rotation error: a joint turned about its own bone moves no position, so
+    only this shows it (a run settled with the neck half a turn about its own axis)."""
     pose, _ = net(windows["x"])
     pose, target = pose[:, -1], windows["pose"][:, -1]
     p = world_positions(pose, windows["yaw"][:, -1], windows["head"][:, -1], net.offsets)
@@ -136,6 +138,7 @@ def validate(net: AvatarJlmNet, windows: dict[str, torch.Tensor]) -> dict[str, f
         "hand_pe_cm": float(err[:, list(HANDS)].mean() * 100),
         "lower_pe_cm": float(err[:, 1:12].mean() * 100),
         "mpjre_deg": float(torch.rad2deg(angle).mean()),
+        "worst_joint_re_deg": float(torch.rad2deg(angle).mean(dim=0).max()),
     }
 
 

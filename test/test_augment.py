@@ -131,9 +131,10 @@ def test_augmentation_names_parse_and_unknown_ones_are_refused():
     assert set(SEGMENTS) >= {"thigh", "shin", "upper_arm", "forearm", "torso"}
 
 
-def test_the_train_commands_help_names_every_kind(capsys):
+def test_the_train_commands_help_names_every_kind(capsys, monkeypatch):
     from sparse_body.cli import main
 
+    monkeypatch.setenv("COLUMNS", "200")  # argparse would break a word longer than a narrow terminal
     with pytest.raises(SystemExit):
         main(["train", "--help"])
     text = " ".join(capsys.readouterr().out.split())

@@ -132,13 +132,13 @@ def validate(net: AvatarJlmNet, windows: dict[str, torch.Tensor]) -> dict[str, f
     p = world_positions(pose, windows["yaw"][:, -1], windows["head"][:, -1], net.offsets)
     g = world_positions(target, windows["yaw"][:, -1], windows["head"][:, -1], net.offsets)
     err = (p - g).norm(dim=-1)
-    angle = roma.rotmat_geodesic_distance(sixd_to_matrix(pose[:, 1:]), sixd_to_matrix(target[:, 1:]))
+    degrees = torch.rad2deg(roma.rotmat_geodesic_distance(sixd_to_matrix(pose[:, 1:]), sixd_to_matrix(target[:, 1:])))
     return {
         "mpjpe_cm": float(err.mean() * 100),
         "hand_pe_cm": float(err[:, list(HANDS)].mean() * 100),
         "lower_pe_cm": float(err[:, 1:12].mean() * 100),
-        "mpjre_deg": float(torch.rad2deg(angle).mean()),
-        "worst_joint_re_deg": float(torch.rad2deg(angle).mean(dim=0).max()),
+        "mpjre_deg": float(degrees.mean()),
+        "worst_joint_re_deg": float(degrees.mean(dim=0).max()),
     }
 
 

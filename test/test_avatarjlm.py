@@ -369,3 +369,37 @@ def test_leg_term_judges_the_legs_own_swing_not_the_root(clip, tmp_path):
     assert (legs[0] - legs[2]).norm(dim=-1).max() > 0.05  # a bent knee moves the foot
     with pytest.raises(ValueError, match="train_noise must be one of"):
         train(replace(AvatarJlmConfig.named("tiny"), train_noise="loud"), TrainRun(None, tmp_path / "unused.onnx"))
+
+
+@pytest.mark.train
+def test_rotation_loss_on_matrices_pulls_a_half_turned_joint_back(tmp_path):
+    """A joint turned 170 degrees about its own bone: L1 on raw 6D falls toward the half turn
+    and pulls the vectors toward zero (where one column flips before the other and the child
+    swings through the joint); the angle between the rotations (rotation_loss=matrix) turns it
+    back as hard as a small turn, the vectors' length kept, and weighs a small turn as 6D's L1."""
+    import torch
+
+    from sparse_body.methods.avatarjlm.model import AvatarJlmConfig, rotation_error
+    from sparse_body.methods.avatarjlm.train import train
+    from sparse_body.train.harness import TrainRun
+
+    def sixd(degrees):  # a turn about z, the bone (6D: the first two columns)
+        a = np.radians(degrees)
+        return torch.tensor([[np.cos(a), np.sin(a), 0.0, -np.sin(a), np.cos(a), 0.0]])
+
+    target, turned = sixd(0.0), sixd(170.0)
+    toward_half_turn = (sixd(170.1) - turned) / np.radians(0.1)
+    pull = {}
+    for space in ("6d", "matrix"):
+        raw = turned.clone().requires_grad_(True)
+        rotation_error(raw, target, space).sum().backward()
+        grad = raw.grad[0]
+        columns = [float(grad[k : k + 3] @ turned[0, k : k + 3]) for k in (0, 3)]  # > 0: descent shrinks them
+        pull[space] = (float(grad @ toward_half_turn[0]), columns)  # > 0: descent turns the joint back
+    assert pull["6d"][0] < -0.1 and min(pull["6d"][1]) > 0.1
+    assert pull["matrix"][0] > 0.3 and max(abs(c) for c in pull["matrix"][1]) < 1e-6
+    small = [float(rotation_error(sixd(5.0), target, space)) for space in ("6d", "matrix")]
+    assert small[1] == pytest.approx(small[0], rel=0.1)
+    assert float(rotation_error(2 * target, target, "matrix")) < 1e-5  # a raw vector's length is no error
+    with pytest.raises(ValueError, match="rotation_loss must be one of"):
+        train(replace(AvatarJlmConfig.named("tiny"), rotation_loss="quat"), TrainRun(None, tmp_path / "unused.onnx"))

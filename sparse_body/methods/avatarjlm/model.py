@@ -41,6 +41,8 @@ from ...train.torch_body import forward_kinematics, matrix_to_6d, sixd_to_matrix
 from .features import PER_SITE, SITES, input_joints
 
 TOKENS = 2 * NUM_JOINTS  # rotation tokens, then position tokens
+ROTATION_LOSSES = ("6d", "matrix")  # AvatarJlmConfig.rotation_loss
+CHORD_TO_6D = 3 * 2**0.5  # a small turn a: chord sqrt(2) a, 6D L1 about a / 3
 HEAD = JOINT_INDEX["head"]
 HANDS = (JOINT_INDEX["left_wrist"], JOINT_INDEX["right_wrist"])
 FEET = tuple(JOINT_INDEX[j] for j in ("left_ankle", "right_ankle", "left_foot", "right_foot"))
@@ -80,6 +82,13 @@ class AvatarJlmConfig(Presets):
     # L1. Head-aligned positions (L_pos) charge a leg for every error of the spine and root
     # above it; this term judges the legs' own swing (the three-point model)
     leg_weight: float = 0.0
+    # what the rotation terms (L_first, L_ori, L_rot) measure: 6d, L1 on the network's raw
+    # output, as the paper; or matrix, the angle between the rotations (rotation_error).
+    # L1 falls again past 135 degrees of a joint's turn (2 (1 - cos a) + 2 |sin a|), so a joint
+    # turned that far settles half a turn about its bone, its child turned back; the raw
+    # vectors' only way out is through zero, where one column flips before the other and the
+    # child swings through the joint, and the position terms hold it there
+    rotation_loss: str = "6d"
     # tracker noise on the noisy copy of each clip: lobstr (1 cm, 1.5 degrees, LoBSTr's
     # training noise) or vr (the field protocol's: 1 mm, 1 degree)
     train_noise: str = "lobstr"
@@ -334,16 +343,31 @@ def world_positions(pose6: torch.Tensor, yaw: torch.Tensor, head: torch.Tensor, 
     return pos - pos[..., HEAD : HEAD + 1, :] + head[..., None, :]
 
 
+def rotation_error(pose6: torch.Tensor, target6: torch.Tensor, space: str) -> torch.Tensor:
+    """(..., n) per joint, the network's 6D against the target's: L1 on the raw vectors (6d), or
+    the angle of the turn between the rotations they stand for, over 3 so that a small turn
+    weighs as on 6d (matrix). The angle pulls as hard at 170 degrees as at 10; L1 pulls a turn
+    past 135 degrees on toward the half turn (on unit vectors, 2 (1 - cos a) + 2 |sin a|)."""
+    if space == "matrix":
+        m = sixd_to_matrix(target6).transpose(-1, -2) @ sixd_to_matrix(pose6)  # the turn between them
+        skew = torch.stack([m[..., 2, 1] - m[..., 1, 2], m[..., 0, 2] - m[..., 2, 0], m[..., 1, 0] - m[..., 0, 1]], -1)
+        sin = skew.square().sum(-1).clamp_min(1e-12).sqrt() / 2
+        cos = (m[..., 0, 0] + m[..., 1, 1] + m[..., 2, 2] - 1) / 2
+        return torch.atan2(sin, cos) / 3
+    return (pose6 - target6).abs().mean(-1)
+
+
 def losses(net: AvatarJlmNet, batch: dict[str, torch.Tensor], token_mask: torch.Tensor | None = None):
     """The paper's terms (Section 3.3) on every frame of the windows, and their weighted sum.
     One deviation: the foot-height term pulls the feet to the true feet's height in contact
-    (our toe joints sit a few centimetres above the floor), not to the floor itself."""
+    (our toe joints sit a few centimetres above the floor), not to the floor itself; and one
+    option, rotation_loss (the rotation terms on the matrices)."""
     c = net.config
     pose, init = net(batch["x"], token_mask)
     target = batch["pose"]  # (B, W, 22, 6), root in the heading frame
-    l_first = (init - target).abs().mean()
-    l_ori = (pose[..., 0, :] - target[..., 0, :]).abs().mean()
-    l_rot = (pose[..., 1:, :] - target[..., 1:, :]).abs().mean()
+    l_first = rotation_error(init, target, c.rotation_loss).mean()
+    l_ori = rotation_error(pose[..., :1, :], target[..., :1, :], c.rotation_loss).mean()
+    l_rot = rotation_error(pose[..., 1:, :], target[..., 1:, :], c.rotation_loss).mean()
     p = world_positions(pose, batch["yaw"], batch["head"], net.offsets)
     g = world_positions(target, batch["yaw"], batch["head"], net.offsets)  # the same head: noise is not the network's
     l_pos = (p - g).abs().mean()

@@ -27,7 +27,7 @@ from ...train.harness import TrainRun, fit, held_out_split
 from ...train.harness import export_onnx as export
 from ...train.torch_body import sixd_to_matrix
 from .features import input_joints, reference, sequence_features
-from .model import HANDS, TOKENS, AvatarJlmConfig, AvatarJlmNet, StreamingStep, losses, world_positions
+from .model import HANDS, ROTATION_LOSSES, TOKENS, AvatarJlmConfig, AvatarJlmNet, StreamingStep, losses, world_positions
 
 
 @dataclass
@@ -161,6 +161,8 @@ def train(config: AvatarJlmConfig, run: TrainRun) -> dict:
     """Train, export out (an .onnx path) and return what the model card reports."""
     if config.train_noise not in NOISE_MODELS:
         raise ValueError(f"train_noise must be one of {', '.join(NOISE_MODELS)}, got {config.train_noise!r}")
+    if config.rotation_loss not in ROTATION_LOSSES:
+        raise ValueError(f"rotation_loss must be one of {', '.join(ROTATION_LOSSES)}, got {config.rotation_loss!r}")
     held_out = held_out_split(config.select_on)
     rng = run.start()
     out = run.out

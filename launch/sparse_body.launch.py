@@ -69,6 +69,7 @@ def _nodes(context):
         )
         with_rsp = False
     estimator_params[1]["publish_link_tf"] = not with_rsp
+    consumers = ["sparse_body_estimator"]  # the nodes here that read the trackers' /tf
     nodes = notes + [
         LifecycleNode(
             package="sparse_body",
@@ -89,6 +90,7 @@ def _nodes(context):
             )
         )
     if arg("refine").lower() in ("true", "1"):
+        consumers.append("sparse_body_constraint")
         nodes.append(
             LifecycleNode(
                 package="sparse_body",
@@ -105,6 +107,7 @@ def _nodes(context):
     if arg("robot"):
         from sparse_body.core.sensors import load_sensor_config
 
+        consumers.append("sparse_body_retarget")
         nodes.append(
             LifecycleNode(
                 package="sparse_body",
@@ -131,7 +134,12 @@ def _nodes(context):
                 output="screen",
                 parameters=[
                     os.path.join(share, "config", "tracker_bridge.yaml"),
-                    {"bag": arg("bag"), "loop": arg("loop").lower() in ("true", "1")},
+                    {
+                        "bag": arg("bag"),
+                        "loop": arg("loop").lower() in ("true", "1"),
+                        # the first frame is for the nodes started here, not for whoever subscribed first
+                        "wait_for_nodes": consumers,
+                    },
                 ],
             )
         )

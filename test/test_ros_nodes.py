@@ -872,6 +872,32 @@ def test_the_bridge_is_a_lifecycle_node_whose_transitions_start_and_stop_the_sam
     assert "configure failed" in log and "no_such_bag" in log, log
 
 
+def test_the_bridge_plays_only_once_the_nodes_it_waits_for_take_tf(ros_env, tmp_path):
+    """wait_for_nodes: a /tf listener that is not the consumer (a test's, a viewer's) does not
+    start the bag; the named node's /tf subscription does (the launch file names its estimator,
+    which a busy machine once configured 2 s into the replay)."""
+    from tf2_msgs.msg import TFMessage
+
+    make_bag(synthetic_walk(4.0), load_sensor_config("six_point"), tmp_path / "trackers")
+    params = {"bag": str(tmp_path / "trackers"), "wait_for_nodes": ["late_consumer"], "start_delay": 0.0}
+    bridge = start_node(BRIDGE, params, "sparse_body_tracker_bridge", tmp_path, ros_env)
+    listener = Listener(rclpy, {"/tf": TFMessage})
+    tf = listener.received["/tf"]
+    consumer = None
+    try:
+        assert listener.spin_until(lambda: listener.node.count_publishers("/tf") > 0, STARTUP_LIMIT)
+        listener.spin_for(2.0)
+        assert tf == []  # subscribed, but not the node it waits for
+        consumer = rclpy.create_node("late_consumer")
+        consumer.create_subscription(TFMessage, "/tf", lambda _: None, 10)
+        assert listener.spin_until(lambda: len(tf) >= 30, STARTUP_LIMIT)
+    finally:
+        if consumer is not None:
+            consumer.destroy_node()
+        listener.destroy()
+        stop(bridge)
+
+
 def test_generated_tf_messages_never_stop_the_node_nor_give_a_non_finite_joint(ros_env, tmp_path):
     """Hypothesis writes /tf messages of any doubles (NaN, infinities, 1e308, 2e154, denormals),
     any frame names (ours among them) and any stamps; each goes to the live node between frames

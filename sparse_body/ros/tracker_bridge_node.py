@@ -62,6 +62,11 @@ PARAMETERS = {
     "loop": (False, "source bag: start again at the end"),
     "restamp": (True, "source bag: stamp transforms with the current time instead of the recorded one"),
     "min_subscribers": (1, "wait until this many /tf subscribers are matched before publishing"),
+    "wait_for_nodes": (
+        [""],
+        "names of nodes whose /tf subscription playback also waits for (the launch file: its "
+        "estimator's and retarget node's); empty: any subscribers count",
+    ),
     "start_delay": (0.5, "seconds to wait after that, so late subscribers can connect too"),
     "devices": (
         [""],
@@ -211,9 +216,14 @@ class TrackerBridge(LifecycleNode):
 
     # -- publishing ------------------------------------------------------------------------
     def _wait_for_subscribers(self, stop: threading.Event) -> bool:
-        # /tf is volatile: what is published before a subscriber is matched is lost to it.
-        pub = self.pub
-        while pub is not None and pub.get_subscription_count() < self.params["min_subscribers"]:
+        # /tf is volatile: what is published before a subscriber is matched is lost to it. A
+        # count alone can be met by a listener that is not the consumer (a test's, a viewer's)
+        # while the estimator is still starting on a busy machine: named nodes are waited for.
+        pub, names = self.pub, {n for n in self.params["wait_for_nodes"] if n}
+        while pub is not None and not (
+            pub.get_subscription_count() >= self.params["min_subscribers"]
+            and names <= {info.node_name for info in self.get_subscriptions_info_by_topic("/tf")}
+        ):
             if stop.wait(0.05):
                 return False
         return not stop.wait(self.params["start_delay"])

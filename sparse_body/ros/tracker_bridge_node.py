@@ -64,8 +64,8 @@ PARAMETERS = {
     "min_subscribers": (1, "wait until this many /tf subscribers are matched before publishing"),
     "wait_for_nodes": (
         [""],
-        "names of nodes whose /tf subscription playback also waits for (the launch file: its "
-        "estimator's and retarget node's); empty: any subscribers count",
+        "names of nodes whose /tf subscription playback also waits for (the launch file names "
+        "the nodes it starts that read /tf); empty: any subscribers count",
     ),
     "start_delay": (0.5, "seconds to wait after that, so late subscribers can connect too"),
     "devices": (

@@ -42,7 +42,6 @@ from .features import PER_SITE, SITES, input_joints
 
 TOKENS = 2 * NUM_JOINTS  # rotation tokens, then position tokens
 ROTATION_LOSSES = ("6d", "matrix")  # AvatarJlmConfig.rotation_loss
-CHORD_TO_6D = 3 * 2**0.5  # a small turn a: chord sqrt(2) a, 6D L1 about a / 3
 HEAD = JOINT_INDEX["head"]
 HANDS = (JOINT_INDEX["left_wrist"], JOINT_INDEX["right_wrist"])
 FEET = tuple(JOINT_INDEX[j] for j in ("left_ankle", "right_ankle", "left_foot", "right_foot"))

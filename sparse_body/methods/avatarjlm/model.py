@@ -348,6 +348,8 @@ def rotation_error(pose6: torch.Tensor, target6: torch.Tensor, space: str) -> to
     weighs as on 6d (matrix). The angle pulls as hard at 170 degrees as at 10; L1 pulls a turn
     past 135 degrees on toward the half turn (on unit vectors, 2 (1 - cos a) + 2 |sin a|)."""
     if space == "matrix":
+        # atan2 of the turn's sine and cosine, not roma.rotmat_geodesic_distance (validate's):
+        # its asin has no finite slope at the half turn, and its norm none at zero
         m = sixd_to_matrix(target6).transpose(-1, -2) @ sixd_to_matrix(pose6)  # the turn between them
         skew = torch.stack([m[..., 2, 1] - m[..., 1, 2], m[..., 0, 2] - m[..., 2, 0], m[..., 1, 0] - m[..., 0, 1]], -1)
         sin = skew.square().sum(-1).clamp_min(1e-12).sqrt() / 2

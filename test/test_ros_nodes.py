@@ -525,6 +525,34 @@ def test_the_tf_reader_ignores_the_frames_its_node_publishes(ros_env):
         node.destroy_node()
 
 
+def test_held_for_no_input_says_when_trackers_arrive_but_are_refused(ros_env):
+    """A tracker stamped far from the node's clock (a bag played with its own stamps, a peer's
+    wrong clock) is refused: the held estimate says so, instead of only "no input yet"."""
+    from geometry_msgs.msg import TransformStamped
+    from rclpy.parameter import Parameter
+    from rclpy.serialization import serialize_message
+
+    from sparse_body.ros.estimator_node import EstimatorNode
+
+    node = EstimatorNode(
+        parameter_overrides=[Parameter("estimator", value="ik"), Parameter("sensors", value="four_point")]
+    )
+    try:
+        node.trigger_configure()
+        assert node.tf_in is not None
+        assert node._held_reason(None, True, np.inf) == "held: no tracker input yet"
+        tf = TransformStamped()
+        tf.header.frame_id, tf.child_frame_id = "world", node._frames[0]
+        tf.header.stamp.sec = 5  # the node's clock is now: decades away
+        tf.transform.rotation.w = 1.0
+        node.tf_in._on_tf(serialize_message(TFMessage(transforms=[tf])), False)
+        reason = node._held_reason(None, True, np.inf)
+        assert reason == "held: no tracker input yet (/tf samples refused: stamp far from the clock 1)", reason
+        assert node._held_reason(None, True, 2.0) == "held: no tracker input for 2.0 s"
+    finally:
+        node.destroy_node()
+
+
 def _position_noise(estimator):
     return estimator.input_filter.config.position_noise
 

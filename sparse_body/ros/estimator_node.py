@@ -613,11 +613,13 @@ class EstimatorNode(LifecycleNode):
 
     def _held_reason(self, frame, no_input: bool, silent: float) -> str:
         if no_input:
-            return (
-                "held: no tracker input yet"
-                if not np.isfinite(silent)
-                else f"held: no tracker input for {silent:.1f} s"
-            )
+            if np.isfinite(silent):
+                return f"held: no tracker input for {silent:.1f} s"
+            # "yet" may hide trackers that do arrive but are all refused (stamps far from this
+            # node's clock, a play space they are outside): say so, or a user looks for a cable
+            assert self.tf_in is not None
+            refused = ", ".join(f"{reason} {n}" for reason, n in self.tf_in.rejected.items() if n)
+            return "held: no tracker input yet" + (f" (/tf samples refused: {refused})" if refused else "")
         missing = [s for s, ok in zip(self.sensors.site_names, frame.valid, strict=True) if not ok]
         return f"held: no usable pose from {', '.join(missing)}" if missing else "held"
 

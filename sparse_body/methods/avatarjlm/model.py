@@ -133,13 +133,14 @@ class AvatarJlmConfig(Presets):
             # the leg term: on the validation people's dance (no training clip has it) lower-body
             # PE 21.38 -> 18.38 cm, and 8.84 -> 8.01 MPJPE on all of them (docs/methods.md)
             "leg_weight": 5.0,
-            # these three together, against the model before them, on the selection: MPJPE -0.36
-            # cm [-0.60, -0.11], lower-body PE -0.64 [-1.22, -0.05] (docs/methods.md)
+            # these three together, against the model before them, on the selection: MPJPE -0.14
+            # cm [-0.34, +0.06], lower-body PE -0.21 [-0.70, +0.34], MPJRE -1.52 degrees [-2.27,
+            # -0.87], and no joint turned half round (docs/methods.md)
             "augment": "mirror,speed,proportions,splice",  # the splice alone turned seed 0's neck on 6d
             "rotation_loss": "matrix",  # the angle: a joint turned past 135 degrees is pulled back
             "select_on": "selection",  # the weights kept on kinds of motion no train clip has
             "minutes": 0.0,  # a step budget, so that the model does not depend on the machine's speed
-            "steps": 3_965,  # 76 minutes on one core of the 2-core developer machine
+            "steps": 3_965,  # 76 minutes on one core of the 2-core developer machine, 34 on two
         },
         "tiny": {  # tests
             "d_embed": 16,

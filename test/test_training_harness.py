@@ -62,6 +62,58 @@ def test_an_interrupted_training_resumes_from_its_checkpoint(tmp_path, mocap_roo
     assert json.loads(meta.custom_metadata_map["trained_steps"]) == 8
 
 
+class Killed(Exception):
+    """A run stopped mid-way, as a session's end stops one."""
+
+
+def _weights(path):
+    import onnx
+    from onnx import numpy_helper
+
+    return {i.name: numpy_helper.to_array(i) for i in onnx.load(str(path)).graph.initializer}
+
+
+@pytest.mark.train
+@pytest.mark.parametrize("method", ["lobstr", "avatarjlm"])
+def test_a_resumed_training_goes_on_as_the_uninterrupted_run_would_have(tmp_path, mocap_root, method):
+    """The optimiser's moments, the learning-rate schedule (LoBSTr's decay, AvatarJLM's drop at
+    check 2, after the kill) and the batches' draws all go on from the checkpoint."""
+    if method == "lobstr":
+        from sparse_body.methods.lobstr.model import LobstrConfig as Config
+        from sparse_body.methods.lobstr.train import train
+
+        config = replace(Config.named("tiny"), steps=8, steps_per_epoch=2)
+    else:
+        from sparse_body.methods.avatarjlm.model import AvatarJlmConfig as Config
+        from sparse_body.methods.avatarjlm.train import train
+
+        config = replace(Config.named("tiny"), steps=8, steps_per_check=2, lr_drop_at=0.5)
+    from sparse_body.train.harness import TrainRun
+
+    whole = train(config, TrainRun(mocap_root, tmp_path / "whole.onnx", limit=1, log=quiet))
+
+    def killed_at_step_4(line):
+        if line.startswith("step 4 "):
+            raise Killed  # before step 4's checkpoint: the one left is step 2's
+
+    checkpoint = tmp_path / "m.checkpoint.npz"
+    with pytest.raises(Killed):
+        train(config, TrainRun(mocap_root, tmp_path / "a.onnx", limit=1, log=killed_at_step_4, checkpoint=checkpoint))
+    lines = []
+    resumed = train(
+        config,
+        TrainRun(mocap_root, tmp_path / "b.onnx", limit=1, log=lines.append, checkpoint=checkpoint, resume=True),
+    )
+    assert any(line.endswith("resumed from " + str(checkpoint) + " at step 2") for line in lines)
+
+    def figures(report):
+        return [{k: v for k, v in h.items() if k != "minutes"} for h in report["history"]]
+
+    assert figures(resumed) == figures(whole)
+    a, b = _weights(tmp_path / "whole.onnx"), _weights(tmp_path / "b.onnx")
+    assert a.keys() == b.keys() and all(np.array_equal(a[k], b[k]) for k in a)
+
+
 @pytest.mark.train
 def test_without_resume_a_checkpoint_is_overwritten_not_read(tmp_path, mocap_root, tiny):
     from sparse_body.methods.lobstr.train import train

@@ -249,6 +249,7 @@ def train(config: ForecastConfig, run: TrainRun) -> dict:
         steps=config.steps,
         minutes=config.minutes,
         check_every=config.check_every,
+        rng=rng,
         run=run,
     )
     out = Path(run.out)

@@ -90,25 +90,32 @@ def fit(
     steps: int,
     minutes: float,
     check_every: int,
-    after_check: Callable[[], None] | None = None,
+    schedule: torch.optim.lr_scheduler.LRScheduler | None = None,
+    rng: np.random.Generator | None = None,
     run: TrainRun,
 ) -> Fitted:
     """Train model until `steps` steps or `minutes` minutes (0: no time limit); every
     check_every steps (and at the last) validate, keep the weights with the lowest score, and
     log. step() runs the model on a batch and returns (loss, figures for the history);
-    after_check (e.g. a learning-rate schedule) runs before each validation. The kept
-    weights are loaded into model, which is left in eval mode.
+    schedule (a learning-rate schedule) steps before each validation. The kept weights are
+    loaded into model, which is left in eval mode.
 
-    run.checkpoint: a .npz written at every check (the weights now and the best so far, the
-    step, the history); run.resume starts from it, with `steps` counting from the start of the first
-    run and `minutes` from this one. Weights only: the optimiser (its moments, its learning-rate
-    schedule) starts afresh."""
+    run.checkpoint: a .npz written at every check: the weights now and the best so far, the
+    step, the history, the optimiser's moments and learning rates, the schedule's place and the
+    random generators' states (rng: the one step() draws its batches from; torch's). run.resume
+    starts from it, with `steps` counting from the start of the first run and `minutes` from this
+    one, and goes on as the uninterrupted run would have: the same batches, the same learning
+    rates, the same weights (a session that ends mid-run loses nothing but time)."""
     best, best_state, history = float("inf"), None, []
     start, done = time.perf_counter(), 0
     checkpoint, log = run.checkpoint, run.log
     if run.resume and checkpoint is not None and Path(checkpoint).is_file():
-        done, best, best_state, history = _restore(model, Path(checkpoint))
-        log(f"resumed from {checkpoint} at step {done}")
+        done, best, best_state, history, whole = _restore(model, Path(checkpoint), optimizer, schedule, rng)
+        # a checkpoint written before 2026-12-05 holds the weights alone: the optimiser starts afresh
+        log(
+            f"resumed from {checkpoint} at step {done}"
+            + ("" if whole else " (weights only: the optimiser starts afresh)")
+        )
     while done < steps and not (minutes and time.perf_counter() - start > 60 * minutes):
         model.train()
         loss, figures = step()
@@ -117,8 +124,8 @@ def fit(
         optimizer.step()
         done += 1
         if done % check_every == 0 or done == steps:
-            if after_check is not None:
-                after_check()
+            if schedule is not None:
+                schedule.step()
             model.eval()
             val = validate()
             history.append({"step": done, "minutes": (time.perf_counter() - start) / 60, **figures, **val})
@@ -131,27 +138,46 @@ def fit(
                 + " ".join(f"{k} {v:.4g}" for k, v in val.items())
             )
             if checkpoint is not None:
-                _save_checkpoint(Path(checkpoint), model, best_state, done, best, history)
+                _save_checkpoint(Path(checkpoint), model, best_state, done, best, history, optimizer, schedule, rng)
     model.load_state_dict(best_state or model.state_dict())
     model.eval()
     return Fitted(done, (time.perf_counter() - start) / 60, validate(), history)
 
 
-def _save_checkpoint(path: Path, model, best_state, step: int, best: float, history: list[dict]) -> None:
+def _save_checkpoint(path: Path, model, best_state, step, best, history, optimizer, schedule, rng) -> None:
     arrays = {f"now.{k}": v.detach().cpu().numpy() for k, v in model.state_dict().items()}
     arrays.update({f"best.{k}": v.cpu().numpy() for k, v in (best_state or {}).items()})
-    state = json.dumps({"step": step, "best": best, "history": history})
+    opt = optimizer.state_dict()
+    for i, slots in opt["state"].items():  # Adam's moments and step count, one array each
+        arrays.update({f"opt.{i}.{k}": torch.as_tensor(v).cpu().numpy() for k, v in slots.items()})
+    arrays["torch_rng"] = torch.get_rng_state().numpy()
+    state = {
+        "step": step,
+        "best": best,
+        "history": history,
+        "param_groups": opt["param_groups"],  # learning rates and the optimiser's settings
+        "schedule": schedule.state_dict() if schedule is not None else None,
+        "rng": rng.bit_generator.state if rng is not None else None,
+    }
     tmp = path.with_name(path.name + ".tmp.npz")  # a crash mid-write keeps the last one
     path.parent.mkdir(parents=True, exist_ok=True)
-    np.savez(tmp, state=np.array(state), **arrays)
+    np.savez(tmp, state=np.array(json.dumps(state)), **arrays)
     tmp.replace(path)
 
 
-def _restore(model, path: Path):
+def _restore(model, path: Path, optimizer=None, schedule=None, rng=None):
+    """The checkpoint's step, best score, best weights and history, its weights loaded into model;
+    with optimizer, schedule and rng, theirs too where the checkpoint has them (whole: it had)."""
     with np.load(path, allow_pickle=False) as saved:
         state = json.loads(str(saved["state"]))
         now = {k[4:]: torch.from_numpy(saved[k]) for k in saved.files if k.startswith("now.")}
         best = {k[5:]: torch.from_numpy(saved[k]) for k in saved.files if k.startswith("best.")} or None
+        slots: dict[int, dict] = {}
+        for k in saved.files:
+            if k.startswith("opt."):
+                _, i, name = k.split(".", 2)
+                slots.setdefault(int(i), {})[name] = torch.from_numpy(saved[k])
+        torch_rng = torch.from_numpy(saved["torch_rng"]) if "torch_rng" in saved.files else None
     try:
         model.load_state_dict(now)
     except RuntimeError as err:  # another configuration's weights (sizes, names)
@@ -159,12 +185,22 @@ def _restore(model, path: Path):
             f"{path}: the checkpoint does not fit this configuration "
             f"(train it afresh without --resume): {str(err).splitlines()[0]}"
         ) from None
-    return state["step"], state["best"], best, state["history"]
+    whole = "param_groups" in state
+    if whole and optimizer is not None:
+        groups = [{**g, "betas": tuple(g["betas"])} if "betas" in g else g for g in state["param_groups"]]
+        optimizer.load_state_dict({"state": slots, "param_groups": groups})
+    if whole and schedule is not None and state["schedule"] is not None:
+        schedule.load_state_dict(state["schedule"])
+    if whole and rng is not None and state["rng"] is not None:
+        rng.bit_generator.state = state["rng"]
+    if torch_rng is not None and optimizer is not None:
+        torch.set_rng_state(torch_rng)
+    return state["step"], state["best"], best, state["history"], whole
 
 
 def load_best(model: torch.nn.Module, checkpoint: Path) -> None:
     """The best weights a checkpoint kept, into model (a stage already finished)."""
-    _, _, best_state, _ = _restore(model, Path(checkpoint))
+    _, _, best_state, _, _ = _restore(model, Path(checkpoint))
     model.load_state_dict(best_state or model.state_dict())
     model.eval()
 

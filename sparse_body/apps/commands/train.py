@@ -184,14 +184,14 @@ def add_parser(sub) -> None:
         "--resume",
         action="store_true",
         help="continue an interrupted training from its checkpoint (<model>.checkpoint.npz, written "
-        "at every validation; weights only, the optimiser and its schedule start afresh); "
-        "--steps counts from the first run",
+        "at every validation: the weights, the optimiser, the learning-rate schedule and the random "
+        "draws, so that it goes on as the uninterrupted run would have); --steps counts from the first run",
     )
     p.add_argument(
         "--keep-checkpoint",
         action="store_true",
-        help="keep <model>.checkpoint.npz after the export, so that --resume can train a finished "
-        "model further (a warm restart: the learning rate starts over)",
+        help="keep <model>.checkpoint.npz after the export, so that --resume with a larger --steps can "
+        "train a finished model further (a schedule set by the step budget follows the new one)",
     )
     p.add_argument(
         "--set",

@@ -176,6 +176,7 @@ def train_temporal(config: TemporalConfig, run: TrainRun) -> dict:
         steps=config.steps,
         minutes=config.minutes,
         check_every=config.steps_per_check,
+        rng=rng,
         run=run,
     )
     export(

@@ -273,6 +273,7 @@ def train_tracker_prior(config: TrackerPriorConfig, run: TrainRun) -> dict:
         steps=config.steps,
         minutes=config.minutes,
         check_every=config.steps_per_check,
+        rng=rng,
         run=run,
     )
     export(

@@ -116,6 +116,7 @@ def train_vae(config: VaeConfig, run: TrainRun) -> dict:
         steps=config.steps,
         minutes=config.minutes,
         check_every=config.steps_per_check,
+        rng=rng,
         run=run,
     )
     export(

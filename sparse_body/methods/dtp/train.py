@@ -244,7 +244,8 @@ def train(config: DtpConfig, run: TrainRun) -> dict:
             steps=steps,
             minutes=minutes,
             check_every=config.steps_per_check,
-            after_check=sched.step,
+            schedule=sched,
+            rng=rng,
             run=replace(run, checkpoint=stage_checkpoint, log=partial(_log_stage, run.log, stage)),
         )
         stages[stage] = {

@@ -227,7 +227,8 @@ def train(config: LobstrConfig, run: TrainRun) -> dict:
         steps=config.steps,
         minutes=config.minutes,
         check_every=config.steps_per_epoch,
-        after_check=sched.step,
+        schedule=sched,
+        rng=rng,
         run=run,
     )
     metadata = {

@@ -144,7 +144,9 @@ def fit(
     return Fitted(done, (time.perf_counter() - start) / 60, validate(), history)
 
 
-def _save_checkpoint(path: Path, model, best_state, step, best, history, optimizer, schedule, rng) -> None:
+def _save_checkpoint(
+    path: Path, model, best_state, step: int, best: float, history: list[dict], optimizer, schedule, rng
+) -> None:
     arrays = {f"now.{k}": v.detach().cpu().numpy() for k, v in model.state_dict().items()}
     arrays.update({f"best.{k}": v.cpu().numpy() for k, v in (best_state or {}).items()})
     opt = optimizer.state_dict()

@@ -187,9 +187,12 @@ def replay_bag(
     listener.tracker_stamps = []
     bridge = None
     try:
-        assert listener.spin_until(lambda: listener.received["robot_description"], STARTUP_LIMIT), (
-            "estimator did not start"
-        )
+        # configured (the description) and ticking (its first status, held for input) before
+        # the bag plays: its /tf subscription is matched from configure on, and on a starved
+        # machine activation can come seconds later (once, a DragPoser node's whole 3 s bag
+        # went by while it said "held: no tracker input yet")
+        started = lambda: listener.received["robot_description"] and listener.received["estimate_status"]  # noqa: E731
+        assert listener.spin_until(started, STARTUP_LIMIT), "estimator did not start"
         bridge = start_node(
             "sparse_body.ros.tracker_bridge_node",
             {

@@ -261,6 +261,45 @@ def test_estimator_refuses_a_missing_or_foreign_model(tmp_path, clip, lobstr_mod
         create_estimator("dragposer", config, clip.skeleton, model_path=str(lobstr_model[0]))
 
 
+def test_an_ensemble_steps_each_network_with_its_own_state_and_averages_their_outputs(tmp_path, clip, lobstr_model):
+    """Two networks on the same features: each keeps its own GRU state (the mean of the two
+    runs apart, frame after frame), and a second model trained otherwise is refused in a line."""
+    import onnx
+    from onnx import numpy_helper
+
+    from sparse_body.methods.lobstr.estimator import LobstrEnsemble, LobstrModel
+
+    model = onnx.load(str(lobstr_model[0]))  # another network: the shipped one, its weights moved
+    for init in model.graph.initializer:
+        if init.data_type == onnx.TensorProto.FLOAT and len(init.dims) == 2:
+            w = numpy_helper.to_array(init)
+            init.CopyFrom(numpy_helper.from_array(w * 0.9 + 0.01, init.name))
+    onnx.save(model, tmp_path / "other.onnx")
+    first, other = LobstrModel(lobstr_model[0]), LobstrModel(tmp_path / "other.onnx")
+    x = sequence_features(clip.positions[:60, INPUT_JOINTS], clip.global_rotations[:60, INPUT_JOINTS], pose=True)
+    both, alone = LobstrEnsemble([first, other]), [LobstrEnsemble([m]) for m in (first, other)]
+    states = [both.initial_state(), *(a.initial_state() for a in alone)]
+    for t in range(len(x)):
+        (pose, prob, states[0]), *apart = [e.step(x[t], s) for e, s in zip([both, *alone], states, strict=True)]
+        states[1:] = [a[2] for a in apart]
+        np.testing.assert_allclose(pose, (apart[0][0] + apart[1][0]) / 2, atol=1e-6)
+        np.testing.assert_allclose(prob, (apart[0][1] + apart[1][1]) / 2, atol=1e-6)
+    assert np.abs(apart[0][0] - apart[1][0]).max() > 1e-3  # (the two do differ)
+    # one model trained at another rate: its outputs mean other things, so it is refused
+    props = {p.key: p.value for p in model.metadata_props}
+    config = json.loads(props["config"])
+    onnx.helper.set_model_props(model, {**props, "config": json.dumps({**config, "fps": 30.0})})
+    onnx.save(model, tmp_path / "at_30.onnx")
+    with pytest.raises(ValueError, match=r"at_30\.onnx: not averaged with .*lobstr\.onnx"):
+        create_estimator(
+            "lobstr",
+            load_sensor_config("four_point"),
+            clip.skeleton,
+            model_path=str(lobstr_model[0]),
+            ensemble_path=str(tmp_path / "at_30.onnx"),
+        )
+
+
 def test_contact_hold_pins_the_toe_then_lets_go_slowly():
     skeleton = Skeleton.canonical()
     hold = ContactHold(skeleton, release_frames=10)

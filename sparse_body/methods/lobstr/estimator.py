@@ -84,6 +84,34 @@ class LobstrModel:
         return pose[0], prob[0], state
 
 
+class LobstrEnsemble:
+    """LoBSTr models trained alike (other seeds), stepped side by side on the same features,
+    their outputs averaged (the 6D rotations before they are made orthonormal, the contact
+    probabilities): on motion no train clip has, networks from other seeds err differently
+    and their mean is nearer the truth (docs/methods.md). One model is that model alone."""
+
+    def __init__(self, models: list[LobstrModel]) -> None:
+        first = models[0]
+        for other in models[1:]:
+            if (other.learned_upper, other.fps, other.features) != (first.learned_upper, first.fps, first.features):
+                raise ValueError(
+                    f"{other.path}: not averaged with {first.path}: its inputs or outputs differ "
+                    "(an ensemble needs models trained with the same configuration)"
+                )
+        self.models, self.path = models, first.path
+        self.fps, self.learned_upper, self.config = first.fps, first.learned_upper, first.config
+
+    def initial_state(self) -> list[np.ndarray]:
+        return [m.initial_state() for m in self.models]
+
+    def step(self, x: np.ndarray, states: list[np.ndarray]):
+        outs = [m.step(x, state) for m, state in zip(self.models, states, strict=True)]
+        if len(outs) == 1:
+            return outs[0][0], outs[0][1], [outs[0][2]]
+        pose = np.mean([o[0] for o in outs], axis=0)
+        return pose, np.mean([o[1] for o in outs], axis=0), [o[2] for o in outs]
+
+
 def _retime(x: np.ndarray, ratio: float) -> np.ndarray:
     """Velocities measured over dt, expressed per model frame (ratio = model dt / dt)."""
     x = x.copy()
@@ -109,7 +137,8 @@ class LobstrEstimator(Estimator):
     ) -> None:
         super().__init__(sensors, skeleton, fps, **options)
         o = self.options
-        self.model = LobstrModel(o.model_path, o.threads)
+        paths = [o.model_path, *([o.ensemble_path] if o.ensemble_path else [])]
+        self.model = LobstrEnsemble([LobstrModel(path, o.threads) for path in paths])
         self.learned_upper = o.learned_upper and self.model.learned_upper
         # the predicted spine curve is kept while it leaves the head this close to the headset
         # (body_ik.fit_spine)

@@ -14,6 +14,9 @@ REACHED = 0.02
 @dataclass(frozen=True)
 class LobstrOptions(EstimatorOptions):
     model_path: str | None = model_path()
+    ensemble_path: str | None = option(
+        None, "a second LoBSTr model stepped beside the first, their outputs averaged (null: the first alone)"
+    )
     contact_ik: bool = option(True, "hold a foot in contact where it touched down (the paper's contact IK)")
     contact_threshold: float = option(
         0.5, "the contact probability from which a foot is held (with toe_contacts=false)", 0.0, 1.0

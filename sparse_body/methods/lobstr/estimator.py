@@ -87,8 +87,10 @@ class LobstrModel:
 class LobstrEnsemble:
     """LoBSTr models trained alike (other seeds), stepped side by side on the same features,
     their outputs averaged (the 6D rotations before they are made orthonormal, the contact
-    probabilities): on motion no train clip has, networks from other seeds err differently
-    and their mean is nearer the truth (docs/methods.md). One model is that model alone."""
+    probabilities). Two seeds of the shipped training, on the kinds of motion no train clip has:
+    the legs are the two runs' mean (their error there is shared, not a seed's chance), the
+    feet slide and jitter less and the rotations are nearer (docs/methods.md). One model is
+    that model alone."""
 
     def __init__(self, models: list[LobstrModel]) -> None:
         first = models[0]

@@ -277,7 +277,7 @@ def test_an_ensemble_steps_each_network_with_its_own_state_and_averages_their_ou
     onnx.save(model, tmp_path / "other.onnx")
     first, other = LobstrModel(lobstr_model[0]), LobstrModel(tmp_path / "other.onnx")
     x = sequence_features(clip.positions[:60, INPUT_JOINTS], clip.global_rotations[:60, INPUT_JOINTS], pose=True)
-    both, alone = LobstrEnsemble([first, other]), [LobstrEnsemble([m]) for m in (first, other)]
+    both, alone = LobstrEnsemble([first, other]), [first, other]
     states = [both.initial_state(), *(a.initial_state() for a in alone)]
     for t in range(len(x)):
         (pose, prob, states[0]), *apart = [e.step(x[t], s) for e, s in zip([both, *alone], states, strict=True)]

@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import math
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -89,8 +90,8 @@ class LobstrEnsemble:
     their outputs averaged (the 6D rotations before they are made orthonormal, the contact
     probabilities). Two seeds of the shipped training, on the kinds of motion no train clip has:
     the legs are the two runs' mean (their error there is shared, not a seed's chance), the
-    feet slide and jitter less and the rotations are nearer (docs/methods.md). One model is
-    that model alone."""
+    feet slide and jitter less and the rotations are nearer (docs/methods.md). The estimator
+    builds one only for ensemble_path: one network steps alone (LobstrModel, the same calls)."""
 
     def __init__(self, models: list[LobstrModel]) -> None:
         first = models[0]
@@ -108,8 +109,6 @@ class LobstrEnsemble:
 
     def step(self, x: np.ndarray, states: list[np.ndarray]):
         outs = [m.step(x, state) for m, state in zip(self.models, states, strict=True)]
-        if len(outs) == 1:
-            return outs[0][0], outs[0][1], [outs[0][2]]
         pose = np.mean([o[0] for o in outs], axis=0)
         return pose, np.mean([o[1] for o in outs], axis=0), [o[2] for o in outs]
 
@@ -139,8 +138,9 @@ class LobstrEstimator(Estimator):
     ) -> None:
         super().__init__(sensors, skeleton, fps, **options)
         o = self.options
-        paths = [o.model_path, *([o.ensemble_path] if o.ensemble_path else [])]
-        self.model = LobstrEnsemble([LobstrModel(path, o.threads) for path in paths])
+        self.model: LobstrModel | LobstrEnsemble = LobstrModel(o.model_path, o.threads)
+        if o.ensemble_path:  # (one network steps alone: no averaging on the default's hot path)
+            self.model = LobstrEnsemble([self.model, LobstrModel(o.ensemble_path, o.threads)])
         self.learned_upper = o.learned_upper and self.model.learned_upper
         # the predicted spine curve is kept while it leaves the head this close to the headset
         # (body_ik.fit_spine)
@@ -167,7 +167,7 @@ class LobstrEstimator(Estimator):
             self._toes = ToeContacts(self.fps)
         if self.contacts:
             self.contacts.reset()
-        self._state = self.model.initial_state()
+        self._state: Any = self.model.initial_state()  # (one network's array, or an ensemble's list)
         self._prev: tuple[float, np.ndarray, np.ndarray] | None = None
 
     @staticmethod

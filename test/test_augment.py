@@ -108,6 +108,21 @@ def test_splices_take_donors_from_other_clips_and_need_one(walk, box):
     assert [len(m) for m in a] == [len(m) for m in b]
 
 
+def test_the_spliced_share_is_what_the_spec_says(walk, box):
+    def spliced_share(spec: str) -> float:
+        rng = np.random.default_rng(11)
+        copies = [random_variant(walk, Augmentation.parse(spec), rng, [box]) for _ in range(60)]
+        return sum("arms:" in m.name for m in copies) / len(copies)
+
+    assert spliced_share("splice=1") == 1.0 and spliced_share("splice=0") == 0.0
+    assert 0.3 < spliced_share("splice") < 0.7  # half, as before the share could be said
+    assert Augmentation.parse("mirror,splice=0.8").spec == "mirror,splice=0.8"
+    assert Augmentation.parse("mirror,splice=0.5").spec == "mirror,splice"  # the default, said as before
+    for bad, why in (("splice=1.5", "from 0 to 1"), ("splice=many", "from 0 to 1"), ("speed=2", "takes no value")):
+        with pytest.raises(ValueError, match=why):
+            Augmentation.parse(bad)
+
+
 def test_variants_start_with_the_clip_and_its_mirror_image_and_stay_in_range(walk, box):
     rng = np.random.default_rng(5)
     out = variants(walk, Augmentation(KINDS, 4), rng, [box])

@@ -199,6 +199,58 @@ def test_user_constraints_are_added_and_removed_at_runtime(shipped_models):
     assert sorted(est.constraints.names()) == ["floor:10", "floor:11"]
 
 
+def test_a_settled_refinement_keeps_the_searchs_correction_with_less_of_its_frame_to_frame_change(shipped_models):
+    """refined:settle follows the search's turn from the base pose with an exponential: the legs
+    stay near the refined ones and their correction changes less a frame; only_legs takes the
+    legs alone from the search."""
+    from sparse_body.core.rotations import quat_to_matrix
+    from sparse_body.core.skeleton import LOWER_BODY, joint_indices
+    from sparse_body.methods.refined.estimator import conjugate, quat_product
+
+    motion = synthetic_walk(3.0)
+    config = load_sensor_config("four_point")
+    stream = synthesize_trackers(motion, config, TrackerNoise(position_std=0.005, rotation_max_deg=2.0), seed=2)
+    legs = joint_indices(LOWER_BODY)
+    base = create_estimator("lobstr", config, motion.skeleton, foot_lock=False).process(stream)
+    runs = {}
+    for settle in (0.0, 0.05):
+        est = create_estimator("refined", config, motion.skeleton, base="lobstr", foot_lock=False, settle=settle)
+        poses = est.process(stream)
+        assert all(p.valid and p.is_finite() for p in poses)
+        again = est.process(stream)  # reset forgets the correction
+        assert all(np.array_equal(a.local_quats, b.local_quats) for a, b in zip(poses, again, strict=True))
+        runs[settle] = poses
+
+    def positions(poses):
+        return np.array(
+            [
+                forward_kinematics(quat_to_matrix(p.local_quats), p.root_position, motion.skeleton.offsets)[1]
+                for p in poses
+            ]
+        )
+
+    def correction_change_deg(poses):  # the legs' turn from the base, frame to frame
+        turn = np.array(
+            [quat_product(p.local_quats, conjugate(b.local_quats)) for p, b in zip(poses, base, strict=True)]
+        )[:, legs]
+        return np.degrees(2 * np.arccos(np.abs(np.sum(turn[1:] * turn[:-1], -1)).clip(0, 1))).mean()
+
+    refined, settled, unrefined = positions(runs[0.0]), positions(runs[0.05]), positions(base)
+    kept = np.linalg.norm(settled[:, legs] - refined[:, legs], axis=-1).mean()
+    whole = np.linalg.norm(unrefined[:, legs] - refined[:, legs], axis=-1).mean()
+    assert kept < 0.35 * whole, (kept, whole)
+    assert correction_change_deg(runs[0.05]) < 0.6 * correction_change_deg(runs[0.0])
+    # only_legs: the same settled legs, and every other joint and the root the base's own
+    only = create_estimator(
+        "refined", config, motion.skeleton, base="lobstr", foot_lock=False, settle=0.05, only_legs=True
+    ).process(stream)
+    rest = [j for j in range(len(J)) if j not in legs]
+    for o, s, b in zip(only, runs[0.05], base, strict=True):
+        np.testing.assert_array_equal(o.local_quats[legs], s.local_quats[legs])
+        np.testing.assert_array_equal(o.local_quats[rest], b.local_quats[rest])
+        np.testing.assert_array_equal(o.root_position, b.root_position)
+
+
 def test_missing_model_is_a_clear_error(tmp_path):
     with pytest.raises(ModelMissing, match="train one with `sparse-body train dragposer`"):
         create_estimator("dragposer", load_sensor_config("six_point"), Skeleton.canonical(), model_path=str(tmp_path))

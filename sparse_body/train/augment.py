@@ -14,7 +14,8 @@ skeleton), from which a trainer derives its inputs and targets as it does for th
   legs, a reach over a squat. The spine stays with the legs because its lean carries the
   weight the feet balance, so the feet still allow the body above them; only the neck, head,
   collars and arms (local rotations, each on its own parent) come from the donor. The
-  copy is as long as the shorter of the two.
+  copy is as long as the shorter of the two. `splice=S` splices that share of the random
+  variants (default 1/2).
 
 'all' names every kind; a report written before 2026-12-05 that says 'all' means the first
 three (splice did not exist yet).
@@ -37,6 +38,7 @@ from ..data.motion import Motion
 _ARM_ENDS = ("_collar", "_shoulder", "_elbow", "_wrist")
 KINDS = ("mirror", "speed", "proportions", "splice")
 SPEED_RANGE = (0.8, 1.25)
+SPLICE_SHARE = 0.5  # of the random variants, when the spec says plain 'splice'
 PROPORTION_STD = 0.05
 
 # the mirror image of each joint: left <-> right
@@ -63,20 +65,40 @@ class Augmentation:
 
     kinds: tuple[str, ...] = KINDS
     variants: int = 3  # augmented copies per train clip, besides the clip itself
+    splice_share: float = SPLICE_SHARE  # of the random variants, spliced
 
     @classmethod
     def parse(cls, spec: str, variants: int = 3) -> Augmentation:
-        """'mirror,speed,proportions,splice' (any subset), 'all' or 'none'."""
+        """'mirror,speed,proportions,splice' (any subset), 'all' or 'none'; 'splice=S' splices
+        a share S in [0, 1] of the random variants instead of half."""
         spec = spec.strip()
-        kinds = KINDS if spec == "all" else () if spec in ("none", "") else tuple(s.strip() for s in spec.split(","))
+        words = KINDS if spec == "all" else () if spec in ("none", "") else tuple(s.strip() for s in spec.split(","))
+        share = SPLICE_SHARE
+        kinds = []
+        for word in words:
+            kind, _, value = word.partition("=")
+            if value and kind == "splice":
+                try:
+                    share = float(value)
+                except ValueError:
+                    share = -1.0
+                if not 0.0 <= share <= 1.0:
+                    raise ValueError(f"splice={value}: the spliced share must be a number from 0 to 1")
+            elif value:
+                raise ValueError(f"augmentation {kind} takes no value ({word})")
+            kinds.append(kind)
         unknown = [k for k in kinds if k not in KINDS]
         if unknown:
             raise ValueError(f"unknown augmentation {', '.join(unknown)}; known: {', '.join(KINDS)}, all, none")
-        return cls(tuple(k for k in KINDS if k in kinds), variants if kinds else 0)
+        return cls(tuple(k for k in KINDS if k in kinds), variants if kinds else 0, share)
 
     @property
     def spec(self) -> str:
-        return ",".join(self.kinds) or "none"
+        words = [
+            f"splice={self.splice_share:g}" if k == "splice" and self.splice_share != SPLICE_SHARE else k
+            for k in self.kinds
+        ]
+        return ",".join(words) or "none"
 
 
 NO_AUGMENTATION = Augmentation((), 0)
@@ -121,12 +143,13 @@ def spliced(motion: Motion, donor: Motion) -> Motion:
 def random_variant(
     motion: Motion, augmentation: Augmentation, rng: np.random.Generator, donors: Sequence[Motion] = ()
 ) -> Motion:
-    """One augmented copy: each kind applied at random (mirror and splice with probability
-    1/2 each; the donor drawn from donors, the other clips of the split)."""
+    """One augmented copy: each kind applied at random (mirror with probability 1/2, splice
+    with the augmentation's splice_share; the donor drawn from donors, the other clips of the
+    split)."""
     kinds = augmentation.kinds
     if "mirror" in kinds and rng.random() < 0.5:
         motion = mirrored(motion)
-    if "splice" in kinds and rng.random() < 0.5:
+    if "splice" in kinds and rng.random() < augmentation.splice_share:
         if not donors:
             raise ValueError("the splice augmentation needs at least two train clips")
         motion = spliced(motion, donors[int(rng.integers(len(donors)))])

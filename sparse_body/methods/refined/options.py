@@ -14,3 +14,7 @@ class RefinedOptions(EstimatorOptions):
     base: str = option("ik", "the estimator whose pose is refined")
     model_path: str | None = option(None, "the DragPoser models' folder, or one of its files; null: the shipped ones")
     iterations: int = iterations()
+    settle: float = option(
+        0.0, "the search's turn from the base pose follows with this time constant (0: at once)", 0.0, 10.0, "seconds"
+    )
+    only_legs: bool = option(False, "the search gives the legs only; the rest of the body stays the base's")

@@ -3,10 +3,10 @@
 import numpy as np
 import pytest
 
+from sparse_body.core.rotations import slerp
 from sparse_body.core.sensors import load_sensor_config
 from sparse_body.data.synthetic import synthetic_walk
 from sparse_body.data.virtual_trackers import synthesize_trackers
-from sparse_body.methods.blend.estimator import slerp
 from sparse_body.methods.factory import create_estimator
 
 FOUR = load_sensor_config("four_point")

@@ -203,9 +203,10 @@ def test_a_settled_refinement_keeps_the_searchs_correction_with_less_of_its_fram
     """refined:settle follows the search's turn from the base pose with an exponential: the legs
     stay near the refined ones and their correction changes less a frame; only_legs takes the
     legs alone from the search."""
+    from scipy.spatial.transform import Rotation
+
     from sparse_body.core.rotations import quat_to_matrix
     from sparse_body.core.skeleton import LOWER_BODY, joint_indices
-    from sparse_body.methods.refined.estimator import conjugate, quat_product
 
     motion = synthetic_walk(3.0)
     config = load_sensor_config("four_point")
@@ -230,10 +231,11 @@ def test_a_settled_refinement_keeps_the_searchs_correction_with_less_of_its_fram
         )
 
     def correction_change_deg(poses):  # the legs' turn from the base, frame to frame
-        turn = np.array(
-            [quat_product(p.local_quats, conjugate(b.local_quats)) for p, b in zip(poses, base, strict=True)]
-        )[:, legs]
-        return np.degrees(2 * np.arccos(np.abs(np.sum(turn[1:] * turn[:-1], -1)).clip(0, 1))).mean()
+        turn = [
+            Rotation.from_quat(p.local_quats[legs]) * Rotation.from_quat(b.local_quats[legs]).inv()
+            for p, b in zip(poses, base, strict=True)
+        ]
+        return np.degrees([(b * a.inv()).magnitude() for a, b in zip(turn, turn[1:], strict=False)]).mean()
 
     refined, settled, unrefined = positions(runs[0.0]), positions(runs[0.05]), positions(base)
     kept = np.linalg.norm(settled[:, legs] - refined[:, legs], axis=-1).mean()

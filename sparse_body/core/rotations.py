@@ -148,3 +148,18 @@ def heading(m: np.ndarray) -> np.ndarray:
     """Yaw of a rotation's forward (+x) axis projected on the ground plane."""
     fwd = np.asarray(m)[..., :, 0]
     return np.arctan2(fwd[..., 1], fwd[..., 0])
+
+
+def slerp(a: np.ndarray, b: np.ndarray, t: float) -> np.ndarray:
+    """Row by row, unit quaternions (x y z w) a -> b at t: the shorter arc. (scipy's Slerp
+    interpolates along one sequence of key rotations, not between two arrays row by row.)"""
+    dot = np.sum(a * b, axis=-1, keepdims=True)
+    b = np.where(dot < 0.0, -b, b)
+    dot = np.clip(np.abs(dot), 0.0, 1.0)
+    angle = np.arccos(dot)
+    sin = np.sin(angle)
+    near = sin < 1e-6  # the same rotation: the line is the arc
+    wa = np.where(near, 1.0 - t, np.sin((1.0 - t) * angle) / np.where(near, 1.0, sin))
+    wb = np.where(near, t, np.sin(t * angle) / np.where(near, 1.0, sin))
+    q = wa * a + wb * b
+    return q / np.linalg.norm(q, axis=-1, keepdims=True)

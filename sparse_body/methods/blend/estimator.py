@@ -23,26 +23,13 @@ import numpy as np
 
 from ...core.kinematics import forward_kinematics
 from ...core.mat3 import quat_matrices
+from ...core.rotations import slerp
 from ...core.skeleton import LOWER_BODY, joint_indices
 from ...core.tracker_filter import NO_FILTER
 from ...core.types import BodyPose
 from ...estimators.base import Estimator
 from ..factory import create_estimator
 from .options import BlendOptions
-
-
-def slerp(a: np.ndarray, b: np.ndarray, t: float) -> np.ndarray:
-    """Row by row, unit quaternions (x y z w) a -> b at t: the shorter arc."""
-    dot = np.sum(a * b, axis=-1, keepdims=True)
-    b = np.where(dot < 0.0, -b, b)
-    dot = np.clip(np.abs(dot), 0.0, 1.0)
-    angle = np.arccos(dot)
-    sin = np.sin(angle)
-    near = sin < 1e-6  # the same rotation: the line is the arc
-    wa = np.where(near, 1.0 - t, np.sin((1.0 - t) * angle) / np.where(near, 1.0, sin))
-    wb = np.where(near, t, np.sin(t * angle) / np.where(near, 1.0, sin))
-    q = wa * a + wb * b
-    return q / np.linalg.norm(q, axis=-1, keepdims=True)
 
 
 class BlendEstimator(Estimator):

@@ -16,34 +16,16 @@ than its base (docs/methods.md). Two options keep the base's smoothness:
 from __future__ import annotations
 
 import numpy as np
+from scipy.spatial.transform import Rotation
 
+from ...core.rotations import slerp
 from ...core.skeleton import LOWER_BODY, joint_indices
 from ...core.tracker_filter import NO_FILTER
 from ...core.types import BodyPose
 from ...estimators.base import Estimator
-from ..blend.estimator import slerp
 from ..dragposer.estimator import DragPoserEstimator
 from ..factory import create_estimator
 from .options import RefinedOptions
-
-
-def quat_product(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Row by row, the rotation a b (x y z w): b, then a."""
-    ax, ay, az, aw = np.moveaxis(a, -1, 0)
-    bx, by, bz, bw = np.moveaxis(b, -1, 0)
-    return np.stack(
-        [
-            aw * bx + ax * bw + ay * bz - az * by,
-            aw * by - ax * bz + ay * bw + az * bx,
-            aw * bz + ax * by - ay * bx + az * bw,
-            aw * bw - ax * bx - ay * by - az * bz,
-        ],
-        axis=-1,
-    )
-
-
-def conjugate(q: np.ndarray) -> np.ndarray:
-    return q * np.array([-1.0, -1.0, -1.0, 1.0])
 
 
 class RefinedEstimator(Estimator):
@@ -91,13 +73,15 @@ class RefinedEstimator(Estimator):
             refined.contact, refined.contact_probability = pose.contact, pose.contact_probability
             return refined
         # per joint, the search's turn from the base's rotation, followed with time constant settle
-        turn = quat_product(refined.local_quats, conjugate(pose.local_quats))
+        base = Rotation.from_quat(pose.local_quats)
+        turn = (Rotation.from_quat(refined.local_quats) * base.inv()).as_quat()
         if self.correction is not None and self.keep > 0.0:
             turn = slerp(turn, self.correction, self.keep)
         self.correction = turn
+        turned = (Rotation.from_quat(turn) * base).as_quat()
         if self.from_search is None:
-            quats, root = quat_product(turn, pose.local_quats), refined.root_position
+            quats, root = turned, refined.root_position
         else:
             quats, root = pose.local_quats.copy(), pose.root_position.copy()
-            quats[self.from_search] = quat_product(turn[self.from_search], pose.local_quats[self.from_search])
+            quats[self.from_search] = turned[self.from_search]
         return BodyPose(frame.stamp, quats, root, pose.contact_probability.copy(), pose.contact.copy())

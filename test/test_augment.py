@@ -118,6 +118,7 @@ def test_the_spliced_share_is_what_the_spec_says(walk, box):
     assert 0.3 < spliced_share("splice") < 0.7  # half, as before the share could be said
     assert Augmentation.parse("mirror,splice=0.8").spec == "mirror,splice=0.8"
     assert Augmentation.parse("mirror,splice=0.5").spec == "mirror,splice"  # the default, said as before
+    assert Augmentation.parse("mirror,splice=0.8").without("mirror").spec == "splice=0.8"  # as the ablation runs it
     for bad, why in (("splice=1.5", "from 0 to 1"), ("splice=many", "from 0 to 1"), ("speed=2", "takes no value")):
         with pytest.raises(ValueError, match=why):
             Augmentation.parse(bad)

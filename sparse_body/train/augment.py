@@ -28,7 +28,7 @@ they see. Tracker noise and limb noise stay with the trainers that already add t
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -81,7 +81,7 @@ class Augmentation:
                 try:
                     share = float(value)
                 except ValueError:
-                    share = -1.0
+                    share = float("nan")  # refused as a share out of range is
                 if not 0.0 <= share <= 1.0:
                     raise ValueError(f"splice={value}: the spliced share must be a number from 0 to 1")
             elif value:
@@ -91,6 +91,10 @@ class Augmentation:
         if unknown:
             raise ValueError(f"unknown augmentation {', '.join(unknown)}; known: {', '.join(KINDS)}, all, none")
         return cls(tuple(k for k in KINDS if k in kinds), variants if kinds else 0, share)
+
+    def without(self, kind: str) -> Augmentation:
+        """The same augmentation (variants, splice share) with one kind left out."""
+        return replace(self, kinds=tuple(k for k in self.kinds if k != kind))
 
     @property
     def spec(self) -> str:

@@ -75,10 +75,10 @@ def _ablate_augmentation(args, parts) -> None:
     from ...train.harness import TrainRun, beside
 
     for config_class, train, out, report_path in parts:
-        kinds = Augmentation.parse(args.augment or config_class.named(args.config).augment).kinds
-        specs = ["none", ",".join(kinds) or "none"]
-        if len(kinds) > 1:
-            specs += [",".join(k for k in kinds if k != left) for left in kinds]
+        full = Augmentation.parse(args.augment or config_class.named(args.config).augment)
+        specs = ["none", full.spec]  # each spec keeps the full one's splice share
+        if len(full.kinds) > 1:
+            specs += [full.without(left).spec for left in full.kinds]
         runs = []
         for spec in dict.fromkeys(specs):
             config = _config(config_class, args)

@@ -54,7 +54,7 @@ class RefinedEstimator(Estimator):
         for inner in (self.base, self.refiner):  # this estimator's targets: the lost-tracker options hold
             inner.read_targets_from(self)
         self.keep = float(np.exp(-1.0 / (o.settle * fps))) if o.settle > 0 else 0.0  # of the correction, a frame
-        self.correction: np.ndarray | None = None  # per joint, the search's turn from the base (22, 4)
+        self.correction: np.ndarray | None = None  # per joint taken from the search, its turn from the base (n, 4)
         self.from_search = joint_indices(LOWER_BODY) if o.only_legs else None  # None: every joint
 
     def _reset(self) -> None:
@@ -72,9 +72,11 @@ class RefinedEstimator(Estimator):
         if self.keep == 0.0 and self.from_search is None:
             refined.contact, refined.contact_probability = pose.contact, pose.contact_probability
             return refined
-        # per joint, the search's turn from the base's rotation, followed with time constant settle
-        base = Rotation.from_quat(pose.local_quats)
-        turn = (Rotation.from_quat(refined.local_quats) * base.inv()).as_quat()
+        # per joint taken from the search, its turn from the base's rotation, followed with
+        # time constant settle (only those joints: the rest would be thrown away)
+        rows = slice(None) if self.from_search is None else self.from_search
+        base = Rotation.from_quat(pose.local_quats[rows])
+        turn = (Rotation.from_quat(refined.local_quats[rows]) * base.inv()).as_quat()
         if self.correction is not None and self.keep > 0.0:
             turn = slerp(turn, self.correction, self.keep)
         self.correction = turn
@@ -83,5 +85,5 @@ class RefinedEstimator(Estimator):
             quats, root = turned, refined.root_position
         else:
             quats, root = pose.local_quats.copy(), pose.root_position.copy()
-            quats[self.from_search] = turned[self.from_search]
+            quats[rows] = turned
         return BodyPose(frame.stamp, quats, root, pose.contact_probability.copy(), pose.contact.copy())

@@ -140,3 +140,89 @@ def test_a_bad_robot_file_refuses_configure_with_the_reason_and_the_node_stays_u
         stop(proc)
     text = (tmp_path / "bad.log").read_text()
     assert "configure failed: " in text and reason in text and "Traceback" not in text, text
+
+
+def _joint_state(stamp, names, positions) -> JointState:
+    msg = JointState(name=list(names), position=[float(v) for v in positions])
+    msg.header.stamp = to_time(stamp)
+    return msg
+
+
+def test_an_ordinary_but_unusable_joint_state_stops_neither_the_constraint_nor_the_retarget_node(ros_env, tmp_path):
+    """Every JointState the message type allows and that is no body pose (names and no
+    positions, too few positions, a name twice, non-finite values) and roots far away or at
+    1e200 m are dropped and counted by both nodes that read the body's JointState; neither
+    dies, and the robot's base on /tf stays finite and bounded."""
+    from sparse_body.robot.retarget import MAX_BASE
+
+    walk = estimate_motion(synthetic_walk(2.0), "ik", load_sensor_config("six_point"))
+    robot = write_robot(tmp_path / "robot")
+    retarget = start_node(NODE, {"robot": str(robot), "autostart": True}, "sparse_body_retarget", tmp_path, ros_env)
+    refiner = start_node(
+        "sparse_body.ros.constraint_node",
+        {"sensors": "six_point", "autostart": True},
+        "sparse_body_constraint",
+        tmp_path,
+        ros_env,
+        remaps={"input/joint_states": "/joint_states"},
+    )
+    listener = Listener(
+        rclpy, {"robot/joint_states": JointState, "/diagnostics": DiagnosticArray, "/tf": TFMessage}, qos={"/tf": 500}
+    )
+    latched = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL)
+    pub_urdf = listener.node.create_publisher(String, "robot_description", latched)
+    pub_joints = listener.node.create_publisher(JointState, "joint_states", 10)
+    pub_tf = listener.node.create_publisher(TFMessage, "/tf", 10)
+    names = joint_state_names()
+    angles = joint_angles(matrix_to_quat(walk.local_rotations))
+    unusable = [
+        (names, []),  # the message type allows it: names and no positions
+        (names, angles[0][:10]),
+        (names[:-1] + names[:1], angles[0]),  # a joint named twice, another missing
+        (names, [float("inf")] * len(names)),
+    ]
+    try:
+        pub_urdf.publish(String(data=body_urdf(walk.view.skeleton)))
+        subscribed = lambda: listener.node.count_subscribers("joint_states") >= 2  # noqa: E731
+        assert listener.spin_until(lambda: node_gone(retarget, refiner) or subscribed(), STARTUP_LIMIT)
+        for i in range(len(walk.positions)):
+            stamp = listener.node.get_clock().now().nanoseconds * 1e-9
+            position, quat = walk.positions[i, 0], matrix_to_quat(walk.local_rotations[i, 0])
+            kind = i % 8
+            if kind < len(unusable):
+                msg = _joint_state(stamp, *unusable[kind])
+            else:
+                msg = _joint_state(stamp, names, angles[i])
+                if kind == 5:
+                    position = position + [1e200, 0.0, 0.0]
+                elif kind == 6:
+                    position = position + [1e20, 0.0, 0.0]
+            pub_tf.publish(_root(stamp, position, quat))
+            pub_joints.publish(msg)
+            listener.spin_for(1.0 / 60)
+        listener.spin_for(2.5)  # a diagnostics message from each
+        alive = {name: p.poll() is None for name, p in (("retarget", retarget), ("constraint", refiner))}
+    finally:
+        listener.destroy()
+        stop(retarget, refiner)
+    logs = {name: (tmp_path / f"{name}.log").read_text() for name in ("sparse_body_retarget", "sparse_body_constraint")}
+    assert all(alive.values()), (alive, logs)
+    for log in logs.values():
+        assert "Traceback" not in log and "process has died" not in log, log
+    assert listener.received["robot/joint_states"], logs["sparse_body_retarget"]
+    bases = [
+        t.transform.translation
+        for m in listener.received["/tf"]
+        for t in m.transforms
+        if t.child_frame_id == "robot/pelvis"
+    ]
+    assert bases and all(np.isfinite([b.x, b.y, b.z]).all() and abs(b.x) <= MAX_BASE for b in bases)
+    keys = {kv.key for d in listener.received["/diagnostics"] for s in d.status for kv in s.values}
+    for prefix in ("dropped: joint_states: ", "dropped input: "):  # the retarget node's, the constraint node's
+        assert any(k.startswith(prefix) and "63 names and 0 positions" in k for k in keys), (prefix, keys)
+        assert any(k.startswith(prefix) and "names a joint twice" in k for k in keys), (prefix, keys)
+    assert any("dropped: joint_states: the body's root is more than" in k for k in keys), keys
+
+
+def node_gone(*procs) -> bool:
+    return any(p.poll() is not None for p in procs)

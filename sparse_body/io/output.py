@@ -35,23 +35,50 @@ def joint_angles(local_quats: np.ndarray) -> np.ndarray:
     return angles.reshape(local_quats.shape[:-2] + (len(AXES) * (NUM_JOINTS - 1),))
 
 
+# The farthest a body's root may be from the fixed frame's origin (m). The trackers are refused
+# beyond 100 m by default (io/tf_guards.py), so an estimate lies well inside; a root at 1e200 m
+# would scale to an infinite robot base.
+MAX_ROOT_DISTANCE = 1000.0
+
+
+class JointStateError(ValueError):
+    """A JointState (with its root) that is no body pose: the reason, in one line."""
+
+
 def pose_from_joint_state(names, positions, root_position, root_quat, stamp: float) -> BodyPose:
-    """The inverse of joint_angles: a pose from a JointState of our 63 joints (in
-    any order) and the root's pose (from TF). Missing joints or non-finite values: ValueError."""
+    """The inverse of joint_angles: a pose from a JointState of our 63 joints (in any order)
+    and the root's pose (from TF): the one conversion every node that reads a body's JointState
+    uses. JointStateError (one line) for anything that is no body pose: names and positions of
+    different lengths, a joint missing or named twice, non-finite values, a root farther than
+    MAX_ROOT_DISTANCE or a root turn that is no unit quaternion."""
     from ..core.rotations import euler_to_matrix, matrix_to_quat
 
+    names, wanted = list(names), joint_state_names()
+    if len(positions) != len(names):
+        raise JointStateError(f"JointState has {len(names)} names and {len(positions)} positions")
     index = {n: i for i, n in enumerate(names)}
-    wanted = joint_state_names()
+    if len(index) != len(names):
+        raise JointStateError("JointState names a joint twice")
     missing = [n for n in wanted if n not in index]
     if missing:
-        raise ValueError(f"JointState lacks {len(missing)} of the body's joints, e.g. {missing[0]!r}")
-    angles = np.array([positions[index[n]] for n in wanted], dtype=float).reshape(NUM_JOINTS - 1, 3)
+        raise JointStateError(f"JointState lacks {len(missing)} of the body's joints, e.g. {missing[0]!r}")
+    try:
+        angles = np.array([positions[index[n]] for n in wanted], dtype=float).reshape(NUM_JOINTS - 1, 3)
+        root_position = np.asarray(root_position, dtype=float).reshape(3)
+        root_quat = np.asarray(root_quat, dtype=float).reshape(4)
+    except (TypeError, ValueError):
+        raise JointStateError("JointState or root pose holds values that are not numbers") from None
     if not (np.all(np.isfinite(angles)) and np.all(np.isfinite(root_position)) and np.all(np.isfinite(root_quat))):
-        raise ValueError("JointState or root pose holds non-finite values")
+        raise JointStateError("JointState or root pose holds non-finite values")
+    if np.linalg.norm(root_position) > MAX_ROOT_DISTANCE:
+        raise JointStateError(f"the body's root is more than {MAX_ROOT_DISTANCE:g} m from the fixed frame's origin")
+    norm = np.linalg.norm(root_quat)
+    if not 0.5 < norm < 2.0:
+        raise JointStateError("the body's root turn is not a unit quaternion")
     quats = np.empty((NUM_JOINTS, 4))
-    quats[0] = np.asarray(root_quat, float) / np.linalg.norm(root_quat)
+    quats[0] = root_quat / norm
     quats[1:] = matrix_to_quat(euler_to_matrix(angles, JOINT_EULER_ORDER))
-    return BodyPose(stamp, quats, np.asarray(root_position, float))
+    return BodyPose(stamp, quats, root_position)
 
 
 @dataclass(frozen=True)

@@ -13,6 +13,8 @@ import numpy as np
 from ..core.skeleton import JOINT_NAMES, NUM_JOINTS, PARENTS, Skeleton
 from .output import AXES, axis_link_name
 
+HEIGHTS = (0.5, 2.5)  # m: the body sizes a node accepts, as the estimator's height parameter
+MAX_BONE = 1.0  # m
 _AXIS_VECTORS = {"x": "1 0 0", "y": "0 1 0", "z": "0 0 1"}
 
 
@@ -116,4 +118,18 @@ def body_skeleton(text: str) -> Skeleton:
     missing = [name for name in JOINT_NAMES[1:] if f"{name}_rz" not in origins]
     if missing:
         raise RobotFileError(f"the body's robot_description has no joint {missing[0]}_rz: not a sparse_body body")
-    return Skeleton(np.array([np.zeros(3)] + [origins[f"{name}_rz"] for name in JOINT_NAMES[1:]]))
+    offsets = np.array([np.zeros(3)] + [origins[f"{name}_rz"] for name in JOINT_NAMES[1:]])
+    # a person as the estimator's own parameters allow one (0.5 to 2.5 m), whose longest bone,
+    # a thigh, is under half a metre at 2.5 m: a peer's 1,750 m body is no person to retarget
+    longest = float(np.linalg.norm(offsets, axis=1).max())
+    if longest > MAX_BONE:
+        raise RobotFileError(
+            f"the body's robot_description has a {longest:.3g} m bone; a person's are under {MAX_BONE:g} m"
+        )
+    skeleton = Skeleton(offsets)
+    height, (low, high) = skeleton.height(), HEIGHTS
+    if not low <= height <= high:
+        raise RobotFileError(
+            f"the body's robot_description is a {height:.3g} m body; a person is {low:g} to {high:g} m"
+        )
+    return skeleton

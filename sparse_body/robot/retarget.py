@@ -15,6 +15,7 @@ down, so the robot's foot does not slide when the human estimate's does.
 from __future__ import annotations
 
 import math
+import time
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -25,7 +26,7 @@ from ..core.rotations import matrix_to_quat, quat_to_matrix
 from ..core.skeleton import JOINT_INDEX, Skeleton
 from ..core.types import BodyPose
 from .mapping import SIDES, RobotMapping, load_mapping
-from .urdf_model import RobotFileError, RobotModel, load_urdf
+from .urdf_model import MAX_SOLVED_JOINTS, RobotFileError, RobotModel, load_urdf
 
 BASE_POSITION = 1.0  # weight of the base (pelvis) place, per metre
 BASE_TURN = 0.5  # and of its turn, per radian
@@ -38,6 +39,9 @@ MAX_TURN_STEP = 0.3  # rad: the largest joint or base turn of one step (a longer
 MAX_MOVE_STEP = 0.1  # m: the largest base move of one step
 JUMP = 0.3  # m (robot's): a body whose pelvis moved this far in a frame jumped (it did not walk there)
 GAP = 0.1  # s between two body poses over which the last solution is no longer a start
+# The farthest robot base place given (m): a body's root is refused beyond 1,000 m
+# (io/output.py) and a robot is at most 20 times a person (a mapping's scale)
+MAX_BASE = 20_000.0
 
 
 @dataclass(frozen=True)
@@ -107,12 +111,25 @@ class HumanoidRetarget:
         self.model, self.mapping, self.skeleton = model, mapping, skeleton
         self.names = tuple(j.name for j in model.moving)
         self.lower, self.upper = model.limits()
-        self.base = model.link(mapping.base)
-        self.links = [model.link(t.link) for t in mapping.targets]
-        self.chains = [np.array(model.chain(link), int) for link in self.links]
+        try:
+            self.base = model.link(mapping.base)
+            self.links = [model.link(t.link) for t in mapping.targets]
+        except RobotFileError as err:  # the mapping names it: say which file
+            raise RobotFileError(f"{mapping.source}: {err}") from None
+        chains = [np.array(model.chain(link), int) for link in self.links]
+        # only the joints between the base and a target move: the others have nothing to reach
+        # for and stay at the zero pose, so the normal equations leave them out
+        self.solved = np.unique(np.concatenate(chains)) if chains else np.zeros(0, int)
+        if len(self.solved) > MAX_SOLVED_JOINTS:
+            raise RobotFileError(
+                f"{mapping.source}: its targets hang from {len(self.solved)} moving joints; at most "
+                f"{MAX_SOLVED_JOINTS} are solved (a humanoid has 20-60)"
+            )
+        self.chains = [np.searchsorted(self.solved, chain) for chain in chains]  # columns among the solved
         moving = model.moving
-        self._axes = [np.array([moving[i].axis for i in chain]).reshape(-1, 3) for chain in self.chains]
-        self._prismatic = [np.array([moving[i].kind == "prismatic" for i in chain], bool) for chain in self.chains]
+        self._axes = [np.array([moving[i].axis for i in chain]).reshape(-1, 3) for chain in chains]
+        self._prismatic = [np.array([moving[i].kind == "prismatic" for i in chain], bool) for chain in chains]
+        self._frame_of = chains  # each target's chain as indices into the moving joints (their frames)
         if model.chain(self.base):
             raise RobotFileError(f"{mapping.source}: base {mapping.base!r} must be the URDF's root link or fixed to it")
         self.points = np.array([t.point for t in mapping.targets], float)
@@ -127,6 +144,7 @@ class HumanoidRetarget:
         self.rest_turns = np.array([r[:3, :3] for r in rest])  # each link's turn at the zero pose, base unturned
         rest_points = np.array([r[:3, :3] @ p + r[:3, 3] for r, p in zip(rest, self.points, strict=True)])
         self._scale_to(rest_points)
+        self.over_budget = 0  # solves abandoned at their time budget (step's budget)
         self.reset()
 
     def _scale_to(self, rest_points: np.ndarray) -> None:
@@ -169,9 +187,10 @@ class HumanoidRetarget:
         self._fresh = True  # the next pose is solved from its own place (FIRST_ITERATIONS)
         self._last_goal = np.zeros(3)  # where the last body pose put the base (a jump of the body is from there)
 
-    def step(self, pose: BodyPose) -> RobotPose:
+    def step(self, pose: BodyPose, budget: float | None = None) -> RobotPose:
         """The robot's pose for a body pose. An invalid or non-finite body pose holds the last
-        robot pose, marked invalid (the zero pose before the first)."""
+        robot pose, marked invalid (the zero pose before the first); so does a solve that
+        takes longer than `budget` seconds (None: no limit), counted in `over_budget`."""
         if not pose.valid or not pose.is_finite():
             self._fresh = True  # what comes after is solved afresh
             return self._held(pose.stamp)
@@ -202,7 +221,20 @@ class HumanoidRetarget:
                 self._locks.pop(k, None)
         goal_turns = turns[self.joints] @ self.rest_turns
         planted = np.array([k in self._locks for k in range(len(goals))])
-        self._solve(base_goal, turns[0], goals, goal_turns, planted, FIRST_ITERATIONS if first else None)
+        start = (self.q.copy(), self.base_place.copy(), self.base_turn.copy())
+        deadline = math.inf if budget is None else time.perf_counter() + budget
+        try:
+            done = self._solve(
+                base_goal, turns[0], goals, goal_turns, planted, FIRST_ITERATIONS if first else None, deadline
+            )
+        except np.linalg.LinAlgError:  # a singular step (bounded robot files make it rare): hold, start afresh
+            self.reset()
+            return self._held(pose.stamp)
+        if not done:
+            self.q, self.base_place, self.base_turn = start  # the last solution, as it was
+            self.over_budget += 1
+            self._fresh = first  # a first solve not done is still to do
+            return self._held(pose.stamp)
         links = self._links()
         reached = np.array(
             [links[link][:3, :3] @ p + links[link][:3, 3] for link, p in zip(self.links, self.points, strict=True)]
@@ -210,7 +242,7 @@ class HumanoidRetarget:
         result = RobotPose(
             pose.stamp, self.q.copy(), self.base_place.copy(), matrix_to_quat(self.base_turn), reached, wanted
         )
-        if not (np.all(np.isfinite(result.positions)) and np.all(np.isfinite(result.base_position))):
+        if not (np.all(np.isfinite(result.positions)) and np.all(np.abs(result.base_position) <= MAX_BASE)):
             self.reset()  # never published: the last good pose is held instead
             return self._held(pose.stamp)
         self._last = result
@@ -234,15 +266,24 @@ class HumanoidRetarget:
         links, _ = self.model.forward(np.asarray(positions, float), base @ self._base_in_root)
         return links
 
-    def _solve(self, base_goal, base_goal_turn, goals, goal_turns, planted, iterations: int | None) -> None:
-        n = len(self.q)
+    def _solve(
+        self, base_goal, base_goal_turn, goals, goal_turns, planted, iterations: int | None, deadline: float
+    ) -> bool:
+        """Gauss-Newton steps towards the goals; False when the clock passed `deadline`
+        (time.perf_counter) before they were done."""
+        solved = self.solved
+        n = len(solved)
+        q, lower, upper = self.q[solved], self.lower[solved], self.upper[solved]
         targets = self.mapping.targets
-        smooth = 0.0 if iterations else math.sqrt(self.mapping.smoothing)  # fresh: no last frame to stay near
-        rest = math.sqrt(REST)
-        previous = self.q.copy()
+        smooth = 0.0 if iterations else self.mapping.smoothing  # fresh: no last frame to stay near
+        previous = q.copy()
+        rest_q = self.rest_q[solved]
         for _ in range(iterations or self.mapping.iterations):
+            if time.perf_counter() > deadline:
+                return False
             base = np.eye(4)
             base[:3, :3], base[:3, 3] = self.base_turn, self.base_place
+            self.q[solved] = q
             links, frames = self.model.forward(self.q, base @ self._base_in_root)
             rows, residuals = [], []
             # the base: its place and turn
@@ -258,9 +299,9 @@ class HumanoidRetarget:
             for k, target in enumerate(targets):
                 link = links[self.links[k]]
                 point = link[:3, :3] @ self.points[k] + link[:3, 3]
-                chain, prismatic = self.chains[k], self._prismatic[k]
-                axes = np.einsum("kab,kb->ka", frames[chain, :3, :3], self._axes[k])
-                origins = frames[chain, :3, 3]
+                chain, prismatic, joint_frames = self.chains[k], self._prismatic[k], frames[self._frame_of[k]]
+                axes = np.einsum("kab,kb->ka", joint_frames[:, :3, :3], self._axes[k])
+                origins = joint_frames[:, :3, 3]
                 if target.position > 0:
                     weight = target.position * (PLANTED if planted[k] else 1.0)
                     row = np.zeros((3, 6 + n))
@@ -279,24 +320,28 @@ class HumanoidRetarget:
                     row[:, 6 + chain] = turned.T
                     rows.append(row * target.orientation)
                     residuals.append(_log(goal_turns[k] @ link[:3, :3].T) * target.orientation)
-            pull = np.zeros((2 * n, 6 + n))
-            pull[:n, 6:] = np.eye(n) * smooth
-            pull[n:, 6:] = np.eye(n) * rest
-            rows.append(pull)
-            residuals.append(np.concatenate([(previous - self.q) * smooth, (self.rest_q - self.q) * rest]))
             jac, res = np.vstack(rows), np.concatenate(residuals)
             normal = jac.T @ jac
+            gradient = jac.T @ res
+            # the two pulls on the joints (to the last frame's angles, to the zero pose) are one
+            # row each per joint: added on the diagonal, not as 2n rows of a dense Jacobian
+            joints = np.arange(6, 6 + n)
+            normal[joints, joints] += smooth + REST
+            gradient[6:] += smooth * (previous - q) + REST * (rest_q - q)
             normal[np.diag_indices_from(normal)] += DAMPING
-            step = self._limited_step(normal, jac.T @ res)
+            step = self._limited_step(normal, gradient, q, lower, upper)
             # a long step leaves the region where the linearisation holds (and the limits' clip
             # can make it worse): shortened, as a trust region would
             longest = max(np.abs(step[3:]).max() / MAX_TURN_STEP, np.abs(step[:3]).max() / MAX_MOVE_STEP, 1.0)
             step /= longest
             self.base_place = self.base_place + step[:3]
             self.base_turn = _exp(step[3:6]) @ self.base_turn
-            self.q = np.clip(self.q + step[6:], self.lower, self.upper)
+            q = np.clip(q + step[6:], lower, upper)
+        self.q[solved] = q
+        return True
 
-    def _limited_step(self, normal: np.ndarray, gradient: np.ndarray) -> np.ndarray:
+    @staticmethod
+    def _limited_step(normal: np.ndarray, gradient: np.ndarray, q, lower, upper) -> np.ndarray:
         """The Gauss-Newton step with the joints it would push past a limit held at that
         limit and the rest solved again for it (a few rounds of an active set): clipping the
         free step instead lets the other joints act as if the clipped ones had moved, and a
@@ -306,12 +351,12 @@ class HumanoidRetarget:
         for _ in range(4):
             rhs = gradient[free] - normal[np.ix_(free, ~free)] @ step[~free]
             step[free] = np.linalg.solve(normal[np.ix_(free, free)], rhs)
-            moved = self.q + step[6:]
-            over = free[6:] & ((moved < self.lower) | (moved > self.upper))
+            moved = q + step[6:]
+            over = free[6:] & ((moved < lower) | (moved > upper))
             if not over.any():
                 break
             held = np.flatnonzero(over)
-            step[6 + held] = np.clip(moved[held], self.lower[held], self.upper[held]) - self.q[held]
+            step[6 + held] = np.clip(moved[held], lower[held], upper[held]) - q[held]
             free[6 + held] = False
         return step
 

@@ -18,7 +18,7 @@ from sensor_msgs.msg import JointState
 
 from ..core.types import BodyPose
 from ..estimators.base import Estimator
-from ..io.output import pose_from_joint_state
+from ..io.output import JointStateError, pose_from_joint_state
 from ..methods.dragposer.constraints import AboveFloor, AngleLimit, LookAt, Orientation, Position
 from .estimator_node import METHOD_OPTIONS, EstimatorNode
 from .estimator_node import PARAMETERS as ESTIMATOR_PARAMETERS
@@ -134,21 +134,33 @@ class ConstraintNode(EstimatorNode):
         """The input estimate drives this node, not the trackers (they come first)."""
 
     def _on_input(self, msg: JointState) -> None:
-        if self.estimator is None or self.tf_in is None:
-            return
-        found = self.tf_in.lookup(self.sensors.fixed_frame, self.params["input_prefix"] + "pelvis")
-        if found is None:
-            return
-        _, translation, rotation = found
+        """The input estimate (from the network: whatever it holds never stops the node; what
+        is no body pose is dropped and counted on /diagnostics)."""
         try:
-            self.estimator.latest = pose_from_joint_state(
-                msg.name, msg.position, translation, rotation, to_seconds(msg.header.stamp)
-            )
-        except ValueError as err:
-            self._stats.error(f"input: {err}")
+            if self.estimator is None or self.tf_in is None:
+                return
+            found = self.tf_in.lookup(self.sensors.fixed_frame, self.params["input_prefix"] + "pelvis")
+            if found is None:
+                return
+            _, translation, rotation = found
+            stamp = to_seconds(msg.header.stamp)
+            self.estimator.latest = pose_from_joint_state(msg.name, msg.position, translation, rotation, stamp)
+        except JointStateError as err:
+            self._drop_input(str(err))
+            return
+        except Exception as err:  # noqa: BLE001 - counted on /diagnostics, said once in the log
+            self._drop_input(f"{type(err).__name__}: {str(err)[:200]}")
             return
         if self.timer is not None:
             self._estimate(fallback=False)
+
+    def _drop_input(self, reason: str) -> None:
+        self._dropped_inputs[reason] = self._dropped_inputs.get(reason, 0) + 1
+        if self._dropped_inputs[reason] == 1:  # said once; counted on /diagnostics after that
+            self.get_logger().warning(f"input dropped: {reason}")
+
+    def _input_diagnostics(self) -> dict[str, str]:
+        return {f"dropped input: {reason}": str(n) for reason, n in sorted(self._dropped_inputs.items())}
 
     def _on_set_constraint(self, request, response):
         constraints = None if self.estimator is None else self.estimator.refiner.constraints
@@ -174,6 +186,7 @@ class ConstraintNode(EstimatorNode):
         if self.srv_constraint is not None:
             self.destroy_service(self.srv_constraint)
         self.sub_input = self.srv_constraint = None
+        self._dropped_inputs: dict[str, int] = {}
         super()._release()
 
 

@@ -658,12 +658,17 @@ class EstimatorNode(LifecycleNode):
             return BodyPose(stamp, matrix_to_quat(standing_pose()), np.zeros(3), valid=False)
         return self._last_good.held(stamp)
 
+    def _input_diagnostics(self) -> dict[str, str]:
+        """What a node that reads more than trackers says of that input (the constraint node)."""
+        return {}
+
     def _publish_diagnostics(self) -> None:
         assert self.tf_in is not None and self.pub_diag is not None  # the timer exists only while active
         rejected = self.tf_in.rejected
         level, message, values = self._stats.status(self.sensors.site_names, self._ages, self._site_valid, rejected)
         values["/tf messages caught up"] = str(self.tf_in.drained)  # taken at once by a node running behind
         values["own /tf messages skipped"] = str(self.tf_in.own_skipped)  # known by their bytes, not read
+        values.update(self._input_diagnostics())
         status = DiagnosticStatus(
             level=bytes([level]),  # a `byte` field: an int there was sent as a random byte
             name=f"{self.get_name()}: estimator",

@@ -17,6 +17,9 @@ non-finite values or a body URDF that is not one are counted on /diagnostics and
 
 from __future__ import annotations
 
+import functools
+import time
+
 import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rclpy.lifecycle import LifecycleNode, LifecyclePublisher, LifecycleState, TransitionCallbackReturn
@@ -33,8 +36,8 @@ from ..io import cdr
 from ..io.cdr import MalformedMessage, read_tf
 from ..io.output import pose_from_joint_state, published_precision
 from ..io.urdf import body_skeleton
-from ..robot.retarget import HumanoidRetarget, load_retarget
-from ..robot.urdf_model import RobotFileError
+from ..robot.retarget import MAX_BASE, HumanoidRetarget, load_retarget
+from ..robot.urdf_model import RobotFileError, read_urdf_text
 from .estimator_node import check_parameter, parameter_descriptor
 from .messages import to_seconds
 from .spin import init, start_and_spin
@@ -46,8 +49,31 @@ PARAMETERS = {
     "fixed_frame": ("world", "the frame the body's root is looked up in and the robot's base is placed in"),
     "input_prefix": ("", "prefix of the body's TF frames (its root is <input_prefix>pelvis)"),
     "frame_prefix": ("robot/", "prefix of the robot's TF frames: its base link is <frame_prefix><base>"),
+    "solve_budget": (0.1, "seconds one robot pose's solve may take; past it the last robot pose is held, counted"),
     "autostart": (False, "configure and activate on start-up (without a lifecycle manager)"),
 }
+RANGES = {"solve_budget": (0.001, 10.0)}
+RECENT = 10.0  # s: diagnostics say WARN while an input was dropped this recently, then OK again
+
+
+def _guarded(where: str):
+    """A callback that never raises out: input from the network must never stop the node. What
+    the checks did not foresee is dropped and counted like any refused input."""
+
+    def wrap(callback):
+        @functools.wraps(callback)
+        def guarded(self, *args):
+            try:
+                return callback(self, *args)
+            except Exception as err:  # noqa: BLE001 - counted on /diagnostics and said once in the log
+                self._drop(f"{where}: {type(err).__name__}: {str(err)[:200]}")
+                return None
+
+        return guarded
+
+    return wrap
+
+
 SAME = 1000  # ns: stamps this close are the same estimate's
 KEPT = 30  # body JointStates waiting for their root on /tf (half a second: the two come together, or nearly)
 
@@ -67,13 +93,15 @@ class RetargetNode(LifecycleNode):
     def __init__(self, **kwargs) -> None:
         super().__init__(self.NAME, **kwargs)
         for name, (default, text) in PARAMETERS.items():
-            self.declare_parameter(name, default, parameter_descriptor(default, text, None))
+            self.declare_parameter(name, default, parameter_descriptor(default, text, RANGES.get(name)))
         self._release()
 
     # -- lifecycle -------------------------------------------------------------------------
     def on_configure(self, state: LifecycleState) -> TransitionCallbackReturn:
         p = {name: self.get_parameter(name).value for name in PARAMETERS}
-        problems = [r for name, (default, _) in PARAMETERS.items() if (r := check_parameter(name, p[name], default))]
+        problems = [
+            r for name, (default, _) in PARAMETERS.items() if (r := check_parameter(name, p[name], default, RANGES))
+        ]
         if not problems and not p["robot"]:
             problems.append("robot is empty: give the robot's mapping YAML")
         if not problems:
@@ -144,14 +172,17 @@ class RetargetNode(LifecycleNode):
         self._contacts: tuple[int, np.ndarray] = (-1, np.zeros(2, bool))  # the newest foot contacts
         self._invalid: set[int] = set()  # stamps (ns) of body estimates marked invalid (held) lately
         self._dropped: dict[str, int] = {}
+        self._last_drop = -np.inf  # time.monotonic() of the newest drop
         self._published = 0
 
     # -- work --------------------------------------------------------------------------------
     def _drop(self, reason: str) -> None:
         self._dropped[reason] = self._dropped.get(reason, 0) + 1
+        self._last_drop = time.monotonic()
         if self._dropped[reason] == 1:  # said once; counted on /diagnostics after that
             self.get_logger().warning(f"input dropped: {reason}")
 
+    @_guarded("robot_description")
     def _on_description(self, msg: String) -> None:
         try:
             skeleton = body_skeleton(msg.data)
@@ -161,6 +192,7 @@ class RetargetNode(LifecycleNode):
             return
         self.get_logger().info(f"retargeting a {skeleton.height():.2f} m body at scale {self.retarget.scale:.3f}")
 
+    @_guarded("foot_contacts")
     def _on_contacts(self, msg: FootContacts) -> None:
         contact = {c.name: bool(c.in_contact) for c in msg.contacts}
         self._contacts = (
@@ -168,12 +200,14 @@ class RetargetNode(LifecycleNode):
             np.array([contact.get("left_foot", False), contact.get("right_foot", False)]),
         )
 
+    @_guarded("estimate_status")
     def _on_status(self, msg: EstimateStatus) -> None:
         if not msg.valid:  # a held body (too little tracker input): the robot holds too
             self._invalid.add(_nanoseconds(msg.header.stamp))
             while len(self._invalid) > 2 * KEPT:
                 self._invalid.discard(min(self._invalid))
 
+    @_guarded("/tf")
     def _on_tf(self, data: bytes) -> None:
         """Every root of the body on /tf, kept by stamp: its JointState may come before or after
         it, and other roots after it (each topic is delivered in order, not the two together)."""
@@ -195,6 +229,7 @@ class RetargetNode(LifecycleNode):
                 self._roots.pop(min(self._roots))
         self._match()
 
+    @_guarded("joint_states")
     def _on_body(self, msg: JointState) -> None:
         self._waiting[_nanoseconds(msg.header.stamp)] = msg
         while len(self._waiting) > KEPT:
@@ -224,9 +259,16 @@ class RetargetNode(LifecycleNode):
         stamp_ns, contact = self._contacts
         if stamp_ns >= 0:  # the newest: the estimator sends them with the JointState (a frame late at worst)
             body.contact = contact.copy()
-        robot = self.retarget.step(body)
-        self.pub_joints.publish(cdr.joint_state_messages([body.stamp], self.retarget.names, robot.positions[None])[0])
+        over = self.retarget.over_budget
+        robot = self.retarget.step(body, self.params["solve_budget"])
+        if self.retarget.over_budget > over:
+            self._drop("the solve ran past solve_budget: the last robot pose held")
         base = published_precision(np.concatenate([robot.base_position, robot.base_quat]))[None, None]
+        refused = _unpublishable(robot.positions, base[0, 0], self.retarget.lower, self.retarget.upper)
+        if refused:
+            self._drop(f"not published: {refused}")
+            return
+        self.pub_joints.publish(cdr.joint_state_messages([body.stamp], self.retarget.names, robot.positions[None])[0])
         child = self.params["frame_prefix"] + self.retarget.mapping.base
         self.pub_tf.publish(cdr.tf_messages([body.stamp], (self.params["fixed_frame"],), (child,), base)[0])
         self._published += 1
@@ -234,17 +276,30 @@ class RetargetNode(LifecycleNode):
     def _publish_diagnostics(self) -> None:
         if self.pub_diag is None:
             return
+        recent = time.monotonic() - self._last_drop < RECENT  # the counts stay; the warning passes
         status = DiagnosticStatus(
             name=f"{self.get_name()}: retargeting",
             hardware_id="sparse_body",
-            level=DiagnosticStatus.WARN if self._dropped else DiagnosticStatus.OK,
-            message="inputs dropped" if self._dropped else "ok",
+            level=DiagnosticStatus.WARN if recent else DiagnosticStatus.OK,
+            message=f"inputs dropped in the last {RECENT:g} s" if recent else "ok",
             values=[KeyValue(key="published", value=str(self._published))]
             + [KeyValue(key=f"dropped: {reason}", value=str(n)) for reason, n in sorted(self._dropped.items())],
         )
         array = DiagnosticArray(status=[status])
         array.header.stamp = self.get_clock().now().to_msg()
         self.pub_diag.publish(array)
+
+
+def _unpublishable(positions: np.ndarray, base: np.ndarray, lower: np.ndarray, upper: np.ndarray) -> str:
+    """Why a robot pose must not be published (empty: it may): every command finite, within
+    the URDF's limits, the base within MAX_BASE of the origin with a unit turn."""
+    if not (np.all(np.isfinite(positions)) and np.all(np.isfinite(base))):
+        return "a non-finite robot pose"
+    if np.any(positions < lower) or np.any(positions > upper):
+        return "a joint outside the URDF's limits"
+    if np.abs(base[:3]).max() > MAX_BASE or not 0.99 < np.linalg.norm(base[3:]) < 1.01:
+        return f"a robot base more than {MAX_BASE:g} m away or turned by no unit quaternion"
+    return ""
 
 
 def _nanoseconds(stamp) -> int:
@@ -258,7 +313,7 @@ def _urdf_text(mapping: str, urdf: str) -> str:
 
     path = Path(urdf) if urdf else load_mapping(mapping).urdf
     assert path is not None  # load_retarget refused a mapping without one
-    return path.read_text(encoding="utf-8")
+    return read_urdf_text(path)
 
 
 def main(args=None) -> None:

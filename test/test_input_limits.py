@@ -172,3 +172,27 @@ def test_training_without_the_training_tools_is_one_line_naming_the_setup(tmp_pa
     )
     assert done.returncode == EXIT_INPUT, done.stderr
     assert done.stderr.count("\n") == 1 and "make setup-train" in done.stderr and "torch" in done.stderr
+
+
+@pytest.mark.parametrize("damage", ["flipped byte", "understated size"])
+def test_a_damaged_npz_is_one_line_and_exit_1(tmp_path, capsys, damage):
+    """A member whose bytes fail their CRC, or whose size its directory understates, raised
+    zipfile's own error from inside the reading: a traceback."""
+    from sparse_body.data.synthetic import synthetic_walk
+
+    good = tmp_path / "walk.npz"
+    synthetic_walk(1.0).save(good)
+    data = bytearray(good.read_bytes())
+    with zipfile.ZipFile(good) as archive:
+        member = archive.getinfo("local_quats.npy")
+    if damage == "flipped byte":
+        data[member.header_offset + 30 + len(member.filename) + 200] ^= 0xFF  # inside the member's data
+    else:  # the central directory's uncompressed size of the member, halved
+        central = bytes(data).find(b"local_quats.npy", data.find(b"PK\x01\x02")) - 46
+        size = int.from_bytes(data[central + 24 : central + 28], "little")
+        data[central + 24 : central + 28] = (size // 2).to_bytes(4, "little")
+    bad = tmp_path / "damaged.npz"
+    bad.write_bytes(bytes(data))
+    code, err = run_cli(capsys, "view", bad, "-o", tmp_path / "page.html")
+    assert code == 1 and err.count("\n") == 1 and "Traceback" not in err and str(bad) in err, err
+    assert not (tmp_path / "page.html").exists()

@@ -9,6 +9,8 @@ from __future__ import annotations
 
 import gzip
 import os
+import zipfile
+import zlib
 from pathlib import Path
 
 import yaml
@@ -42,13 +44,17 @@ def too_large(error: type[Exception]) -> type[Exception]:
 _TOO_LARGE: dict[type[Exception], type[Exception]] = {}
 
 
+# What reading an .npz's members can raise besides FileTooLarge: a member whose bytes fail their
+# CRC or whose size in the directory is understated raises zipfile's or zlib's own errors, not
+# OSError, when the member is read (lazily, after open_npz returned).
+NPZ_ERRORS: tuple[type[Exception], ...] = (OSError, ValueError, KeyError, EOFError, zipfile.BadZipFile, zlib.error)
+
+
 def open_npz(path: str | os.PathLike, kind: str = "motion"):
     """np.load of an .npz (no pickles) whose members, by the sizes its directory declares, hold
     at most the limit of its kind once decompressed: a few MB can declare gigabytes (a
     decompression bomb), and reading is bounded by what is declared. Raises FileTooLarge, and
-    what np.load raises (OSError, ValueError)."""
-    import zipfile
-
+    what np.load raises (OSError, ValueError); reading a member raises NPZ_ERRORS."""
     import numpy as np
 
     limit = limit_bytes(kind)

@@ -29,7 +29,7 @@ def _load_npz(path: Path, keys: tuple[str, ...]) -> dict[str, np.ndarray]:
     path = Path(path)
     if path.suffix == ".pkl":
         raise MotionFileError(path, "pickled model files are not loaded; use the .npz version of the model")
-    from ..core.textfile import FileTooLarge, open_npz, too_large
+    from ..core.textfile import NPZ_ERRORS, FileTooLarge, open_npz, too_large
 
     try:
         with open_npz(path) as z:
@@ -39,8 +39,8 @@ def _load_npz(path: Path, keys: tuple[str, ...]) -> dict[str, np.ndarray]:
             return {k: z[k] for k in z.files if k in keys or k in ("betas", "mocap_framerate", "mocap_frame_rate")}
     except FileTooLarge as err:
         raise too_large(MotionFileError)(path, str(err).removeprefix(f"{path}: ")) from None
-    except (OSError, ValueError) as err:
-        raise MotionFileError(path, f"not a readable .npz ({err})") from None
+    except NPZ_ERRORS as err:
+        raise MotionFileError(path, f"not a readable .npz, or damaged ({err})") from None
 
 
 def smpl_rest_joints(model_path: Path, betas: np.ndarray | None) -> np.ndarray:

@@ -306,10 +306,12 @@ def load_motion_file(
     if name.endswith(".npz"):
         import numpy as np
 
+        from ..core.textfile import NPZ_ERRORS
+
         try:
             with np.load(path, allow_pickle=False) as z:  # the directory only: no member is read
                 keys = set(z.files)
-        except (OSError, ValueError) as err:
+        except NPZ_ERRORS as err:
             raise MotionFileError(path, f"not a readable .npz ({err})") from None
         if {"local_quats", "root_positions"} <= keys:
             return Motion.load(path).resampled(fps)

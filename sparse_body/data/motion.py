@@ -89,7 +89,7 @@ class Motion:
 
     @classmethod
     def load(cls, path: Path) -> Motion:
-        from ..core.textfile import FileTooLarge, open_npz, too_large
+        from ..core.textfile import NPZ_ERRORS, FileTooLarge, open_npz, too_large
 
         try:
             with open_npz(path) as z:
@@ -102,5 +102,5 @@ class Motion:
                 )
         except FileTooLarge as err:
             raise too_large(MotionFileError)(path, str(err).removeprefix(f"{path}: ")) from None
-        except (OSError, KeyError, ValueError) as err:
-            raise MotionFileError(path, f"not a sparse_body motion file ({err})") from None
+        except NPZ_ERRORS as err:
+            raise MotionFileError(path, f"not a sparse_body motion file, or damaged ({err})") from None

@@ -50,10 +50,10 @@ PARAMETERS = {
     "input_prefix": ("", "prefix of the body's TF frames (its root is <input_prefix>pelvis)"),
     "frame_prefix": ("robot/", "prefix of the robot's TF frames: its base link is <frame_prefix><base>"),
     "solve_budget": (0.1, "seconds one robot pose's solve may take; past it the last robot pose is held, counted"),
+    "warn_window": (10.0, "seconds /diagnostics says WARN after an input was dropped, then OK again (the counts stay)"),
     "autostart": (False, "configure and activate on start-up (without a lifecycle manager)"),
 }
-RANGES = {"solve_budget": (0.001, 10.0)}
-RECENT = 10.0  # s: diagnostics say WARN while an input was dropped this recently, then OK again
+RANGES = {"solve_budget": (0.001, 10.0), "warn_window": (0.1, 3600.0)}
 
 
 def _guarded(where: str):
@@ -276,12 +276,13 @@ class RetargetNode(LifecycleNode):
     def _publish_diagnostics(self) -> None:
         if self.pub_diag is None:
             return
-        recent = time.monotonic() - self._last_drop < RECENT  # the counts stay; the warning passes
+        window = self.params["warn_window"]
+        recent = time.monotonic() - self._last_drop < window  # the counts stay; the warning passes
         status = DiagnosticStatus(
             name=f"{self.get_name()}: retargeting",
             hardware_id="sparse_body",
             level=DiagnosticStatus.WARN if recent else DiagnosticStatus.OK,
-            message=f"inputs dropped in the last {RECENT:g} s" if recent else "ok",
+            message=f"inputs dropped in the last {window:g} s" if recent else "ok",
             values=[KeyValue(key="published", value=str(self._published))]
             + [KeyValue(key=f"dropped: {reason}", value=str(n)) for reason, n in sorted(self._dropped.items())],
         )

@@ -182,3 +182,53 @@ def test_user_motion_files_upper_case_and_unknown_layouts(tmp_path, mocap_root):
     (tmp_path / "other.bvh").write_text(BVH)  # a layout we have no joint map for
     with pytest.raises(MotionFileError, match=r"other\.bvh: .*known layouts: cmu_asf, cmu_bvh_mb2"):
         load_motion_file(tmp_path / "other.bvh", 60.0)
+
+
+def _long_bvh(path, frames: int, joints: int = 31) -> None:
+    """A chain of `joints` joints (CMU's count) over `frames` frames of one row."""
+    lines = ["HIERARCHY", "ROOT Hips", "{", "OFFSET 0 0 0"]
+    lines.append("CHANNELS 6 Xposition Yposition Zposition Zrotation Xrotation Yrotation")
+    for j in range(1, joints):
+        lines += [f"JOINT J{j}", "{", "OFFSET 0 1 0", "CHANNELS 3 Zrotation Xrotation Yrotation"]
+    lines += ["End Site", "{", "OFFSET 0 1 0", "}"] + ["}"] * joints
+    row = " ".join(f"{v:.6f}" for v in np.linspace(-10, 10, 6 + 3 * (joints - 1))) + "\n"
+    lines += ["MOTION", f"Frames: {frames}", "Frame Time: 0.008333", row * frames]
+    path.write_text("\n".join(lines))
+
+
+def test_a_bvh_is_read_in_memory_of_the_order_of_its_arrays_and_refused_past_the_limit(tmp_path):
+    """A 70 MB BVH once peaked at 1.63 GB (23 times its size: every number a Python string);
+    at the 512 MiB file limit that was about 12 GB. The rule at a test's size (a 64 MiB limit):
+    a file whose frames need more than the limit once read is refused before they are read,
+    and one within it is read in memory of the order of the limit."""
+    import subprocess
+    import sys
+
+    env = {"SPARSE_BODY_MAX_MOTION_MIB": "64"}
+    # the peak of this process's own memory (VmHWM: getrusage's maxrss is inherited from the parent)
+    script = (
+        "import sys; from sparse_body.data import MotionFileError; from sparse_body.data.bvh import load_bvh\n"
+        "peak = lambda: int(next(l for l in open('/proc/self/status') if l.startswith('VmHWM')).split()[1])\n"
+        "before = peak()\n"
+        "try:\n    m = load_bvh(sys.argv[1]); print('read', m.positions.shape[0])\n"
+        "except MotionFileError as err:\n    print('refused', err)\n"
+        "print((peak() - before) / 1024)\n"
+    )
+    import os
+
+    results = {}
+    for name, frames in (("within", 16_000), ("over", 60_000)):  # 16,000 frames (14 MB) need 58 MiB; 60,000 219
+        path = tmp_path / f"{name}.bvh"
+        _long_bvh(path, frames)
+        out = subprocess.run(
+            [sys.executable, "-c", script, str(path)],
+            capture_output=True,
+            text=True,
+            env={**os.environ, **env},
+            timeout=120,
+            check=True,
+        ).stdout.splitlines()
+        results[name] = (out[0], float(out[-1]))
+    assert results["within"][0] == "read 16000" and results["within"][1] < 2 * 64, results
+    assert results["over"][0].startswith("refused") and "need 220 MiB once read" in results["over"][0], results
+    assert "SPARSE_BODY_MAX_MOTION_MIB" in results["over"][0] and results["over"][1] < 20, results

@@ -13,7 +13,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from . import MotionFileError
-from .source import MAX_JOINTS, SourceMotion, read_text, stem
+from .source import MAX_JOINTS, SourceMotion, stem
 
 # Length units of the CMU BVH conversions (cgspeed's releases of the CMU database): MotionBuilder and
 # 3ds Max releases keep the ASF units (1/0.45 inch), Daz releases use centimetres.
@@ -46,13 +46,108 @@ def _check_channels(path: Path, joint: str, channels: list[str]) -> None:
         raise MotionFileError(path, f"joint {joint!r} has {rotations} rotation channels (0 or 3 allowed)")
 
 
+def _motion_values(path: Path, stream, first: bytes, expected: int) -> np.ndarray:
+    """The motion's numbers, parsed a chunk at a time into one array of the declared size (a
+    file holding more is cut at one value over, enough to say so)."""
+    values = np.empty(expected + 1)
+    count, pending = 0, first
+    while True:
+        chunk = stream.read(CHUNK)
+        data = pending + chunk
+        if chunk:  # the last token may continue in the next chunk
+            cut = max(data.rfind(b" "), data.rfind(b"\n"), data.rfind(b"\t"), data.rfind(b"\r"))
+            data, pending = (data[: cut + 1], data[cut + 1 :]) if cut >= 0 else (b"", data)
+        try:
+            parsed = np.array(data.split(), dtype=np.float64)
+        except ValueError:
+            raise MotionFileError(path, "malformed MOTION header or non-numeric motion data") from None
+        take = min(len(parsed), len(values) - count)
+        values[count : count + take] = parsed[:take]
+        count += take
+        if not chunk or count > expected:
+            return values[:count]
+
+
 def default_unit(layout: str) -> float:
     return 0.01 if layout == "cmu_bvh_daz" else CMU_ASF_UNIT
 
 
+CHUNK = 8 << 20  # bytes of motion data parsed at a time
+# Bytes a SourceMotion holds per frame and joint (a rotation and a position, float64), and per
+# channel value while the values are parsed: what the motion size limit bounds, so that a file
+# within it is read in memory of the same order, not some 20 times its size.
+JOINT_FRAME_BYTES = (9 + 3) * 8
+VALUE_BYTES = 8
+
+
 def load_bvh(path: Path, length_unit: float | None = None) -> SourceMotion:
+    """A BVH file (gzip-compressed when it ends in .gz), read as a stream: the hierarchy as
+    text, the motion parsed into its array a chunk at a time. A file whose declared frames
+    need more memory than the motion size limit allows is refused before they are read."""
     path = Path(path)
-    text = read_text(path)
+    if not path.is_file():
+        raise MotionFileError(path, "no such file")
+    import gzip
+
+    from ..core.textfile import FileTooLarge, limit_bytes, too_large
+
+    opener = gzip.open if path.suffix == ".gz" else open
+    try:
+        with opener(path, "rb") as raw:
+            return _read_bvh(path, _LimitedStream(raw, path), length_unit, limit_bytes("motion"))
+    except FileTooLarge as err:
+        raise too_large(MotionFileError)(path, str(err).removeprefix(f"{path}: ")) from None
+    except (OSError, EOFError) as err:  # a truncated .gz raises EOFError
+        raise MotionFileError(path, f"cannot be read ({err})") from None
+
+
+class _LimitedStream:
+    """A file's bytes with read(n); past the motion size limit, FileTooLarge."""
+
+    def __init__(self, file, path: Path) -> None:
+        from ..core.textfile import limit_bytes
+
+        self.file, self.path, self.limit, self.count = file, path, limit_bytes("motion"), 0
+
+    def read(self, n: int) -> bytes:
+        from ..core.textfile import LIMITS, MIB, FileTooLarge
+
+        data = self.file.read(n)
+        self.count += len(data)
+        if self.count > self.limit:
+            variable, _ = LIMITS["motion"]
+            raise FileTooLarge(
+                f"{self.path}: larger than the {self.limit / MIB:g} MiB allowed for a motion file "
+                f"(set {variable} to raise it)"
+            )
+        return data
+
+
+def _head(path: Path, stream) -> tuple[str, bytes]:
+    """The text up to the first motion value ("... Frame Time: 0.0083"), and the bytes read after it."""
+    buffer = b""
+    while True:
+        chunk = stream.read(1 << 20)
+        buffer += chunk
+        at = buffer.find(b"Frame Time:")
+        if at >= 0:
+            end = at + len(b"Frame Time:")
+            # the frame time itself: the next token, whole
+            while len(buffer) - end < 64 and chunk:
+                chunk = stream.read(1 << 20)
+                buffer += chunk
+            rest = buffer[end:].lstrip()
+            token_end = len(rest.split(None, 1)[0]) if rest.split(None, 1) else 0
+            cut = len(buffer) - len(rest) + token_end
+            return buffer[:cut].decode("utf-8", errors="replace"), buffer[cut:]
+        if not chunk:
+            return buffer.decode("utf-8", errors="replace"), b""
+        if len(buffer) > 64 << 20:  # a hierarchy of MAX_JOINTS joints is under 1 MB
+            raise MotionFileError(path, "no MOTION frames within its first 64 MB")
+
+
+def _read_bvh(path: Path, stream, length_unit: float | None, limit: int) -> SourceMotion:
+    text, after = _head(path, stream)
     head, sep, motion = text.partition("MOTION")
     if not head.lstrip().startswith("HIERARCHY"):
         raise MotionFileError(path, "does not start with HIERARCHY")
@@ -118,9 +213,7 @@ def load_bvh(path: Path, length_unit: float | None = None) -> SourceMotion:
     header, _, data = motion.partition("Frame Time:")
     try:
         frames = int(header.split("Frames:")[1].split()[0])
-        frame_text, *value_texts = data.split()
-        frame_time = float(frame_text)
-        values = np.asarray(value_texts, dtype=np.float64)
+        frame_time = float(data.split()[0])
     except (IndexError, ValueError):
         raise MotionFileError(path, "malformed MOTION header or non-numeric motion data") from None
     # 1/1000 s to 10 s a frame: what a motion capture system records
@@ -128,6 +221,16 @@ def load_bvh(path: Path, length_unit: float | None = None) -> SourceMotion:
         raise MotionFileError(path, f"Frame Time {frame_time!r} is not a frame duration (1 ms to 10 s)")
     fps = 1.0 / frame_time
     n_channels = sum(len(c) for c in channels)
+    needed = frames * (len(names) * JOINT_FRAME_BYTES + n_channels * VALUE_BYTES)
+    if needed > limit:
+        from ..core.textfile import LIMITS, MIB, FileTooLarge
+
+        variable, _ = LIMITS["motion"]
+        raise FileTooLarge(
+            f"{path}: {frames:,} frames of {len(names)} joints need {needed / MIB:,.0f} MiB once read, more than "
+            f"the {limit / MIB:g} MiB allowed for a motion file (set {variable} to raise it)"
+        )
+    values = _motion_values(path, stream, after, max(frames, 0) * n_channels)
     if frames <= 0 or values.size != frames * n_channels:
         have = values.size / n_channels if n_channels else 0
         raise MotionFileError(

@@ -15,7 +15,8 @@ second drawn: every second frame of a 60 Hz recording, each shown twice as long)
 from __future__ import annotations
 
 import json
-from collections.abc import Iterable
+from collections.abc import Iterable, Iterator
+from itertools import chain
 from pathlib import Path
 
 import numpy as np
@@ -77,7 +78,13 @@ def _round(a: np.ndarray) -> list:
     return out.tolist()
 
 
-def body_page(
+def body_page(fps: float, **parts) -> str:
+    """The page's HTML whole (body_page_parts' parts joined)."""
+    head, frames, tail = body_page_parts(fps, **parts)
+    return head + "".join(frames) + tail
+
+
+def body_page_parts(
     fps: float,
     estimate: np.ndarray | None = None,
     truth: np.ndarray | None = None,
@@ -86,11 +93,16 @@ def body_page(
     floor: float | None = None,
     robot: np.ndarray | None = None,
     robot_bones: tuple[tuple[int, int], ...] = (),
-) -> str:
-    """The page's HTML. estimate, truth: (frames, 22, 3) joint positions; trackers: (frames,
-    k, 3), NaN where a tracker has no sample; robot: (frames, links, 3) a robot's link origins
-    (robot_bones: the (parent, child) links drawn joined); all in metres, z up."""
-    import plotly.graph_objects as go
+    stands_for: int = 1,
+) -> tuple[str, Iterator[str], str]:
+    """The page's HTML in three parts: what comes before its animation frames, the frames'
+    JSON one part a frame (made as they are taken), and the rest. estimate, truth: (frames,
+    22, 3) joint positions; trackers: (frames, k, 3), NaN where a tracker has no sample;
+    robot: (frames, links, 3) a robot's link origins
+    (robot_bones: the (parent, child) links drawn joined); all in metres, z up. stands_for: how
+    many frames of the recording each given frame stands for (a reader that decimated
+    already, as bag_bodies does), said in the title."""
+    import plotly.io as pio
 
     shown = [a for a in (estimate, truth) if a is not None]
     if not shown or not len(shown[0]):
@@ -111,8 +123,10 @@ def body_page(
     if estimate is not None and truth is not None:
         error = 100 * np.linalg.norm(estimate - truth, axis=-1)
 
-    def points(xyz: np.ndarray, **style):
-        return go.Scatter3d(x=_round(xyz[:, 0]), y=_round(xyz[:, 1]), z=_round(xyz[:, 2]), **style)
+    def points(xyz: np.ndarray, **style) -> dict:
+        # a plain trace, as plotly would serialise it: thousands of frames of plotly's objects
+        # once held 475 MB for a 28 MB page (a 5-minute bag)
+        return {"type": "scatter3d", "x": _round(xyz[:, 0]), "y": _round(xyz[:, 1]), "z": _round(xyz[:, 2]), **style}
 
     def traces(i: int) -> list:
         out = []
@@ -167,21 +181,22 @@ def body_page(
     x = np.linspace(low[0] - margin, high[0] + margin, 9)
     y = np.linspace(low[1] - margin, high[1] + margin, 9)
     grid_x, grid_y = np.meshgrid(x, y)
-    floor_trace = go.Surface(
-        x=grid_x,
-        y=grid_y,
-        z=np.full_like(grid_x, floor),
-        showscale=False,
-        opacity=0.6,
-        colorscale=[[0, "#cfcfcf"], [1, "#cfcfcf"]],
-        contours={"x": {"show": True, "color": "#888888"}, "y": {"show": True, "color": "#888888"}},
-        hoverinfo="skip",
-        name="floor",
-    )
-    trail = go.Scatter3d(
-        x=_round(centre[:, 0]),
-        y=_round(centre[:, 1]),
-        z=[floor] * len(centre),
+    # the figure as plotly's JSON, plain dicts: plotly's objects validate every slider step and
+    # frame (thousands), costing far more memory than the page they make
+    floor_trace = {
+        "type": "surface",
+        "x": grid_x.tolist(),
+        "y": grid_y.tolist(),
+        "z": np.full_like(grid_x, floor).tolist(),
+        "showscale": False,
+        "opacity": 0.6,
+        "colorscale": [[0, "#cfcfcf"], [1, "#cfcfcf"]],
+        "contours": {"x": {"show": True, "color": "#888888"}, "y": {"show": True, "color": "#888888"}},
+        "hoverinfo": "skip",
+        "name": "floor",
+    }
+    trail = points(
+        np.column_stack([centre, np.full(len(centre), floor)]),
         mode="lines",
         line={"color": "#b0b0b0", "width": 2},
         hoverinfo="skip",
@@ -190,17 +205,14 @@ def body_page(
     duration = 1000.0 * step / fps  # ms a drawn frame stays: the recording's own speed
     first = traces(0)
     moving = list(range(2, 2 + len(first)))  # every trace but the floor and the trail
-    figure = go.Figure(
-        data=[floor_trace, trail, *first],
-        frames=[go.Frame(data=traces(i), traces=moving, name=str(i), layout=_nested(box(i))) for i in picks],
-    )
+    figure: dict = {"data": [floor_trace, trail, *first]}
     top = floor + FOLLOW_HEIGHT * stature
     ranges = [box(0)["scene.xaxis.range"], box(0)["scene.yaxis.range"], [floor, top]]
     span = np.array([2 * half, 2 * half, top - floor])
-    figure.update_layout(
+    figure["layout"] = dict(
         title={
-            "text": f"{title}: {frames / fps:.1f} s at {fps:g} Hz"
-            + (f", one frame in {step} drawn" if step > 1 else "")
+            "text": f"{title}: {frames / fps:.1f} s at {fps * stands_for:g} Hz"
+            + (f", one frame in {step * stands_for} drawn" if step * stands_for > 1 else "")
         },
         scene={
             "xaxis": {"range": ranges[0], "title": "x (m)"},
@@ -260,7 +272,26 @@ def body_page(
     play = json.dumps({"frame": {"duration": duration, "redraw": True}, "transition": {"duration": 0}})
     # `#play` in the address plays on load (the browser test, a link to share)
     script = f"if (window.location.hash === '#play') {{ Plotly.animate('{{plot_id}}', null, {play}); }}"
-    return figure.to_html(include_plotlyjs=True, full_html=True, post_script=script, auto_play=False)
+
+    # the frames go into the page as JSON text made a frame at a time, in place of a marker:
+    # thousands of frames held whole, as plotly's objects or one string, once took 475 MB
+    def frames_json() -> Iterator[str]:
+        for k, i in enumerate(picks):
+            frame = {"data": traces(i), "traces": moving, "name": str(i), "layout": _nested(box(i))}
+            yield ("[" if k == 0 else ",") + json.dumps(frame, allow_nan=False, separators=(",", ":"))
+        yield "]"
+
+    figure["frames"] = FRAMES_MARKER
+    html = pio.to_html(
+        figure, validate=False, include_plotlyjs=True, full_html=True, post_script=script, auto_play=False
+    )
+    head, found, tail = html.partition(json.dumps(FRAMES_MARKER))
+    if not found or FRAMES_MARKER in tail:
+        raise RuntimeError("plotly's page no longer holds the frames where this module puts them")
+    return head, frames_json(), tail
+
+
+FRAMES_MARKER = "sparse_body: the frames go here"
 
 
 def stream_trackers(stream: TrackerStream, sensors: SensorConfig) -> np.ndarray:
@@ -274,20 +305,28 @@ def stream_trackers(stream: TrackerStream, sensors: SensorConfig) -> np.ndarray:
 PAGE_MARKER = '<meta name="generator" content="sparse_body view">'
 
 
-def write_body_page(path: Path, fps: float, overwrite: bool = False, **parts) -> Path:
+def write_body_page(path: Path, fps: float, overwrite: bool = False, **parts) -> Path:  # parts: body_page's
     """body_page written to path: a new file, or with overwrite a page this command wrote
     (io/file_output.py's rules: a user's file, a link or a device is never replaced)."""
     from ..core.file_output import marker_in_head, write_file
 
-    html = body_page(fps, **parts).replace("<head>", "<head>" + PAGE_MARKER, 1)
-    return write_file(Path(path), html, marker_in_head(PAGE_MARKER.encode()), overwrite, "page")
+    head, frames, tail = body_page_parts(fps, **parts)
+    head = head.replace("<head>", "<head>" + PAGE_MARKER, 1)
+    return write_file(
+        Path(path), chain([head], frames, [tail]), marker_in_head(PAGE_MARKER.encode()), overwrite, "page"
+    )
 
 
-def bag_robot(bag: Path, retarget, beside: np.ndarray) -> tuple[np.ndarray, tuple[tuple[int, int], ...]]:
+def bag_robot(
+    bag: Path, retarget, beside: np.ndarray, every: int = 1
+) -> tuple[np.ndarray, tuple[tuple[int, int], ...]]:
     """(link origins (frames, links, 3), the (parent, child) links) of the robot in an estimate
     bag written with `process --robot` (/robot/joint_states, its base on /tf), placed beside the
     body: each frame moved so that the robot's base stands 0.8 m to the body's left (beside:
-    (frames, 3) the body's pelvis, one a /tf message as bag_bodies gives them)."""
+    (frames, 3) the body's pelvis, one a /tf message as bag_bodies gives them; every: one
+    frame in `every` kept, as bag_bodies kept them)."""
+    from itertools import islice
+
     from rosbags.rosbag2 import Reader
 
     from ..core.rotations import quat_to_matrix
@@ -304,12 +343,13 @@ def bag_robot(bag: Path, retarget, beside: np.ndarray) -> tuple[np.ndarray, tupl
             if not joints:
                 raise ViewError(f"{bag}: no {ROBOT_JOINT_STATES_TOPIC} (write it with process --robot)")
             angles = [
-                store.deserialize_cdr(raw, c.msgtype).position for c, _, raw in reader.messages(connections=joints)
+                store.deserialize_cdr(raw, c.msgtype).position
+                for c, _, raw in islice(reader.messages(connections=joints), 0, None, every)
             ]
             tf = [c for c in reader.connections if c.topic == TF_TOPIC]
             bases = [
                 next((row for row in read_tf(raw) if row[1] == base_frame), None)
-                for _, _, raw in reader.messages(connections=tf)
+                for _, _, raw in islice(reader.messages(connections=tf), 0, None, every)
             ]
     except ViewError:
         raise
@@ -329,8 +369,10 @@ def bag_robot(bag: Path, retarget, beside: np.ndarray) -> tuple[np.ndarray, tupl
     return links, bones
 
 
-def bag_bodies(bag: Path) -> tuple[np.ndarray, np.ndarray | None, float]:
-    """tf_bodies of an estimate bag's /tf."""
+def bag_bodies(bag: Path, drawn: bool = False) -> tuple[np.ndarray, np.ndarray | None, float, int]:
+    """tf_bodies of an estimate bag's /tf, and how many of its frames each one returned stands
+    for: with drawn=True, only the frames a page draws (at most MAX_FPS a second and MAX_FRAMES
+    in all, judged from the bag's message count and duration) are kept while reading."""
     from rosbags.rosbag2 import Reader
 
     from ..io.bagio import TF_TOPIC
@@ -339,9 +381,15 @@ def bag_bodies(bag: Path) -> tuple[np.ndarray, np.ndarray | None, float]:
     try:
         with Reader(Path(bag)) as reader:
             tf = [c for c in reader.connections if c.topic == TF_TOPIC]
+            count = sum(c.msgcount for c in tf)
+            every = 1
+            if drawn and count > 1 and reader.duration > 0:
+                rate = (count - 1) / (reader.duration * 1e-9)
+                every = max(int(np.ceil(rate / MAX_FPS - 1e-3)), int(np.ceil(count / MAX_FRAMES)), 1)
             # one message at a time: a recording's rows held whole cost 3 kB a frame (a
             # 5-minute bag reached 982 MB), its bodies a few hundred bytes
-            return tf_bodies((read_tf(raw) for _, _, raw in reader.messages(connections=tf)), str(bag))
+            messages = (read_tf(raw) for _, _, raw in reader.messages(connections=tf))
+            return (*tf_bodies(messages, str(bag), every, count // every + 1), every)
     except ViewError:
         raise
     except MalformedMessage as err:
@@ -350,49 +398,108 @@ def bag_bodies(bag: Path) -> tuple[np.ndarray, np.ndarray | None, float]:
         raise ViewError(f"{bag}: cannot be read as a rosbag2 ({err})") from None
 
 
-def tf_bodies(messages: Iterable[list[TfRow]], source: str) -> tuple[np.ndarray, np.ndarray | None, float]:
+def tf_bodies(
+    messages: Iterable[list[TfRow]], source: str, every: int = 1, expected: int = 0
+) -> tuple[np.ndarray, np.ndarray | None, float]:
     """(joint positions (frames, 22, 3), trackers (frames, k, 3) or None, frame rate) of the
     /tf messages of an estimate (a bag, the live view): a frame per message with every body
     link (fixed frame -> pelvis -> ...); the trackers are the other frames directly under the
     fixed frame, from that message or those since the previous body (the live view sends
-    them apart), NaN where a tracker was not seen."""
-    from ..core.kinematics import forward_kinematics
-    from ..core.rotations import quat_to_matrix
-
+    them apart), NaN where a tracker was not seen. every=N keeps one body in N (the first,
+    then each Nth), dropping the others as they are read; the frame rate is the kept ones'.
+    expected: about how many bodies will be kept (room is made for them at once)."""
     names = {name: j for j, name in enumerate(JOINT_NAMES)}
-    stamps, quats, roots, offsets, tracker_rows, tracker_names = [], [], [], None, [], []
+    # each kept body written into arrays as it comes (one row a frame: Python lists of small
+    # arrays and dicts once cost 3 kB a frame)
+    # (float32 holds every bit of a bag's poses: they are published at float32 precision)
+    store = _Rows({"stamp": ((), np.float64), "pose": ((NUM_JOINTS, 7), np.float32)}, expected)
+    tracker_names: list[str] = []
+    tracker_rows = _Rows({"trackers": ((0, 3), np.float32)}, expected)
+    offsets = None
     loose: list[TfRow] = []  # rows since the last body
+    seen = 0  # bodies read
     for rows in messages:
         by_child = {child: (parent, stamp, numbers) for parent, child, stamp, numbers in rows}
         if not all(n in by_child for n in JOINT_NAMES):
             loose += rows  # not a body message (trackers, or a body of another prefix)
             continue
+        seen += 1
+        if (seen - 1) % every:  # not drawn: nor are the trackers sent before it
+            loose = []
+            continue
         fixed, stamp, _ = by_child[JOINT_NAMES[0]]
         numbers = np.array([by_child[name][2] for name in names])  # x y z, qx qy qz qw
-        stamps.append(stamp)
-        quats.append(numbers[:, 3:])
-        roots.append(numbers[0, :3].copy())
-        offsets = numbers[:, :3] if offsets is None else offsets
-        row = {}
+        store.append(stamp=stamp, pose=numbers)
+        offsets = numbers[:, :3].copy() if offsets is None else offsets
+        row: dict[str, tuple] = {}
         for parent, child, _, values in loose + rows:
             if parent == fixed and child != JOINT_NAMES[0]:
-                row[child] = values[:3]
+                row[child] = tuple(values[:3])
                 if child not in tracker_names:
                     tracker_names.append(child)
-        tracker_rows.append(row)
+                    tracker_rows.widen("trackers", len(tracker_names))
+        placed = np.full((len(tracker_names), 3), np.nan)
+        for k, name in enumerate(tracker_names):
+            if name in row:
+                placed[k] = row[name]
+        tracker_rows.append(trackers=placed)
         loose = []
-    if not quats or offsets is None:
+    if not len(store) or offsets is None:
         raise ViewError(f"{source}: no body on /tf (a bag `sparse-body process` wrote has one)")
     offsets[0] = 0.0
-    _, positions = forward_kinematics(quat_to_matrix(np.array(quats)), np.array(roots), offsets)
-    trackers = None
-    if tracker_names:
-        trackers = np.full((len(quats), len(tracker_names), 3), np.nan)
-        for i, row in enumerate(tracker_rows):
-            for k, name in enumerate(tracker_names):
-                if name in row:
-                    trackers[i, k] = row[name]
+    poses, stamps = store.array("pose"), store.array("stamp")
+    positions = _positions(poses[:, :, 3:], poses[:, 0, :3], offsets.astype(np.float64))
+    trackers = tracker_rows.array("trackers").astype(np.float64) if tracker_names else None
     gaps = np.diff(stamps)
     gaps = gaps[gaps > 0]
     fps = round(float(1.0 / np.median(gaps)), 3) if len(gaps) else 60.0  # stamps are rounded to ns
     return positions, trackers, fps
+
+
+class _Rows:
+    """Rows of named arrays appended one at a time into arrays that double as they fill."""
+
+    def __init__(self, kinds: dict[str, tuple[tuple[int, ...], type]], expected: int = 0) -> None:
+        """kinds: each array's row shape and type; expected: how many rows to make room for at first."""
+        start = max(64, expected)
+        self.data: dict[str, np.ndarray] = {
+            name: np.full((start, *shape), np.nan, dtype) for name, (shape, dtype) in kinds.items()
+        }
+        self.count = 0
+
+    def __len__(self) -> int:
+        return self.count
+
+    def widen(self, name: str, width: int) -> None:
+        """Its second axis grown to `width` (NaN in the rows that had less)."""
+        old = self.data[name]
+        new = np.full((len(old), width, *old.shape[2:]), np.nan, old.dtype)
+        new[:, : old.shape[1]] = old
+        self.data[name] = new
+
+    def append(self, **row) -> None:
+        if self.count == len(next(iter(self.data.values()))):
+            for name, old in self.data.items():
+                new = np.full((2 * len(old), *old.shape[1:]), np.nan, old.dtype)
+                new[: len(old)] = old
+                self.data[name] = new
+        for name, value in row.items():
+            self.data[name][self.count] = value
+        self.count += 1
+
+    def array(self, name: str) -> np.ndarray:
+        return self.data[name][: self.count]
+
+
+def _positions(quats: np.ndarray, roots: np.ndarray, offsets: np.ndarray, block: int = 1024) -> np.ndarray:
+    """Joint positions (frames, 22, 3) of local rotations (frames, 22, 4) and roots, a block of
+    frames at a time (the rotation matrices of a whole recording are 14 MB per 9,000 frames)."""
+    from ..core.kinematics import forward_kinematics
+    from ..core.rotations import quat_to_matrix
+
+    out = np.empty((len(quats), NUM_JOINTS, 3))
+    for start in range(0, len(quats), block):
+        part = slice(start, start + block)
+        turns = quat_to_matrix(quats[part].astype(np.float64))
+        out[part] = forward_kinematics(turns, roots[part].astype(np.float64), offsets)[1]
+    return out

@@ -19,7 +19,7 @@ import contextlib
 import os
 import secrets
 import stat
-from collections.abc import Callable
+from collections.abc import Callable, Iterable
 from pathlib import Path
 
 
@@ -74,19 +74,24 @@ def check_target(path: Path, ours: Callable[[Path], bool], overwrite: bool, what
 
 
 def write_file(
-    path: Path, data: bytes | str, ours: Callable[[Path], bool], overwrite: bool = False, what: str = "file"
+    path: Path,
+    data: bytes | str | Iterable[bytes | str],
+    ours: Callable[[Path], bool],
+    overwrite: bool = False,
+    what: str = "file",
 ) -> Path:
-    """`data` written to `path` as described above; returns the path."""
+    """`data` (or its parts, written one after the other as they come: a page of many
+    megabytes need not be held whole) written to `path` as described above; returns the path."""
     path = check_target(path, ours, overwrite, what)
-    if isinstance(data, str):
-        data = data.encode("utf-8")
+    parts = [data] if isinstance(data, (bytes, str)) else data
     # named before it is made, so that an interrupt right after it is made removes it too (one
     # landing between mkstemp's return and the cleanup's try left it: CI's Ctrl-C test)
     tmp = path.absolute().parent / f".{path.name}.{secrets.token_hex(6)}.partial"
     try:
         fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL | getattr(os, "O_BINARY", 0), 0o666)  # umask applies
         with os.fdopen(fd, "wb") as f:
-            f.write(data)
+            for part in parts:
+                f.write(part.encode("utf-8") if isinstance(part, str) else part)
         check_target(path, ours, overwrite, what)  # nothing else may have appeared meanwhile
         os.replace(tmp, path)
     except BaseException:

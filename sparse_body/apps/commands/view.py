@@ -29,8 +29,9 @@ def run(args) -> int:
             + (f"; {malformed} /tf messages that were not TFMessages left out" if malformed else "")
         )
     elif source is not None and is_bag(source):
-        positions, trackers, fps = bag_bodies(source)
-        parts = {"estimate": positions, "trackers": trackers}
+        # the frames the page draws kept while reading: a 5-minute bag's every frame once took 330 MB
+        positions, trackers, fps, stands_for = bag_bodies(source, drawn=True)
+        parts = {"estimate": positions, "trackers": trackers, "stands_for": stands_for}
         name = source.name
         if args.robot:  # the robot the bag was written with, beside the body
             from ...core.skeleton import Skeleton
@@ -38,7 +39,7 @@ def run(args) -> int:
             from ..viewer import bag_robot
 
             retarget = load_retarget(args.robot, args.robot_urdf, Skeleton.canonical())
-            parts["robot"], parts["robot_bones"] = bag_robot(source, retarget, positions[:, 0])
+            parts["robot"], parts["robot_bones"] = bag_robot(source, retarget, positions[:, 0], stands_for)
     elif source is not None and is_results_file(source):
         from ...data.catalog import find_mocap_root
         from ..result_view import view_clip

@@ -14,7 +14,6 @@ import os
 
 from ament_index_python.packages import PackageNotFoundError, get_package_share_directory
 from launch.actions import DeclareLaunchArgument, LogInfo, OpaqueFunction
-from launch.conditions import IfCondition
 from launch.substitutions import LaunchConfiguration
 from launch_ros.actions import LifecycleNode, Node
 
@@ -36,6 +35,14 @@ def _nodes(context):
 
     share = get_package_share_directory("sparse_body")
     arg = lambda name: LaunchConfiguration(name).perform(context)  # noqa: E731
+    # every optional tool asked for is checked before any node starts: a launch that fails
+    # after starting the estimator left it running as an orphan (parent pid 1)
+    with_rviz = LaunchConfiguration("rviz", default="false").perform(context).lower() in ("true", "1")
+    if with_rviz and not _installed("rviz2"):
+        raise RuntimeError(
+            "rviz:=true, but RViz (rviz2) is not installed: install ros-$ROS_DISTRO-rviz2, or leave rviz "
+            "out (nothing was started)"
+        )
     height = float(arg("height"))
     body = person_body(arg("calibration"), height)
     estimator_params = [
@@ -143,6 +150,15 @@ def _nodes(context):
                 ],
             )
         )
+    if with_rviz:
+        nodes.append(
+            Node(
+                package="rviz2",
+                executable="rviz2",
+                output="screen",
+                arguments=["-d", os.path.join(share, "config", "sparse_body.rviz")],
+            )
+        )
     return nodes
 
 
@@ -220,15 +236,5 @@ def generate_launch_description():
                 "estimator publishes link TF)",
             ),
             OpaqueFunction(function=_nodes),
-            Node(
-                package="rviz2",
-                executable="rviz2",
-                output="screen",
-                condition=IfCondition(LaunchConfiguration("rviz")),
-                arguments=[
-                    "-d",
-                    os.path.join(get_package_share_directory("sparse_body"), "config", "sparse_body.rviz"),
-                ],
-            ),
         ]
     )

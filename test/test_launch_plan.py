@@ -150,3 +150,45 @@ def test_robot_starts_the_retarget_node_with_the_mapping_and_the_sensors_fixed_f
     assert not [
         kw for kind, kw in module._nodes(context) if kind == "lifecycle" and kw["executable"] == "retarget_node"
     ]
+
+
+def test_rviz_asked_for_and_not_installed_refuses_the_launch_before_any_node_starts(monkeypatch):
+    """The launch used to exit 1 ("package 'rviz2' not found") after starting the estimator,
+    which then kept publishing with parent pid 1: a second launch saw two estimators."""
+    from launch import LaunchContext
+
+    module = _launch_module()
+    monkeypatch.setattr(module, "_installed", lambda package: package != "rviz2")
+    monkeypatch.setattr(module, "get_package_share_directory", lambda package: str(Path(__file__).resolve().parents[1]))
+    started = []
+    monkeypatch.setattr(module, "LifecycleNode", lambda **kw: started.append(kw) or ("lifecycle", kw))
+    monkeypatch.setattr(module, "Node", lambda **kw: started.append(kw) or ("node", kw))
+    context = LaunchContext()
+    settings = {
+        "sensors": "six_point",
+        "estimator": "ik",
+        "model_path": "",
+        "height": "1.75",
+        "calibration": "",
+        "bag": "",
+        "refine": "false",
+        "robot_state_publisher": "true",
+        "foxglove_port": "0",
+        "foxglove_host": "127.0.0.1",
+        "step_budget": "0.0",
+        "budget_fallback": "ik",
+        "predict_ahead": "0.0",
+        "foot_lock": "false",
+        "robot": "",
+        "robot_urdf": "",
+        "rviz": "true",
+    }
+    for name, value in settings.items():
+        context.launch_configurations[name] = value
+    with pytest.raises(RuntimeError, match=r"rviz2\) is not installed.*nothing was started"):
+        module._nodes(context)
+    assert started == []
+    monkeypatch.setattr(module, "_installed", lambda package: True)  # installed: started last, with our config
+    actions = module._nodes(context)
+    rviz = [kw for kind, kw in actions if kind == "node" and kw["package"] == "rviz2"]
+    assert len(rviz) == 1 and rviz[0]["arguments"][1].endswith("sparse_body.rviz")

@@ -167,3 +167,19 @@ def test_the_makefile_s_loops_read_the_registry():
     assert {line.split()[0] for line in listed.stdout.split("\n") if line} == {
         name for name, m in METHODS.items() if m.eval_sensors
     }
+
+
+def test_an_option_given_twice_is_refused_and_a_long_value_is_quoted_short():
+    """The last of `ik:predict_ahead=0.1,predict_ahead=0.2` silently won; a 100 kB value was
+    echoed whole."""
+    from sparse_body.estimators.base import parse_estimator_spec
+    from sparse_body.methods.factory import create_estimator
+
+    with pytest.raises(ValueError, match="'predict_ahead' is given twice"):
+        parse_estimator_spec("ik:predict_ahead=0.1,predict_ahead=0.2")
+    huge = "x" * 100_000
+    for spec in (f"ik:floor_height={huge}", f"ik:{huge}", f"{huge}"):
+        with pytest.raises(ValueError) as err:
+            name, options = parse_estimator_spec(spec)
+            create_estimator(name, load_sensor_config("six_point"), Skeleton.canonical(), **options)
+        assert len(str(err.value)) < 400 and "characters)" in str(err.value), str(err.value)[:400]

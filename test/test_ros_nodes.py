@@ -1056,3 +1056,24 @@ def test_a_stopped_start_stays_quiet_about_what_its_interrupt_left_half_built(ro
     monkeypatch.setattr(spin, "_STOP", types.SimpleNamespace(is_set=lambda: False))
     spin._quiet_dropped_interrupts(half_built)  # not stopping: said
     assert printed == [other, half_built]
+
+
+def test_a_parameter_over_the_spec_s_same_option_is_said_in_the_log(ros_env, capfd):
+    """With the parameter predict_ahead 0.1 and `estimator:=ik:predict_ahead=0.2` the node
+    logged 0.2 (its spec) while the parameter's 0.1 stamped the poses."""
+    from rclpy.parameter import Parameter
+
+    from sparse_body.ros.estimator_node import EstimatorNode
+
+    node = EstimatorNode(
+        parameter_overrides=[
+            Parameter("estimator", value="ik:predict_ahead=0.2"),
+            Parameter("predict_ahead", value=0.1),
+        ]
+    )
+    try:
+        node.trigger_configure()
+        assert node.estimator is not None and node.estimator.ahead == 0.1
+    finally:
+        node.destroy_node()
+    assert "the parameter sets predict_ahead to 0.1 over the estimator spec's 0.2" in capfd.readouterr().err

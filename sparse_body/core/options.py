@@ -72,11 +72,18 @@ class Option:
         prefix = f"{owner}: {self.name}"
         is_bool = isinstance(value, bool)
         if not isinstance(value, self.types) or (is_bool and bool not in self.types):
-            raise ValueError(f"{prefix} takes {self.words()}, got {value!r}")
+            raise ValueError(f"{prefix} takes {self.words()}, got {shown(value)}")
         if self.numeric and not is_bool and isinstance(value, (int, float)):
             bounds = self.range
             if not math.isfinite(value) or (bounds is not None and not bounds.low <= value <= bounds.high):
-                raise ValueError(f"{prefix} must be {bounds or 'finite'}, got {value!r}")
+                raise ValueError(f"{prefix} must be {bounds or 'finite'}, got {shown(value)}")
+
+
+def shown(value: object, limit: int = 80) -> str:
+    """A value as an error quotes it: its repr, cut to `limit` characters (a 100 kB option value
+    was echoed whole in a node's log)."""
+    text = repr(value)
+    return text if len(text) <= limit else f"{text[: limit - 25]}... ({len(text):,} characters)"
 
 
 def _annotation(kind: object) -> str:

@@ -353,16 +353,22 @@ class Estimator(ABC):
 
 def parse_estimator_spec(spec: str) -> tuple[str, dict]:
     """ "name" or "name:key=value,key=value" (values read as YAML scalars) -> (name, options)."""
+    from ..core.options import shown
+
     name, _, rest = spec.partition(":")
     options = {}
     for item in filter(None, rest.split(",")):
         key, eq, value = item.partition("=")
         if not eq or not key:
-            raise ValueError(f"estimator option {item!r} in {spec!r} is not key=value")
+            raise ValueError(f"estimator option {shown(item)} in {shown(spec)} is not key=value")
+        if key.strip() in options:  # (the last silently won)
+            raise ValueError(f"estimator option {key.strip()!r} is given twice in {shown(spec)}")
         try:
             options[key.strip()] = load_yaml(value)
         except (yaml.YAMLError, ValueError):  # (InputTooLarge: nested, or aliases expanded too far)
-            raise ValueError(f"estimator option {item!r} in {spec!r}: the value is not a plain YAML scalar") from None
+            raise ValueError(
+                f"estimator option {shown(item)} in {shown(spec)}: the value is not a plain YAML scalar"
+            ) from None
     return name.strip(), options
 
 

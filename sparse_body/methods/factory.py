@@ -5,6 +5,7 @@ methods and the Estimator base, so neither imports the registry."""
 from __future__ import annotations
 
 from ..core.forecast import MAX_AHEAD
+from ..core.options import shown
 from ..core.sensors import SensorConfig
 from ..core.skeleton import JOINT_INDEX, Skeleton
 from ..core.tracker_filter import filter_config
@@ -33,24 +34,24 @@ def create_estimator(name: str, sensors: SensorConfig, skeleton: Skeleton, fps: 
     touched down while in contact (core/contact_hold.py; default true; feet that wear trackers
     are never held), foot_lock=false leaves the method's legs as they are."""
     if name not in METHODS:
-        raise ValueError(f"unknown estimator {name!r}; available: {', '.join(estimator_names())}")
+        raise ValueError(f"unknown estimator {shown(name)}; available: {', '.join(estimator_names())}")
     filtering = filter_config(options)
     smooth = options.pop("smooth", False)
     if not isinstance(smooth, bool):
-        raise ValueError(f"smooth must be true or false, got {smooth!r}")
+        raise ValueError(f"smooth must be true or false, got {shown(smooth)}")
     # on by default: on the kinds of motion no model trained on it halves the four-point skate
     # of the estimators without a contact IK of their own and moves their lower-body error by
     # under 1 % either way (docs/methods.md, "Feet held where they touch down"); feet that wear
     # trackers are as the trackers say, and never held
     foot_lock = options.pop("foot_lock", True)
     if not isinstance(foot_lock, bool):
-        raise ValueError(f"foot_lock must be true or false, got {foot_lock!r}")
+        raise ValueError(f"foot_lock must be true or false, got {shown(foot_lock)}")
     ahead = options.pop("predict_ahead", 0.0)
     if isinstance(ahead, bool) or not isinstance(ahead, (int, float)) or not 0.0 <= ahead <= MAX_AHEAD:
-        raise ValueError(f"predict_ahead must be a number of seconds from 0 to {MAX_AHEAD:g}, got {ahead!r}")
+        raise ValueError(f"predict_ahead must be a number of seconds from 0 to {MAX_AHEAD:g}, got {shown(ahead)}")
     root = options.pop("forecast", "learned")
     if root not in FORECASTS:
-        raise ValueError(f"forecast must be one of {', '.join(FORECASTS)}, got {root!r}")
+        raise ValueError(f"forecast must be one of {', '.join(FORECASTS)}, got {shown(root)}")
     load(METHODS[name].options).parse(options, f"estimator {name!r}")  # before any model is loaded
     estimator = load(METHODS[name].estimator)(sensors, skeleton, fps=fps, **options)
     estimator.use_filter(filtering, smooth)

@@ -380,11 +380,19 @@ class EstimatorNode(LifecycleNode):
         spec string's options, then the filter_* and NAME.<field> parameters a user set (those
         not at their defaults); the estimator applies them (create_estimator), so nothing sets
         its filter a second time."""
-        name, options = parse_estimator_spec(p["estimator"])
+        name, spec = parse_estimator_spec(p["estimator"])
+        options = dict(spec)
         options.update(self._method_options(p, name))
         if p["model_path"]:
             options["model_path"] = p["model_path"]
         options.update(self._shared_options(p))
+        # a parameter set wins over the spec's same option: said, so the log shows what runs
+        # (the spec's predict_ahead=0.2 was logged while the parameter's 0.1 stamped the poses)
+        for key, value in spec.items():
+            if key in options and options[key] != value:
+                self.get_logger().warning(
+                    f"the parameter sets {key} to {options[key]!r} over the estimator spec's {value!r}"
+                )
         return create_estimator(name, sensors, self.skeleton, fps=p["output_rate"], **options)
 
     def _method_options(self, p: dict, method: str) -> dict:

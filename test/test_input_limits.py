@@ -143,6 +143,24 @@ def test_every_exit_code_of_the_table_is_what_the_commands_give(tmp_path, capsys
         (EXIT_INPUT, ["process", tmp_path / "trackers", tmp_path / "o", "--estimator", "lobstr:model_path=none.onnx"]),
         (EXIT_OUTPUT, ["view", tmp_path / "walk.npz", "-o", tmp_path / "notes.html"]),
         (EXIT_OUTPUT, ["process", tmp_path / "trackers", tmp_path / "notes.html"]),
+        # an output whose parent is a file: refused alike by every command (view and eval said 4)
+        (EXIT_OUTPUT, ["view", tmp_path / "walk.npz", "-o", tmp_path / "notes.html" / "page.html"]),
+        (EXIT_OUTPUT, ["process", tmp_path / "trackers", tmp_path / "notes.html" / "out"]),
+        (EXIT_OUTPUT, ["make-bag", tmp_path / "notes.html" / "b", "--seconds", "1"]),
+        (
+            EXIT_OUTPUT,
+            [
+                "eval",
+                "--motion",
+                tmp_path / "walk.npz",
+                "--estimator",
+                "ik",
+                "--sensors",
+                "six_point",
+                "--output",
+                tmp_path / "notes.html" / "r.json",
+            ],
+        ),
         (EXIT_TOO_LARGE, ["make-bag", tmp_path / "b", "--seconds", "1", "--sensors", deep]),
     ]
     import os

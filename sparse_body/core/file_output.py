@@ -49,7 +49,7 @@ def check_target(path: Path, ours: Callable[[Path], bool], overwrite: bool, what
     path = Path(path)
     try:
         info = os.lstat(path)
-    except FileNotFoundError:
+    except (FileNotFoundError, NotADirectoryError):  # (its parent a file: refused below, as every output's)
         info = None
     if info is not None:
         if stat.S_ISLNK(info.st_mode):

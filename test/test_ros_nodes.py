@@ -1077,3 +1077,26 @@ def test_a_parameter_over_the_spec_s_same_option_is_said_in_the_log(ros_env, cap
     finally:
         node.destroy_node()
     assert "the parameter sets predict_ahead to 0.1 over the estimator spec's 0.2" in capfd.readouterr().err
+
+
+def test_the_bridge_s_diagnostics_and_waiting_end_quietly_when_a_stop_destroys_the_node(ros_env, tmp_path):
+    """A terminal's Ctrl-C destroyed the bridge while its diagnostics timer ran in the
+    executor's other thread: it raised, and rclpy printed "The following exception was never
+    retrieved: cannot use Destroyable because destruction was requested"."""
+    import threading
+
+    from rclpy.parameter import Parameter
+
+    from sparse_body.ros.tracker_bridge_node import TrackerBridge
+
+    make_bag(synthetic_walk(1.0), load_sensor_config("six_point"), tmp_path / "trackers")
+    node = TrackerBridge(parameter_overrides=[Parameter("bag", value=str(tmp_path / "trackers"))])
+    node.trigger_configure()
+    assert node.source is not None and node.pub_diag is not None
+    publish, wait = node._publish_diagnostics, node._wait_for_subscribers
+    pub = node.pub
+    node.destroy_node()
+    publish()  # the timer's callback after the stop began: ends without raising
+    node.pub = pub  # a source thread that took the publisher before the stop
+    node.params["wait_for_nodes"], node.params["min_subscribers"] = ["someone"], 1
+    assert wait(threading.Event()) is False

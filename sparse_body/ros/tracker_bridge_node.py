@@ -114,6 +114,7 @@ class TrackerBridge(LifecycleNode):
         self._counts_lock = threading.Lock()
         self.published = 0
         self._active = threading.Event()  # samples go out only while active
+        self._stopping = False  # destroy_node has begun
 
     # -- lifecycle -------------------------------------------------------------------------
     def on_configure(self, state: LifecycleState) -> TransitionCallbackReturn:
@@ -211,6 +212,7 @@ class TrackerBridge(LifecycleNode):
         self.source = self.pub = self.pub_diag = self.service = self.mounting_service = self.diag_timer = None
 
     def destroy_node(self) -> None:
+        self._stopping = True  # what runs meanwhile in the executor's other thread ends quietly
         self._release()  # the source's thread must be out of publish() before the participant goes
         super().destroy_node()
 
@@ -220,12 +222,17 @@ class TrackerBridge(LifecycleNode):
         # count alone can be met by a listener that is not the consumer (a test's, a viewer's)
         # while the estimator is still starting on a busy machine: named nodes are waited for.
         pub, names = self.pub, {n for n in self.params["wait_for_nodes"] if n}
-        while pub is not None and not (
-            pub.get_subscription_count() >= self.params["min_subscribers"]
-            and names <= {info.node_name for info in self.get_subscriptions_info_by_topic("/tf")}
-        ):
-            if stop.wait(0.05):
-                return False
+        try:
+            while pub is not None and not (
+                pub.get_subscription_count() >= self.params["min_subscribers"]
+                and names <= {info.node_name for info in self.get_subscriptions_info_by_topic("/tf")}
+            ):
+                if stop.wait(0.05):
+                    return False
+        except Exception:  # noqa: BLE001 - the publisher destroyed under the waiting thread: a stop
+            if not self._stopping and rclpy.ok():
+                raise
+            return False
         return not stop.wait(self.params["start_delay"])
 
     def _send(self, samples: list[Sample]) -> None:
@@ -360,9 +367,21 @@ class TrackerBridge(LifecycleNode):
         return response
 
     def _publish_diagnostics(self) -> None:
-        assert self.source is not None and self.pub_diag is not None  # the timer exists only while configured
+        """The timer's callback, in the executor's other thread: a stop (Ctrl-C) may destroy its
+        publisher meanwhile, and what it raised then was printed as "The following exception
+        was never retrieved: cannot use Destroyable because destruction was requested"."""
+        try:
+            self._send_diagnostics()
+        except Exception:  # noqa: BLE001 - re-raised unless the node is being destroyed
+            if not self._stopping and rclpy.ok():
+                raise
+
+    def _send_diagnostics(self) -> None:
+        source, pub = self.source, self.pub_diag
+        if source is None or pub is None:  # released meanwhile
+            return
         status = DiagnosticStatus(name="sparse_body: tracker bridge", hardware_id=self.params["source"])
-        problem, figures = self.source.diagnostics()
+        problem, figures = source.diagnostics()
         with self._counts_lock:
             values = {"published": str(self.published), **figures}
         values["calibrated"] = "yes" if self.calibration else "no"
@@ -375,7 +394,7 @@ class TrackerBridge(LifecycleNode):
         status.values = [KeyValue(key=k, value=v) for k, v in values.items()]
         msg = DiagnosticArray(status=[status])
         msg.header.stamp = self.get_clock().now().to_msg()
-        self.pub_diag.publish(msg)
+        pub.publish(msg)
 
 
 def main(args=None) -> None:

@@ -42,9 +42,10 @@ bench: setup-train
 
 # A million generated inputs into each parser of outside input: the serial stream, VMC
 # datagrams, /tf messages through the TF ingest, BVH and ASF/AMC motion files, sensor
-# configuration and calibration YAML.
+# configuration and calibration YAML, a robot's URDF and mapping YAML (and the URDF as a peer's
+# robot_description).
 fuzz: setup-test
-	for target in serial vmc tf bvh asf_amc yaml; do $(VENV)/bin/python -m sparse_body.apps.fuzz $$target 1000000 || exit 1; done
+	for target in serial vmc tf bvh asf_amc yaml robot; do $(VENV)/bin/python -m sparse_body.apps.fuzz $$target 1000000 || exit 1; done
 
 # The release of the test-split tables: every shipped model measured again on the test split
 # (models/<model>.eval.json, each run's per-clip figures) and its card rendered from that; the

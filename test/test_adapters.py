@@ -268,7 +268,16 @@ def test_calibration_refuses_what_is_not_a_tpose(rng, tmp_path):
 
 
 @pytest.mark.parametrize(
-    "target,runs", [("serial", 20000), ("vmc", 20000), ("tf", 20000), ("bvh", 3000), ("asf_amc", 3000), ("yaml", 3000)]
+    "target,runs",
+    [
+        ("serial", 20000),
+        ("vmc", 20000),
+        ("tf", 20000),
+        ("bvh", 3000),
+        ("asf_amc", 3000),
+        ("yaml", 3000),
+        ("robot", 2000),
+    ],
 )
 def test_a_short_fuzzing_run_finds_nothing(target, runs):
     """The full run (a million inputs each) is `make fuzz`; this keeps the harness working."""

@@ -4,8 +4,9 @@ every parser that reads what a user or a device hands us.
 Targets: serial (the tracker byte stream), vmc (one UDP datagram), tf (a /tf message as any
 peer on the ROS domain can send it, through the ingest the live node and the bag reader
 share), bvh (a motion file), asf_amc (a skeleton and its motion), yaml (a sensor
-configuration and a calibration). tf: half the inputs are raw bytes, half a well-formed
-TFMessage of any doubles (NaN, infinities, 1e308, denormals) and frame names, so both the
+configuration and a calibration), robot (a robot's URDF and mapping YAML, and the URDF as the
+body's robot_description from the network, then a retargeting of two poses). tf: half the
+inputs are raw bytes, half a well-formed TFMessage of any doubles (NaN, infinities, 1e308, denormals) and frame names, so both the
 reader and the guards are reached; a tracker sample must come out finite or not at all. The
 corpus starts from well-formed input that libFuzzer then mutates. serial: the input is split
 into reads of sizes taken from the input itself and fed to one FrameDecoder, as a stream
@@ -27,6 +28,8 @@ import numpy as np
 import scipy.spatial.transform  # noqa: F401 - imported uninstrumented: coverage of our parsers, not of scipy
 import yaml  # noqa: F401 - likewise
 
+import sparse_body.core.kinematics  # noqa: F401 - numba's kernels uninstrumented: atheris's hooks break numba's typing
+
 with atheris.instrument_imports():
     from pythonosc.osc_bundle_builder import IMMEDIATELY, OscBundleBuilder
     from pythonosc.osc_message_builder import OscMessageBuilder
@@ -41,6 +44,10 @@ with atheris.instrument_imports():
     from sparse_body.data.samples import TINY_AMC, TINY_ASF, TINY_BVH
     from sparse_body.io.cdr import MalformedMessage, read_tf, tf_messages
     from sparse_body.io.tf_cache import TfCache
+    from sparse_body.io.urdf import body_skeleton
+    from sparse_body.robot.example import MAPPING, urdf
+    from sparse_body.robot.retarget import load_retarget
+    from sparse_body.robot.urdf_model import RobotFileError
 
 
 def _check(orientation, position) -> None:
@@ -141,6 +148,38 @@ def yaml_input(data: bytes) -> None:
         assert "calibration.yaml" in str(err), err
 
 
+_BODY = None
+
+
+def robot_input(data: bytes) -> None:
+    """A robot's URDF and mapping YAML as a user hands them (two files), and the URDF as the
+    body's robot_description from the network: each is a RobotFileError naming its source or
+    a robot whose poses, for a standing and a crouching body, are finite and within limits."""
+    global _BODY
+    from sparse_body.core.skeleton import Skeleton
+    from sparse_body.core.types import BodyPose
+
+    if _BODY is None:
+        _BODY = Skeleton.canonical(1.75)
+    text, _, mapping = data.partition(_SPLIT)
+    try:
+        body_skeleton(text.decode("utf-8", errors="replace"))
+    except RobotFileError as err:
+        assert "robot_description" in str(err), err
+    try:
+        robot = load_retarget(_file("robot.yaml", mapping), _file("robot.urdf", text), _BODY)
+    except RobotFileError as err:
+        assert "robot.yaml" in str(err) or "robot.urdf" in str(err), err
+        return
+    quats = np.zeros((22, 4))
+    quats[:, 3] = 1.0
+    for k, height in enumerate((0.95, 0.6)):
+        pose = robot.step(BodyPose(k / 60, quats, np.array([0.0, 0.0, height]), contact=np.array([True, True])))
+        q = pose.positions
+        assert np.all(np.isfinite(q)) and np.all((q >= robot.lower) & (q <= robot.upper)), q
+        assert np.all(np.isfinite(pose.base_position)) and np.all(np.isfinite(pose.base_quat)), pose
+
+
 TARGETS = {
     "serial": serial_input,
     "vmc": vmc_input,
@@ -148,8 +187,9 @@ TARGETS = {
     "bvh": bvh_input,
     "asf_amc": asf_amc_input,
     "yaml": yaml_input,
+    "robot": robot_input,
 }
-TEXT_TARGETS = {"bvh", "asf_amc", "yaml"}
+TEXT_TARGETS = {"bvh", "asf_amc", "yaml", "robot"}
 
 
 def text_seeds() -> list[bytes]:
@@ -160,6 +200,7 @@ def text_seeds() -> list[bytes]:
         TINY_ASF.encode() + _SPLIT + TINY_AMC.encode(),
         (config_dir() / "sensors" / "four_point.yaml").read_bytes() + _SPLIT + _CALIBRATION,
         (config_dir() / "sensors" / "six_point.yaml").read_bytes() + _SPLIT + _calibration_with_body(),
+        urdf().encode() + _SPLIT + MAPPING.format(urdf="robot.urdf").encode(),
     ]
 
 
@@ -204,7 +245,7 @@ def main(argv: list[str] | None = None) -> None:
         (corpus / f"seed{i}").write_bytes(seed)
     # -timeout: an input that takes seconds is a hang (a receiver thread stuck for good, a
     # loader that never returns)
-    max_len = 4096 if target in TEXT_TARGETS else 512
+    max_len = 16384 if target == "robot" else 4096 if target in TEXT_TARGETS else 512  # (a humanoid's URDF: 8 kB)
     atheris.Setup(
         [argv[0], f"-runs={runs}", f"-max_len={max_len}", "-timeout=10", *argv[3:], str(corpus)], TARGETS[target]
     )

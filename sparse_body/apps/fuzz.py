@@ -6,8 +6,8 @@ peer on the ROS domain can send it, through the ingest the live node and the bag
 share), bvh (a motion file), asf_amc (a skeleton and its motion), yaml (a sensor
 configuration and a calibration), robot (a robot's URDF and mapping YAML, and the URDF as the
 body's robot_description from the network, then a retargeting of two poses). tf: half the
-inputs are raw bytes, half a well-formed TFMessage of any doubles (NaN, infinities, 1e308, denormals) and frame names, so both the
-reader and the guards are reached; a tracker sample must come out finite or not at all. The
+inputs are raw bytes, half a well-formed TFMessage of any doubles (NaN, infinities, 1e308,
+denormals) and frame names, so both the reader and the guards are reached; a tracker sample must come out finite or not at all. The
 corpus starts from well-formed input that libFuzzer then mutates. serial: the input is split
 into reads of sizes taken from the input itself and fed to one FrameDecoder, as a stream
 with garbage and torn frames. The file targets write the input to a file and load it: the

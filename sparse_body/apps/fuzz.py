@@ -3,18 +3,19 @@ every parser that reads what a user or a device hands us.
 
 Targets: serial (the tracker byte stream), vmc (one UDP datagram), tf (a /tf message as any
 peer on the ROS domain can send it, through the ingest the live node and the bag reader
-share), bvh (a motion file), asf_amc (a skeleton and its motion), yaml (a sensor
-configuration and a calibration), robot (a robot's URDF and mapping YAML, and the URDF as the
-body's robot_description from the network, then a retargeting of two poses). tf: half the
-inputs are raw bytes, half a well-formed TFMessage of any doubles (NaN, infinities, 1e308,
-denormals) and frame names, so both the reader and the guards are reached; a tracker sample must come out finite or not at all. The
-corpus starts from well-formed input that libFuzzer then mutates. serial: the input is split
-into reads of sizes taken from the input itself and fed to one FrameDecoder, as a stream
-with garbage and torn frames. The file targets write the input to a file and load it: the
-parser must return finite data or raise its own error type (MotionFileError,
-SensorConfigError, CalibrationError) naming the file. Anything else escaping, a bad decoded
-sample, or one input taking longer than the time limit (a hang) stops the run with a crash
-report and a non-zero exit status; a clean run prints how many inputs it executed.
+share), bvh (a motion file), asf_amc (a skeleton and its motion), yaml (a sensor configuration
+and a calibration), robot (a robot's URDF and mapping YAML, and the URDF as the body's
+robot_description from the network, then a retargeting of two poses). tf: half the inputs are
+raw bytes, half a well-formed TFMessage of any doubles (NaN, infinities, 1e308, denormals) and
+frame names, so both the reader and the guards are reached; a tracker sample must come out
+finite or not at all. The corpus starts from well-formed input that libFuzzer then mutates.
+serial: the input is split into reads of sizes taken from the input itself and fed to one
+FrameDecoder, as a stream with garbage and torn frames. The file targets write the input to a
+file and load it: the parser must return finite data or raise its own error type
+(MotionFileError, SensorConfigError, CalibrationError) naming the file. Anything else
+escaping, a bad decoded sample, or one input taking longer than the time limit (a hang) stops
+the run with a crash report and a non-zero exit status; a clean run prints how many inputs it
+executed.
 """
 
 from __future__ import annotations

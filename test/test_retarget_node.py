@@ -229,3 +229,81 @@ def test_an_ordinary_but_unusable_joint_state_stops_neither_the_constraint_nor_t
 
 def node_gone(*procs) -> bool:
     return any(p.poll() is not None for p in procs)
+
+
+def test_generated_joint_states_stop_neither_node_nor_give_a_non_finite_robot(ros_env, tmp_path):
+    """Hypothesis writes JointStates of any names (the body's among them, in any order, some
+    twice or missing), any number of positions of any doubles, and body roots of any doubles,
+    each between well-formed body estimates; both nodes that read the body's JointState (the
+    retarget and the constraint node) stay up, and every robot joint is finite and in limits."""
+    from hypothesis import HealthCheck, given, settings
+    from hypothesis import strategies as st
+
+    walk = estimate_motion(synthetic_walk(2.0), "ik", load_sensor_config("six_point"))
+    robot = write_robot(tmp_path / "robot")
+    lower, upper = load_urdf(tmp_path / "robot" / "test_humanoid.urdf").limits()
+    retarget = start_node(NODE, {"robot": str(robot), "autostart": True}, "sparse_body_retarget", tmp_path, ros_env)
+    refiner = start_node(
+        "sparse_body.ros.constraint_node",
+        {"sensors": "six_point", "autostart": True},
+        "sparse_body_constraint",
+        tmp_path,
+        ros_env,
+        remaps={"input/joint_states": "/joint_states"},
+    )
+    listener = Listener(rclpy, {"robot/joint_states": JointState}, qos={"robot/joint_states": 1000})
+    latched = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL)
+    pub_urdf = listener.node.create_publisher(String, "robot_description", latched)
+    pub_joints = listener.node.create_publisher(JointState, "joint_states", 10)
+    pub_tf = listener.node.create_publisher(TFMessage, "/tf", 10)
+    names = joint_state_names()
+    angles = joint_angles(matrix_to_quat(walk.local_rotations))
+    sent = [0]
+
+    def send(names_sent, positions, root, quat) -> None:
+        stamp = listener.node.get_clock().now().nanoseconds * 1e-9
+        pub_tf.publish(_root(stamp, root, quat))
+        pub_joints.publish(_joint_state(stamp, names_sent, positions))
+        listener.spin_for(0.004)
+
+    def good() -> None:
+        i = sent[0] % len(angles)
+        sent[0] += 1
+        send(names, angles[i], walk.positions[i, 0], matrix_to_quat(walk.local_rotations[i, 0]))
+
+    doubles = st.floats(allow_nan=True, allow_infinity=True, allow_subnormal=True) | st.sampled_from(
+        [1e308, -1e308, 1e200, 2e154, 5e-324, 0.0, 1.0]
+    )
+    name_lists = st.one_of(
+        st.permutations(names),
+        st.lists(st.sampled_from(names) | st.text(max_size=8), max_size=70),
+    )
+
+    @settings(max_examples=150, deadline=None, database=None, suppress_health_check=list(HealthCheck))
+    @given(
+        name_lists,
+        st.lists(doubles, max_size=70) | st.lists(st.floats(-3.0, 3.0), min_size=63, max_size=63),
+        st.lists(doubles, min_size=3, max_size=3),
+        st.lists(doubles, min_size=4, max_size=4),
+    )
+    def generated(names_sent, positions, root, quat):
+        send(names_sent, positions, root, quat)
+        good()
+
+    try:
+        pub_urdf.publish(String(data=body_urdf(walk.view.skeleton)))
+        subscribed = lambda: listener.node.count_subscribers("joint_states") >= 2  # noqa: E731
+        assert listener.spin_until(lambda: node_gone(retarget, refiner) or subscribed(), STARTUP_LIMIT)
+        for _ in range(30):
+            good()
+        generated()
+        listener.spin_for(1.0)
+        alive = {"retarget": retarget.poll() is None, "constraint": refiner.poll() is None}
+    finally:
+        listener.destroy()
+        stop(retarget, refiner)
+    logs = {name: (tmp_path / f"{name}.log").read_text() for name in ("sparse_body_retarget", "sparse_body_constraint")}
+    assert all(alive.values()), (alive, logs)
+    assert all("Traceback" not in log for log in logs.values()), logs
+    q = np.array([m.position for m in listener.received["robot/joint_states"]])
+    assert len(q) and np.all(np.isfinite(q)) and np.all((q >= lower) & (q <= upper))

@@ -132,3 +132,60 @@ def walk_poses():
         BodyPose(i / 60, matrix_to_quat(est.local_rotations[i]), est.positions[i, 0], contact=est.contacts[i])
         for i in range(len(est.positions))
     ]
+
+
+def test_generated_urdfs_are_a_model_with_finite_kinematics_or_one_line_naming_the_file(tmp_path):
+    """Hypothesis writes URDFs of any tree (links named at random, joints of any type between
+    them, a link twice, a loop), any numbers in origins, axes and limits (NaN, 1e308,
+    denormals, words) and elements left out. Each is a RobotFileError of one line naming the
+    file, or a model whose every link is finite at its limits and at zero."""
+    hypothesis = pytest.importorskip("hypothesis", reason="hypothesis is not installed (make test installs it)")
+    from hypothesis import HealthCheck, given, settings
+    from hypothesis import strategies as st
+
+    number = st.floats(allow_nan=True, allow_infinity=True, allow_subnormal=True).map(repr) | st.sampled_from(
+        ["1e308", "-1e308", "5e-324", "0", "1", "-0.5", "one", "", "1 2"]
+    )
+    triple = st.lists(number, min_size=0, max_size=4).map(" ".join)
+    names = st.sampled_from(["a", "b", "c", "d", "e"])
+    joint = st.fixed_dictionaries(
+        {
+            "name": st.text("jkl", min_size=1, max_size=3),
+            "type": st.sampled_from(["revolute", "continuous", "prismatic", "fixed", "floating", "planar", "ball"]),
+            "parent": names,
+            "child": names,
+        },
+        optional={"xyz": triple, "rpy": triple, "axis": triple, "lower": number, "upper": number},
+    )
+
+    def text(links, joints) -> str:
+        parts = ['<robot name="r">'] + [f'<link name="{n}"/>' for n in links]
+        for j in joints:
+            body = f'<parent link="{j["parent"]}"/><child link="{j["child"]}"/>'
+            if "xyz" in j or "rpy" in j:
+                body += f'<origin xyz="{j.get("xyz", "0 0 0")}" rpy="{j.get("rpy", "0 0 0")}"/>'
+            if "axis" in j:
+                body += f'<axis xyz="{j["axis"]}"/>'
+            if "lower" in j or "upper" in j:
+                body += f'<limit lower="{j.get("lower", "-1")}" upper="{j.get("upper", "1")}"/>'
+            parts.append(f'<joint name="{j["name"]}" type="{j["type"]}">{body}</joint>')
+        return "".join(parts) + "</robot>"
+
+    path = tmp_path / "generated.urdf"
+
+    @settings(max_examples=1000, deadline=None, database=None, suppress_health_check=list(HealthCheck))
+    @given(st.lists(names, min_size=1, max_size=6), st.lists(joint, max_size=6))
+    def check(links, joints):
+        path.write_text(text(links, joints))
+        try:
+            model = load_urdf(path)
+        except RobotFileError as err:
+            assert str(path) in str(err) and "\n" not in str(err), err
+            return
+        lower, upper = model.limits()
+        for q in (np.clip(0.0, lower, upper), np.where(np.isfinite(lower), lower, 0.0)):
+            links_at, _ = model.forward(q, np.eye(4))
+            assert np.all(np.isfinite(links_at)), (text(links, joints), q)
+
+    check()
+    assert hypothesis is not None

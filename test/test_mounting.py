@@ -157,3 +157,23 @@ def test_a_movement_where_nothing_turned_is_refused_in_one_line():
         calibrate_mounting(tpose, still, nominal)
     assert "\n" not in str(err.value)
     assert MAX_SHIFT <= 0.1
+
+
+def test_samples_stamped_late_and_unevenly_give_the_mounting_of_evenly_stamped_ones():
+    """A starved machine stamps samples when it gets to them: after a stall, a burst at one
+    instant. The movement advances with the samples, not with those stamps; the fit once bent
+    each window's trend to the stamps and missed by several millimetres (the bridge's mounting
+    test failed 4 times in 8 at load 3)."""
+    rng = np.random.default_rng(5)
+    nominal, true = np.array([0.10, 0.0, 0.14]), np.array([0.12, -0.015, 0.125])
+    t, joint, rot = _circling(6.0, ((0, 0, 1), (0, 1, 0)), (40, 25), rng)
+    positions = joint + rot.apply(true)
+    even = fit_mounting(t, positions, rot.as_quat(), nominal)
+    # the bridge's thread wakes every 2 ms, and one time in ten after a stall of about 150 ms:
+    # each sample is stamped at the first wake after it was sent
+    wakes = np.cumsum(0.002 + (rng.random(20_000) < 0.1) * rng.exponential(0.15, 20_000))
+    stamps = wakes[np.searchsorted(wakes, t)]
+    assert len(np.unique(stamps)) < 0.7 * len(t)  # bursts: many samples share a stamp
+    uneven = fit_mounting(stamps, positions, rot.as_quat(), nominal)
+    assert np.linalg.norm(even.translation - true) < 0.001, even
+    assert np.linalg.norm(uneven.translation - true) < 0.001, uneven

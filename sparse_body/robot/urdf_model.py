@@ -113,7 +113,9 @@ class RobotModel:
     @cached_property
     def _axes(self) -> tuple[np.ndarray, np.ndarray]:
         moving = self.moving
-        return np.array([j.axis for j in moving]).reshape(-1, 3), np.array([j.kind == "prismatic" for j in moving], bool)
+        return np.array([j.axis for j in moving]).reshape(-1, 3), np.array(
+            [j.kind == "prismatic" for j in moving], bool
+        )
 
     def _motions(self, q: np.ndarray) -> np.ndarray:
         """Each moving joint's motion (moving, 4, 4) at q: a turn about its axis (Rodrigues,

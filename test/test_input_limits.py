@@ -214,3 +214,27 @@ def test_a_damaged_npz_is_one_line_and_exit_1(tmp_path, capsys, damage):
     code, err = run_cli(capsys, "view", bad, "-o", tmp_path / "page.html")
     assert code == 1 and err.count("\n") == 1 and "Traceback" not in err and str(bad) in err, err
     assert not (tmp_path / "page.html").exists()
+
+
+def test_missing_inputs_and_refused_outputs_are_said_before_any_work_or_folder(tmp_path, capsys, monkeypatch):
+    """`view nothing_here` said "unknown motion format"; `demo --estimator iik` made its folder
+    before refusing; `view` of a bag whose page may not be replaced read the whole bag first."""
+    import time
+
+    from sparse_body.apps.offline import make_bag
+    from sparse_body.core.sensors import load_sensor_config
+    from sparse_body.data.synthetic import synthetic_walk
+
+    monkeypatch.chdir(tmp_path)
+    code, err = run_cli(capsys, "view", "nothing_here")
+    assert code == EXIT_INPUT and "nothing_here: no such file or folder" in err, err
+    code, err = run_cli(capsys, "process", "nothing_here", "out")
+    assert code == EXIT_INPUT and "nothing_here: no such file or folder" in err, err
+    code, err = run_cli(capsys, "demo", "--estimator", "iik")
+    assert code == EXIT_INPUT and "unknown estimator 'iik'" in err and not (tmp_path / "sparse_body_demo").exists()
+    make_bag(synthetic_walk(1.0), load_sensor_config("six_point"), tmp_path / "bag")
+    (tmp_path / "bag.html").write_text("<html><head></head><body>mine</body></html>")
+    start = time.monotonic()
+    code, err = run_cli(capsys, "view", "bag")  # its page would be bag.html: the user's
+    assert code == EXIT_OUTPUT and "bag.html: exists and is not a page" in err, err
+    assert time.monotonic() - start < 5.0  # (reading the bag first took 6 s for 5 s of it)

@@ -242,10 +242,18 @@ def test_cli_refuses_bad_arguments_and_lists_what_is_there(tmp_path, capsys):
         )
     assert ended.value.code == 1
     assert "estimator 'ik' has no option 'bogus'; its options are floor_height" in capsys.readouterr().err
-    with pytest.warns(UserWarning, match="tracker.s. pelvis, left_foot, right_foot of 'six_point' never appear"):
-        process_bag(
-            tmp_path / "three", tmp_path / "six", "ik", load_sensor_config("six_point"), motion.skeleton, progress=False
-        )
+    # a configuration whose trackers never appear: process refuses it in one line, before any work
+    with pytest.raises(SystemExit) as ended:
+        main(["process", str(tmp_path / "three"), str(tmp_path / "six"), "--sensors", "six_point", "--quiet"])
+    err = capsys.readouterr().err
+    assert ended.value.code == 1 and err.count("\n") == 1, err
+    assert "six_point's tracker frames left_foot_tracker, pelvis_tracker, right_foot_tracker never appear" in err
+    assert not (tmp_path / "six").exists()
+    # process_bag itself says which never had a usable pose (no Python warning)
+    processed = process_bag(
+        tmp_path / "three", tmp_path / "six", "ik", load_sensor_config("six_point"), motion.skeleton, progress=False
+    )
+    assert processed.never_usable == ("pelvis", "left_foot", "right_foot")
     with pytest.raises(SystemExit):
         main(["process", "--help"])
     help_text = capsys.readouterr().out
@@ -357,3 +365,20 @@ def test_process_takes_the_body_of_a_calibration_file(tmp_path, capsys):
             ]
         )
     assert ended.value.code == 1 and "broken.yaml: 'skeleton' must give" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("sensors", ["three_point", "four_point", "six_point", "four_point_foot_imus"])
+def test_without_sensors_process_reads_the_bag_as_the_configuration_whose_trackers_it_holds(tmp_path, capsys, sensors):
+    """A four-point bag with no --sensors was read as six_point: a raw Python warning, exit 0
+    and straight, still legs."""
+    from sparse_body.cli import main
+
+    make_bag(synthetic_walk(1.0), load_sensor_config(sensors), tmp_path / "trackers")
+    with pytest.raises(SystemExit) as ended:
+        main(["process", str(tmp_path / "trackers"), str(tmp_path / "body"), "--quiet"])
+    out = capsys.readouterr()
+    assert ended.value.code == 0, out.err
+    assert f"reading it as {sensors} (--sensors to choose)" in out.out and "Warning" not in out.err
+    from sparse_body.io.bagio import read_topic
+
+    assert read_topic(tmp_path / "body", "/joint_states")

@@ -152,7 +152,10 @@ def _process_one(bag: Path, out: Path, settings: Settings, exit_on_stop: bool = 
     result = BagResult(str(bag), str(out), "done")
     refused: dict[str, int] = {}
     try:
+        from .offline import check_bag_trackers
+
         _writing = True
+        check_bag_trackers(bag, settings.sensors)  # each bag's trackers are there, before it is read
         processed = process_bag(
             bag,
             out,

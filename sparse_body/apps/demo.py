@@ -155,8 +155,8 @@ def run_demo(
 ) -> dict:
     from ..io.bagio import read_tracker_stream
 
+    motion, source = pick_motion(mocap_root, motion_file, seconds, fps)  # a bad motion file: before the folder
     out_dir.mkdir(parents=True, exist_ok=True)
-    motion, source = pick_motion(mocap_root, motion_file, seconds, fps)
     print(f"motion: {source}, {len(motion)} frames at {motion.fps:g} Hz")
     trackers, estimates = out_dir / "trackers", out_dir / "estimates"
     # an earlier demo's bags are replaced; anything else there is refused (bagio.check_output)

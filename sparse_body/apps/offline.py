@@ -55,6 +55,51 @@ class Processed:
     frames: int = 0
     invalid: int = 0
     poses: list[BodyPose] | None = None
+    never_usable: tuple[str, ...] = ()  # configured trackers that never had a usable pose
+
+
+DETECT_SECONDS = 10.0  # the start of a bag read to find which trackers it holds
+
+
+def sensors_for_bag(bag: Path, given: str | None) -> tuple[SensorConfig, str]:
+    """The sensor configuration to read a tracker bag with, and a line saying how it was
+    chosen. given None: the shipped configuration with the most trackers whose every frame
+    moves on the bag's /tf in its first DETECT_SECONDS. given: that configuration, refused
+    (BagError, one line) when one of its trackers never moves in the bag."""
+    from ..core.resources import config_dir
+    from ..core.sensors import load_sensor_config
+    from ..io.bagio import BagError, tf_frames
+
+    if given is not None:
+        sensors = load_sensor_config(given)
+        check_bag_trackers(bag, sensors)
+        return sensors, f"trackers: {sensors.name} (as given)"
+    found = tf_frames(bag, seconds=DETECT_SECONDS)
+    shipped = [load_sensor_config(p.stem) for p in sorted((config_dir() / "sensors").glob("*.yaml"))]
+    fitting = [c for c in shipped if {site.frame_id for site in c.sites} <= found]
+    if not fitting:
+        raise BagError(
+            f"{bag}: no shipped sensor configuration's trackers are all on its /tf (its first "
+            f"{DETECT_SECONDS:g} s hold {', '.join(sorted(found)) or 'no frames'}); give --sensors (a YAML for yours)"
+        )
+    chosen = max(fitting, key=lambda c: len(c.sites))  # (first of a tie: by name)
+    frames = ", ".join(site.frame_id for site in chosen.sites)
+    return chosen, f"trackers found in the bag: {frames}: reading it as {chosen.name} (--sensors to choose)"
+
+
+def check_bag_trackers(bag: Path, sensors: SensorConfig) -> None:
+    """BagError (one line) when a tracker of the configuration never moves on the bag's /tf
+    (read until each has: a wrong configuration once gave straight, still legs and exit 0)."""
+    from ..io.bagio import BagError, tf_frames
+
+    wanted = {site.frame_id for site in sensors.sites}
+    found = tf_frames(bag, wanted)
+    missing = sorted(wanted - found)
+    if missing:
+        raise BagError(
+            f"{bag}: {sensors.name}'s tracker frames {', '.join(missing)} never appear on its /tf "
+            f"(it holds {', '.join(sorted(found)) or 'none'}); leave --sensors out to choose from them"
+        )
 
 
 def process_bag(
@@ -168,15 +213,7 @@ def process_bag(
     if refused is not None:
         for reason, count in reader.refused.items():
             refused[reason] = refused.get(reason, 0) + count
-    never = [site for s, site in enumerate(sensors.site_names) if not seen[s]]
-    if never:
-        import warnings
-
-        warnings.warn(
-            f"{bag_in}: the configured tracker(s) {', '.join(never)} of {sensors.name!r} never appear "
-            f"with a usable pose (wrong --sensors?)",
-            stacklevel=2,
-        )
+    done.never_usable = tuple(site for s, site in enumerate(sensors.site_names) if not seen[s])
     if timings is not None:
         timings.update(
             read=reader.busy,

@@ -335,6 +335,31 @@ def read_tf_messages(path: Path) -> list[tuple[float, list]]:
     return out
 
 
+def tf_frames(path: Path, wanted: set[str] | None = None, seconds: float | None = None) -> set[str]:
+    """The child frames /tf moves in a bag: all of them, or read until every frame of `wanted`
+    was seen, or for the first `seconds` of the bag (whichever ends first)."""
+    path = Path(path)
+    found: set[str] = set()
+    try:
+        with Reader(path) as reader:
+            conns = [c for c in reader.connections if c.topic == TF_TOPIC]
+            if not conns:
+                raise BagError(f"{path}: no {TF_TOPIC} topic")
+            first = None
+            for _, log_ns, raw in reader.messages(connections=conns):
+                first = log_ns if first is None else first
+                if seconds is not None and (log_ns - first) * 1e-9 > seconds:
+                    break
+                found.update(child for _, child, _, _ in cdr.read_tf(raw))
+                if wanted is not None and wanted <= found:
+                    break
+    except BagError:
+        raise
+    except Exception as err:  # noqa: BLE001 - rosbags' and the decoder's errors: a bag we cannot read
+        raise BagError(f"{path}: cannot be read as a rosbag2 ({err})") from None
+    return found
+
+
 def read_tracker_stream(
     path: Path,
     config: SensorConfig,

@@ -18,6 +18,13 @@ def estimator_names() -> list[str]:
     return sorted(METHODS)
 
 
+def check_estimator_name(name: str) -> None:
+    """ValueError (one line, listing the estimators) unless `name` is one: checked by the
+    commands before they make anything."""
+    if name not in METHODS:
+        raise ValueError(f"unknown estimator {shown(name)}; available: {', '.join(estimator_names())}")
+
+
 def feet_tracked(sensors: SensorConfig) -> bool:
     """Whether both feet wear trackers (six-point, or IMUs: a hold would turn the shin and so
     the ankle away from the orientation an IMU measures)."""
@@ -33,8 +40,7 @@ def create_estimator(name: str, sensors: SensorConfig, skeleton: Skeleton, fps: 
     its fading velocity instead of the learned model's move); foot_lock holds a foot where it
     touched down while in contact (core/contact_hold.py; default true; feet that wear trackers
     are never held), foot_lock=false leaves the method's legs as they are."""
-    if name not in METHODS:
-        raise ValueError(f"unknown estimator {shown(name)}; available: {', '.join(estimator_names())}")
+    check_estimator_name(name)
     filtering = filter_config(options)
     smooth = options.pop("smooth", False)
     if not isinstance(smooth, bool):

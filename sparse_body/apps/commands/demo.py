@@ -10,11 +10,17 @@ from .common import seconds
 def run(args) -> int:
     from ...core.sensors import load_sensor_config
     from ...data.catalog import find_mocap_root
+    from ...estimators.base import parse_estimator_spec
+    from ...methods.factory import check_estimator_name
     from ..demo import run_demo
 
+    check_estimator_name(parse_estimator_spec(args.estimator)[0])  # before the folder is made
+    if args.motion and not Path(args.motion).exists():
+        raise ValueError(f"{args.motion}: no such file")
+    sensors = load_sensor_config(args.sensors)
     run_demo(
         Path(args.out),
-        load_sensor_config(args.sensors),
+        sensors,
         args.estimator,
         find_mocap_root(args.mocap),
         args.motion,

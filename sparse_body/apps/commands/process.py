@@ -13,11 +13,10 @@ from .common import between, between_int, fps, height, rates, topics
 
 def run(args) -> int:
     from ...core.calibration import person_body
-    from ...core.sensors import load_sensor_config
     from ...estimators.base import parse_estimator_spec
     from ...io.bagio import BagError
-    from ..batch import SUMMARY, Settings, is_bag, process_many
-    from ..offline import process_bag
+    from ..batch import SUMMARY, Settings, expand_inputs, is_bag, process_many
+    from ..offline import process_bag, sensors_for_bag
 
     name, options = parse_estimator_spec(args.estimator)
     if args.smooth:
@@ -33,7 +32,17 @@ def run(args) -> int:
         raise ValueError("--robot-urdf goes with --robot (the mapping of the robot's links to the body)")
     guards = TfGuards(clock_window=args.clock_window, future_window=args.future_window, play_radius=args.play_radius)
     inputs = [Path(p) for p in args.bag_in]
+    for given in inputs:  # before anything is read or made
+        if not given.exists():
+            raise BagError(f"{given}: no such file or folder")
     many = len(inputs) > 1 or (inputs[0].is_dir() and not is_bag(inputs[0]))
+    bags = expand_inputs(inputs) if many or args.cluster else inputs
+    if not bags:
+        raise BagError(f"{', '.join(map(str, inputs))}: no bags there")
+    # the trackers the (first) bag holds choose the configuration, unless --sensors names one
+    sensors, chosen = sensors_for_bag(bags[0], args.sensors)
+    if args.sensors is None:
+        print(chosen)
     if many or args.cluster:  # OUT is a folder
         args.left_when_stopped = (  # what main() says on a stop
             f"the bags finished are kept (see {Path(args.bag_out) / SUMMARY}), the ones being written were "
@@ -42,7 +51,7 @@ def run(args) -> int:
         settings = Settings(
             name,
             options,
-            load_sensor_config(args.sensors),
+            sensors,
             body,
             args.fps,
             guards,
@@ -70,7 +79,7 @@ def run(args) -> int:
         inputs[0],
         Path(args.bag_out),
         name,
-        load_sensor_config(args.sensors),
+        sensors,
         body,
         args.fps,
         progress=not args.quiet,
@@ -90,6 +99,8 @@ def run(args) -> int:
         f"tracker samples refused: {rejected}"
     )
     print(rates(result.frames, timings))
+    if result.never_usable:
+        print(f"note: {', '.join(result.never_usable)} never had a usable pose in {args.bag_in[0]}: held where unknown")
     return 0
 
 
@@ -122,7 +133,11 @@ def add_parser(sub) -> None:
         default="ik",
         help="estimator, with options: lobstr, refined:base=lobstr (DragPoser refinement after it)",
     )
-    p.add_argument("--sensors", default="six_point")
+    p.add_argument(
+        "--sensors",
+        help="the sensor configuration (a name or a YAML path); default: the shipped one whose trackers the bag "
+        "holds (said in one line); a configuration whose tracker never appears in the bag is refused",
+    )
     p.add_argument(
         "--topics",
         type=topics,

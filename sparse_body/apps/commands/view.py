@@ -13,11 +13,22 @@ def run(args) -> int:
     from ..viewer import bag_bodies, write_body_page
 
     source = Path(args.source) if args.source else None
+    live = bool(args.source and args.source.startswith(("ws://", "wss://")))
+    if source is not None and not live and not source.exists():
+        raise ValueError(f"{args.source}: no such file or folder")
+    # the page's place checked before any work, where its name is known without it: a page
+    # that may not be replaced was once refused only after 6 s of reading
+    early = args.output or (f"{source.name}.html" if source is not None and not live and is_bag(source) else None)
+    if early is not None:
+        from ...core.file_output import check_target, marker_in_head
+        from ..viewer import PAGE_MARKER
+
+        check_target(Path(early), marker_in_head(PAGE_MARKER.encode()), args.overwrite, "page")
     if (args.robot or args.robot_urdf) and not (source is not None and is_bag(source)):
         raise ValueError("--robot draws the robot of an estimate bag written with process --robot: give the bag")
     title = None
     parts: dict  # what the page draws, by name: arrays (None: not shown)
-    if args.source and args.source.startswith(("ws://", "wss://")):
+    if live:
         from ..live_record import record_tf
         from ..viewer import tf_bodies
 

@@ -13,7 +13,7 @@ import importlib
 import sys
 
 from .apps.commands import exits
-from .apps.commands.common import USER_DESCRIPTION, OneLineParser, choices_text
+from .apps.commands.common import USER_DESCRIPTION, DefaultOnceFormatter, OneLineParser, choices_text
 from .apps.commands.exits import (  # noqa: F401 - the exit codes, named where users and tests look
     EXIT_INPUT,
     EXIT_INTERRUPTED,
@@ -35,7 +35,7 @@ def build_parser() -> argparse.ArgumentParser:
     add = sub.add_parser
     # every subcommand's --help shows the defaults and what can be chosen
     sub.add_parser = lambda *a, **k: add(  # type: ignore[method-assign]
-        *a, formatter_class=argparse.ArgumentDefaultsHelpFormatter, epilog=choices_text(), **k
+        *a, formatter_class=DefaultOnceFormatter, epilog=choices_text(), **k
     )
     for name in COMMANDS:
         importlib.import_module(f"{__package__}.apps.commands.{name}").add_parser(sub)

@@ -30,7 +30,7 @@ def add_parser(sub) -> None:
         help="estimator(s) to measure on --sensors (default: the goal table: ik, lobstr, dragposer, dtp, avatarjlm "
         "step times and ik's TF -> JointState latency)",
     )
-    p.add_argument("--sensors", default="six_point")
+    p.add_argument("--sensors", default="six_point", help="the trackers benched: a configuration name or YAML path")
     p.add_argument("--no-latency", action="store_true", help="only the offline speed (no ROS needed)")
     benched = {name: m for name, m in METHODS.items() if m.runtime_bench}
     p.add_argument(

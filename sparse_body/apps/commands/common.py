@@ -133,6 +133,18 @@ def choices_text() -> str:
     )
 
 
+class DefaultOnceFormatter(argparse.ArgumentDefaultsHelpFormatter):
+    """--help with each option's default said once: not where its help says it already (it
+    was printed twice, "(default: the cores ...) (default: 2)"), nor where there is none to
+    say (None, off)."""
+
+    def _get_help_string(self, action: argparse.Action) -> str:
+        text = action.help or ""
+        if "default" in text or action.default in (None, False, argparse.SUPPRESS) or not action.option_strings:
+            return text
+        return text + " (default: %(default)s)"
+
+
 class OneLineParser(argparse.ArgumentParser):
     """argparse, but a usage error is one line (the usage is one --help away)."""
 

@@ -33,8 +33,10 @@ def run(args) -> int:
 def add_parser(sub) -> None:
     p = sub.add_parser("demo", help="motion -> tracker bag -> estimator -> metrics and an animation")
     p.add_argument("--out", default="sparse_body_demo", help="folder for the bags and demo.gif")
-    p.add_argument("--sensors", default="six_point")
-    p.add_argument("--estimator", default="ik")
+    p.add_argument(
+        "--sensors", default="six_point", help="the trackers the demo's bag holds: a configuration name or YAML path"
+    )
+    p.add_argument("--estimator", default="ik", help="the estimator, with options as NAME:key=value,...")
     p.add_argument("--motion", help="a motion file to use instead of the CMU demo clip")
     p.add_argument("--mocap", help="the CMU folder")
     p.add_argument("--seconds", type=seconds, default=6.0, help="the length of the synthetic walk")

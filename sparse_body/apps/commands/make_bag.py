@@ -31,14 +31,14 @@ def run(args) -> int:
 
 def add_parser(sub) -> None:
     p = sub.add_parser("make-bag", help="write a rosbag2 (MCAP) of tracker TF from a motion")
-    p.add_argument("out", help="the bag directory to create")
+    p.add_argument("out", metavar="OUT", help="the bag directory to create")
     p.add_argument("--sensors", default="six_point", help="sensor configuration name or YAML path")
     p.add_argument("--clip", help="a CMU clip id (e.g. 02_01)")
     p.add_argument("--motion", help="a motion file (.bvh, .amc, .npz)")
     p.add_argument(
         "--seconds", type=seconds, default=0.0, help="length of the synthetic walk, or cut a clip to this length"
     )
-    p.add_argument("--fps", type=fps, default=60.0)
+    p.add_argument("--fps", type=fps, default=60.0, help="the trackers' rate in the bag (Hz)")
     p.add_argument("--noise", action="store_true", help="add LoBSTr's tracker noise")
     p.add_argument("--mocap", help="the CMU folder")
     p.add_argument("--overwrite", action="store_true", help="replace OUT if it exists")

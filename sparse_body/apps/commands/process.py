@@ -196,5 +196,7 @@ def add_parser(sub) -> None:
         help="refuse trackers further than this from the fixed frame's origin",
     )
     p.add_argument("--quiet", action="store_true", help="no progress bar")
-    p.add_argument("--overwrite", action="store_true", help="replace BAG_OUT if it exists")
+    p.add_argument(
+        "--overwrite", action="store_true", help="replace OUT if it exists and is an estimate bag this command wrote"
+    )
     p.set_defaults(func=run)

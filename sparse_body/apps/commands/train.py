@@ -147,7 +147,7 @@ def add_parser(sub) -> None:
 
     p = sub.add_parser("train", help="train a learned estimator on the CMU train split (ONNX + model card)")
     trainable = {name: t for name in TRAINABLE if (t := METHODS[name].training) is not None}
-    p.add_argument("method", choices=list(trainable))
+    p.add_argument("method", choices=list(trainable), help="the method to train")
     p.add_argument(
         "--config", default="small", help="; ".join(f"{name}: {t.config_help}" for name, t in trainable.items())
     )
@@ -165,7 +165,7 @@ def add_parser(sub) -> None:
     p.add_argument("--minutes", type=between(0.0, 7 * 24 * 60, "minutes"), help="stop training after this long")
     p.add_argument("--steps", type=positive_int, help="stop training after this many steps")
     p.add_argument("--threads", type=between_int(1, 256), default=2, help="torch CPU threads")
-    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--seed", type=int, default=0, help="the random seed of the training run")
     p.add_argument("--limit", type=positive_int, help="only the first N clips of each split (smoke runs)")
     p.add_argument("--mocap", help="the CMU folder")
     p.add_argument("--no-card", action="store_true", help="skip the test-split evaluation and model card")

@@ -95,3 +95,17 @@ def test_listing_the_methods_imports_no_methods_code():
     )
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
     assert out.strip() == "[]", out
+
+
+def test_a_start_that_compiles_the_kernels_says_so_and_how_long_it_took(monkeypatch):
+    """A cold first start of the node compiled for about a minute with nothing logged."""
+    from sparse_body.methods import kernels
+
+    assert kernels.kernels_cached()  # the setup compiled them: a start only loads
+    lines: list[str] = []
+    kernels.compile_kernels(("ik",), say=lines.append)
+    assert lines == []  # cached: nothing to say
+    monkeypatch.setattr(kernels, "kernels_cached", lambda: False)
+    kernels.compile_kernels(("ik",), say=lines.append)
+    assert len(lines) == 2 and lines[0].startswith("compiling the per-frame kernels once"), lines
+    assert lines[1].startswith("compiled the per-frame kernels in "), lines

@@ -177,7 +177,7 @@ def process_bag(
         # in: one landing inside numba's LLVM callback was swallowed there ("Exception ignored"),
         # and the run went on to the end (1 in 32 beside 4 burners)
         with interrupts_held():
-            compile_kernels()
+            compile_kernels(say=print if progress else None)
         ready = time.perf_counter()
         pending: deque[TrackerStream] = deque()  # read chunks whose poses are not all made
 

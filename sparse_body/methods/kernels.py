@@ -19,9 +19,36 @@ import numpy as np
 WARM_ESTIMATORS = ("ik", "dragposer")
 
 
-def compile_kernels(estimators: tuple[str, ...] = WARM_ESTIMATORS) -> None:
+def kernels_cached() -> bool:
+    """Whether numba's disk cache holds this package's kernels (its index files, beside the
+    sources or under NUMBA_CACHE_DIR): if not, the next start compiles them."""
+    import os
+    from pathlib import Path
+
+    package = Path(__file__).resolve().parents[1]
+    folders = [package]
+    if os.environ.get("NUMBA_CACHE_DIR"):
+        folders.append(Path(os.environ["NUMBA_CACHE_DIR"]))
+    return any(next(folder.rglob("*.nbi"), None) is not None for folder in folders)
+
+
+def compile_kernels(estimators: tuple[str, ...] = WARM_ESTIMATORS, say=None) -> None:
     """Compile (or load from the disk cache) every kernel of the per-frame path by running
-    each of `estimators` for a few frames of a standing body."""
+    each of `estimators` for a few frames of a standing body. say(line): told, in one line
+    each, when the kernels are not cached yet (a first start compiles for about a minute on
+    two cores, with nothing else to show for it) and how long it took."""
+    import time
+
+    cold = say is not None and not kernels_cached()
+    if cold:
+        say("compiling the per-frame kernels once (about a minute on 2 cores; later starts load them)")
+    start = time.perf_counter()
+    _warm(estimators)
+    if cold:
+        say(f"compiled the per-frame kernels in {time.perf_counter() - start:.0f} s")
+
+
+def _warm(estimators: tuple[str, ...]) -> None:
     from ..core.body_ik import LIMBS, reach
     from ..core.kinematics import LEG_JOINTS, forward_kinematics
     from ..core.rotations import sixd_to_matrix, yaw_matrix_of

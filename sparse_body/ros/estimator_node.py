@@ -320,7 +320,8 @@ class EstimatorNode(LifecycleNode):
                 self.get_logger().info(f"the body of {p['calibration']}: {self.skeleton.height():.2f} m tall")
             self.estimator = self._make_estimator(p, sensors)
             self.budgeted = BudgetedStep(self.estimator, self._make_budget_fallback(p, sensors))
-            compile_kernels()  # here, not at the first estimate: numba compiles (or loads) on first use
+            # here, not at the first estimate: numba compiles (or loads) on first use
+            compile_kernels(say=self.get_logger().info)
         except (SensorConfigError, CalibrationError, ValueError, FileNotFoundError) as err:
             self.get_logger().error(f"configure failed: {err}")
             self._release()

@@ -24,6 +24,23 @@ def clip_index(mocap_root):
     return {c.clip_id: c for c in read_index(mocap_root)}
 
 
+# the first seconds of four CMU clips, indexed with a split of their own (fixtures/cmu/README.md)
+FIXTURE_MOCAP = Path(__file__).resolve().parent / "fixtures" / "cmu"
+
+
+@pytest.fixture(scope="session")
+def train_mocap() -> Path:
+    """What the trainers' tests train on: the motion capture where it is installed, else the
+    repository's fixtures, so that every trainer, resume and export test runs for anyone."""
+    return find_mocap_root() or FIXTURE_MOCAP
+
+
+@pytest.fixture(scope="session")
+def train_clip_index(train_mocap):
+    """The clips of train_mocap by id (02_01, 02_05, 05_02 and 16_17 in either)."""
+    return {c.clip_id: c for c in read_index(train_mocap)}
+
+
 @pytest.fixture
 def rng():
     return np.random.default_rng(1234)

@@ -158,7 +158,7 @@ def test_the_train_commands_help_names_every_kind(capsys, monkeypatch):
 
 
 @pytest.mark.train
-def test_ablation_command_writes_each_runs_validation(tmp_path, mocap_root):
+def test_ablation_command_writes_each_runs_validation(tmp_path, train_mocap):
     from sparse_body.cli import main
 
     out = tmp_path / "lobstr.onnx"
@@ -177,7 +177,7 @@ def test_ablation_command_writes_each_runs_validation(tmp_path, mocap_root):
                 "--out",
                 str(out),
                 "--mocap",
-                str(mocap_root),
+                str(train_mocap),
             ]
         )
     assert done.value.code == 0

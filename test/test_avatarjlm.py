@@ -26,8 +26,8 @@ WRISTS = [J["left_wrist"], J["right_wrist"]]
 
 
 @pytest.fixture(scope="module")
-def clip(clip_index):
-    return load_clip(clip_index["02_05"]).slice(0, 240)
+def clip(train_clip_index):
+    return load_clip(train_clip_index["02_05"]).slice(0, 240)
 
 
 @pytest.fixture(scope="module")
@@ -147,7 +147,7 @@ def test_four_point_model_stands_on_the_pelvis_tracker_and_needs_it(avatarjlm_mo
 
 
 @pytest.mark.train
-def test_legs_are_rebuilt_by_default_only_where_the_network_turns_them(tmp_path, mocap_root, clip):
+def test_legs_are_rebuilt_by_default_only_where_the_network_turns_them(tmp_path, train_mocap, clip):
     """Three-point networks trained from random rotations turn their legs (the runtime rebuilds
     them unless told not to); the four-point model and networks started from the identity
     (the shipped three-point one, tested below) do not. Tiny models trained a few steps by the
@@ -158,7 +158,7 @@ def test_legs_are_rebuilt_by_default_only_where_the_network_turns_them(tmp_path,
 
     for sensors in ("three_point", "four_point"):
         config = replace(AvatarJlmConfig.named("tiny"), sensors=sensors)
-        train(config, TrainRun(mocap_root, tmp_path / f"{sensors}.onnx", limit=2, log=lambda *_: None))
+        train(config, TrainRun(train_mocap, tmp_path / f"{sensors}.onnx", limit=2, log=lambda *_: None))
     three, four = (str(tmp_path / f"{s}.onnx") for s in ("three_point", "four_point"))
     assert create_estimator("avatarjlm", THREE, clip.skeleton, model_path=three).legs_from_positions
     assert not create_estimator(
@@ -168,7 +168,7 @@ def test_legs_are_rebuilt_by_default_only_where_the_network_turns_them(tmp_path,
 
 
 @pytest.mark.train
-def test_train_avatarjlm_is_one_command(tmp_path, mocap_root):
+def test_train_avatarjlm_is_one_command(tmp_path, train_mocap):
     import onnxruntime as ort
 
     from sparse_body.methods.avatarjlm.train import TURNED_JOINT_DEG
@@ -209,7 +209,7 @@ def test_train_avatarjlm_is_one_command(tmp_path, mocap_root):
 
 
 @pytest.mark.train
-def test_a_finished_training_trains_further_from_its_kept_checkpoint(tmp_path, mocap_root):
+def test_a_finished_training_trains_further_from_its_kept_checkpoint(tmp_path, train_mocap):
     """--keep-checkpoint then --resume: the second run starts where the first stopped and its
     report keeps the first run, which the model card shows."""
     from sparse_body.methods.avatarjlm.card import _curve, _training

@@ -37,7 +37,7 @@ def shipped_models():
 
 
 @pytest.fixture(scope="module")
-def tiny_vae(tmp_path_factory, mocap_root):
+def tiny_vae(tmp_path_factory, train_mocap):
     """Tiny models trained for a few steps by the real training code (for the torch tests)."""
     from sparse_body.methods.dragposer.vae_model import VaeConfig
     from sparse_body.methods.dragposer.vae_train import train_vae
@@ -46,14 +46,14 @@ def tiny_vae(tmp_path_factory, mocap_root):
     out = tmp_path_factory.mktemp("dragposer")
     config = VaeConfig.named("tiny")
     config.hidden, config.steps = 64, 20
-    train_vae(config, TrainRun(mocap_root, out, limit=2, log=lambda *_: None))
+    train_vae(config, TrainRun(train_mocap, out, limit=2, log=lambda *_: None))
     from sparse_body.methods.dragposer.temporal_model import TemporalConfig
     from sparse_body.methods.dragposer.temporal_train import train_temporal
 
-    train_temporal(TemporalConfig.named("tiny"), TrainRun(mocap_root, out, limit=2, log=lambda *_: None))
+    train_temporal(TemporalConfig.named("tiny"), TrainRun(train_mocap, out, limit=2, log=lambda *_: None))
     from sparse_body.methods.dragposer.tracker_prior_train import TrackerPriorConfig, train_tracker_prior
 
-    train_tracker_prior(TrackerPriorConfig.named("tiny"), TrainRun(mocap_root, out, limit=2, log=lambda *_: None))
+    train_tracker_prior(TrackerPriorConfig.named("tiny"), TrainRun(train_mocap, out, limit=2, log=lambda *_: None))
     return out
 
 
@@ -259,7 +259,7 @@ def test_missing_model_is_a_clear_error(tmp_path):
 
 
 @pytest.mark.train
-def test_train_dragposer_is_one_command(tmp_path, mocap_root):
+def test_train_dragposer_is_one_command(tmp_path, train_mocap):
     subprocess.run(
         [
             sys.executable,

@@ -24,8 +24,8 @@ SIX = load_sensor_config("six_point")
 
 
 @pytest.fixture(scope="module")
-def clip(clip_index):
-    return load_clip(clip_index["02_05"]).slice(0, 240)
+def clip(train_clip_index):
+    return load_clip(train_clip_index["02_05"]).slice(0, 240)
 
 
 @pytest.fixture(scope="module")
@@ -232,7 +232,7 @@ def test_occlusion_protocol_occludes_the_share_asked_one_or_both_feet_both_ways(
 
 
 @pytest.mark.train
-def test_train_dtp_is_one_command(tmp_path, mocap_root):
+def test_train_dtp_is_one_command(tmp_path, train_mocap):
     out = tmp_path / "dtp.onnx"
     subprocess.run(
         [
@@ -260,7 +260,7 @@ def test_train_dtp_is_one_command(tmp_path, mocap_root):
 
 
 @pytest.mark.train
-def test_resume_after_the_pre_training_goes_on_with_the_fine_tuning(tmp_path, mocap_root, monkeypatch):
+def test_resume_after_the_pre_training_goes_on_with_the_fine_tuning(tmp_path, train_mocap, monkeypatch):
     import sparse_body.methods.dtp.train as dtp_train
     from sparse_body.methods.dtp.model import DtpConfig
     from sparse_body.train.harness import TrainRun
@@ -278,12 +278,12 @@ def test_resume_after_the_pre_training_goes_on_with_the_fine_tuning(tmp_path, mo
 
     monkeypatch.setattr(dtp_train, "fit", interrupted_in_the_fine_tuning)
     with pytest.raises(KeyboardInterrupt):
-        dtp_train.train(config, TrainRun(mocap_root, out, limit=1, checkpoint=checkpoint, log=lambda *_: None))
+        dtp_train.train(config, TrainRun(train_mocap, out, limit=1, checkpoint=checkpoint, log=lambda *_: None))
     assert (tmp_path / "dtp.pretrained.onnx").is_file() and not out.is_file()
     calls.clear()
     monkeypatch.setattr(dtp_train, "fit", fit)
     lines = []
-    run = TrainRun(mocap_root, out, limit=1, checkpoint=checkpoint, resume=True, log=lines.append)
+    run = TrainRun(train_mocap, out, limit=1, checkpoint=checkpoint, resume=True, log=lines.append)
     report = dtp_train.train(config, run)
     assert any("pretrain: finished before" in line for line in lines)
     assert any("finetune: resumed" in line and "at step 2" in line for line in lines)

@@ -8,13 +8,12 @@ import pytest
 
 
 @pytest.mark.train
-@pytest.mark.mocap
-def test_a_short_training_exports_a_model_the_runtime_loads_with_its_report_and_card(tmp_path, mocap_root):
+def test_a_short_training_exports_a_model_the_runtime_loads_with_its_report_and_card(tmp_path, train_mocap):
     from sparse_body.estimators.forecast_model import RootForecastModel
     from sparse_body.train.forecast import main
 
     out = tmp_path / "forecast_root.onnx"
-    assert main(["--config", "tiny", "--limit", "2", "--out", str(out), "--mocap", str(mocap_root)]) == 0
+    assert main(["--config", "tiny", "--limit", "2", "--out", str(out), "--mocap", str(train_mocap)]) == 0
     model = RootForecastModel(out)
     move = model(np.tile([1.0, 0.0, 0.0], (model.lags, 1)), 0.1)
     assert move.shape == (3,) and np.isfinite(move).all()

@@ -2,6 +2,8 @@
 the URDF's limits, hands where the scaled human's are, planted feet held on the floor; bad
 robot files end in one line; `process --robot` writes the robot's JointState beside the body."""
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 
@@ -247,3 +249,27 @@ def test_a_fresh_solve_reaches_the_hands_without_a_last_frame_to_stay_near(tmp_p
         body = BodyPose(0.0, matrix_to_quat(walk.local_rotations[i]), walk.positions[i, 0], contact=walk.contacts[i])
         first = robot.step(body)
         assert np.linalg.norm(first.reached - first.wanted, axis=1)[2:4].max() < 0.02  # the hands
+
+
+UNITREE = Path(__file__).resolve().parents[2] / "shared" / "robots" / "unitree"
+
+
+def test_process_finds_a_shipped_mapping_by_name(tmp_path, capsys):
+    """`process --robot unitree_h1 --robot-urdf h1.urdf` failed with "unitree_h1: No such file or
+    directory": the name was resolved as a path in the working directory."""
+    if not (UNITREE / "h1.urdf").is_file():
+        pytest.skip("Unitree's H1 URDF (unitree_ros, BSD-3-Clause) is not installed beside the checkout")
+    from sparse_body.apps.offline import make_bag
+    from sparse_body.cli import main
+    from sparse_body.io.bagio import read_topic
+    from sparse_body.io.topics import ROBOT_JOINT_STATES_TOPIC
+
+    make_bag(synthetic_walk(1.0), load_sensor_config("six_point"), tmp_path / "in")
+    with pytest.raises(SystemExit) as done:
+        main(
+            ["process", str(tmp_path / "in"), str(tmp_path / "out"), "--robot", "unitree_h1"]
+            + ["--robot-urdf", str(UNITREE / "h1.urdf"), "--quiet"]
+        )
+    assert done.value.code == 0, capsys.readouterr().err
+    states = read_topic(tmp_path / "out", ROBOT_JOINT_STATES_TOPIC)
+    assert len(states) == 60 and "left_knee_joint" in list(states[0].name)

@@ -32,8 +32,8 @@ from sparse_body.methods.lobstr.features import (
 
 
 @pytest.fixture(scope="module")
-def clip(clip_index):
-    return load_clip(clip_index["02_05"]).slice(0, 300)
+def clip(train_clip_index):
+    return load_clip(train_clip_index["02_05"]).slice(0, 300)
 
 
 @pytest.fixture(scope="module")
@@ -342,7 +342,7 @@ def test_contact_hold_lets_go_of_a_point_out_of_reach():
 
 
 @pytest.mark.train
-def test_train_is_one_command(tmp_path, mocap_root):
+def test_train_is_one_command(tmp_path, train_mocap):
     out = tmp_path / "m.onnx"
     subprocess.run(
         [

@@ -22,7 +22,7 @@ def tiny():
 
 @pytest.mark.train
 @pytest.mark.parametrize("method", ["lobstr", "avatarjlm", "dtp"])
-def test_only_validation_or_the_selection_may_pick_the_weights(tmp_path, mocap_root, method, capsys):
+def test_only_validation_or_the_selection_may_pick_the_weights(tmp_path, train_mocap, method, capsys):
     from sparse_body.cli import main
 
     out = tmp_path / "m.onnx"
@@ -35,12 +35,12 @@ def test_only_validation_or_the_selection_may_pick_the_weights(tmp_path, mocap_r
 
 
 @pytest.mark.train
-def test_an_interrupted_training_resumes_from_its_checkpoint(tmp_path, mocap_root, tiny):
+def test_an_interrupted_training_resumes_from_its_checkpoint(tmp_path, train_mocap, tiny):
     from sparse_body.methods.lobstr.train import train
     from sparse_body.train.harness import TrainRun
 
     checkpoint = tmp_path / "lobstr.checkpoint.npz"
-    first = train(tiny, TrainRun(mocap_root, tmp_path / "a.onnx", limit=2, log=quiet, checkpoint=checkpoint))
+    first = train(tiny, TrainRun(train_mocap, tmp_path / "a.onnx", limit=2, log=quiet, checkpoint=checkpoint))
     assert [h["step"] for h in first["history"]] == [2, 4]
     with np.load(checkpoint, allow_pickle=False) as saved:  # plain arrays and a JSON state, no pickle
         state = json.loads(str(saved["state"]))
@@ -48,7 +48,7 @@ def test_an_interrupted_training_resumes_from_its_checkpoint(tmp_path, mocap_roo
     lines = []
     second = train(
         replace(tiny, steps=8),
-        TrainRun(mocap_root, tmp_path / "b.onnx", limit=2, log=lines.append, checkpoint=checkpoint, resume=True),
+        TrainRun(train_mocap, tmp_path / "b.onnx", limit=2, log=lines.append, checkpoint=checkpoint, resume=True),
     )
     assert any("resumed" in line and "step 4" in line for line in lines)
     assert second["steps"] == 8
@@ -75,7 +75,7 @@ def _weights(path):
 
 @pytest.mark.train
 @pytest.mark.parametrize("method", ["lobstr", "avatarjlm"])
-def test_a_resumed_training_goes_on_as_the_uninterrupted_run_would_have(tmp_path, mocap_root, method):
+def test_a_resumed_training_goes_on_as_the_uninterrupted_run_would_have(tmp_path, train_mocap, method):
     """The optimiser's moments, the learning-rate schedule (LoBSTr's decay, AvatarJLM's drop at
     check 2, after the kill) and the batches' draws all go on from the checkpoint."""
     if method == "lobstr":
@@ -90,7 +90,7 @@ def test_a_resumed_training_goes_on_as_the_uninterrupted_run_would_have(tmp_path
         config = replace(Config.named("tiny"), steps=8, steps_per_check=2, lr_drop_at=0.5)
     from sparse_body.train.harness import TrainRun
 
-    whole = train(config, TrainRun(mocap_root, tmp_path / "whole.onnx", limit=1, log=quiet))
+    whole = train(config, TrainRun(train_mocap, tmp_path / "whole.onnx", limit=1, log=quiet))
 
     def killed_at_step_4(line):
         if line.startswith("step 4 "):
@@ -98,11 +98,11 @@ def test_a_resumed_training_goes_on_as_the_uninterrupted_run_would_have(tmp_path
 
     checkpoint = tmp_path / "m.checkpoint.npz"
     with pytest.raises(Killed):
-        train(config, TrainRun(mocap_root, tmp_path / "a.onnx", limit=1, log=killed_at_step_4, checkpoint=checkpoint))
+        train(config, TrainRun(train_mocap, tmp_path / "a.onnx", limit=1, log=killed_at_step_4, checkpoint=checkpoint))
     lines = []
     resumed = train(
         config,
-        TrainRun(mocap_root, tmp_path / "b.onnx", limit=1, log=lines.append, checkpoint=checkpoint, resume=True),
+        TrainRun(train_mocap, tmp_path / "b.onnx", limit=1, log=lines.append, checkpoint=checkpoint, resume=True),
     )
     assert any(line.endswith("resumed from " + str(checkpoint) + " at step 2") for line in lines)
 
@@ -115,27 +115,27 @@ def test_a_resumed_training_goes_on_as_the_uninterrupted_run_would_have(tmp_path
 
 
 @pytest.mark.train
-def test_without_resume_a_checkpoint_is_overwritten_not_read(tmp_path, mocap_root, tiny):
+def test_without_resume_a_checkpoint_is_overwritten_not_read(tmp_path, train_mocap, tiny):
     from sparse_body.methods.lobstr.train import train
     from sparse_body.train.harness import TrainRun
 
     checkpoint = tmp_path / "lobstr.checkpoint.npz"
-    train(tiny, TrainRun(mocap_root, tmp_path / "a.onnx", limit=2, log=quiet, checkpoint=checkpoint))
-    again = train(tiny, TrainRun(mocap_root, tmp_path / "b.onnx", limit=2, log=quiet, checkpoint=checkpoint))
+    train(tiny, TrainRun(train_mocap, tmp_path / "a.onnx", limit=2, log=quiet, checkpoint=checkpoint))
+    again = train(tiny, TrainRun(train_mocap, tmp_path / "b.onnx", limit=2, log=quiet, checkpoint=checkpoint))
     assert [h["step"] for h in again["history"]] == [2, 4]
 
 
 @pytest.mark.train
-def test_a_checkpoint_of_another_configuration_is_refused_by_name(tmp_path, mocap_root, tiny):
+def test_a_checkpoint_of_another_configuration_is_refused_by_name(tmp_path, train_mocap, tiny):
     from sparse_body.methods.lobstr.train import train
     from sparse_body.train.harness import TrainRun
 
     checkpoint = tmp_path / "lobstr.checkpoint.npz"
-    train(tiny, TrainRun(mocap_root, tmp_path / "a.onnx", limit=2, log=quiet, checkpoint=checkpoint))
+    train(tiny, TrainRun(train_mocap, tmp_path / "a.onnx", limit=2, log=quiet, checkpoint=checkpoint))
     with pytest.raises(ValueError, match="lobstr.checkpoint.npz: the checkpoint does not fit"):
         train(
             replace(tiny, hidden=24),
-            TrainRun(mocap_root, tmp_path / "b.onnx", limit=2, log=quiet, checkpoint=checkpoint, resume=True),
+            TrainRun(train_mocap, tmp_path / "b.onnx", limit=2, log=quiet, checkpoint=checkpoint, resume=True),
         )
 
 

@@ -24,10 +24,14 @@ def run(args) -> int:
     body = person_body(args.calibration, args.height)
     robot = None
     if args.robot:
+        from ...robot.mapping import load_mapping
         from ...robot.retarget import load_retarget
 
         load_retarget(args.robot, args.robot_urdf, body)  # one line on a bad robot file, before any work
-        robot = (str(Path(args.robot).resolve()), str(Path(args.robot_urdf).resolve()) if args.robot_urdf else "")
+        # the mapping's file, resolved (a shipped one by its name: `--robot unitree_h1`, which a
+        # path resolved against the working directory lost) and the URDF's
+        mapping = str(Path(load_mapping(args.robot).source).resolve())
+        robot = (mapping, str(Path(args.robot_urdf).resolve()) if args.robot_urdf else "")
     elif args.robot_urdf:
         raise ValueError("--robot-urdf goes with --robot (the mapping of the robot's links to the body)")
     guards = TfGuards(clock_window=args.clock_window, future_window=args.future_window, play_radius=args.play_radius)

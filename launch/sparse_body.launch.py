@@ -168,8 +168,9 @@ def generate_launch_description():
             DeclareLaunchArgument("sensors", default_value="six_point", description="sensor configuration"),
             DeclareLaunchArgument(
                 "estimator",
-                default_value="ik",
-                description=f"estimation method: {', '.join(estimator_names())} (options as NAME:key=value)",
+                default_value="auto",
+                description=f"estimation method: auto (the one recommended for the sensors), "
+                f"{', '.join(estimator_names())} (options as NAME:key=value)",
             ),
             DeclareLaunchArgument(
                 "model_path", default_value="", description="model file of a learned estimator (empty: the shipped one)"

@@ -190,6 +190,8 @@ def test_train_avatarjlm_is_one_command(tmp_path, train_mocap):
             "--out",
             str(out),
             "--no-card",
+            "--mocap",
+            str(train_mocap),
         ],
         check=True,
         capture_output=True,
@@ -228,6 +230,8 @@ def test_a_finished_training_trains_further_from_its_kept_checkpoint(tmp_path, t
         "--out",
         str(out),
         "--no-card",
+        "--mocap",
+        str(train_mocap),
     ]
     subprocess.run(run + ["--steps", "2", "--keep-checkpoint"], check=True, capture_output=True)
     assert (tmp_path / "avatarjlm.checkpoint.npz").is_file()

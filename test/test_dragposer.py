@@ -276,6 +276,8 @@ def test_train_dragposer_is_one_command(tmp_path, train_mocap):
             "--out",
             str(tmp_path),
             "--no-card",
+            "--mocap",
+            str(train_mocap),
         ],
         check=True,
         capture_output=True,

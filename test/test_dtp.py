@@ -250,6 +250,8 @@ def test_train_dtp_is_one_command(tmp_path, train_mocap):
             "--out",
             str(out),
             "--no-card",
+            "--mocap",
+            str(train_mocap),
         ],
         check=True,
         capture_output=True,

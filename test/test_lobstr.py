@@ -360,6 +360,8 @@ def test_train_is_one_command(tmp_path, train_mocap):
             "--out",
             str(out),
             "--no-card",
+            "--mocap",
+            str(train_mocap),
         ],
         check=True,
         capture_output=True,

@@ -109,3 +109,26 @@ def test_a_start_that_compiles_the_kernels_says_so_and_how_long_it_took(monkeypa
     kernels.compile_kernels(("ik",), say=lines.append)
     assert len(lines) == 2 and lines[0].startswith("compiling the per-frame kernels once"), lines
     assert lines[1].startswith("compiled the per-frame kernels in "), lines
+
+
+def test_auto_is_the_estimator_recommended_for_the_sensors_everywhere_one_is_named(tmp_path, capsys):
+    """Every command and the node take the recommended estimator when none is named, and say
+    which; its options pass to it."""
+    from sparse_body.apps.offline import make_bag
+    from sparse_body.cli import main
+    from sparse_body.core.sensors import load_sensor_config
+    from sparse_body.core.skeleton import Skeleton
+    from sparse_body.data.synthetic import synthetic_walk
+    from sparse_body.methods.factory import create_estimator
+    from sparse_body.methods.recommended import RECOMMENDED, resolve_estimator
+
+    assert resolve_estimator("auto:foot_lock=false", "four_point") == f"{RECOMMENDED['four_point']}:foot_lock=false"
+    assert resolve_estimator("lobstr", "four_point") == "lobstr"
+    sensors = load_sensor_config("four_point")
+    estimator = create_estimator("auto", sensors, Skeleton.canonical(), foot_lock=False)
+    assert estimator.name == RECOMMENDED["four_point"].partition(":")[0]
+    make_bag(synthetic_walk(0.5), load_sensor_config("six_point"), tmp_path / "bag")
+    with pytest.raises(SystemExit) as ended:
+        main(["process", str(tmp_path / "bag"), str(tmp_path / "out"), "--quiet"])
+    assert ended.value.code == 0
+    assert f"estimator: {RECOMMENDED['six_point']}, recommended for six_point" in capsys.readouterr().out

@@ -26,7 +26,19 @@ def test_only_validation_or_the_selection_may_pick_the_weights(tmp_path, train_m
     from sparse_body.cli import main
 
     out = tmp_path / "m.onnx"
-    args = ["train", method, "--config", "tiny", "--limit", "1", "--out", str(out), "--no-card"]
+    args = [
+        "train",
+        method,
+        "--config",
+        "tiny",
+        "--limit",
+        "1",
+        "--out",
+        str(out),
+        "--no-card",
+        "--mocap",
+        str(train_mocap),
+    ]
     with pytest.raises(SystemExit) as done:
         main([*args, "--set", "select_on=test"])
     assert done.value.code != 0 and not out.exists()

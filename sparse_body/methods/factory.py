@@ -11,6 +11,7 @@ from ..core.skeleton import JOINT_INDEX, Skeleton
 from ..core.tracker_filter import filter_config
 from ..estimators.base import FORECASTS, Estimator
 from . import METHODS, load
+from .recommended import AUTO, recommended
 
 
 def estimator_names() -> list[str]:
@@ -19,10 +20,10 @@ def estimator_names() -> list[str]:
 
 
 def check_estimator_name(name: str) -> None:
-    """ValueError (one line, listing the estimators) unless `name` is one: checked by the
-    commands before they make anything."""
-    if name not in METHODS:
-        raise ValueError(f"unknown estimator {shown(name)}; available: {', '.join(estimator_names())}")
+    """ValueError (one line, listing the estimators) unless `name` is one, or auto: checked by
+    the commands before they make anything."""
+    if name not in METHODS and name != AUTO:
+        raise ValueError(f"unknown estimator {shown(name)}; available: {AUTO}, {', '.join(estimator_names())}")
 
 
 def feet_tracked(sensors: SensorConfig) -> bool:
@@ -41,6 +42,11 @@ def create_estimator(name: str, sensors: SensorConfig, skeleton: Skeleton, fps: 
     touched down while in contact (core/contact_hold.py; default true; feet that wear trackers
     are never held), foot_lock=false leaves the method's legs as they are."""
     check_estimator_name(name)
+    if name == AUTO:  # the recommended estimator for these sensors (methods/recommended.py)
+        from ..estimators.base import parse_estimator_spec
+
+        name, chosen = parse_estimator_spec(recommended(sensors.name))
+        options = {**chosen, **options}
     filtering = filter_config(options)
     smooth = options.pop("smooth", False)
     if not isinstance(smooth, bool):

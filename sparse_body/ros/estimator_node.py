@@ -51,6 +51,7 @@ from ..io.urdf import body_urdf
 from ..methods import METHODS, NAMES, load
 from ..methods.factory import create_estimator
 from ..methods.kernels import compile_kernels
+from ..methods.recommended import AUTO, resolve_estimator
 from .estimate_stats import EstimateStats
 from .spin import init, start_and_spin
 from .tf_input import TfReader
@@ -83,9 +84,9 @@ PARAMETERS = {
     # name: (default, description)
     "sensors": ("six_point", "sensor configuration: a name under config/sensors or a YAML path"),
     "estimator": (
-        "ik",
-        f"estimation method: {', '.join(NAMES)} (refined:base=NAME: DragPoser's refinement after "
-        "another; options as NAME:key=value,...)",
+        "auto",
+        f"estimation method: auto (the one recommended for the sensors), {', '.join(NAMES)} "
+        "(refined:base=NAME: DragPoser's refinement after another; options as NAME:key=value,...)",
     ),
     "model_path": ("", "model file for learned estimators; empty: the shipped model"),
     "fixed_frame": ("", "frame the trackers are looked up in; empty: the sensor configuration's"),
@@ -193,8 +194,8 @@ def _check_estimator_spec(value: str) -> str | None:
     except ValueError as err:
         return str(err)
     names = estimator_names()
-    if method not in names:
-        return f"unknown estimator {method!r}; available: {', '.join(names)}"
+    if method not in names and method != AUTO:
+        return f"unknown estimator {method!r}; available: {AUTO}, {', '.join(names)}"
     return None
 
 
@@ -315,6 +316,9 @@ class EstimatorNode(LifecycleNode):
             sensors = load_sensor_config(p["sensors"])
             if p["fixed_frame"]:
                 sensors = replace(sensors, fixed_frame=p["fixed_frame"])
+            for key in ("estimator", "budget_fallback"):  # auto: the one recommended for the sensors
+                if p.get(key):
+                    p[key] = resolve_estimator(p[key], sensors.name)
             self.skeleton = person_body(p["calibration"], p["height"])
             if p["calibration"]:
                 self.get_logger().info(f"the body of {p['calibration']}: {self.skeleton.height():.2f} m tall")

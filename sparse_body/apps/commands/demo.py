@@ -12,6 +12,7 @@ def run(args) -> int:
     from ...data.catalog import find_mocap_root
     from ...estimators.base import parse_estimator_spec
     from ...methods.factory import check_estimator_name
+    from ...methods.recommended import resolve_estimator
     from ..demo import run_demo
 
     check_estimator_name(parse_estimator_spec(args.estimator)[0])  # before the folder is made
@@ -21,7 +22,7 @@ def run(args) -> int:
     run_demo(
         Path(args.out),
         sensors,
-        args.estimator,
+        resolve_estimator(args.estimator, sensors.name),
         find_mocap_root(args.mocap),
         args.motion,
         args.seconds,
@@ -36,7 +37,11 @@ def add_parser(sub) -> None:
     p.add_argument(
         "--sensors", default="six_point", help="the trackers the demo's bag holds: a configuration name or YAML path"
     )
-    p.add_argument("--estimator", default="ik", help="the estimator, with options as NAME:key=value,...")
+    p.add_argument(
+        "--estimator",
+        default="auto",
+        help="the estimator, with options as NAME:key=value,...; auto: the one recommended for the sensors",
+    )
     p.add_argument("--motion", help="a motion file to use instead of the CMU demo clip")
     p.add_argument("--mocap", help="the CMU folder")
     p.add_argument("--seconds", type=seconds, default=6.0, help="the length of the synthetic walk")

@@ -35,8 +35,14 @@ def run(args) -> int:
         untrained_categories,
     )
     from ...methods import METHODS, paper_figures
+    from ...methods.recommended import AUTO, resolve_estimator
 
     sensors = load_sensor_config(args.sensors)
+    given = args.estimator or [AUTO]
+    args.estimator = [resolve_estimator(spec, sensors.name) for spec in given]
+    for spec, resolved in zip(given, args.estimator, strict=True):
+        if spec != resolved:
+            print(f"estimator: {resolved}, recommended for {sensors.name} (--estimator to choose)")
     if args.horizon is not None and not 0.0 <= args.horizon <= MAX_AHEAD:
         raise ValueError(f"--horizon must be from 0 to {MAX_AHEAD:g} seconds, got {args.horizon:g}")
     specs, reference = list(args.estimator), {}
@@ -134,8 +140,8 @@ def add_parser(sub) -> None:
     p.add_argument(
         "--estimator",
         action="append",
-        required=True,
-        help="estimator name, optionally with options: lobstr:contact_ik=false (repeat to compare several)",
+        help="estimator name, optionally with options: lobstr:contact_ik=false (repeat to compare several); "
+        "default: auto, the one recommended for the sensors",
     )
     p.add_argument("--sensors", default="three_point", help="sensor configuration name or YAML path")
     p.add_argument(

@@ -15,12 +15,12 @@ def run(args) -> int:
     from ...core.calibration import person_body
     from ...estimators.base import parse_estimator_spec
     from ...io.bagio import BagError
+    from ...methods.factory import check_estimator_name
+    from ...methods.recommended import resolve_estimator
     from ..batch import SUMMARY, Settings, expand_inputs, is_bag, process_many
     from ..offline import process_bag, sensors_for_bag
 
-    name, options = parse_estimator_spec(args.estimator)
-    if args.smooth:
-        options["smooth"] = True
+    check_estimator_name(parse_estimator_spec(args.estimator)[0])
     body = person_body(args.calibration, args.height)
     robot = None
     if args.robot:
@@ -47,6 +47,12 @@ def run(args) -> int:
     sensors, chosen = sensors_for_bag(bags[0], args.sensors)
     if args.sensors is None:
         print(chosen)
+    spec = resolve_estimator(args.estimator, sensors.name)
+    if spec != args.estimator:
+        print(f"estimator: {spec}, recommended for {sensors.name} (--estimator to choose)")
+    name, options = parse_estimator_spec(spec)
+    if args.smooth:
+        options["smooth"] = True
     if many or args.cluster:  # OUT is a folder
         args.left_when_stopped = (  # what main() says on a stop
             f"the bags finished are kept (see {Path(args.bag_out) / SUMMARY}), the ones being written were "
@@ -134,8 +140,9 @@ def add_parser(sub) -> None:
     )
     p.add_argument(
         "--estimator",
-        default="ik",
-        help="estimator, with options: lobstr, refined:base=lobstr (DragPoser refinement after it)",
+        default="auto",
+        help="estimator, with options: lobstr, refined:base=lobstr (DragPoser refinement after it); auto: the "
+        "one recommended for the sensors (said in one line)",
     )
     p.add_argument(
         "--sensors",

@@ -22,7 +22,7 @@ from .core.results import EvalResult
 from .core.rotations import quat_to_matrix
 from .core.sensors import SensorConfig
 from .data import MotionFileError
-from .data.catalog import DEFAULT_FPS, SELECTION, load_clip, split_clips
+from .data.catalog import DEFAULT_FPS, FLOOR, SELECTION, load_clip, split_clips
 from .data.field_protocol import FIELD, Protocol, UserView, user_view
 from .data.motion import Motion
 from .data.motion_inputs import (
@@ -184,7 +184,23 @@ def estimated_clips(mocap_root: Path, split: str, estimator: str, sensors_name: 
 def split_items(mocap_root: Path, split: str, fps: float = DEFAULT_FPS, limit: int | None = None) -> list[EvalItem]:
     """The clips of a part of the CMU split (or of an imported folder's), seeded by their place
     in the split (the split's order is fixed, so the draws are too); a selection clip by its
-    place in validation, so that it meets the same draws in both."""
+    place in validation, so that it meets the same draws in both. "floor": the selection's
+    clips lying on the floor, on the back, the side and the front in turn (data/floor.py), each
+    lying kind a kind of motion of its own."""
+    if split == FLOOR:
+        from .data.floor import LYING
+
+        ways = list(LYING)
+        return [
+            replace(
+                item,
+                name=f"{item.name}_{ways[k % len(ways)].split()[-1]}",
+                key=f"{item.key}:{ways[k % len(ways)]}",
+                load=partial(_lying, item.load, ways[k % len(ways)]),
+                category=ways[k % len(ways)],
+            )
+            for k, item in enumerate(split_items(mocap_root, SELECTION, fps, limit))
+        ]
     seeds = {c.clip_id: k for k, c in enumerate(split_clips(mocap_root, "validation" if split == SELECTION else split))}
     return [
         EvalItem(
@@ -199,6 +215,12 @@ def split_items(mocap_root: Path, split: str, fps: float = DEFAULT_FPS, limit: i
         )
         for c in split_clips(mocap_root, split, limit)
     ]
+
+
+def _lying(load: Callable[[], Motion], how: str) -> Motion:
+    from .data.floor import lying
+
+    return lying(load(), how)
 
 
 def untrained_categories(mocap_root: Path, categories: list[str]) -> dict[str, str]:

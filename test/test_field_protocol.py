@@ -273,3 +273,26 @@ def test_a_protocol_comes_back_equal_from_the_json_a_results_file_keeps():
     for protocol in (FIELD, LAB, Protocol.named("height", "none", 5.0, 0.01, 10.0), losing):
         assert Protocol.from_json(json.loads(json.dumps(protocol.to_json()))) == protocol
     assert losing.label == "field, vr noise, hands frozen in 10 % of frames"
+
+
+def test_a_motion_lying_on_the_floor_keeps_its_limbs_and_rests_its_lowest_joint_on_the_floor():
+    """The floor part (eval --split floor): a clip's body on its back, side or front."""
+    from scipy.spatial.transform import Rotation
+
+    from sparse_body.core.skeleton import JOINT_INDEX
+    from sparse_body.data.floor import FLOOR_CLEARANCE, LYING, lying
+
+    walk = synthetic_walk(2.0)
+    # which of the pelvis's own axes points up: forward (x) on the back, left (y) on the side
+    faces_up = {"lying on the back": [1, 0, 0], "lying on the side": [0, 1, 0], "lying on the front": [-1, 0, 0]}
+    for how in LYING:
+        lain = lying(walk, how)
+        p = lain.positions
+        np.testing.assert_allclose(p[..., 2].min(axis=1), FLOOR_CLEARANCE, atol=1e-9)
+        spine = p[:, JOINT_INDEX["head"]] - p[:, 0]
+        assert np.all(np.abs(spine[:, 2]) < 0.15 * np.linalg.norm(spine, axis=1)), how  # the spine lies flat
+        up = Rotation.from_quat(lain.local_quats[:, 0]).apply(faces_up[how])
+        assert np.all(up[:, 2] > 0.9), how
+        # the limbs move as in the clip: the joints' local turns are the clip's
+        np.testing.assert_allclose(lain.local_quats[:, 1:], walk.local_quats[:, 1:])
+        assert np.ptp(p[:, 0, :2], axis=0).max() < 1e-9  # held where the clip starts

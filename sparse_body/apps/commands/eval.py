@@ -147,9 +147,10 @@ def add_parser(sub) -> None:
     p.add_argument(
         "--split",
         default="test",
-        choices=("train", "validation", "test", "selection"),  # data/catalog.PARTS, not imported for --help
+        choices=("train", "validation", "test", "selection", "floor"),  # data/catalog.PARTS, not imported for --help
         help="part of the split (default test); selection: the validation clips of the kinds of motion "
-        "no train clip has, the set every accuracy choice is made on",
+        "no train clip has, the set every accuracy choice is made on; floor: the selection's clips with the "
+        "body lying on the floor (on its back, side and front in turn)",
     )
     p.add_argument("--fps", type=fps, default=60.0, help="frame rate the clips are resampled to")
     p.add_argument(

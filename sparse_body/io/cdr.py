@@ -130,8 +130,9 @@ def tf_messages(stamps, parents: Sequence[str], children: Sequence[str], values:
 
 
 @lru_cache(maxsize=8)
-def _joint_state_template(names: tuple[str, ...]) -> tuple[bytes, int, int]:
-    """(template, stamp offset, positions offset): no frame_id, no velocities or efforts."""
+def _joint_state_template(names: tuple[str, ...], with_velocity: bool = False) -> tuple[bytes, int, int, int]:
+    """(template, stamp offset, positions offset, velocities offset or -1): no frame_id, no
+    efforts; velocities where asked for."""
     layout = Layout()
     stamp = _header(layout, "")
     layout.uint32(len(names))
@@ -139,18 +140,23 @@ def _joint_state_template(names: tuple[str, ...]) -> tuple[bytes, int, int]:
         layout.string(name)
     layout.uint32(len(names))
     numbers = layout.doubles(len(names))
-    layout.uint32(0)  # velocity
+    layout.uint32(len(names) if with_velocity else 0)  # velocity
+    velocities = layout.doubles(len(names)) if with_velocity else -1
     layout.uint32(0)  # effort
-    return bytes(layout.buf), stamp, numbers
+    return bytes(layout.buf), stamp, numbers, velocities
 
 
-def joint_state_messages(stamps, names: Sequence[str], positions: np.ndarray) -> list[bytes]:
+def joint_state_messages(
+    stamps, names: Sequence[str], positions: np.ndarray, velocities: np.ndarray | None = None
+) -> list[bytes]:
     """sensor_msgs/JointState per frame: no frame_id, the names, positions (frames, len(names)),
-    no velocities or efforts."""
-    template, stamp, numbers = _joint_state_template(tuple(names))
+    velocities (the same shape) where given, no efforts."""
+    template, stamp, numbers, speeds = _joint_state_template(tuple(names), velocities is not None)
     rows = _rows(template, len(positions))
     _put_stamp(rows, stamp, *stamp_parts(stamps))
     _put(rows, numbers, "<f8", positions)
+    if velocities is not None:
+        _put(rows, speeds, "<f8", velocities)
     return [row.tobytes() for row in rows]
 
 

@@ -96,9 +96,11 @@ class EstimateBagWriter:
         self._described = DESCRIPTION_TOPIC not in topics  # the URDF goes before the first pose
         self.robot = None
         if robot is not None:  # (mapping YAML, URDF): the robot's joints beside the body's
+            from ..robot.limits import limiter_for
             from ..robot.retarget import load_retarget
 
             self.robot = load_retarget(robot[0], robot[1], skeleton)
+            self.limiter = limiter_for(self.robot)  # the commands as a controller can follow them
             self.robot_connection = writer.add_connection(
                 ROBOT_JOINT_STATES_TOPIC, TYPES[JOINT_STATES_TOPIC], typestore=self.store
             )
@@ -150,7 +152,10 @@ class EstimateBagWriter:
             )
             for i in range(len(poses))
         ]
-        messages = cdr.joint_state_messages(poses.stamps, self.robot.names, np.array([r.positions for r in robot]))
+        commands = [self.limiter(r.stamp, r.positions, r.fresh) for r in robot]
+        messages = cdr.joint_state_messages(
+            poses.stamps, self.robot.names, np.array([c for c, _ in commands]), np.array([v for _, v in commands])
+        )
         base = np.array([np.concatenate([r.base_position, r.base_quat]) for r in robot])[:, None]
         table = TransformTable(
             (self.fixed_frame,), (ROBOT_PREFIX + self.robot.mapping.base,), published_precision(base)

@@ -22,7 +22,18 @@ from pathlib import Path
 from ..core.skeleton import JOINT_NAMES
 from .urdf_model import RobotFileError
 
-KEYS = {"urdf", "base", "targets", "scale", "ankle_height", "smoothing", "iterations", "description"}
+KEYS = {
+    "urdf",
+    "base",
+    "targets",
+    "scale",
+    "ankle_height",
+    "smoothing",
+    "iterations",
+    "ramp",
+    "max_acceleration",
+    "description",
+}
 TARGET_KEYS = {"link", "joint", "point", "position", "orientation", "contact"}
 SIDES = ("left", "right")
 
@@ -48,6 +59,8 @@ class RobotMapping:
     ankle_height: float | None = None  # m above the floor of a planted foot target; None: scaled human's
     smoothing: float = 0.02  # weight of staying at the last frame's angles (smooth in time)
     iterations: int = 4  # Gauss-Newton steps a frame, from the last frame's solution
+    ramp: float = 0.5  # s: after a start or a hold, the robot eases from where it is to the solution
+    max_acceleration: float | None = None  # rad/s^2 (m/s^2) every joint keeps to; None: the velocity limits only
     description: str = ""
 
 
@@ -94,6 +107,10 @@ def mapping_from(data, path: Path) -> RobotMapping:
         None if data.get("ankle_height") is None else _number(data["ankle_height"], f"{path}: ankle_height", 0.0, 2.0),
         _number(data.get("smoothing", 0.02), f"{path}: smoothing", 0.0, 100.0),
         int(_number(data.get("iterations", 4), f"{path}: iterations", 1, 100)),
+        _number(data.get("ramp", 0.5), f"{path}: ramp", 0.0, 10.0),
+        None
+        if data.get("max_acceleration") is None
+        else _number(data["max_acceleration"], f"{path}: max_acceleration", 0.1, 10_000.0),
         str(data.get("description", "")),
     )
 

@@ -53,6 +53,7 @@ class RobotPose:
     reached: np.ndarray  # (targets, 3) where each target point is
     wanted: np.ndarray  # (targets, 3) the scaled human joint it reaches for (before the floor and locks)
     valid: bool = True
+    fresh: bool = False  # solved afresh (a start, after a hold or a gap, a jump): not from the last frame
 
 
 def _skew(v: np.ndarray) -> np.ndarray:
@@ -92,6 +93,27 @@ def _exp(v: np.ndarray) -> np.ndarray:
         return np.eye(3)
     k = _skew(v / angle)
     return np.eye(3) + math.sin(angle) * k + (1.0 - math.cos(angle)) * (k @ k)
+
+
+# A hinge whose zero lies within HINGE_NEAR of one limit and whose range reaches HINGE_REACH the
+# other way bends only that way (a knee, an elbow): its neutral is bent HINGE_BEND into its
+# range (a quarter of it at most). Read from the limits, never assumed from names or axes.
+HINGE_NEAR = 0.3  # rad
+HINGE_REACH = 1.2  # rad
+HINGE_BEND = 0.35  # rad (20 degrees)
+
+
+def neutral_pose(lower: np.ndarray, upper: np.ndarray) -> np.ndarray:
+    """Each joint's neutral value: zero within its limits, or for a one-way hinge a small bend
+    the way its limits allow."""
+    neutral = np.clip(0.0, lower, upper)
+    bends_up = (np.abs(lower) <= HINGE_NEAR) & (upper >= HINGE_REACH)
+    bends_down = (np.abs(upper) <= HINGE_NEAR) & (lower <= -HINGE_REACH)
+    span = np.where(np.isfinite(upper - lower), upper - lower, 0.0)
+    bend = np.minimum(HINGE_BEND, 0.25 * span)
+    neutral = np.where(bends_up, np.maximum(lower, 0.0) + bend, neutral)
+    neutral = np.where(bends_down, np.minimum(upper, 0.0) - bend, neutral)
+    return np.clip(neutral, lower, upper)
 
 
 def load_retarget(mapping: str | Path, urdf: str | Path | None, skeleton: Skeleton) -> HumanoidRetarget:
@@ -134,7 +156,11 @@ class HumanoidRetarget:
             raise RobotFileError(f"{mapping.source}: base {mapping.base!r} must be the URDF's root link or fixed to it")
         self.points = np.array([t.point for t in mapping.targets], float)
         self.joints = [JOINT_INDEX[t.joint] for t in mapping.targets]
-        self.rest_q = np.clip(0.0, self.lower, self.upper)
+        self.rest_q = np.clip(0.0, self.lower, self.upper)  # the zero pose: the scale and the feet's turn
+        # where the solver starts and what it is pulled towards: hinges bent a little the way
+        # their limits let them (a straight knee is a singular start, from which H1's knee
+        # went to its hyperextension limit and stayed there)
+        self.neutral_q = neutral_pose(self.lower, self.upper)
         rest_links, _ = model.forward(self.rest_q, np.eye(4))
         to_base = np.linalg.inv(rest_links[self.base])
         # the root link in the base link's frame at the zero pose: the solver places the base,
@@ -179,7 +205,7 @@ class HumanoidRetarget:
 
     def reset(self) -> None:
         """Forget the last solution and the planted feet (a new recording, a jump)."""
-        self.q = self.rest_q.copy()
+        self.q = self.neutral_q.copy()
         self.base_turn = np.eye(3)
         self.base_place = np.zeros(3)
         self._locks: dict[int, np.ndarray] = {}
@@ -240,7 +266,13 @@ class HumanoidRetarget:
             [links[link][:3, :3] @ p + links[link][:3, 3] for link, p in zip(self.links, self.points, strict=True)]
         )
         result = RobotPose(
-            pose.stamp, self.q.copy(), self.base_place.copy(), matrix_to_quat(self.base_turn), reached, wanted
+            pose.stamp,
+            self.q.copy(),
+            self.base_place.copy(),
+            matrix_to_quat(self.base_turn),
+            reached,
+            wanted,
+            fresh=first,
         )
         if not (np.all(np.isfinite(result.positions)) and np.all(np.abs(result.base_position) <= MAX_BASE)):
             self.reset()  # never published: the last good pose is held instead
@@ -251,7 +283,9 @@ class HumanoidRetarget:
     def _held(self, stamp: float) -> RobotPose:
         if self._last is None:
             zero = np.zeros((len(self.links), 3))
-            return RobotPose(stamp, self.rest_q.copy(), np.zeros(3), np.array([0.0, 0.0, 0.0, 1.0]), zero, zero, False)
+            return RobotPose(
+                stamp, self.neutral_q.copy(), np.zeros(3), np.array([0.0, 0.0, 0.0, 1.0]), zero, zero, False
+            )
         last = self._last
         return RobotPose(stamp, last.positions, last.base_position, last.base_quat, last.reached, last.wanted, False)
 
@@ -277,7 +311,7 @@ class HumanoidRetarget:
         targets = self.mapping.targets
         smooth = 0.0 if iterations else self.mapping.smoothing  # fresh: no last frame to stay near
         previous = q.copy()
-        rest_q = self.rest_q[solved]
+        rest_q = self.neutral_q[solved]
         for _ in range(iterations or self.mapping.iterations):
             if time.perf_counter() > deadline:
                 return False

@@ -50,6 +50,7 @@ class Joint:
     lower: float  # limits (rad or m); -inf/inf for continuous
     upper: float
     index: int = -1  # its place among the moving joints (the URDF's order), -1 when fixed
+    velocity: float = math.inf  # the URDF's velocity limit (rad/s or m/s); inf where it gives none
 
 
 @dataclass(frozen=True)
@@ -93,6 +94,10 @@ class RobotModel:
     def limits(self) -> tuple[np.ndarray, np.ndarray]:
         moving = self.moving
         return np.array([j.lower for j in moving]), np.array([j.upper for j in moving])
+
+    def velocity_limits(self) -> np.ndarray:
+        """Each moving joint's velocity limit (inf where the URDF gives none)."""
+        return np.array([j.velocity for j in self.moving])
 
     def forward(self, q: np.ndarray, base: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(link transforms (links, 4, 4) in the world, joint frames (moving, 4, 4) after
@@ -273,7 +278,12 @@ def _joint(element, index: dict[str, int], source: str) -> Joint | None:
         )
         if lower > upper:
             raise RobotFileError(f"{where}: its lower limit {lower:g} is above its upper limit {upper:g}")
-    return Joint(name, kind, index[parent], index[child], origin, axis, lower, upper)
+    velocity = math.inf
+    limit = element.find("limit")
+    if kind in MOVING and limit is not None and limit.get("velocity") is not None:
+        velocity = float(_numbers(limit.get("velocity"), 1, 0.0, f"{where} limit velocity", 1e6)[0])
+        velocity = velocity if velocity > 0 else math.inf  # 0: none given (as some exporters write)
+    return Joint(name, kind, index[parent], index[child], origin, axis, lower, upper, velocity=velocity)
 
 
 def _root(joints: list[Joint], links: list[str], source: str) -> int:

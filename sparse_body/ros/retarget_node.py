@@ -36,6 +36,7 @@ from ..io import cdr
 from ..io.cdr import MalformedMessage, read_tf
 from ..io.output import pose_from_joint_state, published_precision
 from ..io.urdf import body_skeleton
+from ..robot.limits import CommandLimiter, limiter_for
 from ..robot.retarget import MAX_BASE, HumanoidRetarget, load_retarget
 from ..robot.urdf_model import RobotFileError, read_urdf_text
 from .estimator_node import check_parameter, parameter_descriptor
@@ -83,6 +84,7 @@ class RetargetNode(LifecycleNode):
 
     # Made in on_configure, destroyed in _release.
     retarget: HumanoidRetarget | None = None
+    limiter: CommandLimiter | None = None  # the commands eased and held to the robot's limits
     pub_joints: LifecyclePublisher | None = None
     pub_tf: LifecyclePublisher | None = None
     pub_diag: LifecyclePublisher | None = None
@@ -165,7 +167,7 @@ class RetargetNode(LifecycleNode):
             self.destroy_publisher(self.pub_description)
         for sub in self.subs:
             self.destroy_subscription(sub)
-        self.subs, self.retarget, self.diag_timer = [], None, None
+        self.subs, self.retarget, self.limiter, self.diag_timer = [], None, None, None
         self.pub_joints = self.pub_tf = self.pub_diag = self.pub_description = None
         self._waiting: dict[int, JointState] = {}  # body JointStates by stamp (ns), until their root comes
         self._roots: dict[int, tuple[np.ndarray, np.ndarray]] = {}  # the body's roots by stamp (ns), lately
@@ -187,6 +189,8 @@ class RetargetNode(LifecycleNode):
         try:
             skeleton = body_skeleton(msg.data)
             self.retarget = load_retarget(self.params["robot"], self.params["robot_urdf"], skeleton)
+            if self.limiter is None:  # (a new body keeps the robot where its commands left it)
+                self.limiter = limiter_for(self.retarget)
         except RobotFileError as err:  # (a body URDF from the network is input like any other)
             self._drop(f"robot_description: {err}")
             return
@@ -263,12 +267,15 @@ class RetargetNode(LifecycleNode):
         robot = self.retarget.step(body, self.params["solve_budget"])
         if self.retarget.over_budget > over:
             self._drop("the solve ran past solve_budget: the last robot pose held")
+        assert self.limiter is not None  # made with the retarget
+        command, velocity = self.limiter(body.stamp, robot.positions, robot.fresh)
         base = published_precision(np.concatenate([robot.base_position, robot.base_quat]))[None, None]
-        refused = _unpublishable(robot.positions, base[0, 0], self.retarget.lower, self.retarget.upper)
+        refused = _unpublishable(command, base[0, 0], self.retarget.lower, self.retarget.upper)
         if refused:
             self._drop(f"not published: {refused}")
             return
-        self.pub_joints.publish(cdr.joint_state_messages([body.stamp], self.retarget.names, robot.positions[None])[0])
+        joints = cdr.joint_state_messages([body.stamp], self.retarget.names, command[None], velocity[None])
+        self.pub_joints.publish(joints[0])
         child = self.params["frame_prefix"] + self.retarget.mapping.base
         self.pub_tf.publish(cdr.tf_messages([body.stamp], (self.params["fixed_frame"],), (child,), base)[0])
         self._published += 1
@@ -283,7 +290,13 @@ class RetargetNode(LifecycleNode):
             hardware_id="sparse_body",
             level=DiagnosticStatus.WARN if recent else DiagnosticStatus.OK,
             message=f"inputs dropped in the last {window:g} s" if recent else "ok",
-            values=[KeyValue(key="published", value=str(self._published))]
+            values=[
+                KeyValue(key="published", value=str(self._published)),
+                KeyValue(
+                    key="commands held to a velocity or acceleration limit",
+                    value=str(self.limiter.limited if self.limiter is not None else 0),
+                ),
+            ]
             + [KeyValue(key=f"dropped: {reason}", value=str(n)) for reason, n in sorted(self._dropped.items())],
         )
         array = DiagnosticArray(status=[status])

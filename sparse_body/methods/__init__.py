@@ -21,6 +21,7 @@ NAMES = (
     "dragposer",
     "refined",
     "blend",
+    "upright",
     "dtp",
     "avatarjlm",
 )

@@ -89,7 +89,7 @@ def test_listing_the_methods_imports_no_methods_code():
     import sys
 
     code = (
-        "import sys, sparse_body.methods as m; assert len(m.METHODS) == 8; "
+        "import sys, sparse_body.methods as m; assert len(m.METHODS) == 9; "
         "print(sorted(k for k in sys.modules if k.startswith('sparse_body.methods.') and '.' in k[20:]) "
         "+ [k for k in ('torch', 'onnxruntime') if k in sys.modules])"
     )

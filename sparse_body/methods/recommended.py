@@ -2,23 +2,25 @@
 command and of the node's `estimator` parameter): one per sensor configuration, chosen by
 the worst kind of motion rather than the average (docs/methods.md, "The default estimator").
 
-A default must hold on every kind a user brings. The learned regressors (LoBSTr, AvatarJLM)
-do best on upright motion like CMU's training, and break where the body leaves it (another
-lab's lying on the floor: LoBSTr 1.57x IK's leg error, AvatarJLM 1.38x); DragPoser's search
-over its pose prior meets the trackers whatever the pose, and held 0.65x IK there (the
-filer's figures, issue 73). Which estimator each configuration gets, and the per-kind table
-behind it, is in docs/methods.md; a configuration not named here (a user's YAML) gets
-DragPoser, which takes any subset of the six trackers.
+A default must hold on every kind a user brings. The learned regressors do best on upright
+motion like CMU's training and break where the body leaves it: another lab's lying on the floor
+gave LoBSTr 1.57x IK's leg error (issue 73), and on the floor part here (`eval --split floor`)
+every learned four-point estimator was 1.6-2.8x IK's on some way of lying. A configuration not
+named here (a user's YAML) gets DragPoser, which takes any subset of the six trackers.
 """
 
 from __future__ import annotations
 
 AUTO = "auto"
-# sensor configuration -> estimator spec
+# sensor configuration -> estimator spec, chosen by the worst kind of motion over three sets none
+# trains on (docs/methods.md, "The default estimator"): the selection, cmu-extra, the floor part
 RECOMMENDED = {
-    "three_point": "dragposer",
-    "four_point": "dragposer",
-    "six_point": "ik",
+    # worst kind 0.91x IK's MPJPE (blend), 0.93x (avatarjlm), 1.07x (dragposer: one-leg balances)
+    "three_point": "blend",
+    # LoBSTr while upright, IK as the body lies down: worst kind 1.06x IK's leg error (lying on
+    # the front); LoBSTr alone 2.82x there, DragPoser 2.40x, blend 1.71x
+    "four_point": "upright",
+    "six_point": "ik",  # the feet tracked: not chosen again this wave
 }
 OTHERWISE = "dragposer"
 

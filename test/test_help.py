@@ -35,3 +35,13 @@ def test_every_option_has_help_with_its_default_said_once_and_names_as_in_the_us
         for word in re.findall(r"\b[A-Z][A-Z_]{1,}\b", action.help):
             if word in arguments:
                 assert re.search(rf"\b{word}\b", usage), f"{name} {label}: {word} is not in the usage line"
+
+
+def test_the_readme_is_short_and_names_no_maintainers_folder():
+    """A newcomer reads it in one sitting: at most 250 lines (it reached 289), and no folder
+    only the maintainers have."""
+    from pathlib import Path
+
+    text = (Path(__file__).resolve().parents[1] / "README.md").read_text()
+    assert len(text.splitlines()) <= 250, len(text.splitlines())
+    assert "../shared" not in text and "Maintainers" not in text

@@ -257,7 +257,7 @@ def test_cli_refuses_bad_arguments_and_lists_what_is_there(tmp_path, capsys):
     with pytest.raises(SystemExit):
         main(["process", "--help"])
     help_text = capsys.readouterr().out
-    assert "(default: ik)" in help_text and "six_point" in help_text and "lobstr" in help_text
+    assert "(default: auto)" in help_text and "six_point" in help_text and "lobstr" in help_text
 
 
 def test_setup_py_defers_to_pyproject():

@@ -48,8 +48,8 @@ def test_unknown_estimator_and_missing_sites_are_clear_errors():
     config = load_sensor_config("three_point")
     with pytest.raises(
         ValueError,
-        match="unknown estimator 'lobstr2'; available: avatarjlm, blend, dragposer, dtp, ik, lobstr, reference, "
-        "refined",
+        match="unknown estimator 'lobstr2'; available: auto, avatarjlm, blend, dragposer, dtp, ik, lobstr, reference, "
+        "refined, upright",
     ):
         create_estimator("lobstr2", config, synthetic_walk(0.1).skeleton)
     hands = config.subset(["left_hand", "right_hand"])

@@ -18,7 +18,7 @@ def run(args) -> int:
     from ...methods.factory import check_estimator_name
     from ...methods.recommended import resolve_estimator
     from ..batch import SUMMARY, Settings, expand_inputs, is_bag, process_many
-    from ..offline import process_bag, sensors_for_bag
+    from ..offline import process_bag
 
     check_estimator_name(parse_estimator_spec(args.estimator)[0])
     body = person_body(args.calibration, args.height)
@@ -43,8 +43,9 @@ def run(args) -> int:
     bags = expand_inputs(inputs) if many or args.cluster else inputs
     if not bags:
         raise BagError(f"{', '.join(map(str, inputs))}: no bags there")
-    # the trackers the (first) bag holds choose the configuration, unless --sensors names one
-    sensors, chosen = sensors_for_bag(bags[0], args.sensors)
+    # the trackers the (first readable) bag holds choose the configuration, unless --sensors
+    # names one; of many, a bag that cannot be read fails alone, as in the run
+    sensors, chosen = _sensors_of(bags, args.sensors, many or bool(args.cluster))
     if args.sensors is None:
         print(chosen)
     spec = resolve_estimator(args.estimator, sensors.name)
@@ -112,6 +113,25 @@ def run(args) -> int:
     if result.never_usable:
         print(f"note: {', '.join(result.never_usable)} never had a usable pose in {args.bag_in[0]}: held where unknown")
     return 0
+
+
+def _sensors_of(bags: list[Path], given: str | None, many: bool):
+    """sensors_for_bag of the first bag that can be read (of one bag: its error)."""
+    from ...core.sensors import load_sensor_config
+    from ...io.bagio import BagError
+    from ..offline import sensors_for_bag
+
+    if many and given is not None:  # each bag's trackers are checked as it is processed
+        sensors = load_sensor_config(given)
+        return sensors, f"trackers: {sensors.name} (as given)"
+    first_error = None
+    for bag in bags if many else bags[:1]:
+        try:
+            return sensors_for_bag(bag, given)
+        except BagError as err:
+            first_error = first_error or err
+    assert first_error is not None
+    raise first_error
 
 
 def add_parser(sub) -> None:

@@ -64,3 +64,26 @@ def run_demo_metrics() -> dict:
 
     with tempfile.TemporaryDirectory() as folder:
         return run_demo(Path(folder), load_sensor_config("six_point"), "ik", mocap_root=None, seconds=3.0, gif=False)
+
+
+def test_the_animation_follows_the_body_large_with_a_head_and_labelled_axes(tmp_path):
+    """The GIF once framed a 6.5 m box: the body about 100 px tall in 560, no z label, the head
+    a square. Now a 2.5 m box follows the pelvis."""
+    import numpy as np
+
+    from sparse_body.apps.demo import FOLLOW_HALF, animate, follow_box
+    from sparse_body.data.synthetic import synthetic_walk
+
+    walk = synthetic_walk(4.0)
+    positions = walk.positions
+    centres, top = follow_box(positions, 0.0)
+    assert np.abs(centres - positions[:, 0, :2]).max() < FOLLOW_HALF / 2  # the box stays on the body
+    assert top > positions[..., 2].max() + 0.3
+    animate(tmp_path / "a.gif", positions, positions, positions[:, [15, 20, 21]], walk.fps, "walk")
+    gif = Image.open(tmp_path / "a.gif")
+    for k in (0, gif.n_frames - 1):  # the body as large at the end of the walk as at its start
+        gif.seek(k)
+        image = np.asarray(gif.convert("RGB"), dtype=int)
+        blue = np.all(np.abs(image - [0x1F, 0x77, 0xB4]) < 40, axis=-1)  # tab:blue, the estimate
+        rows = np.flatnonzero(blue.any(axis=1))
+        assert rows[-1] - rows[0] > 150, (k, rows[-1] - rows[0])

@@ -75,23 +75,12 @@ def animate(
 
     step = gif_step(fps)
     idx = np.arange(0, len(truth), step)
-    both = np.concatenate([truth.reshape(-1, 3), estimate.reshape(-1, 3)])
-    both = both[np.all(np.isfinite(both), axis=1)]
-    floor = float(truth[..., 2].min())
-    low, high = both.min(axis=0) - 0.15, both.max(axis=0) + 0.15
-    low[2], high[2] = floor, max(high[2], floor + 1.0)
-    # at least 1.5 m across: a walk along x otherwise leaves a sliver whose y ticks run together
-    middle, half = (low[1] + high[1]) / 2, max((high[1] - low[1]) / 2, 0.75)
-    low[1], high[1] = middle - half, middle + half
-    extent = high - low  # metres along x, y, z: the box's shape
-    ticks = [np.arange(np.ceil(low[k]), high[k] + 1e-9, 1.0 if extent[k] > 3.0 else 0.5) for k in (0, 1)]
+    floor = float(np.nanmin(truth[..., 2]))
+    centres, top = follow_box(truth, floor)
+    extent = np.array([2 * FOLLOW_HALF, 2 * FOLLOW_HALF, top - floor])  # metres along x, y, z: the box's shape
     fig = plt.figure(figsize=(size_px / 100, size_px / 100), dpi=100)
-    ax = cast(Axes3D, fig.add_axes((0.02, 0.04, 0.96, 0.86), projection="3d"))
+    ax = cast(Axes3D, fig.add_axes((0.0, 0.02, 0.98, 0.9), projection="3d"))
     canvas = cast(FigureCanvasAgg, fig.canvas)  # Agg, chosen above
-    grid = (
-        np.arange(np.floor(low[0] * 2) / 2, high[0] + 0.5, 0.5),
-        np.arange(np.floor(low[1] * 2) / 2, high[1] + 0.5, 0.5),
-    )
     legend = [
         Line2D([], [], color="0.6", lw=2, label="truth"),
         Line2D([], [], color="tab:blue", lw=2, label="estimate"),
@@ -100,28 +89,32 @@ def animate(
     frames = []
     for i in idx:
         ax.cla()
+        low = np.array([centres[i, 0] - FOLLOW_HALF, centres[i, 1] - FOLLOW_HALF, floor])
+        high = np.array([centres[i, 0] + FOLLOW_HALF, centres[i, 1] + FOLLOW_HALF, top])
         ax.set_xlim(low[0], high[0])
         ax.set_ylim(low[1], high[1])
         ax.set_zlim(low[2], high[2])
-        # equal axes (a metre is a metre), zoomed so that the tick and axis labels stay inside
-        # the picture (at 1.1 the x label was cut off and the y ticks ran into it)
-        ax.set_box_aspect(tuple(extent), zoom=0.9)
+        # equal axes (a metre is a metre): the box follows the body (a walk's whole path in one
+        # box left it 100 px tall in 560), zoomed so that the labels stay inside the picture
+        ax.set_box_aspect(tuple(extent), zoom=0.98)
         ax.grid(False)  # the floor grid below is the scale
-        ax.set_xticks(ticks[0])  # whole metres (half metres on a short side): labels that do not touch
-        ax.set_yticks(ticks[1])
-        ax.set_xlabel("x [m]", fontsize=7, labelpad=7)
-        ax.set_ylabel("y [m]", fontsize=7, labelpad=2)
-        ax.tick_params(labelsize=6, pad=0)
-        ax.set_zticks([])
+        for k, setter in enumerate((ax.set_xticks, ax.set_yticks, ax.set_zticks)):
+            setter(np.arange(np.ceil(low[k] * 2) / 2, high[k] + 1e-9, 0.5 if k < 2 else 1.0))
+        ax.set_xlabel("x [m]", fontsize=8, labelpad=4)
+        ax.set_ylabel("y [m]", fontsize=8, labelpad=4)
+        ax.set_zlabel("z [m]", fontsize=8, labelpad=2)
+        ax.tick_params(labelsize=7, pad=0)
+        grid = (np.arange(np.ceil(low[0] * 2) / 2, high[0], 0.5), np.arange(np.ceil(low[1] * 2) / 2, high[1], 0.5))
         for x in grid[0]:  # the floor, 0.5 m squares
-            ax.plot([x, x], [grid[1][0], grid[1][-1]], [floor, floor], color="0.85", lw=0.6)
+            ax.plot([x, x], [low[1], high[1]], [floor, floor], color="0.85", lw=0.6)
         for y in grid[1]:
-            ax.plot([grid[0][0], grid[0][-1]], [y, y], [floor, floor], color="0.85", lw=0.6)
+            ax.plot([low[0], high[0]], [y, y], [floor, floor], color="0.85", lw=0.6)
         for n, (pos, colour) in enumerate(((truth[i], "0.6"), (estimate[i], "tab:blue"))):
             for j in range(1, len(PARENTS)):
                 ax.plot(*zip(pos[PARENTS[j]], pos[j], strict=True), color=colour, lw=2)
-            if tops is not None:
-                ax.plot(*zip(pos[HEAD], tops[n][i], strict=True), color=colour, lw=5)
+            if tops is not None:  # the head, a ball between the head joint and the skull's top
+                ball = (pos[HEAD] + tops[n][i]) / 2
+                ax.scatter(*ball, color=colour, s=110, depthshade=False)
         tr = trackers[i][np.all(np.isfinite(trackers[i]), axis=1)]
         ax.scatter(tr[:, 0], tr[:, 1], tr[:, 2], color="tab:red", s=20)
         ax.legend(handles=legend, loc="upper left", fontsize=7, frameon=False)
@@ -131,6 +124,22 @@ def animate(
     plt.close(fig)
     delay_ms = round(1000 * step / fps)  # whole centiseconds (gif_step)
     frames[0].save(path, save_all=True, append_images=frames[1:], duration=delay_ms, loop=0)
+
+
+FOLLOW_HALF = 1.25  # m: the picture's box reaches this far from the pelvis (2.5 m across)
+FOLLOW_SMOOTH = 0.5  # s: the box's centre is the pelvis averaged over this long (it does not shake)
+
+
+def follow_box(truth: np.ndarray, floor: float) -> tuple[np.ndarray, float]:
+    """(each frame's box centre (frames, 2), the box's top): centred on the pelvis, smoothed
+    over FOLLOW_SMOOTH at 60 Hz, the top a margin above the highest head."""
+    pelvis = np.asarray(truth[:, 0, :2], float)
+    width = max(1, int(FOLLOW_SMOOTH * 60) | 1)
+    padded = np.pad(pelvis, ((width // 2, width // 2), (0, 0)), mode="edge")
+    kernel = np.ones(width) / width
+    centres = np.stack([np.convolve(padded[:, k], kernel, mode="valid") for k in (0, 1)], axis=1)
+    top = max(float(np.nanmax(truth[..., 2])) + 0.35, floor + 2.0)
+    return centres, top
 
 
 # Why a metric has no value, when the motion gives it none.

@@ -29,7 +29,7 @@ from ..io.cdr import TfRow
 MAX_FPS = 30.0  # frames drawn a second: WebGL redraws 3D scenes whole
 MAX_FRAMES = 9000  # five minutes at 30 frames a second; longer recordings are drawn sparser
 FOLLOW_HALF_WIDTH = 0.75  # of the body's height: the followed box reaches this far from the pelvis
-FOLLOW_HEIGHT = 1.1  # of the body's height: the box's top above the floor
+FOLLOW_HEIGHT = 1.3  # of the body's height: the box's top above the floor (1.1 left the head at the edge)
 ERROR_RANGE_CM = 20.0  # the colour scale's top: an error this large is fully red
 BONES = [(PARENTS[j], j) for j in range(1, NUM_JOINTS)]
 

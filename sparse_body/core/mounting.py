@@ -79,28 +79,25 @@ def fit_mounting(
 
     times (n,) seconds, positions (n, 3), quats (n, 4) x y z w: the joint's orientation (the
     T-pose calibration applied); nominal (3,): the configuration's translation. Non-finite
-    samples are skipped. The times give the samples' order and their mean rate; windows are
-    cut by count of samples received at that rate."""
+    samples are skipped."""
     times, positions, quats = (np.asarray(a, dtype=float) for a in (times, positions, quats))
     nominal = np.asarray(nominal, dtype=float)
     ok = np.all(np.isfinite(positions), axis=1) & np.all(np.isfinite(quats), axis=1) & np.isfinite(times)
     ok[ok] = np.linalg.norm(quats[ok], axis=1) > 0.5
     times, positions, quats = times[ok], positions[ok], quats[ok]
     order = np.argsort(times, kind="stable")
-    positions = positions[order]
+    times, positions = times[order], positions[order]
     rotations = Rotation.from_quat(quats[order]).as_matrix() if len(order) else np.zeros((0, 3, 3))
-    # The clock of the windows and of each window's trend is the samples as received, at their
-    # mean rate, not their stamps: a starved machine stamps samples late and unevenly (a
-    # burst of them at one instant after a stall), which bent each window's trend and emptied
-    # windows; the movement advances with the samples. With even stamps the two are the same.
-    span = float(times[order[-1]] - times[order[0]]) if len(order) > 1 else 0.0
-    times = np.arange(len(order)) * (span / (len(order) - 1) if span > 0 else 1.0 / 60.0)
     min_turn = np.deg2rad(MIN_TURN_DEG)
     A, b, frames, residuals = np.zeros((3, 3)), np.zeros(3), 0, []
     for idx in _windows(times, window):
         if len(idx) < 10:
             continue
-        dp, dr = _detrended(times[idx], positions[idx]), _detrended(times[idx], rotations[idx])
+        # each window's trend over its samples in the order received, not their stamps: a starved
+        # machine stamps samples late and in bursts (many at one instant after a stall), which
+        # bent the trend; the movement advances with the samples
+        order = np.arange(len(idx), dtype=float)
+        dp, dr = _detrended(order, positions[idx]), _detrended(order, rotations[idx])
         Aw, bw = np.einsum("tki,tkj->ij", dr, dr), np.einsum("tki,tk->i", dr, dp)
         if np.sqrt(np.linalg.eigvalsh(Aw)[-1] / len(idx)) < min_turn:
             continue  # the segment held still: nothing to learn

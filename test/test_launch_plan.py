@@ -26,36 +26,47 @@ def _launch_module():
     return module
 
 
+# every launch argument, as the launch file declares them with their defaults
+ARGUMENTS = {
+    "sensors": "six_point",
+    "estimator": "auto",
+    "model_path": "",
+    "height": "1.75",
+    "calibration": "",
+    "bag": "",
+    "refine": "false",
+    "robot_state_publisher": "true",
+    "foxglove_port": "0",
+    "foxglove_host": "127.0.0.1",
+    "step_budget": "0.0",
+    "budget_fallback": "ik",
+    "predict_ahead": "0.0",
+    "foot_lock": "false",
+    "robot": "",
+    "robot_urdf": "",
+    "rviz": "false",
+}
+
+
+def _context(**given):
+    """A launch context holding the launch arguments, these given ones over the defaults."""
+    from launch import LaunchContext
+
+    context = LaunchContext()
+    for name, value in {**ARGUMENTS, **given}.items():
+        context.launch_configurations[name] = value
+    return context
+
+
 def test_a_missing_robot_state_publisher_is_said_and_nothing_is_started_for_it(monkeypatch):
     """It used to fail after the estimator had started, leaving it running as an orphan."""
     from launch.actions import LogInfo
     from launch_ros.actions import Node
 
-    from launch import LaunchContext
-
     module = _launch_module()
     monkeypatch.setattr(module, "_installed", lambda package: package != "robot_state_publisher")
     monkeypatch.setattr(module, "get_package_share_directory", lambda package: str(Path(__file__).resolve().parents[1]))
-    context = LaunchContext()
-    for name, value in {
-        "sensors": "three_point",
-        "estimator": "reference",
-        "model_path": "",
-        "height": "1.75",
-        "calibration": "",
-        "bag": "",
-        "refine": "false",
-        "robot_state_publisher": "true",
-        "foxglove_port": "0",
-        "foxglove_host": "127.0.0.1",
-        "step_budget": "0.0",
-        "budget_fallback": "ik",
-        "predict_ahead": "0.0",
-        "foot_lock": "false",
-        "robot": "",
-        "robot_urdf": "",
-    }.items():
-        context.launch_configurations[name] = value
+    context = _context(sensors="three_point", estimator="reference")
     actions = module._nodes(context)
     assert any(isinstance(a, LogInfo) for a in actions)
     assert not any(
@@ -65,7 +76,6 @@ def test_a_missing_robot_state_publisher_is_said_and_nothing_is_started_for_it(m
 
 
 def test_a_calibration_file_is_the_body_of_the_estimator_and_of_robot_state_publisher(monkeypatch, tmp_path):
-    from launch import LaunchContext
     from sparse_body.core.calibration import Calibration
     from sparse_body.core.skeleton import Skeleton
     from sparse_body.io.urdf import body_urdf
@@ -79,26 +89,7 @@ def test_a_calibration_file_is_the_body_of_the_estimator_and_of_robot_state_publ
     offsets = Skeleton.canonical(1.62).offsets.copy()
     offsets[18] *= 1.2  # a long left upper arm
     Calibration(1.62, 0.0, {}, Skeleton(offsets)).save(tmp_path / "me.yaml")
-    context = LaunchContext()
-    for name, value in {
-        "sensors": "six_point",
-        "estimator": "ik",
-        "model_path": "",
-        "height": "1.75",
-        "calibration": str(tmp_path / "me.yaml"),
-        "bag": "",
-        "refine": "false",
-        "robot_state_publisher": "true",
-        "foxglove_port": "0",
-        "foxglove_host": "0.0.0.0",
-        "step_budget": "0.0",
-        "budget_fallback": "ik",
-        "predict_ahead": "0.0",
-        "foot_lock": "false",
-        "robot": "",
-        "robot_urdf": "",
-    }.items():
-        context.launch_configurations[name] = value
+    context = _context(estimator="ik", calibration=str(tmp_path / "me.yaml"), foxglove_host="0.0.0.0")
     actions = module._nodes(context)
     estimator = next(kw for kind, kw in actions if kind == "lifecycle")
     assert estimator["parameters"][1]["calibration"] == str(tmp_path / "me.yaml")
@@ -110,14 +101,12 @@ def test_a_calibration_file_is_the_body_of_the_estimator_and_of_robot_state_publ
 
 
 def test_robot_starts_the_retarget_node_with_the_mapping_and_the_sensors_fixed_frame(monkeypatch):
-    from launch import LaunchContext
 
     module = _launch_module()
     monkeypatch.setattr(module, "_installed", lambda package: True)
     monkeypatch.setattr(module, "get_package_share_directory", lambda package: str(Path(__file__).resolve().parents[1]))
     monkeypatch.setattr(module, "LifecycleNode", lambda **kw: ("lifecycle", kw))
     monkeypatch.setattr(module, "Node", lambda **kw: ("node", kw))
-    context = LaunchContext()
     settings = {
         "sensors": "four_point",
         "estimator": "ik",
@@ -136,8 +125,7 @@ def test_robot_starts_the_retarget_node_with_the_mapping_and_the_sensors_fixed_f
         "robot": "unitree_h1",
         "robot_urdf": "/robots/h1.urdf",
     }
-    for name, value in settings.items():
-        context.launch_configurations[name] = value
+    context = _context(**settings)
     started = [kw for kind, kw in module._nodes(context) if kind == "lifecycle"]
     retarget = next(kw for kw in started if kw["executable"] == "retarget_node")
     assert retarget["parameters"][0] == {
@@ -155,7 +143,6 @@ def test_robot_starts_the_retarget_node_with_the_mapping_and_the_sensors_fixed_f
 def test_rviz_asked_for_and_not_installed_refuses_the_launch_before_any_node_starts(monkeypatch):
     """The launch used to exit 1 ("package 'rviz2' not found") after starting the estimator,
     which then kept publishing with parent pid 1: a second launch saw two estimators."""
-    from launch import LaunchContext
 
     module = _launch_module()
     monkeypatch.setattr(module, "_installed", lambda package: package != "rviz2")
@@ -163,28 +150,7 @@ def test_rviz_asked_for_and_not_installed_refuses_the_launch_before_any_node_sta
     started = []
     monkeypatch.setattr(module, "LifecycleNode", lambda **kw: started.append(kw) or ("lifecycle", kw))
     monkeypatch.setattr(module, "Node", lambda **kw: started.append(kw) or ("node", kw))
-    context = LaunchContext()
-    settings = {
-        "sensors": "six_point",
-        "estimator": "ik",
-        "model_path": "",
-        "height": "1.75",
-        "calibration": "",
-        "bag": "",
-        "refine": "false",
-        "robot_state_publisher": "true",
-        "foxglove_port": "0",
-        "foxglove_host": "127.0.0.1",
-        "step_budget": "0.0",
-        "budget_fallback": "ik",
-        "predict_ahead": "0.0",
-        "foot_lock": "false",
-        "robot": "",
-        "robot_urdf": "",
-        "rviz": "true",
-    }
-    for name, value in settings.items():
-        context.launch_configurations[name] = value
+    context = _context(sensors="six_point", estimator="ik", robot_state_publisher="true", rviz="true")
     with pytest.raises(RuntimeError, match=r"rviz2\) is not installed.*nothing was started"):
         module._nodes(context)
     assert started == []

@@ -157,16 +157,7 @@ def test_an_ordinary_but_unusable_joint_state_stops_neither_the_constraint_nor_t
 
     walk = estimate_motion(synthetic_walk(2.0), "ik", load_sensor_config("six_point"))
     robot = write_robot(tmp_path / "robot")
-    params = {"robot": str(robot), "autostart": True, "warn_window": 1.0}
-    retarget = start_node(NODE, params, "sparse_body_retarget", tmp_path, ros_env)
-    refiner = start_node(
-        "sparse_body.ros.constraint_node",
-        {"sensors": "six_point", "autostart": True},
-        "sparse_body_constraint",
-        tmp_path,
-        ros_env,
-        remaps={"input/joint_states": "/joint_states"},
-    )
+    retarget, refiner = _both_readers({"robot": str(robot), "autostart": True, "warn_window": 1.0}, tmp_path, ros_env)
     listener = Listener(
         rclpy, {"robot/joint_states": JointState, "/diagnostics": DiagnosticArray, "/tf": TFMessage}, qos={"/tf": 500}
     )
@@ -227,6 +218,21 @@ def test_an_ordinary_but_unusable_joint_state_stops_neither_the_constraint_nor_t
     assert DiagnosticStatus.WARN in levels and levels[-1] == DiagnosticStatus.OK, levels
 
 
+def _both_readers(retarget_params: dict, tmp_path, ros_env):
+    """The two nodes that read the body's JointState: the retarget node (these parameters) and
+    the constraint node on the estimator's joint_states."""
+    retarget = start_node(NODE, retarget_params, "sparse_body_retarget", tmp_path, ros_env)
+    refiner = start_node(
+        "sparse_body.ros.constraint_node",
+        {"sensors": "six_point", "autostart": True},
+        "sparse_body_constraint",
+        tmp_path,
+        ros_env,
+        remaps={"input/joint_states": "/joint_states"},
+    )
+    return retarget, refiner
+
+
 def node_gone(*procs) -> bool:
     return any(p.poll() is not None for p in procs)
 
@@ -242,15 +248,7 @@ def test_generated_joint_states_stop_neither_node_nor_give_a_non_finite_robot(ro
     walk = estimate_motion(synthetic_walk(2.0), "ik", load_sensor_config("six_point"))
     robot = write_robot(tmp_path / "robot")
     lower, upper = load_urdf(tmp_path / "robot" / "test_humanoid.urdf").limits()
-    retarget = start_node(NODE, {"robot": str(robot), "autostart": True}, "sparse_body_retarget", tmp_path, ros_env)
-    refiner = start_node(
-        "sparse_body.ros.constraint_node",
-        {"sensors": "six_point", "autostart": True},
-        "sparse_body_constraint",
-        tmp_path,
-        ros_env,
-        remaps={"input/joint_states": "/joint_states"},
-    )
+    retarget, refiner = _both_readers({"robot": str(robot), "autostart": True}, tmp_path, ros_env)
     listener = Listener(rclpy, {"robot/joint_states": JointState}, qos={"robot/joint_states": 1000})
     latched = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL)
     pub_urdf = listener.node.create_publisher(String, "robot_description", latched)

@@ -96,8 +96,8 @@ def fit_mounting(
         # each window's trend over its samples in the order received, not their stamps: a starved
         # machine stamps samples late and in bursts (many at one instant after a stall), which
         # bent the trend; the movement advances with the samples
-        order = np.arange(len(idx), dtype=float)
-        dp, dr = _detrended(order, positions[idx]), _detrended(order, rotations[idx])
+        received = np.arange(len(idx), dtype=float)
+        dp, dr = _detrended(received, positions[idx]), _detrended(received, rotations[idx])
         Aw, bw = np.einsum("tki,tkj->ij", dr, dr), np.einsum("tki,tk->i", dr, dp)
         if np.sqrt(np.linalg.eigvalsh(Aw)[-1] / len(idx)) < min_turn:
             continue  # the segment held still: nothing to learn

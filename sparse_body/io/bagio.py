@@ -311,12 +311,10 @@ def write_tracker_bag(
             writer.write(conn, log_ns[i], data)
 
 
-def read_tf_messages(path: Path) -> list[tuple[float, list]]:
-    """Every /tf message of a bag as (seconds from the first message, its transforms as
-    cdr.read_tf rows (parent, child, stamp, (tx, ty, tz, qx, qy, qz, qw)))): what the tracker
-    bridge replays, read as the live node and read_tracker_stream read /tf."""
+def _tf_messages(path: Path):
+    """Each /tf message of a bag as (seconds from the first message, its cdr.read_tf rows), read
+    as they are wanted; BagError (one line) for a bag without /tf or one that cannot be read."""
     path = Path(path)
-    out: list[tuple[float, list]] = []
     try:
         with Reader(path) as reader:
             conns = [c for c in reader.connections if c.topic == TF_TOPIC]
@@ -325,11 +323,18 @@ def read_tf_messages(path: Path) -> list[tuple[float, list]]:
             first = None
             for _, log_ns, raw in reader.messages(connections=conns):
                 first = log_ns if first is None else first
-                out.append(((log_ns - first) * 1e-9, cdr.read_tf(raw)))
+                yield (log_ns - first) * 1e-9, cdr.read_tf(raw)
     except BagError:
         raise
     except Exception as err:  # noqa: BLE001 - rosbags' and the decoder's errors: a bag we cannot read
         raise BagError(f"{path}: cannot be read as a rosbag2 ({err})") from None
+
+
+def read_tf_messages(path: Path) -> list[tuple[float, list]]:
+    """Every /tf message of a bag as (seconds from the first message, its transforms as
+    cdr.read_tf rows (parent, child, stamp, (tx, ty, tz, qx, qy, qz, qw)))): what the tracker
+    bridge replays, read as the live node and read_tracker_stream read /tf."""
+    out = list(_tf_messages(path))
     if not out:  # a loop over nothing would spin a core
         raise BagError(f"{path}: no {TF_TOPIC} messages to play")
     return out
@@ -338,25 +343,15 @@ def read_tf_messages(path: Path) -> list[tuple[float, list]]:
 def tf_frames(path: Path, wanted: set[str] | None = None, seconds: float | None = None) -> set[str]:
     """The child frames /tf moves in a bag: all of them, or read until every frame of `wanted`
     was seen, or for the first `seconds` of the bag (whichever ends first)."""
-    path = Path(path)
     found: set[str] = set()
-    try:
-        with Reader(path) as reader:
-            conns = [c for c in reader.connections if c.topic == TF_TOPIC]
-            if not conns:
-                raise BagError(f"{path}: no {TF_TOPIC} topic")
-            first = None
-            for _, log_ns, raw in reader.messages(connections=conns):
-                first = log_ns if first is None else first
-                if seconds is not None and (log_ns - first) * 1e-9 > seconds:
-                    break
-                found.update(child for _, child, _, _ in cdr.read_tf(raw))
-                if wanted is not None and wanted <= found:
-                    break
-    except BagError:
-        raise
-    except Exception as err:  # noqa: BLE001 - rosbags' and the decoder's errors: a bag we cannot read
-        raise BagError(f"{path}: cannot be read as a rosbag2 ({err})") from None
+    messages = _tf_messages(path)
+    for at, rows in messages:
+        if seconds is not None and at > seconds:
+            break
+        found.update(child for _, child, _, _ in rows)
+        if wanted is not None and wanted <= found:
+            break
+    messages.close()  # (the bag closed now, not when the generator is collected)
     return found
 
 

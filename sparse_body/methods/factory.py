@@ -70,3 +70,17 @@ def create_estimator(name: str, sensors: SensorConfig, skeleton: Skeleton, fps: 
     estimator.use_forecast(float(ahead), root)
     estimator.use_foot_lock(foot_lock and not feet_tracked(sensors))
     return estimator
+
+
+def inner_estimators(outer: Estimator, names: tuple[str, ...]) -> list[Estimator]:
+    """The estimators a combining one (blend, upright) steps inside itself, by name: each with
+    its own defaults and shipped model, its legs as its method gives them (the outer one's
+    foot_lock holds the result), reading the outer one's filtered targets (its filter has
+    done the filtering)."""
+    from ..core.tracker_filter import NO_FILTER
+
+    inner = [create_estimator(name, outer.sensors, outer.skeleton, outer.fps, foot_lock=False) for name in names]
+    for estimator in inner:
+        estimator.use_filter(NO_FILTER)
+        estimator.read_targets_from(outer)
+    return inner

@@ -25,10 +25,9 @@ from ...core.kinematics import forward_kinematics
 from ...core.mat3 import quat_matrices
 from ...core.rotations import slerp
 from ...core.skeleton import LOWER_BODY, joint_indices
-from ...core.tracker_filter import NO_FILTER
 from ...core.types import BodyPose
 from ...estimators.base import Estimator
-from ..factory import create_estimator
+from ..factory import inner_estimators
 from .options import BlendOptions
 
 
@@ -53,11 +52,7 @@ class BlendEstimator(Estimator):
         self.keep = float(np.exp(-1.0 / (settle * fps))) if settle > 0 else 0.0  # of the share, a frame
         self.share = self.weight
         self.legs = joint_indices(LOWER_BODY)
-        # each part's legs as its method gives them: the blend's own foot_lock holds the mean's
-        self.parts = [create_estimator(name, sensors, skeleton, fps, foot_lock=False) for name in (first, second)]
-        for inner in self.parts:
-            inner.use_filter(NO_FILTER)  # this estimator's filter has done it
-            inner.read_targets_from(self)
+        self.parts = inner_estimators(self, (first, second))
         # The two never share state but the frame's targets (converted before both start), so
         # the first (a network: ONNX Runtime, which lets go of the GIL) runs in a worker thread
         # while this thread runs the second: a step costs the longer of the two, not their sum

@@ -20,10 +20,9 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from ...core.rotations import slerp
-from ...core.tracker_filter import NO_FILTER
 from ...core.types import BodyPose
 from ...estimators.base import Estimator
-from ..factory import create_estimator
+from ..factory import inner_estimators
 from .options import UprightOptions
 
 
@@ -40,10 +39,7 @@ class UprightEstimator(Estimator):
         if o.lying_from <= o.upright_within:
             raise ValueError(f"lying_from ({o.lying_from}) must be above upright_within ({o.upright_within})")
         self.keep = float(np.exp(-1.0 / (o.settle * fps))) if o.settle > 0 else 0.0  # of the share, a frame
-        self.parts = [create_estimator(name, sensors, skeleton, fps, foot_lock=False) for name in (o.base, o.fallback)]
-        for inner in self.parts:
-            inner.use_filter(NO_FILTER)  # this estimator's filter has done it
-            inner.read_targets_from(self)
+        self.parts = inner_estimators(self, (o.base, o.fallback))
         names = list(sensors.site_names)
         self._head = names.index("head") if "head" in names else None
         self._pelvis = names.index("pelvis") if "pelvis" in names else None

@@ -39,3 +39,19 @@ def test_a_walk_is_the_base_s_and_a_body_lying_down_is_handed_to_the_fallback():
         late = slice(90, None)
         gap = max(np.abs(p.root_position - q.root_position).max() for p, q in zip(poses[late], ik[late], strict=True))
         assert gap < 0.01, how
+
+
+def test_eval_says_each_estimator_s_worst_kind_against_ik():
+    """Tables by kind, always: beside IK, each estimator's worst kind and its share of IK's."""
+    from sparse_body.core.results import EvalResult, format_groups
+
+    def result(name, values):
+        clips = [
+            {"clip": f"c{k}", "frames": 100, "category": kind, "MPJPE [cm]": value}
+            for k, (kind, value) in enumerate(values)
+        ]
+        return EvalResult.from_json({"estimator": name, "sensors": "four_point", "split": "floor", "clips": clips})
+
+    ik = result("ik", [("walk", 10.0), ("lying", 20.0)])
+    text = format_groups([ik, result("upright", [("walk", 6.0), ("lying", 21.0)])], by="category", label="motion")
+    assert "upright/four_point: worst kind lying, 1.05x IK's MPJPE [cm]" in text, text

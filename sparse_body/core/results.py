@@ -280,4 +280,30 @@ def format_groups(
             cells.append(text.rjust(colw))
         lines.append(named[g].ljust(width) + "".join(cells))
     lines.append("(frame-weighted mean [95 % interval, clips drawn with replacement])")
+    if by == "category":
+        lines += _worst_against_ik(results, parts, names, metric)
     return "\n".join(lines)
+
+
+def _worst_against_ik(results: list[EvalResult], parts: list[dict], kinds: list[str], metric: str) -> list[str]:
+    """For each estimator beside IK (the same sensors): its worst kind's share of IK's figure,
+    the kind a default must hold on (issue 73)."""
+    ik = next((k for k, r in enumerate(results) if r.estimator.partition(":")[0] == "ik"), None)
+    if ik is None or len(kinds) < 2:
+        return []
+    out = []
+    for k, r in enumerate(results):
+        if k == ik or r.sensors != results[ik].sensors:
+            continue
+        shares = {}
+        for g in kinds:
+            mine, base = parts[k].get(g), parts[ik].get(g)
+            if mine is None or base is None:
+                continue
+            a, b = mine.summary.get(metric, float("nan")), base.summary.get(metric, float("nan"))
+            if np.isfinite(a) and np.isfinite(b) and b > 0:
+                shares[g] = a / b
+        if shares:
+            worst = max(shares, key=shares.__getitem__)
+            out.append(f"  {r.estimator}/{r.sensors}: worst kind {worst}, {shares[worst]:.2f}x IK's {metric}")
+    return out

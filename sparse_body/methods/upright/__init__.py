@@ -8,4 +8,5 @@ METHOD = Method(
     "sparse_body.methods.upright.estimator:UprightEstimator",
     "sparse_body.methods.upright.options:UprightOptions",
     step_goal=("lobstr and ik, slerped", 3.0),
+    compare_with=("lobstr", "ik"),  # its base alone, and the baseline it hands over to
 )

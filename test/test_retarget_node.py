@@ -53,10 +53,7 @@ def test_hostile_input_is_counted_and_the_robot_stays_finite_and_within_its_limi
     lower, upper = load_urdf(tmp_path / "robot" / "test_humanoid.urdf").limits()
     node = start_node(NODE, {"robot": str(robot), "autostart": True}, "sparse_body_retarget", tmp_path, ros_env)
     listener = Listener(rclpy, {"robot/joint_states": JointState, "/diagnostics": DiagnosticArray})
-    latched = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL)
-    pub_urdf = listener.node.create_publisher(String, "robot_description", latched)
-    pub_joints = listener.node.create_publisher(JointState, "joint_states", 10)
-    pub_tf = listener.node.create_publisher(TFMessage, "/tf", 10)
+    pub_urdf, pub_joints, pub_tf = _body_publishers(listener)
     pub_contacts = listener.node.create_publisher(FootContacts, "foot_contacts", 10)
     names, angles = joint_state_names(), joint_angles(matrix_to_quat(walk.local_rotations))
     good = 0
@@ -161,10 +158,7 @@ def test_an_ordinary_but_unusable_joint_state_stops_neither_the_constraint_nor_t
     listener = Listener(
         rclpy, {"robot/joint_states": JointState, "/diagnostics": DiagnosticArray, "/tf": TFMessage}, qos={"/tf": 500}
     )
-    latched = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL)
-    pub_urdf = listener.node.create_publisher(String, "robot_description", latched)
-    pub_joints = listener.node.create_publisher(JointState, "joint_states", 10)
-    pub_tf = listener.node.create_publisher(TFMessage, "/tf", 10)
+    pub_urdf, pub_joints, pub_tf = _body_publishers(listener)
     names = joint_state_names()
     angles = joint_angles(matrix_to_quat(walk.local_rotations))
     unusable = [
@@ -218,6 +212,17 @@ def test_an_ordinary_but_unusable_joint_state_stops_neither_the_constraint_nor_t
     assert DiagnosticStatus.WARN in levels and levels[-1] == DiagnosticStatus.OK, levels
 
 
+def _body_publishers(listener):
+    """What an estimator publishes of the body, from the listener's node: its URDF (latched),
+    its JointState and /tf."""
+    latched = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL)
+    return (
+        listener.node.create_publisher(String, "robot_description", latched),
+        listener.node.create_publisher(JointState, "joint_states", 10),
+        listener.node.create_publisher(TFMessage, "/tf", 10),
+    )
+
+
 def _both_readers(retarget_params: dict, tmp_path, ros_env):
     """The two nodes that read the body's JointState: the retarget node (these parameters) and
     the constraint node on the estimator's joint_states."""
@@ -250,10 +255,7 @@ def test_generated_joint_states_stop_neither_node_nor_give_a_non_finite_robot(ro
     lower, upper = load_urdf(tmp_path / "robot" / "test_humanoid.urdf").limits()
     retarget, refiner = _both_readers({"robot": str(robot), "autostart": True}, tmp_path, ros_env)
     listener = Listener(rclpy, {"robot/joint_states": JointState}, qos={"robot/joint_states": 1000})
-    latched = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL)
-    pub_urdf = listener.node.create_publisher(String, "robot_description", latched)
-    pub_joints = listener.node.create_publisher(JointState, "joint_states", 10)
-    pub_tf = listener.node.create_publisher(TFMessage, "/tf", 10)
+    pub_urdf, pub_joints, pub_tf = _body_publishers(listener)
     names = joint_state_names()
     angles = joint_angles(matrix_to_quat(walk.local_rotations))
     sent = [0]

@@ -20,6 +20,7 @@ from ..core.types import BodyPose
 from ..estimators.base import Estimator
 from ..io.output import JointStateError, pose_from_joint_state
 from ..methods.dragposer.constraints import AboveFloor, AngleLimit, LookAt, Orientation, Position
+from .dropped import DroppedInputs
 from .estimator_node import METHOD_OPTIONS, EstimatorNode
 from .estimator_node import PARAMETERS as ESTIMATOR_PARAMETERS
 from .estimator_node import RANGES as ESTIMATOR_RANGES
@@ -146,21 +147,16 @@ class ConstraintNode(EstimatorNode):
             stamp = to_seconds(msg.header.stamp)
             self.estimator.latest = pose_from_joint_state(msg.name, msg.position, translation, rotation, stamp)
         except JointStateError as err:
-            self._drop_input(str(err))
+            self._dropped_inputs.drop(str(err))
             return
         except Exception as err:  # noqa: BLE001 - counted on /diagnostics, said once in the log
-            self._drop_input(f"{type(err).__name__}: {str(err)[:200]}")
+            self._dropped_inputs.drop(f"{type(err).__name__}: {str(err)[:200]}")
             return
         if self.timer is not None:
             self._estimate(fallback=False)
 
-    def _drop_input(self, reason: str) -> None:
-        self._dropped_inputs[reason] = self._dropped_inputs.get(reason, 0) + 1
-        if self._dropped_inputs[reason] == 1:  # said once; counted on /diagnostics after that
-            self.get_logger().warning(f"input dropped: {reason}")
-
     def _input_diagnostics(self) -> dict[str, str]:
-        return {f"dropped input: {reason}": str(n) for reason, n in sorted(self._dropped_inputs.items())}
+        return self._dropped_inputs.values("dropped input: ")
 
     def _on_set_constraint(self, request, response):
         constraints = None if self.estimator is None else self.estimator.refiner.constraints
@@ -186,7 +182,7 @@ class ConstraintNode(EstimatorNode):
         if self.srv_constraint is not None:
             self.destroy_service(self.srv_constraint)
         self.sub_input = self.srv_constraint = None
-        self._dropped_inputs: dict[str, int] = {}
+        self._dropped_inputs = DroppedInputs(self.get_logger().warning)
         super()._release()
 
 

@@ -18,7 +18,6 @@ non-finite values or a body URDF that is not one are counted on /diagnostics and
 from __future__ import annotations
 
 import functools
-import time
 
 import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
@@ -39,6 +38,7 @@ from ..io.urdf import body_skeleton
 from ..robot.limits import CommandLimiter, limiter_for
 from ..robot.retarget import MAX_BASE, HumanoidRetarget, load_retarget
 from ..robot.urdf_model import RobotFileError, read_urdf_text
+from .dropped import DroppedInputs
 from .estimator_node import check_parameter, parameter_descriptor
 from .messages import to_seconds
 from .spin import init, start_and_spin
@@ -173,16 +173,12 @@ class RetargetNode(LifecycleNode):
         self._roots: dict[int, tuple[np.ndarray, np.ndarray]] = {}  # the body's roots by stamp (ns), lately
         self._contacts: tuple[int, np.ndarray] = (-1, np.zeros(2, bool))  # the newest foot contacts
         self._invalid: set[int] = set()  # stamps (ns) of body estimates marked invalid (held) lately
-        self._dropped: dict[str, int] = {}
-        self._last_drop = -np.inf  # time.monotonic() of the newest drop
+        self._dropped = DroppedInputs(self.get_logger().warning)
         self._published = 0
 
     # -- work --------------------------------------------------------------------------------
     def _drop(self, reason: str) -> None:
-        self._dropped[reason] = self._dropped.get(reason, 0) + 1
-        self._last_drop = time.monotonic()
-        if self._dropped[reason] == 1:  # said once; counted on /diagnostics after that
-            self.get_logger().warning(f"input dropped: {reason}")
+        self._dropped.drop(reason)
 
     @_guarded("robot_description")
     def _on_description(self, msg: String) -> None:
@@ -284,7 +280,7 @@ class RetargetNode(LifecycleNode):
         if self.pub_diag is None:
             return
         window = self.params["warn_window"]
-        recent = time.monotonic() - self._last_drop < window  # the counts stay; the warning passes
+        recent = self._dropped.recent(window)  # the counts stay; the warning passes
         status = DiagnosticStatus(
             name=f"{self.get_name()}: retargeting",
             hardware_id="sparse_body",
@@ -297,7 +293,7 @@ class RetargetNode(LifecycleNode):
                     value=str(self.limiter.limited if self.limiter is not None else 0),
                 ),
             ]
-            + [KeyValue(key=f"dropped: {reason}", value=str(n)) for reason, n in sorted(self._dropped.items())],
+            + [KeyValue(key=k, value=v) for k, v in self._dropped.values("dropped: ").items()],
         )
         array = DiagnosticArray(status=[status])
         array.header.stamp = self.get_clock().now().to_msg()

@@ -1100,3 +1100,19 @@ def test_the_bridge_s_diagnostics_and_waiting_end_quietly_when_a_stop_destroys_t
     node.pub = pub  # a source thread that took the publisher before the stop
     node.params["wait_for_nodes"], node.params["min_subscribers"] = ["someone"], 1
     assert wait(threading.Event()) is False
+
+
+def test_a_body_lying_down_is_said_out_of_depth_on_estimate_status(ros_env, tmp_path):
+    """The default four-point estimator (upright) stands a lying body up for its base and says
+    so on estimate_status, valid, with the share of the tilt it took out; the joints stay finite."""
+    from sparse_body.data.floor import lying
+
+    config = load_sensor_config("four_point")
+    motion = lying(synthetic_walk(3.0), "lying on the front")
+    listener = replay_bag(rclpy, ros_env, tmp_path, motion, config, {"estimator": "auto"})
+    statuses = during_playback(listener, "estimate_status")
+    deep = [s for s in statuses if s.valid and s.message.startswith("out of depth")]
+    assert len(statuses) >= 30 and len(deep) >= 0.8 * len(statuses), {s.message for s in statuses}
+    assert "degrees from upright; blend shown it stood up" in deep[-1].message, deep[-1].message
+    assert float(deep[-1].message.split()[3].rstrip(":")) > 0.9, deep[-1].message
+    assert all(np.all(np.isfinite(m.position)) for m in listener.received["joint_states"])

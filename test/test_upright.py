@@ -1,5 +1,5 @@
-"""upright: the base estimator while the torso is upright, handed over to the fallback as the
-body lies down; the tilt that decides it flags the lying frames and none of a walk."""
+"""upright: the base estimator shown the body stood up as it lies down (or, with a fallback named,
+handed over to it); the tilt that decides it flags the lying frames and none of a walk."""
 
 import numpy as np
 
@@ -19,15 +19,58 @@ def _run(estimator, motion, sensors):
     return poses, np.array(shares)
 
 
-def test_a_walk_is_the_base_s_and_a_body_lying_down_is_handed_to_the_fallback():
+def _leg_errors(poses, motion, skeleton):
+    """Per frame, degrees between the estimate's and the body's left hip-to-ankle line."""
+    from scipy.spatial.transform import Rotation
+
+    from sparse_body.core.kinematics import forward_kinematics
+    from sparse_body.core.skeleton import JOINT_INDEX as J
+
+    def legs(local, root, offsets):
+        _, p = forward_kinematics(local, root, offsets)
+        v = p[:, J["left_ankle"]] - p[:, J["left_hip"]]
+        return v / np.linalg.norm(v, axis=1, keepdims=True)
+
+    quats = np.stack([p.local_quats for p in poses])
+    est = legs(Rotation.from_quat(quats.reshape(-1, 4)).as_matrix().reshape(len(poses), -1, 3, 3),
+               np.stack([p.root_position for p in poses]), skeleton.offsets)  # fmt: skip
+    true_local = Rotation.from_quat(motion.local_quats.reshape(-1, 4)).as_matrix().reshape(len(motion), -1, 3, 3)
+    true = legs(true_local, motion.root_positions, motion.skeleton.offsets)
+    return np.degrees(np.arccos(np.clip((est * true).sum(1), -1.0, 1.0)))
+
+
+def test_a_walk_is_the_base_s_and_a_body_lying_down_is_stood_up_for_it():
     sensors = load_sensor_config("four_point")
     walk = synthetic_walk(2.0)
-    upright = create_estimator("upright", sensors, walk.skeleton, foot_lock=False)
+    upright = create_estimator("upright", sensors, walk.skeleton, foot_lock=False, base="lobstr")
     base = create_estimator("lobstr", sensors, walk.skeleton, foot_lock=False)
     poses, shares = _run(upright, walk, sensors)
     alone, _ = _run(base, walk, sensors)
-    assert shares.max() < 0.01  # upright throughout: nothing handed over
+    assert shares.max() < 0.01  # upright throughout: nothing turned
     assert max(np.abs(p.local_quats - q.local_quats).max() for p, q in zip(poses, alone, strict=True)) < 0.02
+    standing = np.median(_leg_errors(alone, walk, walk.skeleton))
+    stood, lost = {}, {}
+    for how in LYING:
+        lain = lying(walk, how)
+        upright.reset()
+        base.reset()
+        poses, shares = _run(upright, lain, sensors)
+        alone, _ = _run(base, lain, sensors)
+        assert shares[60:].min() > 0.99, how  # lying: the whole tilt taken out, once settled
+        assert all(p.valid and p.is_finite() for p in poses), how
+        late = slice(90, None)
+        stood[how] = np.median(_leg_errors(poses[late], lain.slice(90, len(lain)), walk.skeleton))
+        lost[how] = np.median(_leg_errors(alone[late], lain.slice(90, len(lain)), walk.skeleton))
+    # stood up, the base's legs are near its own on the walk whichever way the body lies; left
+    # lying, some way of lying throws them far off
+    assert max(stood.values()) < standing + 10.0, (stood, standing)
+    assert max(stood.values()) < max(lost.values()) - 20.0, (stood, lost)
+
+
+def test_a_named_fallback_is_handed_the_lying_body():
+    sensors = load_sensor_config("four_point")
+    walk = synthetic_walk(2.0)
+    upright = create_estimator("upright", sensors, walk.skeleton, foot_lock=False, base="lobstr", fallback="ik")
     fallback = create_estimator("ik", sensors, walk.skeleton, foot_lock=False)
     for how in LYING:
         lain = lying(walk, how)

@@ -189,6 +189,12 @@ class Estimator(ABC):
             self.freeze_guard.reset()
         self._reset()
 
+    def out_of_depth(self) -> tuple[float, str] | None:
+        """How far the last frame lay outside the motion the method knows (0: within it, 1:
+        wholly outside) and what it did about it, said on estimate_status; None: the method
+        does not say (only upright does today)."""
+        return None
+
     def _reset(self) -> None:  # noqa: B027 - optional: a method without history has nothing to forget
         """Forget the method's own history (recurrent state, contacts, the last latent)."""
 

@@ -2,11 +2,12 @@
 command and of the node's `estimator` parameter): one per sensor configuration, chosen by
 the worst kind of motion rather than the average (docs/methods.md, "The default estimator").
 
-A default must hold on every kind a user brings. The learned regressors do best on upright
-motion like CMU's training and break where the body leaves it: another lab's lying on the floor
-gave LoBSTr 1.57x IK's leg error (issue 73), and on the floor part here (`eval --split floor`)
-every learned four-point estimator was 1.6-2.8x IK's on some way of lying. A configuration not
-named here (a user's YAML) gets DragPoser, which takes any subset of the six trackers.
+A default must hold on every kind a user brings. The learned models do best on upright motion
+like CMU's training and break where the body leaves it: another lab's lying on the floor gave
+LoBSTr 1.57x IK's leg error (issue 73), and on the floor part here (`eval --split floor`) every
+learned four-point estimator was 1.6-2.4x IK's on some way of lying until `upright` stood the
+body up for it. A configuration not named here (a user's YAML) gets DragPoser, which takes any
+subset of the six trackers.
 """
 
 from __future__ import annotations
@@ -17,8 +18,9 @@ AUTO = "auto"
 RECOMMENDED = {
     # worst kind 0.91x IK's MPJPE (blend), 0.93x (avatarjlm), 1.07x (dragposer: one-leg balances)
     "three_point": "blend",
-    # LoBSTr while upright, IK as the body lies down: worst kind 1.06x IK's leg error (lying on
-    # the front); LoBSTr alone 2.82x there, DragPoser 2.40x, blend 1.71x
+    # blend (AvatarJLM and DragPoser), stood up as the body lies down: worst kind 0.99x IK's leg
+    # error (the selection's acrobatics); blend alone 1.71x (lying on the front), DragPoser 2.40x,
+    # upright:base=lobstr,fallback=ik (the last wave's) 1.06x
     "four_point": "upright",
     "six_point": "ik",  # the feet tracked: not chosen again this wave
 }

@@ -179,6 +179,9 @@ RANGES = {
 }
 # how estimate_status begins for a valid pose made by budget_fallback (the step over its budget)
 OVER_BUDGET = "over budget:"
+# how it begins for a valid pose of a frame the estimator says lay outside the motion it knows
+# (Estimator.out_of_depth: upright's torso tilted past upright_within), the share following
+OUT_OF_DEPTH = "out of depth"
 # seconds a fallback tick may come later than its period before the node counts itself as
 # stalled (not running) rather than the trackers as silent
 STALL = 0.25
@@ -622,6 +625,9 @@ class EstimatorNode(LifecycleNode):
                 f"{OVER_BUDGET} {self.budgeted.fallback.name}'s pose: {self._method()} took over "
                 f"{self._step_budget() * 1000:.1f} ms"
             )
+        depth = self.budgeted.estimator.out_of_depth() if pose.valid else None
+        if depth is not None and depth[0] > 0.0:
+            return pose, f"{OUT_OF_DEPTH} {depth[0]:.2f}: {depth[1]}"
         return pose, ""
 
     def _held_reason(self, frame, no_input: bool, silent: float) -> str:

@@ -1,5 +1,5 @@
-"""An estimator used only while the body is upright, handed over to another as it lies down
-(upright:base=lobstr,fallback=ik)."""
+"""An estimator that only ever sees an upright body: as the body lies down its trackers are
+turned so that the torso stands, for the base (blend by default), and its pose turned back."""
 
 from ..record import Method
 
@@ -7,6 +7,6 @@ METHOD = Method(
     "upright",
     "sparse_body.methods.upright.estimator:UprightEstimator",
     "sparse_body.methods.upright.options:UprightOptions",
-    step_goal=("lobstr and ik, slerped", 3.0),
-    compare_with=("lobstr", "ik"),  # its base alone, and the baseline it hands over to
+    step_goal=("blend (avatarjlm and dragposer) on turned targets", 3.0),
+    compare_with=("blend", "ik"),  # its base alone, and the baseline every kind is measured against
 )

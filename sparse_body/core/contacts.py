@@ -9,7 +9,7 @@ take (the lowest toe drifts by 3-4.5 cm across a walk, subject 08's stance toes 
 over a single floor), so the floor is taken locally and speed decides, with the height only
 keeping a foot held still in the air (a balance on one leg) out of contact.
 
-Version 1 (before 2026-12-05) took one floor for the whole take (estimate_floor), a 2 cm band
+Version 1 (the first labels) took one floor for the whole take (estimate_floor), a 2 cm band
 and horizontal speed: it called 9-21 % of walking frames contacts, where a toe stands on the
 floor about 40 % of a gait cycle. Skate and contact accuracy figures say which they used.
 """

@@ -21,7 +21,7 @@ The lab protocol is the one the papers report: the true skeleton, exact mounting
 PRESETS names them (`sparse-body eval --protocol NAME`, each of its values overridden by its
 own flag): `field`, the default, a user's session with every failure at a realistic rate and
 the mounting found by the movement calibration; `field-exact`, the field before those (exact
-mounting translations, no failures: what docs tables measured before 2026-12 say they used);
+mounting translations, no failures: what the lab notes that name it used);
 and `lab`.
 """
 

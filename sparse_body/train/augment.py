@@ -17,8 +17,8 @@ skeleton), from which a trainer derives its inputs and targets as it does for th
   copy is as long as the shorter of the two. `splice=S` splices that share of the random
   variants (default 1/2).
 
-'all' names every kind; a report written before 2026-12-05 that says 'all' means the first
-three (splice did not exist yet).
+'all' names every kind; a report written before splice existed that says 'all' means the first
+three.
 
 No random heading: every model here sees the body in a heading-free frame (LoBSTr's
 pelvis-yaw reference, DragPoser's heading-split pose), so turning the clip changes nothing

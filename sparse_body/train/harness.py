@@ -111,7 +111,7 @@ def fit(
     checkpoint, log = run.checkpoint, run.log
     if run.resume and checkpoint is not None and Path(checkpoint).is_file():
         done, best, best_state, history, whole = _restore(model, Path(checkpoint), optimizer, schedule, rng)
-        # a checkpoint written before 2026-12-05 holds the weights alone: the optimiser starts afresh
+        # a checkpoint of the first format holds the weights alone: the optimiser starts afresh
         log(
             f"resumed from {checkpoint} at step {done}"
             + ("" if whole else " (weights only: the optimiser starts afresh)")

@@ -160,8 +160,8 @@ def add_parser(sub) -> None:
         help="what the estimators are given (each value below overrides the protocol's own): field, a "
         "user's session (calibrated body, VR noise, trackers worn 1.5 cm off and found by the mounting "
         "calibration, hands lost 3 %%, a Lighthouse jump a minute, IMU heading drift up to 2 deg/min); "
-        "field-exact, the same with exact mounting and no failures (docs tables measured before "
-        "2026-12); lab, the true skeleton without noise (the papers')",
+        "field-exact, the same with exact mounting and no failures (what the lab notes that "
+        "name it used); lab, the true skeleton without noise (the papers')",
     )
     p.add_argument(
         "--skeleton",

@@ -74,7 +74,7 @@ CHOICES_SECTION = """## How the shipped model's training was chosen
 
 Both choices were made on motion of kinds no training clip has; neither read the test split.
 
-**Splice, worn trackers, kept on the selection (2026-12-05).** The model before this one
+**Splice, worn trackers, kept on the selection.** The model before this one
 trained with mirror, speed and proportions, noisy copies with per-frame noise only, and kept the
 weights that scored best on every validation clip. This one adds the splice augmentation
 (another train clip's head and arms on a clip's legs), noisy copies that also wear their
@@ -97,7 +97,7 @@ One run with the three changes together (a second run, the selection alone, was 
 the core for AvatarJLM): the table does not say which of the three did it, and since the
 selection also chose the weights, its own figures flatter the model a little.
 
-**Dropout (2026-11).** Dropout 0.1 on the GRU's output, at the same 11,848 steps (a step budget):
+**Dropout.** Dropout 0.1 on the GRU's output, at the same 11,848 steps (a step budget):
 on the validation people's dance, lower-body PE 17.56 -> 17.00 cm (IK 25.08), MPJPE on all of
 them 7.95 -> 7.78 cm; one run each.
 

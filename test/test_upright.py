@@ -41,7 +41,7 @@ def _leg_errors(poses, motion, skeleton):
 
 def test_a_walk_is_the_base_s_and_a_body_lying_down_is_stood_up_for_it():
     sensors = load_sensor_config("four_point")
-    walk = synthetic_walk(2.0)
+    walk = synthetic_walk(2.0, speed=0.3)  # short strides: a body lying keeps its pelvis low
     upright = create_estimator("upright", sensors, walk.skeleton, foot_lock=False, base="lobstr")
     base = create_estimator("lobstr", sensors, walk.skeleton, foot_lock=False)
     poses, shares = _run(upright, walk, sensors)
@@ -69,7 +69,7 @@ def test_a_walk_is_the_base_s_and_a_body_lying_down_is_stood_up_for_it():
 
 def test_a_named_fallback_is_handed_the_lying_body():
     sensors = load_sensor_config("four_point")
-    walk = synthetic_walk(2.0)
+    walk = synthetic_walk(2.0, speed=0.3)  # short strides: a body lying keeps its pelvis low
     upright = create_estimator("upright", sensors, walk.skeleton, foot_lock=False, base="lobstr", fallback="ik")
     fallback = create_estimator("ik", sensors, walk.skeleton, foot_lock=False)
     for how in LYING:
@@ -98,3 +98,26 @@ def test_eval_says_each_estimator_s_worst_kind_against_ik():
     ik = result("ik", [("walk", 10.0), ("lying", 20.0)])
     text = format_groups([ik, result("upright", [("walk", 6.0), ("lying", 21.0)])], by="category", label="motion")
     assert "upright/four_point: worst kind lying, 1.05x IK's MPJPE [cm]" in text, text
+
+
+def test_a_body_bent_over_with_its_pelvis_high_is_not_lying():
+    """Picking something up tilts the torso as far as lying down does, with the pelvis at a
+    standing height: nothing is turned, the pose is the base's."""
+    from scipy.spatial.transform import Rotation
+
+    from sparse_body.core.skeleton import JOINT_INDEX as J
+    from sparse_body.data.motion import Motion
+
+    sensors = load_sensor_config("four_point")
+    walk = synthetic_walk(2.0, speed=0.3)
+    quats = np.array(walk.local_quats)
+    spine = J["spine1"]
+    quats[:, spine] = (Rotation.from_quat(quats[:, spine]) * Rotation.from_euler("y", 85, degrees=True)).as_quat()
+    bent = Motion("bent", walk.fps, walk.skeleton, quats, walk.root_positions)
+    upright = create_estimator("upright", sensors, walk.skeleton, foot_lock=False, base="lobstr")
+    base = create_estimator("lobstr", sensors, walk.skeleton, foot_lock=False)
+    poses, shares = _run(upright, bent, sensors)
+    alone, _ = _run(base, bent, sensors)
+    assert upright.tilted > 60.0  # tilted as a lying body is
+    assert shares.max() < 0.01
+    assert max(np.abs(p.local_quats - q.local_quats).max() for p, q in zip(poses, alone, strict=True)) < 0.02

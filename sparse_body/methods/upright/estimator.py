@@ -40,6 +40,11 @@ UP = np.array([0.0, 0.0, 1.0])
 POSITIONED, TURNED = (_POSE, _POSITION), (_POSE, _ROTATION)  # what a joint target gives
 
 
+def _smoothstep(x: float) -> float:
+    x = min(1.0, max(0.0, x))
+    return x * x * (3.0 - 2.0 * x)
+
+
 class UprightEstimator(Estimator):
     name = "upright"
     Options = UprightOptions
@@ -52,12 +57,14 @@ class UprightEstimator(Estimator):
             raise ValueError("upright's estimators cannot be 'upright'")
         if o.lying_from <= o.upright_within:
             raise ValueError(f"lying_from ({o.lying_from}) must be above upright_within ({o.upright_within})")
+        if o.high_from <= o.low_below:
+            raise ValueError(f"high_from ({o.high_from}) must be above low_below ({o.low_below})")
         self.keep = float(np.exp(-1.0 / (o.settle * fps))) if o.settle > 0 else 0.0  # of the share, a frame
         # the base reads the turned targets (_frame_targets below); a fallback the same ones untouched
         self.parts = inner_estimators(self, (o.base, o.fallback) if o.fallback else (o.base,))
-        names = list(sensors.site_names)
-        self._head = names.index("head") if "head" in names else None
-        self._pelvis = names.index("pelvis") if "pelvis" in names else None
+        self._sites: tuple[str, ...] = ()  # the frames' site order, and where head and pelvis are in it
+        self._head: int | None = None
+        self._pelvis: int | None = None
         rest = skeleton.rest_positions()
         feet = rest[list(FOOT_JOINTS), 2].min()
         # where a standing body carries its pelvis and head over the floor (z = 0)
@@ -96,17 +103,32 @@ class UprightEstimator(Estimator):
         length = float(np.linalg.norm(torso))
         return (torso / length, pivot) if length > 1e-6 else None
 
+    def _lying(self, positions, direction, pivot) -> float:
+        """How far (0 to 1) this frame's body lies: its torso tilted past upright_within and its
+        pivot (pelvis, else head) low. A tilted torso alone is no lying body: a person bending
+        over to pick something up, or in a cartwheel, tilts it as far with the pelvis high."""
+        o = self.options
+        tilt = self.tilted = float(np.degrees(np.arccos(np.clip(direction[2], -1.0, 1.0))))
+        tilted = _smoothstep((tilt - o.upright_within) / (o.lying_from - o.upright_within))
+        site = "pelvis" if pivot == self._pelvis else "head"
+        height = positions[pivot][2] / self._standing[site]
+        return tilted * _smoothstep((o.high_from - height) / (o.high_from - o.low_below))
+
     def _frame_targets(self, frame):
         """The joint targets every part reads, once a frame: the share follows the torso's
         tilt, and (without a fallback) the targets are turned so that the torso stands by
         that share of its tilt."""
         targets = super()._frame_targets(frame)
         o = self.options
+        if frame.sites != self._sites:
+            known = set(self.sensors.site_names)
+            self._sites = frame.sites
+            self._head, self._pelvis = (
+                frame.index(s) if s in frame.sites and s in known else None for s in ("head", "pelvis")
+            )
         torso = self._torso(*targets)
         if torso is not None:
-            tilt = self.tilted = float(np.degrees(np.arccos(np.clip(torso[0][2], -1.0, 1.0))))
-            ramp = min(1.0, max(0.0, (tilt - o.upright_within) / (o.lying_from - o.upright_within)))
-            self.share = self.keep * self.share + (1.0 - self.keep) * ramp * ramp * (3.0 - 2.0 * ramp)
+            self.share = self.keep * self.share + (1.0 - self.keep) * self._lying(targets[0], *torso)
         self._turn = None
         if o.fallback or torso is None or self.share < 1e-6:
             return targets

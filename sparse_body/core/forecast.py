@@ -34,6 +34,7 @@ FADE = 0.1  # s: the velocity's time constant (chosen on the held-out kind dance
 MAX_TURN = 30.0  # rad/s a joint may turn (a fast punch's wrist: about 20)
 MAX_SPEED = 12.0  # m/s the root may move (a sprinter's: about 10)
 MAX_GAP = 0.1  # s between two poses over which a velocity is still read
+SMOOTH = 0.0  # s: the time constant each velocity is averaged over (0: the last two poses')
 # A learned root forecast: (velocities (lags, 3) in m/s, newest first, in the heading frame;
 # seconds ahead) -> the root's move (3,) in the heading frame. `lags` says how many it needs.
 RootModel = Callable[[np.ndarray, float], np.ndarray]
@@ -48,17 +49,27 @@ def faded_seconds(ahead: float, fade: float) -> float:
 class PoseForecast:
     """forecast(pose) -> the body `ahead` seconds after pose.stamp, stamped then."""
 
-    def __init__(self, ahead: float, fade: float = FADE, root_model: RootModel | None = None, lags: int = 0) -> None:
+    def __init__(
+        self,
+        ahead: float,
+        fade: float = FADE,
+        root_model: RootModel | None = None,
+        lags: int = 0,
+        smooth: float = SMOOTH,
+    ) -> None:
         if not 0.0 <= ahead <= MAX_AHEAD:
             raise ValueError(f"predict_ahead must be from 0 to {MAX_AHEAD:g} s, got {ahead!r}")
         self.ahead = float(ahead)
         self.carry = faded_seconds(self.ahead, fade)
         self.root_model, self.lags = root_model, lags
+        self.smooth = smooth
         self.reset()
 
     def reset(self) -> None:
         self._last: BodyPose | None = None
         self._roots: deque[tuple[float, np.ndarray]] = deque(maxlen=max(self.lags, 1) + 1)  # (stamp, root) in a row
+        self._turn: np.ndarray | None = None  # the joints' velocities, averaged (smooth)
+        self._move: np.ndarray | None = None  # the root's move, averaged
 
     def forecast(self, pose: BodyPose) -> BodyPose:
         if self.ahead == 0.0:
@@ -66,6 +77,7 @@ class PoseForecast:
         last, self._last = self._last, (pose if pose.valid else None)
         if not pose.valid or last is None or breaks_take(last.stamp, pose.stamp, MAX_GAP):
             self._roots.clear()
+            self._turn = self._move = None
             if pose.valid:
                 self._roots.append((pose.stamp, pose.root_position.copy()))
             return pose.restamped(pose.stamp + self.ahead)
@@ -75,10 +87,17 @@ class PoseForecast:
         turn = (Rotation.from_quat(last.local_quats).inv() * now).as_rotvec() / dt  # the shorter way round
         speed = np.linalg.norm(turn, axis=1, keepdims=True)
         turn *= np.minimum(1.0, MAX_TURN / np.maximum(speed, 1e-12))
+        move = self._root_move(now)
+        if self.smooth > 0.0:  # each velocity averaged over about `smooth` s: noise is not motion
+            keep = math.exp(-dt / self.smooth)
+            if self._turn is not None and self._move is not None:
+                turn = keep * self._turn + (1.0 - keep) * turn
+                move = keep * self._move + (1.0 - keep) * move
+            self._turn, self._move = turn, move
         return BodyPose(
             pose.stamp + self.ahead,
             (now * Rotation.from_rotvec(turn * self.carry)).as_quat(),
-            pose.root_position + self._root_move(now),
+            pose.root_position + move,
             pose.contact_probability.copy(),
             pose.contact.copy(),
             valid=True,

@@ -41,6 +41,7 @@ def main() -> int:
     parser.add_argument("estimator")
     parser.add_argument("sensors")
     parser.add_argument("--ahead", type=float, default=0.1)
+    parser.add_argument("--smooth", type=float, nargs="+", default=SMOOTHS, help="time constants to try, s")
     parser.add_argument("--limit", type=int)
     parser.add_argument("--output", type=Path)
     args = parser.parse_args()
@@ -71,7 +72,7 @@ def main() -> int:
         roots = np.stack([p.root_position for p in poses])
         row = {"clip": item.key, "kind": kinds[item.key], "frames": count, "figures": {}}
         row["figures"]["present"] = figures(joints(local, roots))
-        for smooth in SMOOTHS:
+        for smooth in args.smooth:
             forecast = PoseForecast(args.ahead, root_model=model, lags=lags, smooth=smooth)
             ahead = [forecast.forecast(p) for p in poses]
             f_local = quat_to_matrix(np.stack([p.local_quats for p in ahead]))

@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import _thread
 import contextlib
+import os
 import signal
 import sys
 import threading
@@ -110,8 +111,23 @@ def start_and_spin(make_node, threads: int = 1) -> None:
             with contextlib.suppress(Exception):  # half made: what is there goes with the process
                 node.destroy_node()
         rclpy.try_shutdown()
-        sys.exit(0)
+        _exit_now()
     spin_until_shutdown(node, threads)
+
+
+def _exit_now() -> None:
+    """Exit code 0 without Python's finalisation: the interrupt may have cut numba's compile
+    short inside LLVM, and collecting those half-built objects at exit crashed the process
+    (exit code -11, once in CI after "stopped while starting"). The node and the context are
+    already gone; only the output is left to flush."""
+    import ctypes
+
+    for stream in (sys.stdout, sys.stderr):
+        with contextlib.suppress(Exception):
+            stream.flush()
+    with contextlib.suppress(Exception):  # rcutils logs through C's stdio
+        ctypes.CDLL(None).fflush(None)
+    os._exit(0)
 
 
 def _ignore_signals() -> None:

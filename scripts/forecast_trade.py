@@ -42,6 +42,8 @@ def main() -> int:
     parser.add_argument("sensors")
     parser.add_argument("--ahead", type=float, default=0.1)
     parser.add_argument("--smooth", type=float, nargs="+", default=SMOOTHS, help="time constants to try, s")
+    parser.add_argument("--smooth-root", type=float, help="the root's time constant, s (default: as --smooth)")
+    parser.add_argument("--no-hold", action="store_true", help="skip the variants with planted feet held")
     parser.add_argument("--limit", type=int)
     parser.add_argument("--output", type=Path)
     args = parser.parse_args()
@@ -73,11 +75,13 @@ def main() -> int:
         row = {"clip": item.key, "kind": kinds[item.key], "frames": count, "figures": {}}
         row["figures"]["present"] = figures(joints(local, roots))
         for smooth in args.smooth:
-            forecast = PoseForecast(args.ahead, root_model=model, lags=lags, smooth=smooth)
+            forecast = PoseForecast(args.ahead, root_model=model, lags=lags, smooth=smooth, smooth_root=args.smooth_root)
             ahead = [forecast.forecast(p) for p in poses]
             f_local = quat_to_matrix(np.stack([p.local_quats for p in ahead]))
             f_roots = np.stack([p.root_position for p in ahead])
             row["figures"][f"smooth {smooth:g}"] = figures(joints(f_local, f_roots))
+            if args.no_hold:
+                continue
             hold = ContactHold(view.skeleton)
             held = np.stack([hold.apply(f_local[t], f_roots[t], p.contact) for t, p in enumerate(ahead)])
             row["figures"][f"smooth {smooth:g}, feet held"] = figures(joints(held, f_roots))

@@ -40,6 +40,14 @@ SMOOTH = 0.0  # s: the time constant each velocity is averaged over (0: the last
 RootModel = Callable[[np.ndarray, float], np.ndarray]
 
 
+def _averaged(before: np.ndarray | None, now: np.ndarray, dt: float, smooth: float) -> np.ndarray:
+    """now averaged with what came before over about `smooth` s (0: now alone)."""
+    if smooth <= 0.0 or before is None:
+        return now
+    keep = math.exp(-dt / smooth)
+    return keep * before + (1.0 - keep) * now
+
+
 def faded_seconds(ahead: float, fade: float) -> float:
     """How far a velocity that fades with time constant `fade` carries in `ahead` seconds,
     in seconds at its first speed (ahead itself as fade grows without end)."""
@@ -56,6 +64,7 @@ class PoseForecast:
         root_model: RootModel | None = None,
         lags: int = 0,
         smooth: float = SMOOTH,
+        smooth_root: float | None = None,
     ) -> None:
         if not 0.0 <= ahead <= MAX_AHEAD:
             raise ValueError(f"predict_ahead must be from 0 to {MAX_AHEAD:g} s, got {ahead!r}")
@@ -63,6 +72,7 @@ class PoseForecast:
         self.carry = faded_seconds(self.ahead, fade)
         self.root_model, self.lags = root_model, lags
         self.smooth = smooth
+        self.smooth_root = smooth if smooth_root is None else smooth_root
         self.reset()
 
     def reset(self) -> None:
@@ -88,12 +98,8 @@ class PoseForecast:
         speed = np.linalg.norm(turn, axis=1, keepdims=True)
         turn *= np.minimum(1.0, MAX_TURN / np.maximum(speed, 1e-12))
         move = self._root_move(now)
-        if self.smooth > 0.0:  # each velocity averaged over about `smooth` s: noise is not motion
-            keep = math.exp(-dt / self.smooth)
-            if self._turn is not None and self._move is not None:
-                turn = keep * self._turn + (1.0 - keep) * turn
-                move = keep * self._move + (1.0 - keep) * move
-            self._turn, self._move = turn, move
+        turn = self._turn = _averaged(self._turn, turn, dt, self.smooth)  # noise is not motion
+        move = self._move = _averaged(self._move, move, dt, self.smooth_root)
         return BodyPose(
             pose.stamp + self.ahead,
             (now * Rotation.from_rotvec(turn * self.carry)).as_quat(),

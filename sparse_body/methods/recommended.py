@@ -18,9 +18,9 @@ AUTO = "auto"
 RECOMMENDED = {
     # worst kind 0.91x IK's MPJPE (blend), 0.93x (avatarjlm), 1.07x (dragposer: one-leg balances)
     "three_point": "blend",
-    # blend (AvatarJLM and DragPoser), stood up as the body lies down: worst kind 0.99x IK's leg
-    # error (the selection's acrobatics); blend alone 1.71x (lying on the front), DragPoser 2.40x,
-    # upright:base=lobstr,fallback=ik (the last wave's) 1.06x
+    # blend (AvatarJLM and DragPoser), stood up as the body lies down: worst kind 0.97x IK's leg
+    # error (the floor part, lying on the side); blend alone 1.71x (lying on the front),
+    # DragPoser 2.40x, upright:base=lobstr,fallback=ik (the last wave's) 1.06x
     "four_point": "upright",
     "six_point": "ik",  # the feet tracked: not chosen again this wave
 }

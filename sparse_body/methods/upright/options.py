@@ -18,7 +18,7 @@ class UprightOptions(EstimatorOptions):
         70.0, "torso tilt from which the whole tilt is taken out (or the fallback has the pose)", 0.0, 180.0, "degrees"
     )
     low_below: float = option(
-        0.4, "pelvis height (share of a standing one's) under which a tilted body counts as lying", 0.0, 2.0
+        0.5, "pelvis height (share of a standing one's) under which a tilted body counts as lying", 0.0, 2.0
     )
-    high_from: float = option(0.6, "pelvis height (share of a standing one's) from which it never does", 0.0, 2.0)
+    high_from: float = option(0.7, "pelvis height (share of a standing one's) from which it never does", 0.0, 2.0)
     settle: float = option(0.2, "the time constant of the share of the tilt taken out", 0.0, 10.0, "seconds")

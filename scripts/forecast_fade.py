@@ -63,11 +63,11 @@ def main() -> int:
                 continue
             variants = {"present": made}
             for fade in FADES:
-                forecast = PoseForecast(0.0)
+                forecast = PoseForecast(0.0, smooth=0.0, smooth_root=0.0)  # the fade alone, as measured
                 forecast.ahead, forecast.carry = h / motion.fps, faded_seconds(h / motion.fps, fade)
                 variants[f"fade {fade:g}"] = joints([forecast.forecast(p) for p in poses])
             if model is not None:  # the shipped forecast: joints faded (FADE), the root learned
-                learned = PoseForecast(h / motion.fps, root_model=model, lags=model.lags)
+                learned = PoseForecast(h / motion.fps, root_model=model, lags=model.lags, smooth=0.0, smooth_root=0.0)
                 variants["learned root"] = joints([learned.forecast(p) for p in poses])
             row["errors"][str(h)] = {
                 name: [float(np.linalg.norm(pred[:count] - motion.positions[h:], axis=-1).mean(axis=1).sum()), count]

@@ -7,7 +7,7 @@ Each clip is estimated once; the forecasts are applied to its poses afterwards (
 function of the poses alone, as in PoseForecast.forecast). Skate is read against the true
 body's contacts at the forecast time, as `sparse-body eval --horizon` does.
 
-Usage: .venv/bin/python scripts/forecast_trade.py ESTIMATOR SENSORS [--ahead 0.1] [--limit N]
+Usage: .venv/bin/python scripts/forecast_trade.py ESTIMATOR SENSORS [--ahead 0.1] [--smooth 0 0.4:0.1 ...] [--limit N]
            [--output docs/forecast_trade_ESTIMATOR_SENSORS.json]
 Writes the table (Markdown) to stdout and every clip's figures to --output.
 """
@@ -21,7 +21,7 @@ from pathlib import Path
 
 import numpy as np
 
-SMOOTHS = (0.0, 0.03, 0.05, 0.1)  # s; 0: the last two poses' velocity (as shipped before)
+SMOOTHS = ("0", "0.2", "0.4:0.1")  # s, joints[:root]; 0: the last two poses' velocity (as shipped before)
 METRICS = ("MPJPE [cm]", "Jitter [100m/s3]", "Skate [cm/s]")
 
 
@@ -41,8 +41,9 @@ def main() -> int:
     parser.add_argument("estimator")
     parser.add_argument("sensors")
     parser.add_argument("--ahead", type=float, default=0.1)
-    parser.add_argument("--smooth", type=float, nargs="+", default=SMOOTHS, help="time constants to try, s")
-    parser.add_argument("--smooth-root", type=float, help="the root's time constant, s (default: as --smooth)")
+    parser.add_argument(
+        "--smooth", nargs="+", default=SMOOTHS, help="time constants to try, s: JOINTS or JOINTS:ROOT (ROOT: as JOINTS)"
+    )
     parser.add_argument("--no-hold", action="store_true", help="skip the variants with planted feet held")
     parser.add_argument("--limit", type=int)
     parser.add_argument("--output", type=Path)
@@ -75,16 +76,19 @@ def main() -> int:
         row = {"clip": item.key, "kind": kinds[item.key], "frames": count, "figures": {}}
         row["figures"]["present"] = figures(joints(local, roots))
         for smooth in args.smooth:
-            forecast = PoseForecast(args.ahead, root_model=model, lags=lags, smooth=smooth, smooth_root=args.smooth_root)
+            turns, _, root = str(smooth).partition(":")
+            forecast = PoseForecast(
+                args.ahead, root_model=model, lags=lags, smooth=float(turns), smooth_root=float(root or turns)
+            )
             ahead = [forecast.forecast(p) for p in poses]
             f_local = quat_to_matrix(np.stack([p.local_quats for p in ahead]))
             f_roots = np.stack([p.root_position for p in ahead])
-            row["figures"][f"smooth {smooth:g}"] = figures(joints(f_local, f_roots))
+            row["figures"][f"smooth {smooth}"] = figures(joints(f_local, f_roots))
             if args.no_hold:
                 continue
             hold = ContactHold(view.skeleton)
             held = np.stack([hold.apply(f_local[t], f_roots[t], p.contact) for t, p in enumerate(ahead)])
-            row["figures"][f"smooth {smooth:g}, feet held"] = figures(joints(held, f_roots))
+            row["figures"][f"smooth {smooth}, feet held"] = figures(joints(held, f_roots))
         clips.append(row)
         print(item.key, file=sys.stderr)
     if args.output:

@@ -127,11 +127,30 @@ def _nodes(context):
                         "robot": arg("robot"),
                         "robot_urdf": arg("robot_urdf"),
                         "fixed_frame": load_sensor_config(arg("sensors")).fixed_frame,
+                        "publish_link_tf": not with_rsp,
                         "autostart": True,
                     }
                 ],
             )
         )
+        if with_rsp:  # the robot's links from its JointState, under robot/ (the retarget node places its base)
+            from sparse_body.robot.retarget import robot_urdf_text
+
+            nodes.append(
+                Node(
+                    package="robot_state_publisher",
+                    executable="robot_state_publisher",
+                    name="robot_state_publisher_robot",
+                    namespace="robot",
+                    output="screen",
+                    parameters=[
+                        {
+                            "robot_description": robot_urdf_text(arg("robot"), arg("robot_urdf")),
+                            "frame_prefix": "robot/",
+                        }
+                    ],
+                )
+            )
     if arg("bag"):
         nodes.append(
             Node(

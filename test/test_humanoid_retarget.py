@@ -180,11 +180,28 @@ def test_the_shipped_mappings_are_well_formed():
         assert mapping.urdf is not None and {t.contact for t in mapping.targets} >= {"left", "right"}
 
 
+def _tf_tree(transforms) -> dict[str, np.ndarray]:
+    """Each frame of one /tf message in its root frame (4, 4), composed down the tree."""
+    from sparse_body.core.rotations import quat_to_matrix
+
+    parent, local = {}, {}
+    for t in transforms:
+        m = np.eye(4)
+        r, v = t.transform.rotation, t.transform.translation
+        m[:3, :3], m[:3, 3] = quat_to_matrix(np.array([r.x, r.y, r.z, r.w])), [v.x, v.y, v.z]
+        parent[t.child_frame_id], local[t.child_frame_id] = t.header.frame_id, m
+
+    def placed(frame: str) -> np.ndarray:
+        return placed(parent[frame]) @ local[frame] if frame in parent else np.eye(4)
+
+    return {frame: placed(frame) for frame in parent}
+
+
 def test_process_writes_the_robots_joint_states_beside_the_body(tmp_path, capsys):
     from sparse_body.apps.offline import make_bag
     from sparse_body.cli import main
     from sparse_body.io.bagio import TF_TOPIC, read_topic
-    from sparse_body.io.topics import ROBOT_JOINT_STATES_TOPIC
+    from sparse_body.io.topics import ROBOT_DESCRIPTION_TOPIC, ROBOT_JOINT_STATES_TOPIC
 
     motion = synthetic_walk(2.0)
     make_bag(motion, load_sensor_config("six_point"), tmp_path / "in")
@@ -198,7 +215,17 @@ def test_process_writes_the_robots_joint_states_beside_the_body(tmp_path, capsys
     q = np.array([s.position for s in states])
     lower, upper = model.limits()
     assert np.all(np.isfinite(q)) and np.all((q >= lower) & (q <= upper))
-    assert any(t.child_frame_id == "robot/pelvis" for t in read_topic(tmp_path / "out", TF_TOPIC)[0].transforms)
+    # every link on /tf where the JointState puts it, and the URDF beside it: a viewer draws the robot from the bag
+    tf = read_topic(tmp_path / "out", TF_TOPIC)
+    retarget = load_retarget(robot, None, Skeleton.canonical(1.75))
+    for k in (0, len(states) // 2):
+        placed = _tf_tree(tf[k].transforms)
+        base = placed["robot/pelvis"]
+        links = retarget.link_transforms(states[k].position, base[:3, 3], base[:3, :3])
+        for name, link in zip(model.links, links, strict=True):
+            np.testing.assert_allclose(placed["robot/" + name], link, atol=1e-6, err_msg=name)
+    (description,) = read_topic(tmp_path / "out", ROBOT_DESCRIPTION_TOPIC)
+    assert description.data == (tmp_path / "robot" / "test_humanoid.urdf").read_text()
     # the page draws the robot beside the body
     with pytest.raises(SystemExit) as viewed:
         main(["view", str(tmp_path / "out"), "--robot", str(robot), "-o", str(tmp_path / "page.html")])

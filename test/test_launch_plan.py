@@ -100,7 +100,8 @@ def test_a_calibration_file_is_the_body_of_the_estimator_and_of_robot_state_publ
     assert rsp["parameters"][0]["robot_description"] != body_urdf(Skeleton.canonical(1.62))
 
 
-def test_robot_starts_the_retarget_node_with_the_mapping_and_the_sensors_fixed_frame(monkeypatch):
+def test_robot_starts_the_retarget_node_with_the_mapping_and_the_sensors_fixed_frame(monkeypatch, tmp_path):
+    from sparse_body.robot.example import write_robot
 
     module = _launch_module()
     monkeypatch.setattr(module, "_installed", lambda package: True)
@@ -132,8 +133,22 @@ def test_robot_starts_the_retarget_node_with_the_mapping_and_the_sensors_fixed_f
         "robot": "unitree_h1",
         "robot_urdf": "/robots/h1.urdf",
         "fixed_frame": "world",
+        "publish_link_tf": True,  # no robot_state_publisher: the retarget node places every robot link
         "autostart": True,
     }
+    assert not [
+        kw for kind, kw in module._nodes(context) if kind == "node" and kw["package"] == "robot_state_publisher"
+    ]
+    # with robot_state_publisher, one more for the robot, under robot/, from its URDF
+    robot = write_robot(tmp_path / "robot")
+    context = _context(**{**settings, "robot_state_publisher": "true", "robot": str(robot), "robot_urdf": ""})
+    started = module._nodes(context)
+    retarget = next(kw for kind, kw in started if kind == "lifecycle" and kw["executable"] == "retarget_node")
+    assert retarget["parameters"][0]["publish_link_tf"] is False
+    publishers = [kw for kind, kw in started if kind == "node" and kw["package"] == "robot_state_publisher"]
+    assert len(publishers) == 2
+    (for_robot,) = [kw for kw in publishers if kw["parameters"][0].get("frame_prefix") == "robot/"]
+    assert for_robot["parameters"][0]["robot_description"] == (tmp_path / "robot" / "test_humanoid.urdf").read_text()
     context.launch_configurations["robot"] = ""  # none: no retarget node
     assert not [
         kw for kind, kw in module._nodes(context) if kind == "lifecycle" and kw["executable"] == "retarget_node"
@@ -158,3 +173,21 @@ def test_rviz_asked_for_and_not_installed_refuses_the_launch_before_any_node_sta
     actions = module._nodes(context)
     rviz = [kw for kind, kw in actions if kind == "node" and kw["package"] == "rviz2"]
     assert len(rviz) == 1 and rviz[0]["arguments"][1].endswith("sparse_body.rviz")
+
+
+def test_the_rviz_config_draws_the_body_and_the_robot_and_follows_the_pelvis():
+    """Both bodies from their descriptions (the robot's frames under robot/, as the retarget
+    node or robot_state_publisher puts them), and a view that keeps the walking body in sight."""
+    import yaml
+
+    config = yaml.safe_load((Path(__file__).resolve().parents[1] / "config" / "sparse_body.rviz").read_text())
+    manager = config["Visualization Manager"]
+    models = {
+        d["Description Topic"]["Value"]: d
+        for d in manager["Displays"]
+        if d["Class"] == "rviz_default_plugins/RobotModel" and d["Enabled"]
+    }
+    assert set(models) == {"/robot_description", "/robot/robot_description"}
+    assert models["/robot/robot_description"]["TF Prefix"] == "robot"
+    assert manager["Views"]["Current"]["Target Frame"] == "pelvis"
+    assert manager["Global Options"]["Fixed Frame"] == "world"

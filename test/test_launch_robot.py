@@ -2,8 +2,9 @@
 bridge, the estimate retargeted onto a humanoid generated here (sparse_body/robot/example.py) by the
 retarget node, as a user of the launch file relies on it: the robot's JointState names the
 URDF's moving joints, carries one robot pose for each body estimate, never leaves a joint
-limit over the replayed bag, and puts the robot's hands within 5 cm of the human hands scaled
-to the robot (the body as the estimator published it, the robot from its URDF)."""
+limit over the replayed bag, puts the robot's hands within 5 cm of the human hands scaled
+to the robot (the body as the estimator published it, the robot from its URDF), and puts every
+robot link on /tf where its JointState says, so a viewer draws the robot from the launch alone."""
 
 import os
 import tempfile
@@ -79,6 +80,21 @@ def _stamp(header) -> int:
     return header.stamp.sec * 1_000_000_000 + header.stamp.nanosec
 
 
+def _tf_tree(transforms) -> dict[str, np.ndarray]:
+    """Each child frame of one /tf message in the message's root frame (4, 4)."""
+    parent, local = {}, {}
+    for t in transforms:
+        m = np.eye(4)
+        r, v = t.transform.rotation, t.transform.translation
+        m[:3, :3], m[:3, 3] = quat_to_matrix(np.array([r.x, r.y, r.z, r.w])), [v.x, v.y, v.z]
+        parent[t.child_frame_id], local[t.child_frame_id] = t.header.frame_id, m
+
+    def placed(frame: str) -> np.ndarray:
+        return placed(parent[frame]) @ local[frame] if frame in parent else np.eye(4)
+
+    return {frame: placed(frame) for frame in parent}
+
+
 class TestTheRobotOfALaunch(unittest.TestCase):
     def test_robot_joint_states_keep_the_limits_and_reach_the_hands(self):
         topics = [
@@ -113,6 +129,23 @@ class TestTheRobotOfALaunch(unittest.TestCase):
         self.assertTrue(np.all(np.isfinite(q)))
         self.assertTrue(np.all((q >= retarget.lower) & (q <= retarget.upper)), "a joint limit left")
         # each robot pose against the body estimate of the same stamp (both with their roots on /tf)
+        # the robot's every link on /tf, where its JointState puts it (a viewer needs nothing more)
+        robot_tf = [m for m in tf if any(t.child_frame_id.startswith("robot/") for t in m.transforms)]
+        self.assertTrue(robot_tf, "no robot frames on /tf")
+        states = {_stamp(m.header): m for m in robot_states}
+        checked = 0
+        for msg in robot_tf[-20:]:
+            state = states.get(_stamp(msg.transforms[0].header))
+            if state is None:
+                continue
+            placed = _tf_tree(msg.transforms)
+            self.assertEqual(set(placed), {"robot/" + name for name in model.links})
+            base = placed["robot/pelvis"]
+            links = retarget.link_transforms(state.position, base[:3, 3], base[:3, :3])
+            for name, link in zip(model.links, links, strict=True):
+                np.testing.assert_allclose(placed["robot/" + name], link, atol=1e-5, err_msg=name)
+            checked += 1
+        self.assertGreater(checked, 0, "no robot /tf message matched to its robot JointState")
         roots, bases = {}, {}
         for msg in tf:
             for t in msg.transforms:

@@ -332,8 +332,7 @@ def bag_robot(
     from ..core.rotations import quat_to_matrix
     from ..io.bagio import TF_TOPIC, typestore
     from ..io.cdr import read_tf
-    from ..io.estimate_bag import ROBOT_PREFIX
-    from ..io.topics import ROBOT_JOINT_STATES_TOPIC
+    from ..io.topics import ROBOT_JOINT_STATES_TOPIC, ROBOT_PREFIX
 
     base_frame = ROBOT_PREFIX + retarget.mapping.base
     store = typestore()

@@ -18,7 +18,6 @@ from .output import (
     axis_link_table,
     body_table,
     joint_angles,
-    published_precision,
     tracker_sites,
     tracker_table,
 )
@@ -27,7 +26,9 @@ from .topics import (
     DESCRIPTION_TOPIC,
     ESTIMATE_TOPICS,
     JOINT_STATES_TOPIC,
+    ROBOT_DESCRIPTION_TOPIC,
     ROBOT_JOINT_STATES_TOPIC,
+    ROBOT_PREFIX,
     STATUS_TOPIC,
     TF_TOPIC,
 )
@@ -46,7 +47,6 @@ LATCHED = Qos(
     QosTime(0, 0),
     False,
 )
-ROBOT_PREFIX = "robot/"  # the robot's TF frames: robot_state_publisher with frame_prefix robot/ draws it
 TYPES = {
     JOINT_STATES_TOPIC: "sensor_msgs/msg/JointState",
     CONTACTS_TOPIC: "sparse_body/msg/FootContacts",
@@ -95,15 +95,19 @@ class EstimateBagWriter:
         self._last_ns = -1  # the last receive time written: they only grow (see write)
         self._described = DESCRIPTION_TOPIC not in topics  # the URDF goes before the first pose
         self.robot = None
+        self._robot_urdf: str | None = None
         if robot is not None:  # (mapping YAML, URDF): the robot's joints beside the body's
             from ..robot.limits import limiter_for
-            from ..robot.retarget import load_retarget
+            from ..robot.retarget import load_retarget, robot_urdf_text
+            from .robot_links import RobotLinks
 
             self.robot = load_retarget(robot[0], robot[1], skeleton)
+            self.robot_links = RobotLinks(self.robot, fixed_frame, ROBOT_PREFIX)
             self.limiter = limiter_for(self.robot)  # the commands as a controller can follow them
             self.robot_connection = writer.add_connection(
                 ROBOT_JOINT_STATES_TOPIC, TYPES[JOINT_STATES_TOPIC], typestore=self.store
             )
+            self._robot_urdf = robot_urdf_text(robot[0], robot[1])  # on ROBOT_DESCRIPTION_TOPIC, first
 
     def write(self, poses: BodyPoses, trackers: TrackerStream | None = None) -> None:
         """The next poses, and (with sensors) the tracker frames they were made from."""
@@ -127,6 +131,13 @@ class EstimateBagWriter:
             urdf = self.store.types["std_msgs/msg/String"](data=body_urdf(self.skeleton))
             self.writer.write(c_urdf, log_ns[0], self.store.serialize_cdr(urdf, "std_msgs/msg/String"))
             self._described = True
+        if self.robot is not None and self._robot_urdf is not None:
+            c_robot = self.writer.add_connection(
+                ROBOT_DESCRIPTION_TOPIC, "std_msgs/msg/String", typestore=self.store, offered_qos_profiles=[LATCHED]
+            )
+            urdf = self.store.types["std_msgs/msg/String"](data=self._robot_urdf)
+            self.writer.write(c_robot, log_ns[0], self.store.serialize_cdr(urdf, "std_msgs/msg/String"))
+            self._robot_urdf = None
         written = [(connection, per_frame[topic]) for topic, connection in self.connections.items()]
         if robot is not None:
             written.append((self.robot_connection, robot))
@@ -136,8 +147,8 @@ class EstimateBagWriter:
 
     def _robot_poses(self, poses: BodyPoses) -> tuple[list[bytes], TransformTable]:
         """The robot's JointState for each pose, retargeted in order (robot/retarget.py; an
-        invalid pose holds the robot's last angles), and its base link's place on /tf
-        (fixed frame -> robot/<base link>), which a JointState cannot carry."""
+        invalid pose holds the robot's last angles), and its links on /tf (fixed frame ->
+        robot/<base link>, which a JointState cannot carry, and every link under it)."""
         assert self.robot is not None
         robot = [
             self.robot.step(
@@ -156,11 +167,8 @@ class EstimateBagWriter:
         messages = cdr.joint_state_messages(
             poses.stamps, self.robot.names, np.array([c for c, _ in commands]), np.array([v for _, v in commands])
         )
-        base = np.array([np.concatenate([r.base_position, r.base_quat]) for r in robot])[:, None]
-        table = TransformTable(
-            (self.fixed_frame,), (ROBOT_PREFIX + self.robot.mapping.base,), published_precision(base)
-        )
-        return messages, table
+        bases = np.array([np.concatenate([r.base_position, r.base_quat]) for r in robot])
+        return messages, self.robot_links.link_table(np.array([c for c, _ in commands]), bases)
 
     def _tf_messages(
         self,

@@ -4,6 +4,8 @@ names, imported by the command line without the bag libraries."""
 TF_TOPIC, TF_STATIC_TOPIC = "/tf", "/tf_static"
 JOINT_STATES_TOPIC, CONTACTS_TOPIC, STATUS_TOPIC = "/joint_states", "/foot_contacts", "/estimate_status"
 DESCRIPTION_TOPIC = "/robot_description"
+ROBOT_PREFIX = "robot/"  # the robot's TF frames: its base link is robot/<base link>
+ROBOT_DESCRIPTION_TOPIC = "/robot/robot_description"  # its URDF, latched (process --robot)
 ROBOT_JOINT_STATES_TOPIC = "/robot/joint_states"  # the humanoid robot's joints (process --robot)
 ESTIMATE_TOPICS = (JOINT_STATES_TOPIC, CONTACTS_TOPIC, STATUS_TOPIC, TF_TOPIC, DESCRIPTION_TOPIC)
 # MCAP chunk compression, as rosbag2's MCAP storage writes it (its zstd presets): every MCAP

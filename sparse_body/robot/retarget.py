@@ -26,7 +26,7 @@ from ..core.rotations import matrix_to_quat, quat_to_matrix
 from ..core.skeleton import JOINT_INDEX, Skeleton
 from ..core.types import BodyPose
 from .mapping import SIDES, RobotMapping, load_mapping
-from .urdf_model import MAX_SOLVED_JOINTS, RobotFileError, RobotModel, load_urdf
+from .urdf_model import MAX_SOLVED_JOINTS, RobotFileError, RobotModel, load_urdf, read_urdf_text
 
 BASE_POSITION = 1.0  # weight of the base (pelvis) place, per metre
 BASE_TURN = 0.5  # and of its turn, per radian
@@ -124,6 +124,15 @@ def load_retarget(mapping: str | Path, urdf: str | Path | None, skeleton: Skelet
     if path is None:
         raise RobotFileError(f"{mapping}: names no urdf; give the robot's URDF file")
     return HumanoidRetarget(load_urdf(path), robot, skeleton)
+
+
+def robot_urdf_text(mapping: str | Path, urdf: str | Path | None) -> str:
+    """The robot's URDF as text (empty or None: the file the mapping names), for its
+    robot_description; RobotFileError (one line) where it cannot be read."""
+    path = Path(urdf) if urdf else load_mapping(mapping).urdf
+    if path is None:
+        raise RobotFileError(f"{mapping}: names no urdf; give the robot's URDF file")
+    return read_urdf_text(path)
 
 
 class HumanoidRetarget:

@@ -6,8 +6,10 @@ on the floor), its `estimate_status` (a body held for lack of input holds the ro
 the body's `robot_description` (latched: the body the estimator publishes, so a calibrated
 person is retargeted as they are). Output, one per body estimate:
 `robot/joint_states` (the URDF's moving joints, in its order, always within its limits),
-the robot's base on /tf (fixed_frame -> <frame_prefix><base link>) and the robot's URDF on
-`robot/robot_description` (latched), so robot_state_publisher with frame_prefix draws it.
+the robot's links on /tf (fixed_frame -> <frame_prefix><base link>, and with publish_link_tf
+every link under its neighbour, io/robot_links.py) and the robot's URDF on
+`robot/robot_description` (latched): a viewer draws the robot from these alone, or
+robot_state_publisher with frame_prefix places the links instead (publish_link_tf false).
 
 configure: read the mapping and the URDF (a bad file fails configure with one line), create
 the publishers and subscriptions; activate: publish; deactivate: stop; cleanup: release
@@ -33,11 +35,12 @@ from sparse_body.msg import EstimateStatus, FootContacts
 
 from ..io import cdr
 from ..io.cdr import MalformedMessage, read_tf
-from ..io.output import pose_from_joint_state, published_precision
+from ..io.output import TransformTable, pose_from_joint_state, published_precision
+from ..io.robot_links import RobotLinks
 from ..io.urdf import body_skeleton
 from ..robot.limits import CommandLimiter, limiter_for
-from ..robot.retarget import MAX_BASE, HumanoidRetarget, load_retarget
-from ..robot.urdf_model import RobotFileError, read_urdf_text
+from ..robot.retarget import MAX_BASE, HumanoidRetarget, load_retarget, robot_urdf_text
+from ..robot.urdf_model import RobotFileError
 from .dropped import DroppedInputs
 from .estimator_node import check_parameter, parameter_descriptor
 from .messages import to_seconds
@@ -50,6 +53,7 @@ PARAMETERS = {
     "fixed_frame": ("world", "the frame the body's root is looked up in and the robot's base is placed in"),
     "input_prefix": ("", "prefix of the body's TF frames (its root is <input_prefix>pelvis)"),
     "frame_prefix": ("robot/", "prefix of the robot's TF frames: its base link is <frame_prefix><base>"),
+    "publish_link_tf": (True, "publish every robot link on /tf (off when robot_state_publisher does)"),
     "solve_budget": (0.1, "seconds one robot pose's solve may take; past it the last robot pose is held, counted"),
     "warn_window": (10.0, "seconds /diagnostics says WARN after an input was dropped, then OK again (the counts stay)"),
     "autostart": (False, "configure and activate on start-up (without a lifecycle manager)"),
@@ -84,6 +88,7 @@ class RetargetNode(LifecycleNode):
 
     # Made in on_configure, destroyed in _release.
     retarget: HumanoidRetarget | None = None
+    links: RobotLinks | None = None  # the robot's links on /tf, for the body the retarget was made for
     limiter: CommandLimiter | None = None  # the commands eased and held to the robot's limits
     pub_joints: LifecyclePublisher | None = None
     pub_tf: LifecyclePublisher | None = None
@@ -111,7 +116,7 @@ class RetargetNode(LifecycleNode):
                 from ..core.skeleton import Skeleton
 
                 load_retarget(p["robot"], p["robot_urdf"], Skeleton.canonical(1.75))
-                self._urdf_text = _urdf_text(p["robot"], p["robot_urdf"])
+                self._urdf_text = robot_urdf_text(p["robot"], p["robot_urdf"])
             except RobotFileError as err:
                 problems.append(str(err))
         if problems:
@@ -167,7 +172,7 @@ class RetargetNode(LifecycleNode):
             self.destroy_publisher(self.pub_description)
         for sub in self.subs:
             self.destroy_subscription(sub)
-        self.subs, self.retarget, self.limiter, self.diag_timer = [], None, None, None
+        self.subs, self.retarget, self.links, self.limiter, self.diag_timer = [], None, None, None, None
         self.pub_joints = self.pub_tf = self.pub_diag = self.pub_description = None
         self._waiting: dict[int, JointState] = {}  # body JointStates by stamp (ns), until their root comes
         self._roots: dict[int, tuple[np.ndarray, np.ndarray]] = {}  # the body's roots by stamp (ns), lately
@@ -185,6 +190,7 @@ class RetargetNode(LifecycleNode):
         try:
             skeleton = body_skeleton(msg.data)
             self.retarget = load_retarget(self.params["robot"], self.params["robot_urdf"], skeleton)
+            self.links = RobotLinks(self.retarget, self.params["fixed_frame"], self.params["frame_prefix"])
             if self.limiter is None:  # (a new body keeps the robot where its commands left it)
                 self.limiter = limiter_for(self.retarget)
         except RobotFileError as err:  # (a body URDF from the network is input like any other)
@@ -272,8 +278,12 @@ class RetargetNode(LifecycleNode):
             return
         joints = cdr.joint_state_messages([body.stamp], self.retarget.names, command[None], velocity[None])
         self.pub_joints.publish(joints[0])
-        child = self.params["frame_prefix"] + self.retarget.mapping.base
-        self.pub_tf.publish(cdr.tf_messages([body.stamp], (self.params["fixed_frame"],), (child,), base)[0])
+        if self.params["publish_link_tf"] and self.links is not None:
+            table = self.links.link_table(command[None], base[0])
+        else:  # robot_state_publisher places the links from robot/joint_states
+            child = self.params["frame_prefix"] + self.retarget.mapping.base
+            table = TransformTable((self.params["fixed_frame"],), (child,), base)
+        self.pub_tf.publish(cdr.tf_messages([body.stamp], table.parents, table.children, table.values)[0])
         self._published += 1
 
     def _publish_diagnostics(self) -> None:
@@ -314,16 +324,6 @@ def _unpublishable(positions: np.ndarray, base: np.ndarray, lower: np.ndarray, u
 
 def _nanoseconds(stamp) -> int:
     return int(stamp.sec) * 1_000_000_000 + int(stamp.nanosec)
-
-
-def _urdf_text(mapping: str, urdf: str) -> str:
-    from pathlib import Path
-
-    from ..robot.mapping import load_mapping
-
-    path = Path(urdf) if urdf else load_mapping(mapping).urdf
-    assert path is not None  # load_retarget refused a mapping without one
-    return read_urdf_text(path)
 
 
 def main(args=None) -> None:

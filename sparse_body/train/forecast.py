@@ -175,14 +175,16 @@ def score_forecasts(clips: list[dict], model: RootForecastNet | None, lags: int)
             count = len(poses) - h
             if count <= 0:
                 continue
-            raw = {"smooth": 0.0, "smooth_root": 0.0}  # each velocity as read: the model is what is compared
+            # each velocity as read (smooth=0): the root model is what is compared
             variants = {
                 "present": PoseForecast(0.0),
-                "faded": PoseForecast(h / fps, **raw),
-                "constant velocity": PoseForecast(h / fps, fade=math.inf, **raw),
+                "faded": PoseForecast(h / fps, smooth=0.0, smooth_root=0.0),
+                "constant velocity": PoseForecast(h / fps, fade=math.inf, smooth=0.0, smooth_root=0.0),
             }
             if model is not None:
-                variants["learned root"] = PoseForecast(h / fps, root_model=learned, lags=lags, **raw)
+                variants["learned root"] = PoseForecast(
+                    h / fps, root_model=learned, lags=lags, smooth=0.0, smooth_root=0.0
+                )
             row["errors"][str(ms)] = {}
             for name, forecast in variants.items():
                 out = [forecast.forecast(p) for p in poses] if name != "present" else poses

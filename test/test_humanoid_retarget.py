@@ -230,9 +230,15 @@ def test_process_writes_the_robots_joint_states_beside_the_body(tmp_path, capsys
     with pytest.raises(SystemExit) as viewed:
         main(["view", str(tmp_path / "out"), "--robot", str(robot), "-o", str(tmp_path / "page.html")])
     assert viewed.value.code == 0 and '"name":"robot"' in (tmp_path / "page.html").read_text()
+    with pytest.raises(SystemExit) as from_tf:  # without the mapping: the robot's links on the bag's /tf
+        main(["view", str(tmp_path / "out"), "-o", str(tmp_path / "page_tf.html")])
+    assert from_tf.value.code == 0 and '"name":"robot"' in (tmp_path / "page_tf.html").read_text()
     with pytest.raises(SystemExit) as plain:
         main(["process", str(tmp_path / "in"), str(tmp_path / "plain"), "--quiet"])
     assert plain.value.code == 0
+    with pytest.raises(SystemExit) as bodily:  # no robot in the bag: the body alone
+        main(["view", str(tmp_path / "plain"), "-o", str(tmp_path / "p1.html")])
+    assert bodily.value.code == 0 and '"name":"robot"' not in (tmp_path / "p1.html").read_text()
     with pytest.raises(SystemExit) as unmade:  # a bag without the robot says so
         main(["view", str(tmp_path / "plain"), "--robot", str(robot), "-o", str(tmp_path / "p2.html")])
     assert unmade.value.code != 0 and "no /robot/joint_states" in capsys.readouterr().err

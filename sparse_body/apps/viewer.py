@@ -25,6 +25,7 @@ from ..core.sensors import SensorConfig
 from ..core.skeleton import JOINT_NAMES, NUM_JOINTS, PARENTS
 from ..core.types import TrackerStream
 from ..io.cdr import TfRow
+from ..io.topics import ROBOT_PREFIX
 
 MAX_FPS = 30.0  # frames drawn a second: WebGL redraws 3D scenes whole
 MAX_FRAMES = 9000  # five minutes at 30 frames a second; longer recordings are drawn sparser
@@ -332,7 +333,7 @@ def bag_robot(
     from ..core.rotations import quat_to_matrix
     from ..io.bagio import TF_TOPIC, typestore
     from ..io.cdr import read_tf
-    from ..io.topics import ROBOT_JOINT_STATES_TOPIC, ROBOT_PREFIX
+    from ..io.topics import ROBOT_JOINT_STATES_TOPIC
 
     base_frame = ROBOT_PREFIX + retarget.mapping.base
     store = typestore()
@@ -366,6 +367,49 @@ def bag_robot(
         links[i, :, :2] += beside[i, :2] - place[:2] + [0.0, 0.8]
     bones = tuple((j.parent, j.child) for j in retarget.model.joints)
     return links, bones
+
+
+def bag_robot_links(
+    bag: Path, beside: np.ndarray, every: int = 1
+) -> tuple[np.ndarray, tuple[tuple[int, int], ...]] | None:
+    """bag_robot's answer from the robot's links on the bag's /tf alone (`process --robot`
+    puts every link there under robot/), no mapping or URDF needed; None where the bag's /tf
+    has no robot links (a bag written without --robot, or before its links were written)."""
+    from itertools import islice
+
+    from rosbags.rosbag2 import Reader
+
+    from ..core.rotations import quat_to_matrix
+    from ..io.bagio import TF_TOPIC
+    from ..io.cdr import read_tf
+
+    names: list[str] = []
+    bones: list[tuple[int, int]] = []
+    frames: list[np.ndarray] = []
+    try:
+        with Reader(Path(bag)) as reader:
+            tf = [c for c in reader.connections if c.topic == TF_TOPIC]
+            for _, _, raw in islice(reader.messages(connections=tf), 0, None, every):
+                rows = [r for r in read_tf(raw) if r[1].startswith(ROBOT_PREFIX)]
+                if not rows:
+                    return None
+                if not names:
+                    names = [child for _, child, _, _ in rows]
+                    index = {n: k for k, n in enumerate(names)}
+                    bones = [(index[parent], index[child]) for parent, child, _, _ in rows if parent in index]
+                placed: dict[str, np.ndarray] = {}
+                for parent, child, _, values in rows:  # each parent comes before its children
+                    local = np.eye(4)
+                    local[:3, :3], local[:3, 3] = quat_to_matrix(np.asarray(values[3:])), values[:3]
+                    placed[child] = placed[parent] @ local if parent in placed else local
+                frames.append(np.array([placed[n][:3, 3] for n in names]))
+    except Exception as err:  # noqa: BLE001 - rosbags raises many kinds for a broken file
+        raise ViewError(f"{bag}: cannot be read as a rosbag2 ({err})") from None
+    if len(frames) != len(beside):
+        raise ViewError(f"{bag}: {len(frames)} robot poses on /tf and {len(beside)} bodies")
+    links = np.array(frames)
+    links[:, :, :2] += (beside[:, None, :2] - links[:, :1, :2]) + [0.0, 0.8]
+    return links, tuple(bones)
 
 
 def bag_bodies(bag: Path, drawn: bool = False) -> tuple[np.ndarray, np.ndarray | None, float, int]:
@@ -432,7 +476,7 @@ def tf_bodies(
         offsets = numbers[:, :3].copy() if offsets is None else offsets
         row: dict[str, tuple] = {}
         for parent, child, _, values in loose + rows:
-            if parent == fixed and child != JOINT_NAMES[0]:
+            if parent == fixed and child != JOINT_NAMES[0] and not child.startswith(ROBOT_PREFIX):  # (a robot's base)
                 row[child] = tuple(values[:3])
                 if child not in tracker_names:
                     tracker_names.append(child)

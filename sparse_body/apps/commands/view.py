@@ -44,13 +44,19 @@ def run(args) -> int:
         positions, trackers, fps, stands_for = bag_bodies(source, drawn=True)
         parts = {"estimate": positions, "trackers": trackers, "stands_for": stands_for}
         name = source.name
-        if args.robot:  # the robot the bag was written with, beside the body
+        if args.robot:  # the robot the bag was written with, beside the body, from its mapping
             from ...core.skeleton import Skeleton
             from ...robot.retarget import load_retarget
             from ..viewer import bag_robot
 
             retarget = load_retarget(args.robot, args.robot_urdf, Skeleton.canonical())
             parts["robot"], parts["robot_bones"] = bag_robot(source, retarget, positions[:, 0], stands_for)
+        else:  # the robot's links on the bag's /tf (process --robot writes them), where there are any
+            from ..viewer import bag_robot_links
+
+            drawn = bag_robot_links(source, positions[:, 0], stands_for)
+            if drawn is not None:
+                parts["robot"], parts["robot_bones"] = drawn
     elif source is not None and is_results_file(source):
         from ...data.catalog import find_mocap_root
         from ..result_view import view_clip
@@ -97,7 +103,9 @@ def add_parser(sub) -> None:
     p.add_argument("--fps", type=fps, default=60.0, help="a motion file's frame rate where it has none")
     p.add_argument("--seconds", type=float, default=10.0, help="how long to record a live view (at most 600)")
     p.add_argument(
-        "--robot", help="draw the robot of an estimate bag written with process --robot beside the body (its mapping)"
+        "--robot",
+        help="the mapping of the robot of an estimate bag written with process --robot, drawn beside the body "
+        "(without it: the robot's links on the bag's /tf, where it has them)",
     )
     p.add_argument("--robot-urdf", help="the robot's URDF, where the mapping names none or another")
     p.set_defaults(func=run, motion=None)

@@ -29,7 +29,7 @@ from sparse_body.io.output import joint_state_names  # noqa: E402
 from sparse_body.ros.live_view import SEEN, LiveView, LiveViewError  # noqa: E402
 
 pytestmark = pytest.mark.ros
-WANTED = ("/joint_states", "/tf", "/robot_description", "/estimate_status")
+WANTED = ("/joint_states", "/tf", "/robot_description", "/estimate_status", "/diagnostics")
 
 
 def free_port() -> int:
@@ -96,7 +96,7 @@ def test_a_websocket_client_sees_the_body_and_trackers_live(ros_env, tmp_path):
 
         def enough(got):  # 20 valid estimates (before the trackers come, the node publishes a held pose)
             status = [store.deserialize_cdr(m, "sparse_body/msg/EstimateStatus") for m in got["/estimate_status"]]
-            return sum(m.valid for m in status) >= 20 and got["/robot_description"]
+            return sum(m.valid for m in status) >= 20 and got["/robot_description"] and got["/diagnostics"]
 
         channels, received = asyncio.run(collect(port, enough, STARTUP_LIMIT))
         recorded, malformed = record_tf(f"ws://127.0.0.1:{port}", 3.0)  # `sparse-body view ws://...`
@@ -116,6 +116,8 @@ def test_a_websocket_client_sees_the_body_and_trackers_live(ros_env, tmp_path):
     assert {s.frame_id + SEEN for s in config.sites} & frames, frames  # the trackers beside the body
     urdf = store.deserialize_cdr(received["/robot_description"][0], "std_msgs/msg/String").data
     assert urdf.lstrip().startswith("<") and "<robot" in urdf
+    diagnostics = store.deserialize_cdr(received["/diagnostics"][-1], "diagnostic_msgs/msg/DiagnosticArray")
+    assert diagnostics.status[0].name.endswith(": estimator") and diagnostics.status[0].values
 
     positions, trackers, fps = tf_bodies(recorded, "live")  # what the page of a recorded live view draws
     assert malformed == 0 and len(positions) > 10 and np.all(np.isfinite(positions))

@@ -699,7 +699,11 @@ class EstimatorNode(LifecycleNode):
         msg.header.stamp = self.get_clock().now().to_msg()
         self.pub_diag.publish(msg)
         if self.live_view is not None:
-            self.live_view.log_description(self.get_clock().now().nanoseconds * 1e-9)
+            from rclpy.serialization import serialize_message
+
+            now = self.get_clock().now().nanoseconds * 1e-9
+            self.live_view.log_description(now)
+            self.live_view.log("/diagnostics", serialize_message(msg), now)
 
 
 def main(args=None, node_class=None) -> None:

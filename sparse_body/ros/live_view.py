@@ -6,8 +6,9 @@ of both names of the protocol (foxglove.sdk.v1 and the older foxglove.websocket.
 The channels carry the node's own CDR bytes (io/cdr.py) with ROS 2 message definitions as
 their schemas ("ros2msg"), so Foxglove decodes them as it decodes a ROS bag: /joint_states,
 /foot_contacts, /estimate_status, /tf (the body's links, and the trackers the estimate used
-as `<tracker frame>_seen`), and /robot_description (the URDF; sent again every second, since a client
-only receives what is logged after it subscribed)."""
+as `<tracker frame>_seen`), /robot_description (the URDF; sent again every second, since a client
+only receives what is logged after it subscribed) and /diagnostics (the node's own, once a
+second: its rate, latency and trackers)."""
 
 from __future__ import annotations
 
@@ -24,6 +25,7 @@ CHANNELS = {
     "/estimate_status": "sparse_body/msg/EstimateStatus",
     "/tf": "tf2_msgs/msg/TFMessage",
     "/robot_description": "std_msgs/msg/String",
+    "/diagnostics": "diagnostic_msgs/msg/DiagnosticArray",
 }
 SEEN = "_seen"  # suffix of the tracker frames drawn beside the body (the input /tf has the originals)
 

@@ -101,7 +101,10 @@ GOOD = urdf(1.0)
 BAD_URDFS = {
     "not XML": ("<robot><link", "not valid XML"),
     "not a robot": ("<model/>", "not <robot>"),
-    "missing link": (GOOD.replace('<link name="left_knee_link"/>', ""), "'left_knee_link' is not defined"),
+    "missing link": (
+        GOOD.replace('<link name="left_ankle_pitch_link"/>', ""),
+        "'left_ankle_pitch_link' is not defined",
+    ),
     "two parents": (
         GOOD.replace(
             "</robot>",

@@ -102,6 +102,7 @@ def test_hostile_input_is_counted_and_the_robot_stays_finite_and_within_its_limi
     assert int(values["dropped: joint_states: JointState lacks 63 of the body's joints, e.g. 'left_hip_rz'"]) > 0
     assert any(k.startswith("dropped: joint_states: JointState or root pose holds non-finite") for k in values)
     assert any(k.startswith("dropped: robot_description:") for k in values)
+    assert 0 <= int(values["published with two robot links overlapping"]) <= int(values["published"])
 
 
 def _subscribed(listener) -> bool:

@@ -46,11 +46,35 @@ def _joints(scale: float) -> list[JointRow]:
     return [(n, p, c, tuple(v * scale for v in xyz), a, lim) for n, p, c, xyz, a, lim in out]
 
 
+# link -> (its collision cylinder's centre z and length at scale 1, radius; rpy): the body's
+# parts as a robot's collision primitives, so robot/collision.py has shapes to check
+_SHAPES = {
+    "pelvis": (-0.05, 0.2, 0.09, "1.5708 0 0"),
+    "torso_link": (0.25, 0.4, 0.13, "0 0 0"),
+    "head_link": (0.1, 0.12, 0.09, "0 0 0"),
+    **{f"{side}_hip_pitch_link": (-0.2255, 0.45, 0.06, "0 0 0") for side in _SIDE},
+    **{f"{side}_knee_link": (-0.244, 0.45, 0.05, "0 0 0") for side in _SIDE},
+    **{f"{side}_shoulder_yaw_link": (-0.1665, 0.3, 0.04, "0 0 0") for side in _SIDE},
+    **{f"{side}_elbow_link": (-0.105, 0.2, 0.035, "0 0 0") for side in _SIDE},
+}
+
+
+def _link(link: str, scale: float) -> str:
+    if link not in _SHAPES:
+        return f'  <link name="{link}"/>'
+    z, length, radius, rpy = _SHAPES[link]
+    return (
+        f'  <link name="{link}">\n    <collision>\n      <origin xyz="0 0 {z * scale:.4f}" rpy="{rpy}"/>\n'
+        f'      <geometry><cylinder radius="{radius * scale:.4f}" length="{length * scale:.4f}"/></geometry>\n'
+        "    </collision>\n  </link>"
+    )
+
+
 def urdf(scale: float = 0.8, name: str = "test_humanoid") -> str:
     joints = _joints(scale)
     links = ["pelvis"] + [c for _, _, c, _, _, _ in joints]
     text = [f'<?xml version="1.0"?>\n<robot name="{name}">']
-    text += [f'  <link name="{link}"/>' for link in links]
+    text += [_link(link, scale) for link in links]
     for joint, parent, child, xyz, axis, limits in joints:
         kind = "fixed" if limits is None else "revolute"
         body = [f'    <parent link="{parent}"/>', f'    <child link="{child}"/>']

@@ -17,6 +17,7 @@ from __future__ import annotations
 import math
 import time
 from dataclasses import dataclass
+from functools import cached_property
 from pathlib import Path
 
 import numpy as np
@@ -25,6 +26,7 @@ from ..core.kinematics import forward_kinematics
 from ..core.rotations import matrix_to_quat, quat_to_matrix
 from ..core.skeleton import JOINT_INDEX, Skeleton
 from ..core.types import BodyPose
+from .collision import SelfCollision
 from .mapping import SIDES, RobotMapping, load_mapping
 from .urdf_model import MAX_SOLVED_JOINTS, RobotFileError, RobotModel, load_urdf, read_urdf_text
 
@@ -39,6 +41,10 @@ MAX_TURN_STEP = 0.3  # rad: the largest joint or base turn of one step (a longer
 MAX_MOVE_STEP = 0.1  # m: the largest base move of one step
 JUMP = 0.3  # m (robot's): a body whose pelvis moved this far in a frame jumped (it did not walk there)
 GAP = 0.1  # s between two body poses over which the last solution is no longer a start
+# the clearance the solver keeps between two of the robot's links (robot/collision.py), and how
+# hard: a pair closer than CLEARANCE is pushed apart as strongly as a planted foot is held
+CLEARANCE = 0.01  # m
+COLLISION = 3.0
 # The farthest robot base place given (m): a body's root is refused beyond 1,000 m
 # (io/output.py) and a robot is at most 20 times a person (a mapping's scale)
 MAX_BASE = 20_000.0
@@ -289,6 +295,11 @@ class HumanoidRetarget:
         self._last = result
         return result
 
+    @cached_property
+    def collision(self) -> SelfCollision:
+        """The robot's self-collision check, its pairs those apart at the zero and neutral poses."""
+        return SelfCollision(self.model, [self.rest_q, self.neutral_q])
+
     def _held(self, stamp: float) -> RobotPose:
         if self._last is None:
             zero = np.zeros((len(self.links), 3))
@@ -363,6 +374,7 @@ class HumanoidRetarget:
                     row[:, 6 + chain] = turned.T
                     rows.append(row * target.orientation)
                     residuals.append(_log(goal_turns[k] @ link[:3, :3].T) * target.orientation)
+            self._keep_apart(links, frames, rows, residuals)
             jac, res = np.vstack(rows), np.concatenate(residuals)
             normal = jac.T @ jac
             gradient = jac.T @ res
@@ -382,6 +394,42 @@ class HumanoidRetarget:
             q = np.clip(q + step[6:], lower, upper)
         self.q[solved] = q
         return True
+
+    def _keep_apart(self, links: np.ndarray, frames: np.ndarray, rows: list, residuals: list) -> None:
+        """A row for each pair of links closer than CLEARANCE: its clearance along the line
+        between the closest points, to grow by what it lacks (one-sided: pairs further apart
+        add nothing)."""
+        gap, on_first, on_second = self.collision.contacts(links)
+        for k in np.flatnonzero(gap < CLEARANCE):
+            apart = on_first[k] - on_second[k]
+            length = float(np.linalg.norm(apart))
+            if length < 1e-9:  # axes crossing: no direction to push along
+                continue
+            normal = apart / length
+            first, second = self.collision.pair_links(int(k))
+            row = normal @ (
+                self._point_rows(on_first[k], first, frames) - self._point_rows(on_second[k], second, frames)
+            )
+            rows.append(row[None] * COLLISION)
+            residuals.append(np.array([(CLEARANCE - gap[k]) * COLLISION]))
+
+    def _point_rows(self, point: np.ndarray, link: int, frames: np.ndarray) -> np.ndarray:
+        """How a point fixed to a link moves (3, 6 + solved joints) with the base's place and
+        turn and each solved joint."""
+        rows = np.zeros((3, 6 + len(self.solved)))
+        rows[:, :3] = np.eye(3)
+        rows[:, 3:6] = -_skew(point - self.base_place)
+        chain = np.array(self.model.chain(link), int)
+        solved = np.isin(chain, self.solved)
+        chain = chain[solved]
+        if len(chain):
+            moving = self.model.moving
+            axes = np.einsum("kab,kb->ka", frames[chain, :3, :3], np.array([moving[i].axis for i in chain]))
+            moved = _cross(axes, point - frames[chain, :3, 3])
+            prismatic = np.array([moving[i].kind == "prismatic" for i in chain])
+            moved[prismatic] = axes[prismatic]
+            rows[:, 6 + np.searchsorted(self.solved, chain)] = moved.T
+        return rows
 
     @staticmethod
     def _limited_step(normal: np.ndarray, gradient: np.ndarray, q, lower, upper) -> np.ndarray:
@@ -409,8 +457,9 @@ def retarget_quality(
 ) -> dict[str, float]:
     """What a run of robot poses is worth: each target's mean and 95th-percentile distance
     [cm] from its scaled human joint (feet: only while not planted, where the lock moves the
-    goal), joint values outside the URDF's limits (a count), and each foot target's skate
-    [cm/s]: its mean horizontal speed while planted on consecutive frames."""
+    goal), joint values outside the URDF's limits (a count), the frames where two of the
+    robot's links overlap (robot/collision.py) and how deep the deepest 1 % go, and each foot
+    target's skate [cm/s]: its mean horizontal speed while planted on consecutive frames."""
     reached = np.array([p.reached for p in poses])
     wanted = np.array([p.wanted for p in poses])
     q = np.array([p.positions for p in poses])
@@ -418,6 +467,16 @@ def retarget_quality(
         "frames": float(len(poses)),
         "limit violations": float(np.sum((q < retarget.lower - 1e-9) | (q > retarget.upper + 1e-9))),
     }
+    clearance = np.array(
+        [
+            retarget.collision.distances(
+                retarget.link_transforms(p.positions, p.base_position, quat_to_matrix(p.base_quat))
+            ).min(initial=np.inf)
+            for p in poses
+        ]
+    )
+    out["self-collision frames [%]"] = float(np.mean(clearance < 0.0) * 100) if len(poses) else 0.0
+    out["self-collision depth p99 [cm]"] = float(max(0.0, -np.percentile(clearance, 1)) * 100) if len(poses) else 0.0
     for k, target in enumerate(retarget.mapping.targets):
         if target.position <= 0:
             continue

@@ -30,6 +30,8 @@ MAX_SOLVED_JOINTS = 200
 MAX_OFFSET = 100.0
 MAX_AXIS = 1e6
 MOVING = ("revolute", "continuous", "prismatic")
+MIN_RADIUS = 0.01  # m: a collision shape thinner than this is a contact point, not a body part (G1's feet)
+MIN_MASS = 0.05  # kg: a link lighter than this is a frame, not a body part
 # A floating or planar joint from a frame the URDF does not define ("world") only says that
 # the root moves freely, as the retargeting base does anyway: it is skipped.
 FREE = ("floating", "planar")
@@ -54,6 +56,17 @@ class Joint:
 
 
 @dataclass(frozen=True)
+class Capsule:
+    """A link's collision shape as a capsule: the points within `radius` of the segment a-b
+    (in the link's frame). robot/collision.py checks them against each other."""
+
+    link: int
+    a: np.ndarray  # (3,)
+    b: np.ndarray  # (3,)
+    radius: float
+
+
+@dataclass(frozen=True)
 class RobotModel:
     """A tree of links from one root; joints in an order where each parent comes first."""
 
@@ -61,6 +74,7 @@ class RobotModel:
     links: tuple[str, ...]
     joints: tuple[Joint, ...]
     root: int  # link index
+    capsules: tuple[Capsule, ...] = ()  # from each link's <collision> (or, for a mesh, its <inertial>)
 
     @cached_property
     def moving(self) -> tuple[Joint, ...]:
@@ -231,7 +245,106 @@ def parse_urdf(text: str, source: str = "URDF") -> RobotModel:
     twice = _twice([j.name for j in joints])
     if twice is not None:
         raise RobotFileError(f"{source}: joint {twice!r} is defined twice")
-    return RobotModel(name, tuple(links), _tree_order(joints, links, source), _root(joints, links, source))
+    capsules = _fixed_fallback(root.findall("link"), joints, source)
+    return RobotModel(name, tuple(links), _tree_order(joints, links, source), _root(joints, links, source), capsules)
+
+
+def _fixed_fallback(elements, joints: list[Joint], source: str) -> tuple[Capsule, ...]:
+    """Every link's capsules; a mesh link too light for its own fit (a shape hung on a fixed
+    joint, as G1's pelvis_contour_link on its pelvis) takes its fixed parent's fit, where the
+    parent has no shape of its own and no other such child took it."""
+    found, wanting = [], []
+    fits = [_inertial_capsule(el, i, f"{source}: link {el.get('name')!r}") for i, el in enumerate(elements)]
+    for i, element in enumerate(elements):
+        own, needs_fit = _capsules(element, i, source)
+        found += own
+        if needs_fit:
+            found += fits[i] or wanting.append(i) or []
+    fixed_parent = {j.child: j for j in joints if j.kind == "fixed"}
+    shaped = {c.link for c in found}  # a parent with shapes of its own keeps them (G1's torso and its logo)
+    for link in wanting:
+        joint = fixed_parent.get(link)
+        if joint is not None and fits[joint.parent] and joint.parent not in shaped:
+            shaped.add(joint.parent)
+            back = np.linalg.inv(joint.origin)  # the parent's frame into the link's
+            for c in fits[joint.parent]:
+                a, b = (back[:3, :3] @ p + back[:3, 3] for p in (c.a, c.b))
+                found.append(Capsule(link, a, b, c.radius))
+    return tuple(found)
+
+
+def _origin(element, where: str) -> np.ndarray:
+    """An <origin>'s transform (4, 4) (identity where there is none)."""
+    origin_el = element.find("origin") if element is not None else None
+    xyz = _numbers(origin_el.get("xyz") if origin_el is not None else None, 3, 0.0, f"{where} origin xyz", MAX_OFFSET)
+    rpy = _numbers(origin_el.get("rpy") if origin_el is not None else None, 3, 0.0, f"{where} origin rpy", MAX_OFFSET)
+    origin = np.eye(4)
+    origin[:3, :3], origin[:3, 3] = rpy_matrix(*rpy), xyz
+    return origin
+
+
+def _capsules(link_el, link: int, source: str) -> tuple[list[Capsule], bool]:
+    """A link's collision shapes as capsules: a cylinder's axis, a sphere's centre, a box's
+    longest side (its radius half the middle side); for a mesh, whose file is not read, the
+    solid cylinder with the link's mass and inertia (its smallest principal moment about the
+    long axis). Shapes under MIN_RADIUS (contact points) and massless links are left out.
+    (primitive capsules, whether a mesh asks for the inertial fit)"""
+    where = f"{source}: link {link_el.get('name')!r} collision"
+    found: list[Capsule] = []
+    fitted = False
+    for collision in link_el.findall("collision"):
+        geometry = collision.find("geometry")
+        if geometry is None or not len(geometry):
+            continue
+        shape, frame = geometry[0], _origin(collision, where)
+        half, radius = 0.0, 0.0
+        if shape.tag == "cylinder":
+            radius = float(_numbers(shape.get("radius"), 1, 0.0, f"{where} radius", MAX_OFFSET)[0])
+            length = float(_numbers(shape.get("length"), 1, 0.0, f"{where} length", MAX_OFFSET)[0])
+            axis, half = frame[:3, 2], max(length / 2 - radius, 0.0)
+        elif shape.tag == "sphere":
+            radius = float(_numbers(shape.get("radius"), 1, 0.0, f"{where} radius", MAX_OFFSET)[0])
+            axis = frame[:3, 2]
+        elif shape.tag == "box":
+            size = np.abs(_numbers(shape.get("size"), 3, 0.0, f"{where} size", MAX_OFFSET))
+            order = np.argsort(size)
+            radius = float(size[order[1]]) / 2
+            axis, half = frame[:3, order[2]], max(float(size[order[2]]) / 2 - radius, 0.0)
+        elif shape.tag == "mesh":
+            fitted = True
+            continue
+        else:
+            continue
+        if radius >= MIN_RADIUS:
+            centre = frame[:3, 3]
+            found.append(Capsule(link, centre - half * axis, centre + half * axis, radius))
+    return found, fitted
+
+
+def _inertial_capsule(link_el, link: int, where: str) -> list[Capsule]:
+    """The solid cylinder of the link's mass and inertia, as a capsule (none for a link under
+    MIN_MASS or without an inertia): radius^2 = 2 I_long / m, length^2 = 12 I_cross / m - 3 r^2."""
+    inertial = link_el.find("inertial")
+    mass_el = inertial.find("mass") if inertial is not None else None
+    tensor_el = inertial.find("inertia") if inertial is not None else None
+    if mass_el is None or tensor_el is None:
+        return []
+    mass = float(_numbers(mass_el.get("value"), 1, 0.0, f"{where} mass", 1e6)[0])
+    keys = ("ixx", "ixy", "ixz", "iyy", "iyz", "izz")
+    xx, xy, xz, yy, yz, zz = (float(_numbers(tensor_el.get(k), 1, 0.0, f"{where} {k}", 1e6)[0]) for k in keys)
+    if mass < MIN_MASS:
+        return []
+    frame = _origin(inertial, where)
+    tensor = frame[:3, :3] @ np.array([[xx, xy, xz], [xy, yy, yz], [xz, yz, zz]]) @ frame[:3, :3].T
+    moments, axes = np.linalg.eigh(tensor)
+    if not np.all(np.isfinite(moments)) or moments[0] <= 0.0:
+        return []
+    radius = math.sqrt(2.0 * moments[0] / mass)
+    length = math.sqrt(max(12.0 * (moments[1] + moments[2]) / 2 / mass - 3.0 * radius**2, 0.0))
+    half, centre = max(length / 2 - radius, 0.0), frame[:3, 3]
+    if radius < MIN_RADIUS:
+        return []
+    return [Capsule(link, centre - half * axes[:, 0], centre + half * axes[:, 0], radius)]
 
 
 def _twice(names: list[str]) -> str | None:

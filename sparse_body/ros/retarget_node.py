@@ -33,6 +33,7 @@ from std_msgs.msg import String
 
 from sparse_body.msg import EstimateStatus, FootContacts
 
+from ..core.rotations import quat_to_matrix
 from ..io import cdr
 from ..io.cdr import MalformedMessage, read_tf
 from ..io.output import TransformTable, pose_from_joint_state, published_precision
@@ -180,6 +181,7 @@ class RetargetNode(LifecycleNode):
         self._invalid: set[int] = set()  # stamps (ns) of body estimates marked invalid (held) lately
         self._dropped = DroppedInputs(self.get_logger().warning)
         self._published = 0
+        self._overlapping = 0  # published poses where two of the robot's links overlap (robot/collision.py)
 
     # -- work --------------------------------------------------------------------------------
     def _drop(self, reason: str) -> None:
@@ -276,6 +278,9 @@ class RetargetNode(LifecycleNode):
         if refused:
             self._drop(f"not published: {refused}")
             return
+        turn = quat_to_matrix(base[0, 0, 3:])
+        links = self.retarget.link_transforms(command, base[0, 0, :3], turn)
+        self._overlapping += bool(self.retarget.collision.distances(links).min(initial=np.inf) < 0.0)
         joints = cdr.joint_state_messages([body.stamp], self.retarget.names, command[None], velocity[None])
         self.pub_joints.publish(joints[0])
         if self.params["publish_link_tf"] and self.links is not None:
@@ -298,6 +303,7 @@ class RetargetNode(LifecycleNode):
             message=f"inputs dropped in the last {window:g} s" if recent else "ok",
             values=[
                 KeyValue(key="published", value=str(self._published)),
+                KeyValue(key="published with two robot links overlapping", value=str(self._overlapping)),
                 KeyValue(
                     key="commands held to a velocity or acceleration limit",
                     value=str(self.limiter.limited if self.limiter is not None else 0),

@@ -258,8 +258,10 @@ def _fixed_fallback(elements, joints: list[Joint], source: str) -> tuple[Capsule
     for i, element in enumerate(elements):
         own, needs_fit = _capsules(element, i, source)
         found += own
-        if needs_fit:
-            found += fits[i] or wanting.append(i) or []
+        if needs_fit and fits[i]:
+            found += fits[i]
+        elif needs_fit:
+            wanting.append(i)
     fixed_parent = {j.child: j for j in joints if j.kind == "fixed"}
     shaped = {c.link for c in found}  # a parent with shapes of its own keeps them (G1's torso and its logo)
     for link in wanting:

@@ -67,14 +67,8 @@ class SelfCollision:
             for j in range(i + 1, len(capsules))
             if hops[self._links[i], self._links[j]] > NEAR
         ]
-        self.first, self.second = (
-            (np.array(side, int) for side in zip(*pairs, strict=True))
-            if pairs
-            else (
-                np.zeros(0, int),
-                np.zeros(0, int),
-            )
-        )
+        self.first = np.array([i for i, _ in pairs], int)
+        self.second = np.array([j for _, j in pairs], int)
         for q in reference:
             links, _ = model.forward(q, np.eye(4))
             keep = self.distances(links) > margin

@@ -65,7 +65,7 @@ class RobotMapping:
 
 
 def load_mapping(name_or_path: str | Path) -> RobotMapping:
-    """A robot mapping by name (config/robots/NAME.yaml: unitree_h1, unitree_g1_29dof) or by
+    """A robot mapping by name (config/robots/NAME.yaml: unitree_h1, unitree_g1_29dof, unitree_g1_23dof) or by
     path; RobotFileError (one line) where it cannot be one."""
     from ..core.resources import shipped_or_path
     from ..core.sensors import read_yaml

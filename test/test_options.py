@@ -48,6 +48,11 @@ def test_a_spec_s_options_are_checked_against_the_declaration_before_a_model_is_
     with pytest.raises(ValueError, match=r"filter: jump must be from 0 to 100 \(metres\), got -1"):
         create_estimator("ik", sensors, skeleton, filter_jump=-1)
     assert create_estimator("ik", sensors, skeleton, floor_height=0.1).options.floor_height == 0.1
+    # a text with fixed values says them, before the model file (which does not exist) is looked for
+    with pytest.raises(
+        ValueError, match=r"estimator 'dtp': model must be one of online, lookahead, pretrained, got 'x'"
+    ):
+        create_estimator("dtp", sensors, skeleton, model="x", model_path="/nowhere.onnx")
 
 
 def test_the_eval_record_holds_every_option_of_the_method_as_run():
@@ -122,6 +127,10 @@ def test_a_toy_method_s_options_are_node_parameters_with_their_ranges(toy_method
     from sparse_body.ros.estimator_node import method_option_parameters
 
     declared = method_option_parameters()
+    assert declared["dtp.model"].choices == ("online", "lookahead", "pretrained")  # and said in its description
+    from sparse_body.ros.estimator_node import PARAMETERS
+
+    assert PARAMETERS["dtp.model"][1].endswith("(one of online, lookahead, pretrained)")
     assert declared["toy.gain"].range is not None and (
         declared["toy.gain"].range.low,
         declared["toy.gain"].range.high,

@@ -1,5 +1,6 @@
 """Options as a user gives them: one frozen dataclass per owner (a method, the tracker filter),
-each field declared once with its default, its help and, for a number, its closed range.
+each field declared once with its default, its help and, for a number, its closed range (for a
+text, its choices where they are fixed).
 
 Everything a user sees of an option is read from that declaration: the `NAME:key=value`
 parser and its errors, the nodes' ROS parameters (with native ranges that `ros2 param
@@ -29,11 +30,19 @@ class Range:
         return f"from {self.low:g} to {self.high:g}" + (f" ({self.unit})" if self.unit else "")
 
 
-def option(default: Any, help: str, low: float | None = None, high: float | None = None, unit: str = "") -> Any:
-    """A dataclass field that is an option: its default, what it does, and for a number the
-    closed interval it must lie in (a number without one is refused by the tests)."""
+def option(
+    default: Any,
+    help: str,
+    low: float | None = None,
+    high: float | None = None,
+    unit: str = "",
+    choices: tuple[str, ...] | None = None,
+) -> Any:
+    """A dataclass field that is an option: its default, what it does, for a number the closed
+    interval it must lie in (a number without one is refused by the tests), and for a text
+    the values it may take, where they are fixed."""
     bounds = None if low is None or high is None else Range(low, high, unit)
-    return dataclasses.field(default=default, metadata={"help": help, "range": bounds})
+    return dataclasses.field(default=default, metadata={"help": help, "range": bounds, "choices": choices})
 
 
 @dataclass(frozen=True)
@@ -45,6 +54,7 @@ class Option:
     default: Any
     help: str
     range: Range | None
+    choices: tuple[str, ...] | None = None  # a text's values, where they are fixed
 
     @property
     def kinds(self) -> list[str]:
@@ -64,6 +74,8 @@ class Option:
 
     def takes(self) -> str:
         """What the option takes, in words: "a number from 0 to 1 (metres)", "true or false"."""
+        if self.choices:
+            return "one of " + ", ".join(f"`{c}`" for c in self.choices)
         return f"{self.words()} {self.range}" if self.range is not None else self.words()
 
     def check(self, owner: str, value: object) -> None:
@@ -73,6 +85,8 @@ class Option:
         is_bool = isinstance(value, bool)
         if not isinstance(value, self.types) or (is_bool and bool not in self.types):
             raise ValueError(f"{prefix} takes {self.words()}, got {shown(value)}")
+        if self.choices and isinstance(value, str) and value not in self.choices:
+            raise ValueError(f"{prefix} must be one of {', '.join(self.choices)}, got {shown(value)}")
         if self.numeric and not is_bool and isinstance(value, (int, float)):
             bounds = self.range
             if not math.isfinite(value) or (bounds is not None and not bounds.low <= value <= bounds.high):
@@ -110,7 +124,14 @@ class Options:
     def fields(cls) -> dict[str, Option]:
         """The options, by name, in declaration order (a subclass's after its base's)."""
         return {
-            f.name: Option(f.name, _annotation(f.type), f.default, f.metadata.get("help", ""), f.metadata.get("range"))
+            f.name: Option(
+                f.name,
+                _annotation(f.type),
+                f.default,
+                f.metadata.get("help", ""),
+                f.metadata.get("range"),
+                f.metadata.get("choices"),
+            )
             for f in dataclasses.fields(cls)
         }
 

@@ -62,7 +62,8 @@ if TYPE_CHECKING:
 
 def _text(option: Option) -> str:
     unit = f" ({option.range.unit})" if option.range is not None and option.range.unit else ""
-    return option.help + unit
+    choices = f" (one of {', '.join(option.choices)})" if option.choices else ""
+    return option.help + unit + choices
 
 
 # The tracker filter's options (core/tracker_filter.FilterConfig), each a parameter filter_<field>.

@@ -10,7 +10,9 @@ from ...estimators.options import EstimatorOptions, floor_height, max_gap, model
 @dataclass(frozen=True)
 class AvatarJlmOptions(EstimatorOptions):
     model: str = option(
-        "auto", "the shipped model: three_point, four_point, or auto (four_point with a pelvis tracker)"
+        "auto",
+        "the shipped model (auto: four_point with a pelvis tracker)",
+        choices=("auto", "three_point", "four_point"),
     )
     model_path: str | None = model_path()
     polish: bool = option(

@@ -9,7 +9,7 @@ from ...estimators.options import EstimatorOptions, floor_height, max_gap, model
 
 @dataclass(frozen=True)
 class DtpOptions(EstimatorOptions):
-    model: str = option("online", "the shipped model: online, lookahead or pretrained")
+    model: str = option("online", "the shipped model", choices=("online", "lookahead", "pretrained"))
     model_path: str | None = model_path()
     polish: bool = option(True, "bring head, hands and tracked feet onto their trackers by IK")
     foot_trust: float = option(

@@ -46,6 +46,7 @@ from sparse_body.data.synthetic import synthetic_walk  # noqa: E402
 from sparse_body.io.output import pose_from_joint_state  # noqa: E402
 from sparse_body.msg import EstimateStatus  # noqa: E402
 from sparse_body.robot.example import write_robot  # noqa: E402
+from sparse_body.robot.limits import GAP  # noqa: E402
 from sparse_body.robot.retarget import load_retarget  # noqa: E402
 
 os.environ["ROS_DOMAIN_ID"] = isolated_domain()
@@ -160,9 +161,17 @@ class TestTheRobotOfALaunch(unittest.TestCase):
                 elif t.child_frame_id == "robot/pelvis":
                     bases[_stamp(t.header)] = value
         bodies = {_stamp(m.header): m for m in body_states}
-        errors = []
+        errors, easing = [], []
+        restarted = -np.inf  # when the robot's commands last started over (robot/limits.py eases them in)
+        previous = None
         for msg in robot_states:
             key = _stamp(msg.header)
+            # a start, a gap in the commands (a starved node drops what waits too long: beside four
+            # CPU burners, once in two runs) or a held body: the solver starts over and the commands
+            # ramp in over the mapping's ramp, behind the body by design; judged apart below
+            if previous is None or not 0 < key - previous <= GAP * 1e9 or key in held:
+                restarted = key
+            previous = key
             if key not in bodies or key not in roots or key not in bases or key in held:
                 continue  # (a held body holds the robot: no hands to reach)
             body = pose_from_joint_state(bodies[key].name, bodies[key].position, *roots[key], key * 1e-9)
@@ -171,7 +180,8 @@ class TestTheRobotOfALaunch(unittest.TestCase):
             for side in ("left", "right"):
                 hand = links[model.link(f"{side}_hand")][:3, 3]
                 wanted = retarget.to_robot(joints[JOINT_INDEX[f"{side}_wrist"]])
-                errors.append(np.linalg.norm(hand - wanted))
+                eased = key - restarted < (retarget.mapping.ramp + 0.2) * 1e9  # the ramp, and the catch-up after it
+                (easing if eased else errors).append(np.linalg.norm(hand - wanted))
         self.assertGreater(
             len(errors),
             200,
@@ -188,6 +198,9 @@ class TestTheRobotOfALaunch(unittest.TestCase):
         kept = len(robot_stamps & set(window))
         self.assertGreaterEqual(kept, 0.75 * len(window), f"robot poses for {kept} of {len(window)} body estimates")
         self.assertLess(np.max(errors), 0.05, f"hands {np.mean(errors) * 100:.1f} cm from the human's on average")
+        # while easing in, the robot is between where it was and the body: never further off than a
+        # stride (the walk's hands swing about 0.3 m)
+        self.assertLess(np.max(easing, initial=0.0), 0.3, f"{len(easing)} eased hand poses")
 
 
 @launch_testing.post_shutdown_test()

@@ -6,6 +6,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from tf_helpers import tf_tree
 
 from sparse_body.core.rotations import matrix_to_quat
 from sparse_body.core.sensors import load_sensor_config
@@ -183,23 +184,6 @@ def test_the_shipped_mappings_are_well_formed():
         assert mapping.urdf is not None and {t.contact for t in mapping.targets} >= {"left", "right"}
 
 
-def _tf_tree(transforms) -> dict[str, np.ndarray]:
-    """Each frame of one /tf message in its root frame (4, 4), composed down the tree."""
-    from sparse_body.core.rotations import quat_to_matrix
-
-    parent, local = {}, {}
-    for t in transforms:
-        m = np.eye(4)
-        r, v = t.transform.rotation, t.transform.translation
-        m[:3, :3], m[:3, 3] = quat_to_matrix(np.array([r.x, r.y, r.z, r.w])), [v.x, v.y, v.z]
-        parent[t.child_frame_id], local[t.child_frame_id] = t.header.frame_id, m
-
-    def placed(frame: str) -> np.ndarray:
-        return placed(parent[frame]) @ local[frame] if frame in parent else np.eye(4)
-
-    return {frame: placed(frame) for frame in parent}
-
-
 def test_process_writes_the_robots_joint_states_beside_the_body(tmp_path, capsys):
     from sparse_body.apps.offline import make_bag
     from sparse_body.cli import main
@@ -222,7 +206,7 @@ def test_process_writes_the_robots_joint_states_beside_the_body(tmp_path, capsys
     tf = read_topic(tmp_path / "out", TF_TOPIC)
     retarget = load_retarget(robot, None, Skeleton.canonical(1.75))
     for k in (0, len(states) // 2):
-        placed = _tf_tree(tf[k].transforms)
+        placed = tf_tree(tf[k].transforms)
         base = placed["robot/pelvis"]
         links = retarget.link_transforms(states[k].position, base[:3, 3], base[:3, :3])
         for name, link in zip(model.links, links, strict=True):

@@ -35,6 +35,7 @@ from launch_testing_ros import WaitForTopics  # noqa: E402
 from ros_helpers import isolated_domain  # noqa: E402
 from sensor_msgs.msg import JointState  # noqa: E402
 from tf2_msgs.msg import TFMessage  # noqa: E402
+from tf_helpers import tf_tree  # noqa: E402
 
 import launch  # noqa: E402
 from sparse_body.apps.offline import make_bag  # noqa: E402
@@ -81,21 +82,6 @@ def _stamp(header) -> int:
     return header.stamp.sec * 1_000_000_000 + header.stamp.nanosec
 
 
-def _tf_tree(transforms) -> dict[str, np.ndarray]:
-    """Each child frame of one /tf message in the message's root frame (4, 4)."""
-    parent, local = {}, {}
-    for t in transforms:
-        m = np.eye(4)
-        r, v = t.transform.rotation, t.transform.translation
-        m[:3, :3], m[:3, 3] = quat_to_matrix(np.array([r.x, r.y, r.z, r.w])), [v.x, v.y, v.z]
-        parent[t.child_frame_id], local[t.child_frame_id] = t.header.frame_id, m
-
-    def placed(frame: str) -> np.ndarray:
-        return placed(parent[frame]) @ local[frame] if frame in parent else np.eye(4)
-
-    return {frame: placed(frame) for frame in parent}
-
-
 class TestTheRobotOfALaunch(unittest.TestCase):
     def test_robot_joint_states_keep_the_limits_and_reach_the_hands(self):
         topics = [
@@ -139,7 +125,7 @@ class TestTheRobotOfALaunch(unittest.TestCase):
             state = states.get(_stamp(msg.transforms[0].header))
             if state is None:
                 continue
-            placed = _tf_tree(msg.transforms)
+            placed = tf_tree(msg.transforms)
             self.assertEqual(set(placed), {"robot/" + name for name in model.links})
             base = placed["robot/pelvis"]
             links = retarget.link_transforms(state.position, base[:3, 3], base[:3, :3])

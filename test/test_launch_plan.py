@@ -191,3 +191,24 @@ def test_the_rviz_config_draws_the_body_and_the_robot_and_follows_the_pelvis():
     assert models["/robot/robot_description"]["TF Prefix"] == "robot"
     assert manager["Views"]["Current"]["Target Frame"] == "pelvis"
     assert manager["Global Options"]["Fixed Frame"] == "world"
+
+
+def test_the_launch_arguments_default_to_the_nodes_own_defaults():
+    """An argument the launch file passes on to the estimator as a parameter of the same name
+    starts where the node itself does (a launched node and one started by hand agree)."""
+    pytest.importorskip("rclpy")
+    from launch.actions import DeclareLaunchArgument
+
+    from sparse_body.ros.estimator_node import PARAMETERS
+
+    declared = {
+        a.name: "".join(getattr(s, "text", "") for s in a.default_value)
+        for a in _launch_module().generate_launch_description().entities
+        if isinstance(a, DeclareLaunchArgument)
+    }
+    shared = sorted(set(declared) & set(PARAMETERS))
+    assert {"predict_ahead", "foot_lock", "step_budget", "budget_fallback", "estimator", "sensors"} <= set(shared)
+    for name in shared:
+        default = PARAMETERS[name][0]
+        wanted = str(default).lower() if isinstance(default, bool) else str(default)
+        assert declared[name] == wanted, (name, declared[name], wanted)

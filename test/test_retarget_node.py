@@ -308,3 +308,20 @@ def test_generated_joint_states_stop_neither_node_nor_give_a_non_finite_robot(ro
     assert all("Traceback" not in log for log in logs.values()), logs
     q = np.array([m.position for m in listener.received["robot/joint_states"]])
     assert len(q) and np.all(np.isfinite(q)) and np.all((q >= lower) & (q <= upper))
+
+
+def test_a_number_out_of_its_range_at_start_up_fails_configure_in_one_line(ros_env, tmp_path):
+    """A parameter given out of its declared range at start-up (rclpy would end the process
+    with a traceback) is kept out and said by configure; the process ends 1 under autostart."""
+    robot = write_robot(tmp_path / "robot")
+    done = subprocess.run(
+        [sys.executable, "-m", NODE, "--ros-args", "-p", f"robot:={robot}", "-p", "solve_budget:=-1.0"]
+        + ["-p", "autostart:=true"],
+        capture_output=True,
+        text=True,
+        env=ros_env,
+        timeout=STARTUP_LIMIT,
+    )
+    text = done.stdout + done.stderr
+    assert done.returncode == 1 and "configure failed: solve_budget must be between 0.001 and 10" in text, text
+    assert "Traceback" not in text, text

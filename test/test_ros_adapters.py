@@ -388,3 +388,26 @@ def test_calibration_requests_are_bounded_and_write_only_under_the_calibration_d
     assert not sneaky.success and not (tmp_path / "escape.yaml").exists() and not (tmp_path / "elsewhere").exists()
     assert not tilde.success and "save_path refused" in tilde.message
     assert not waiting.success and heard >= 1
+
+
+@pytest.mark.parametrize(
+    ("given", "reason"),
+    [
+        (["rate:=-1.0"], "rate must be between 0.01 and 100"),
+        (["source:=vmc", "vmc_port:=70000"], "vmc_port must be between 1 and 65535"),
+    ],
+)
+def test_a_bridge_parameter_out_of_its_range_fails_configure_in_one_line(ros_env, tmp_path, given, reason):
+    """The bridge's numbers have ranges (`ros2 param describe` shows them): one out of range
+    is refused at configure with the reason, before any source opens, and the process ends 1."""
+    arguments = [a for item in ["bag:=/nowhere", *given] for a in ("-p", item)]
+    done = subprocess.run(
+        [sys.executable, "-m", "sparse_body.ros.tracker_bridge_node", "--ros-args", *arguments],
+        capture_output=True,
+        text=True,
+        env=ros_env,
+        timeout=STARTUP_LIMIT,
+    )
+    text = done.stdout + done.stderr
+    assert done.returncode == 1 and "configure failed: " in text and reason in text, text
+    assert "Traceback" not in text, text

@@ -21,10 +21,11 @@ from ..estimators.base import Estimator
 from ..io.output import JointStateError, pose_from_joint_state
 from ..methods.dragposer.constraints import AboveFloor, AngleLimit, LookAt, Orientation, Position
 from .dropped import DroppedInputs
-from .estimator_node import METHOD_OPTIONS, EstimatorNode
 from .estimator_node import PARAMETERS as ESTIMATOR_PARAMETERS
-from .estimator_node import RANGES as ESTIMATOR_RANGES
+from .estimator_node import EstimatorNode
 from .estimator_node import main as estimator_main
+from .estimator_parameters import METHOD_OPTIONS
+from .estimator_parameters import RANGES as ESTIMATOR_RANGES
 from .messages import to_seconds
 
 # the refiner's input is the estimate: no estimator to choose, nor one to fall back on; of the

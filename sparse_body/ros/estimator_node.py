@@ -21,8 +21,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
-from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor, SetParametersResult
-from rclpy.exceptions import InvalidParameterValueException
+from rcl_interfaces.msg import SetParametersResult
 from rclpy.lifecycle import LifecycleNode, LifecyclePublisher, LifecycleState, TransitionCallbackReturn
 from rclpy.publisher import Publisher
 from rclpy.qos import DurabilityPolicy, QoSProfile
@@ -34,13 +33,10 @@ from std_msgs.msg import String
 from sparse_body.msg import EstimateStatus, FootContacts
 
 from ..core.calibration import CalibrationError, person_body
-from ..core.forecast import MAX_AHEAD
-from ..core.options import Option
 from ..core.rotations import matrix_to_quat
 from ..core.sensors import SensorConfigError, load_sensor_config
 from ..core.skeleton import JOINT_NAMES, standing_pose
 from ..core.tracker_filter import PREFIX as FILTER
-from ..core.tracker_filter import FilterConfig
 from ..core.types import BodyPose, BodyPoses
 from ..estimators.base import Estimator, parse_estimator_spec
 from ..estimators.budget import BudgetedStep
@@ -48,11 +44,19 @@ from ..io import cdr
 from ..io.output import HELD, axis_link_name, axis_link_table, body_table, joint_angles
 from ..io.tf_cache import TfGuards
 from ..io.urdf import body_urdf
-from ..methods import METHODS, NAMES, load
 from ..methods.factory import create_estimator
 from ..methods.kernels import compile_kernels
-from ..methods.recommended import AUTO, resolve_estimator
+from ..methods.recommended import resolve_estimator
 from .estimate_stats import EstimateStats
+from .estimator_parameters import (  # noqa: F401 - PARAMETERS, method_option_parameters: the node's schema, read here
+    LIVE,
+    METHOD_OPTIONS,
+    PARAMETERS,
+    RANGES,
+    check_parameter,
+    method_option_parameters,
+)
+from .parameters import declare
 from .spin import init, start_and_spin
 from .tf_input import TfReader
 
@@ -60,124 +64,6 @@ if TYPE_CHECKING:
     from .live_view import LiveView
 
 
-def _text(option: Option) -> str:
-    unit = f" ({option.range.unit})" if option.range is not None and option.range.unit else ""
-    choices = f" (one of {', '.join(option.choices)})" if option.choices else ""
-    return option.help + unit + choices
-
-
-# The tracker filter's options (core/tracker_filter.FilterConfig), each a parameter filter_<field>.
-FILTER_PARAMETERS = {FILTER + name: (o.default, _text(o)) for name, o in FilterConfig.fields().items()}
-
-
-def method_option_parameters() -> dict[str, Option]:
-    """Every registered method's options (methods/NAME/options.py), each a parameter
-    NAME.<field>: the options the estimator (or budget_fallback) of that method is made with,
-    over those its spec string gives."""
-    return {
-        f"{method}.{name}": o for method, record in METHODS.items() for name, o in load(record.options).fields().items()
-    }
-
-
-METHOD_OPTIONS = method_option_parameters()
-
-PARAMETERS = {
-    # name: (default, description)
-    "sensors": ("six_point", "sensor configuration: a name under config/sensors or a YAML path"),
-    "estimator": (
-        "auto",
-        f"estimation method: auto (the one recommended for the sensors), {', '.join(NAMES)} "
-        "(refined:base=NAME: DragPoser's refinement after another; options as NAME:key=value,...)",
-    ),
-    "model_path": ("", "model file for learned estimators; empty: the shipped model"),
-    "fixed_frame": ("", "frame the trackers are looked up in; empty: the sensor configuration's"),
-    "height": (1.75, "the tracked person's height in metres (scales the canonical body; unused with a calibration)"),
-    "calibration": (
-        "",
-        "T-pose calibration YAML (the tracker bridge's ~/calibrate writes one): the body it fitted "
-        "is the one estimated and published; empty: the canonical body at height",
-    ),
-    **FILTER_PARAMETERS,
-    "foot_lock": (
-        True,
-        "hold each foot where it touched down while the estimator says it is in contact (hip and "
-        "knee move, LoBSTr's contact IK): less sliding; feet that wear trackers are never "
-        "held; false: the estimator's legs as they are",
-    ),
-    "predict_ahead": (
-        0.0,
-        "seconds past the trackers' stamp the body is forecast and stamped (a teleoperation "
-        "loop cancels its own delay with it): each joint carried on at its fading velocity, the "
-        "root moved by the learned forecast (estimator option forecast=faded: at its velocity too); "
-        "0: the body at the trackers' stamp",
-    ),
-    "output_rate": (
-        60.0,
-        "estimates per second when the trackers do not drive them (input slow, partial or "
-        "absent); estimates driven by tracker input are limited to twice this",
-    ),
-    "step_budget": (
-        0.0,
-        "seconds an estimator's step may take before budget_fallback gives that frame's pose "
-        "instead (flagged on estimate_status, counted on /diagnostics), so a slow step never puts "
-        "the output behind the trackers; 0: three quarters of the output period (1/output_rate)",
-    ),
-    "budget_fallback": (
-        "ik",
-        "the cheaper estimator whose pose is published for a frame the estimator's step has not "
-        "given within step_budget; empty, or the estimator itself: every step is waited for",
-    ),
-    "stale_timeout": (
-        0.1,
-        "a tracker's newest sample no longer counts when it is this many seconds (or three of "
-        "the tracker's own sample intervals, if longer) behind the newest tracker sample",
-    ),
-    "tracker_timeout": (
-        1.0,
-        "seconds in which no new tracker sample arrived after which the estimate is held, "
-        "invalid: the trackers stopped (a node running late on a busy CPU stays valid)",
-    ),
-    "clock_window": (
-        TfGuards.clock_window,
-        "a /tf stamp further than this many seconds from this node's clock is refused and counted "
-        "(a frame stamped 0; a bag replayed with its recorded stamps without use_sim_time); 0: no check",
-    ),
-    "future_window": (
-        TfGuards.future_window,
-        "a /tf stamp more than this many seconds ahead of this node's clock is refused and counted "
-        "(a sender whose clock runs ahead: its estimates would be stamped in the future); only "
-        "while clock_window is above 0",
-    ),
-    "play_radius": (
-        TfGuards.play_radius,
-        "a tracker further than this many metres from the fixed frame's origin is refused",
-    ),
-    "frame_prefix": ("", "prefix of the body's TF frames"),
-    "publish_link_tf": (True, "publish every body link on /tf (off when robot_state_publisher does)"),
-    "autostart": (False, "configure and activate on start-up (without a lifecycle manager)"),
-    "foxglove_port": (
-        0,
-        "serve the outputs, the trackers and the URDF to the Foxglove app on this WebSocket port "
-        "(open ws://foxglove_host:PORT; needs foxglove-sdk); 0: off",
-    ),
-    "foxglove_host": ("127.0.0.1", "address the Foxglove WebSocket server listens on (0.0.0.0: every network)"),
-    **{name: (o.default, _text(o)) for name, o in METHOD_OPTIONS.items()},
-}
-# Numbers outside these bounds are refused with the reason (at configure and on a live set).
-RANGES = {
-    "height": (0.5, 2.5),
-    **{FILTER + name: (o.range.low, o.range.high) for name, o in FilterConfig.fields().items() if o.range},
-    **{name: (o.range.low, o.range.high) for name, o in METHOD_OPTIONS.items() if o.range},
-    "output_rate": (0.1, 1000.0),
-    "step_budget": (0.0, 1.0),
-    "predict_ahead": (0.0, MAX_AHEAD),
-    "stale_timeout": (0.001, 10.0),
-    "tracker_timeout": (0.01, 60.0),
-    "clock_window": (0.0, 1e9),
-    "future_window": (0.001, 60.0),
-    "play_radius": (0.1, 1e6),
-    "foxglove_port": (0, 65535),
-}
 # how estimate_status begins for a valid pose made by budget_fallback (the step over its budget)
 OVER_BUDGET = "over budget:"
 # how it begins for a valid pose of a frame the estimator says lay outside the motion it knows
@@ -186,63 +72,6 @@ OUT_OF_DEPTH = "out of depth"
 # seconds a fallback tick may come later than its period before the node counts itself as
 # stalled (not running) rather than the trackers as silent
 STALL = 0.25
-# What a configured node applies at once; the rest is refused until it is cleaned up.
-LIVE = {"stale_timeout", "tracker_timeout", "publish_link_tf", "autostart"}
-
-
-def _check_estimator_spec(value: str) -> str | None:
-    from ..methods.factory import estimator_names
-
-    try:
-        method, _ = parse_estimator_spec(value)
-    except ValueError as err:
-        return str(err)
-    names = estimator_names()
-    if method not in names and method != AUTO:
-        return f"unknown estimator {method!r}; available: {AUTO}, {', '.join(names)}"
-    return None
-
-
-# Text parameters with a form to check (the rest are checked where they are used, at configure).
-TEXT_CHECKS = {
-    "estimator": _check_estimator_spec,
-    "budget_fallback": lambda value: _check_estimator_spec(value) if value else None,
-}
-
-
-def check_parameter(name: str, value, default, ranges: dict[str, tuple[float, float]] = RANGES) -> str | None:
-    """Why value is not acceptable for parameter name (whose default shows its type), or None."""
-    if name in METHOD_OPTIONS:  # a method's option: its declaration says (null where it takes null)
-        try:
-            METHOD_OPTIONS[name].check(f"parameter {name.partition('.')[0]}", value)
-        except ValueError as err:
-            return str(err).replace(": ", ".", 1)
-        return None
-    if isinstance(default, bool):
-        return None if isinstance(value, bool) else f"{name} must be true or false, got {value!r}"
-    if isinstance(default, (int, float)):
-        if isinstance(value, bool) or not isinstance(value, (int, float)) or not np.isfinite(value):
-            return f"{name} must be a finite number, got {value!r}"
-        if isinstance(default, int) and not float(value).is_integer():
-            return f"{name} must be a whole number, got {value!r}"
-        low, high = ranges.get(name, (-np.inf, np.inf))
-        return None if low <= value <= high else f"{name} must be between {low:g} and {high:g}, got {value!r}"
-    if isinstance(default, str):
-        if not isinstance(value, str):
-            return f"{name} must be a string, got {value!r}"
-        if name in TEXT_CHECKS:
-            return TEXT_CHECKS[name](value)
-    return None
-
-
-def parameter_descriptor(default, text: str, bounds: tuple[float, float] | None) -> ParameterDescriptor:
-    """A parameter's description, typed dynamically, with its range where it has one."""
-    descriptor = ParameterDescriptor(description=text, dynamic_typing=True)
-    if bounds is not None and isinstance(default, float):
-        descriptor.floating_point_range = [FloatingPointRange(from_value=bounds[0], to_value=bounds[1], step=0.0)]
-    elif bounds is not None and isinstance(default, int) and not isinstance(default, bool):
-        descriptor.integer_range = [IntegerRange(from_value=int(bounds[0]), to_value=int(bounds[1]), step=1)]
-    return descriptor
 
 
 class EstimatorNode(LifecycleNode):
@@ -267,20 +96,8 @@ class EstimatorNode(LifecycleNode):
 
     def __init__(self, **kwargs) -> None:
         super().__init__(self.NAME, **kwargs)
-        # Typed by their defaults but declared dynamically: a wrong type or value given at
-        # start-up is refused by configure with the reason, instead of ending the process.
-        # Numbers carry their range natively (`ros2 param describe` shows it; a set outside it
-        # is refused by rclpy); one given outside it at start-up is kept out, and configure
-        # says so (rclpy would have ended the process).
-        self._refused_at_start: dict[str, str] = {}
-        for name, (default, text) in self.PARAMETERS.items():
-            descriptor = parameter_descriptor(default, text, self.RANGES.get(name))
-            try:
-                self.declare_parameter(name, default, descriptor)
-            except InvalidParameterValueException as err:
-                self.declare_parameter(name, default, descriptor, ignore_override=True)
-                low, high = self.RANGES[name]
-                self._refused_at_start[name] = f"{name} must be between {low:g} and {high:g} ({err})"
+        # (ros/parameters.py: a value given out of range at start-up is said by configure)
+        self._refused_at_start = declare(self, self.PARAMETERS, self.RANGES)
         self.add_on_set_parameters_callback(self._on_set_parameters)
         # counted from the start: inputs can fail before the first activate (the constraint
         # node's estimate input is subscribed at configure)

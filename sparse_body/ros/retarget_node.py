@@ -43,8 +43,8 @@ from ..robot.limits import CommandLimiter, limiter_for
 from ..robot.retarget import MAX_BASE, HumanoidRetarget, load_retarget, robot_urdf_text
 from ..robot.urdf_model import RobotFileError
 from .dropped import DroppedInputs
-from .estimator_node import check_parameter, parameter_descriptor
 from .messages import to_seconds
+from .parameters import declare, problems
 from .spin import init, start_and_spin
 
 PARAMETERS = {
@@ -100,28 +100,25 @@ class RetargetNode(LifecycleNode):
 
     def __init__(self, **kwargs) -> None:
         super().__init__(self.NAME, **kwargs)
-        for name, (default, text) in PARAMETERS.items():
-            self.declare_parameter(name, default, parameter_descriptor(default, text, RANGES.get(name)))
+        self._refused_at_start = declare(self, PARAMETERS, RANGES)
         self._release()
 
     # -- lifecycle -------------------------------------------------------------------------
     def on_configure(self, state: LifecycleState) -> TransitionCallbackReturn:
         p = {name: self.get_parameter(name).value for name in PARAMETERS}
-        problems = [
-            r for name, (default, _) in PARAMETERS.items() if (r := check_parameter(name, p[name], default, RANGES))
-        ]
-        if not problems and not p["robot"]:
-            problems.append("robot is empty: give the robot's mapping YAML")
-        if not problems:
+        wrong = list(self._refused_at_start.values()) + problems(PARAMETERS, p, RANGES)
+        if not wrong and not p["robot"]:
+            wrong.append("robot is empty: give the robot's mapping YAML")
+        if not wrong:
             try:  # checked here with a stand-in body: the real one comes on robot_description
                 from ..core.skeleton import Skeleton
 
                 load_retarget(p["robot"], p["robot_urdf"], Skeleton.canonical(1.75))
                 self._urdf_text = robot_urdf_text(p["robot"], p["robot_urdf"])
             except RobotFileError as err:
-                problems.append(str(err))
-        if problems:
-            self.get_logger().error(f"configure failed: {'; '.join(problems)}")
+                wrong.append(str(err))
+        if wrong:
+            self.get_logger().error(f"configure failed: {'; '.join(wrong)}")
             return TransitionCallbackReturn.FAILURE
         self.params = p
         from tf2_msgs.msg import TFMessage  # here, not at import: the stand-in exists only after setup

@@ -36,7 +36,6 @@ import numpy as np
 import rclpy
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from geometry_msgs.msg import TransformStamped
-from rcl_interfaces.msg import ParameterDescriptor
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
 from rclpy.lifecycle import LifecycleNode, LifecyclePublisher, LifecycleState, TransitionCallbackReturn
 from rclpy.publisher import Publisher
@@ -50,6 +49,7 @@ from ..core.file_output import OutputError
 from ..core.sensors import SensorConfig, SensorConfigError, load_sensor_config
 from ..io.bagio import BagError
 from .messages import to_time
+from .parameters import declare, problems
 from .spin import init, start_and_spin
 from .tracker_sources import BagSource, DeviceSource, Sample, TrackerSource
 
@@ -87,6 +87,15 @@ PARAMETERS = {
     ),
     "autostart": (True, "configure and activate on start-up (false: wait for a lifecycle manager)"),
 }
+# Numbers outside these bounds are refused at configure with the reason (and shown by `ros2 param describe`).
+RANGES = {
+    "rate": (0.01, 100.0),
+    "min_subscribers": (0, 1000),
+    "start_delay": (0.0, 60.0),
+    "vmc_port": (1, 65535),
+    "serial_baudrate": (300, 10_000_000),
+    "stale_after": (0.001, 60.0),
+}
 MAX_CALIBRATION_SECONDS = 30.0
 MOUNTING_SECONDS = 15.0  # ~/calibrate_mounting's default: three seconds for each of five movements
 
@@ -104,8 +113,7 @@ class TrackerBridge(LifecycleNode):
 
     def __init__(self, **kwargs) -> None:
         super().__init__("sparse_body_tracker_bridge", **kwargs)
-        for name, (default, text) in PARAMETERS.items():
-            self.declare_parameter(name, default, ParameterDescriptor(description=text))
+        self._refused_at_start = declare(self, PARAMETERS, RANGES)
         self.params: dict = {}
         self.calibration: Calibration | None = None
         self._collect: dict[str, list] | None = None  # site -> [(stamp, position, orientation)]
@@ -120,6 +128,9 @@ class TrackerBridge(LifecycleNode):
     def on_configure(self, state: LifecycleState) -> TransitionCallbackReturn:
         p = {name: self.get_parameter(name).value for name in PARAMETERS}
         try:
+            wrong = list(self._refused_at_start.values()) + problems(PARAMETERS, p, RANGES)
+            if wrong:
+                raise ValueError("; ".join(wrong))
             if p["source"] not in SOURCES:
                 raise ValueError(f"parameter 'source' must be one of {', '.join(SOURCES)}, got {p['source']!r}")
             sensors = load_sensor_config(p["sensors"])

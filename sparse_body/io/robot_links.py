@@ -44,10 +44,12 @@ class RobotLinks:
                     found.append(other)
         return tuple(order)
 
-    def link_table(self, commands: np.ndarray, bases: np.ndarray) -> TransformTable:
+    def link_table(self, commands: np.ndarray, bases: np.ndarray, world: np.ndarray | None = None) -> TransformTable:
         """fixed frame -> <prefix><base link>, then every link under its neighbour towards the
         base, for joint commands (frames, moving joints) and base poses (frames, 7: position,
-        then quaternion x y z w), as a RobotPose gives them."""
+        then quaternion x y z w), as a RobotPose gives them; world: their link transforms
+        (frames, links, 4, 4) where the caller has them already (the node checks collisions
+        on them), so they are not computed twice."""
         links = self.retarget.model.links
         commands, bases = np.atleast_2d(commands), np.atleast_2d(bases)
         values = np.empty((len(commands), 1 + len(self.edges), 7))
@@ -55,8 +57,10 @@ class RobotLinks:
         parents = np.array([p for p, _ in self.edges], int)
         children = np.array([c for _, c in self.edges], int)
         for i, (q, base) in enumerate(zip(commands, bases, strict=True)):
-            world = self.retarget.link_transforms(q, base[:3], quat_to_matrix(base[3:]))
-            relative = np.linalg.inv(world[parents]) @ world[children]
+            placed = (
+                world[i] if world is not None else self.retarget.link_transforms(q, base[:3], quat_to_matrix(base[3:]))
+            )
+            relative = np.linalg.inv(placed[parents]) @ placed[children]
             values[i, 1:, :3] = relative[:, :3, 3]
             values[i, 1:, 3:] = matrix_to_quat(relative[:, :3, :3])
         names = (self.fixed_frame,) + tuple(self.prefix + links[p] for p in parents)

@@ -281,7 +281,7 @@ class RetargetNode(LifecycleNode):
         joints = cdr.joint_state_messages([body.stamp], self.retarget.names, command[None], velocity[None])
         self.pub_joints.publish(joints[0])
         if self.params["publish_link_tf"] and self.links is not None:
-            table = self.links.link_table(command[None], base[0])
+            table = self.links.link_table(command[None], base[0], links[None])
         else:  # robot_state_publisher places the links from robot/joint_states
             child = self.params["frame_prefix"] + self.retarget.mapping.base
             table = TransformTable((self.params["fixed_frame"],), (child,), base)

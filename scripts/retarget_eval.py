@@ -1,8 +1,10 @@
 """Humanoid retargeting (sparse_body/robot) measured on the validation people (field
 protocol): the estimator's pose of each clip, retargeted onto a robot frame by frame as the
-retarget node does, scored by robot/retarget.retarget_quality: each target's distance from
-the scaled human joint, joint-limit violations, foot skate while planted, below-floor depth,
-and the solver's step time.
+retarget node does and its commands eased and limited as the node sends them (robot/limits.py),
+scored by robot/quality.py: each target's distance from the scaled human joint, joint-limit
+violations, self-collision, foot skate while planted, below-floor depth, the commands' speeds
+and accelerations against their limits, the knees against the person's, and the solver's
+step time.
 
 Usage: .venv/bin/python scripts/retarget_eval.py ROBOT_YAML [--urdf PATH] [--estimator ik]
            [--sensors six_point] [--limit N] [--output docs/retarget_ROBOT.json]
@@ -29,8 +31,10 @@ def main() -> int:
     from sparse_body.data.catalog import find_mocap_root, split_clips
     from sparse_body.data.field_protocol import FIELD
     from sparse_body.evaluation import estimate_motion, split_items
+    from sparse_body.robot.limits import limiter_for
     from sparse_body.robot.mapping import load_mapping
-    from sparse_body.robot.retarget import HumanoidRetarget, retarget_quality
+    from sparse_body.robot.quality import command_quality, retarget_quality
+    from sparse_body.robot.retarget import HumanoidRetarget
     from sparse_body.robot.urdf_model import load_urdf
 
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
@@ -62,6 +66,12 @@ def main() -> int:
             poses.append(retarget.step(body))
             steps.append(time.perf_counter() - start)
         figures = retarget_quality(poses, retarget, est.contacts, est.motion.fps)
+        limiter = limiter_for(retarget)
+        stamps = np.arange(len(poses)) / est.motion.fps
+        sent = [limiter(t, p.positions, p.fresh) for t, p in zip(stamps, poses, strict=True)]
+        commands, velocities = (np.array([s[k] for s in sent]) for k in (0, 1))
+        figures |= command_quality(commands, velocities, stamps, retarget, est.local_rotations)
+        figures["solved afresh after a miss [%]"] = retarget.restarts / max(1, len(poses)) * 100
         rows.append({"clip": item.key, "kind": kinds[item.key], **figures})
         print(f"{item.key}: {figures}", file=sys.stderr)
     keys = [k for k in rows[0] if k not in ("clip", "kind", "frames")]
@@ -74,17 +84,23 @@ def main() -> int:
         values = np.array([r.get(key, np.nan) for r in rows])
         ok = np.isfinite(values)
         mean = float(np.sum(values[ok] * frames[ok]) / frames[ok].sum()) if ok.any() else float("nan")
-        worst = float(values[ok].max()) if ok.any() else float("nan")
+        lowest_worst = "correlation" in key  # (the others are errors and counts: the highest is the worst)
+        worst = float((values[ok].min() if lowest_worst else values[ok].max()) if ok.any() else np.nan)
         summary[key] = mean
         print(f"| {key} | {mean:.2f} | {worst:.2f} |")
     steps_ms = np.array(steps) * 1e3
     print(f"| step p50 / p99 [ms] | {np.percentile(steps_ms, 50):.2f} / {np.percentile(steps_ms, 99):.2f} | |")
+    knee = [r for r in rows if np.isfinite(r.get("left knee correlation", np.nan))]
+    if knee:
+        lowest = min(min(r["left knee correlation"], r["right knee correlation"]) for r in knee)
+        print(f"\nknee correlation with the person's, lowest clip and side: {lowest:.3f} ({len(knee)} clips)")
     print("\nby motion kind (frame-weighted; each figure the mean of both sides):\n")
-    print("| kind | clips | frames | hands [cm] | feet, not planted [cm] | feet skate [cm/s] |")
-    print("| --- | ---: | ---: | ---: | ---: | ---: |")
+    print("| kind | clips | frames | hands [cm] | feet, not planted [cm] | feet skate [cm/s] | knee correlation |")
+    print("| --- | ---: | ---: | ---: | ---: | ---: | ---: |")
     for kind in sorted({r["kind"] for r in rows}):
         mine = [r for r in rows if r["kind"] == kind]
-        figures = [_kind_mean(mine, end) for end in ("hand error [cm]", "foot error [cm]", "skate [cm/s]")]
+        ends = ("hand error [cm]", "foot error [cm]", "skate [cm/s]", "knee correlation")
+        figures = [_kind_mean(mine, end) for end in ends]
         count = int(sum(r["frames"] for r in mine))
         print(f"| {kind} | {len(mine)} | {count} | " + " | ".join(f"{v:.2f}" for v in figures) + " |")
     if args.output:

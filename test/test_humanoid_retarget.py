@@ -16,7 +16,8 @@ from sparse_body.data.synthetic import synthetic_walk
 from sparse_body.evaluation import estimate_motion
 from sparse_body.robot.example import urdf, write_robot
 from sparse_body.robot.mapping import load_mapping
-from sparse_body.robot.retarget import load_retarget, retarget_quality
+from sparse_body.robot.quality import retarget_quality
+from sparse_body.robot.retarget import load_retarget
 from sparse_body.robot.urdf_model import RobotFileError, load_urdf, parse_urdf
 
 
@@ -269,6 +270,48 @@ def test_a_fresh_solve_reaches_the_hands_without_a_last_frame_to_stay_near(tmp_p
         body = BodyPose(0.0, matrix_to_quat(walk.local_rotations[i]), walk.positions[i, 0], contact=walk.contacts[i])
         first = robot.step(body)
         assert np.linalg.norm(first.reached - first.wanted, axis=1)[2:4].max() < 0.02  # the hands
+
+
+def test_a_planted_foot_is_held_across_the_floor_and_rises_with_the_persons_heel(tmp_path, walk):
+    """Held at the floor as well, a planted foot kept the robot's stance leg stretched while the
+    person's heel rose (Unitree G1's knee 4-13 degrees against the person's 20-30)."""
+    robot = load_retarget(write_robot(tmp_path), None, walk.view.skeleton)
+    i = next(i for i in range(60, len(walk.positions)) if walk.contacts[i - 5 : i + 1, 0].all())
+    foot = [t.name for t in robot.mapping.targets].index("left_foot")
+    for k in range(i - 5, i + 1):  # the left foot planted for a few frames
+        body = BodyPose(k / 60, matrix_to_quat(walk.local_rotations[k]), walk.positions[k, 0], contact=walk.contacts[k])
+        planted = robot.step(body)
+    for lift in (0.01, 0.02, 0.03):  # the body rises, the foot still planted: as a heel lifts
+        body = BodyPose(
+            (i + 1) / 60 + lift,
+            matrix_to_quat(walk.local_rotations[i]),
+            walk.positions[i, 0] + [0, 0, lift],
+            contact=np.array([True, False]),
+        )
+        raised = robot.step(body)
+    assert np.linalg.norm(raised.reached[foot, :2] - planted.reached[foot, :2]) < 0.005  # held across the floor
+    assert raised.reached[foot, 2] - planted.reached[foot, 2] > 0.015  # and rises with the person's
+
+
+def test_a_leg_caught_in_the_wrong_branch_is_solved_afresh_at_once(tmp_path, walk):
+    """G1's leg on a dance's crossing step turned its hip yaw to its limit, folded its knee and
+    stayed so (knee against the person's: correlation 0.00 over the clip)."""
+    robot = load_retarget(write_robot(tmp_path), None, walk.view.skeleton)
+    _retarget(walk, robot)
+    assert robot.restarts == 0  # a walk within reach never needs it
+    robot.reset()
+
+    def body(i):
+        return BodyPose(i / 60, matrix_to_quat(walk.local_rotations[i]), walk.positions[i, 0], contact=walk.contacts[i])
+
+    for i in range(100):
+        robot.step(body(i))
+    for joint in ("left_hip_yaw_joint", "left_knee_joint"):  # twisted and folded
+        k = list(robot.names).index(joint)
+        robot.q[k] = 0.98 * robot.upper[k]
+    after = robot.step(body(100))
+    assert robot.restarts == 1
+    assert np.linalg.norm(after.reached - after.wanted, axis=1).max() < 0.03  # (0.09 from the twisted start)
 
 
 UNITREE = Path(__file__).resolve().parents[2] / "shared" / "robots" / "unitree"

@@ -9,6 +9,7 @@ import pytest
 
 from sparse_body.io import cdr
 from sparse_body.robot.limits import CommandLimiter
+from sparse_body.robot.quality import command_quality
 from sparse_body.robot.retarget import HINGE_BEND, neutral_pose
 
 UNITREE = Path(__file__).resolve().parents[2] / "shared" / "robots" / "unitree"
@@ -63,12 +64,12 @@ def test_joint_states_carry_the_commands_velocities_as_rosbags_encodes_them():
 )
 def test_a_real_humanoid_bends_its_knees_with_the_person_within_its_limits(robot, urdf):
     """H1's left knee sat at its -0.26 rad hyperextension limit for 84 % of a walk (knee
-    correlation -0.43): the solver started and rested at the straight, singular zero pose."""
+    correlation -0.43): the solver started and rested at the straight, singular zero pose.
+    After the start's ramp, each knee follows the person's (G1 0.89, H1 0.93 measured)."""
     if not (UNITREE / urdf).is_file():
         pytest.skip(f"Unitree's {urdf} (unitree_ros, BSD-3-Clause) is not installed beside the checkout")
     from sparse_body.core.rotations import matrix_to_quat
     from sparse_body.core.sensors import load_sensor_config
-    from sparse_body.core.skeleton import JOINT_INDEX
     from sparse_body.core.types import BodyPose
     from sparse_body.data.synthetic import synthetic_walk
     from sparse_body.evaluation import estimate_motion
@@ -87,12 +88,8 @@ def test_a_real_humanoid_bends_its_knees_with_the_person_within_its_limits(robot
         velocities.append(velocity)
     q, v = np.array(commands), np.array(velocities)
     assert np.all((q >= retarget.lower) & (q <= retarget.upper))
-    assert np.all(np.abs(v) <= retarget.model.velocity_limits() + 1e-9)
+    figures = command_quality(q, v, np.arange(len(q)) / 60, retarget, walk.local_rotations)
+    assert figures["velocity over limit [%]"] == 0.0, figures
     for side in ("left", "right"):
-        k = list(retarget.names).index(f"{side}_knee_joint")
-        turns = walk.local_rotations[:, JOINT_INDEX[f"{side}_knee"]]
-        person = np.arccos(np.clip((np.trace(turns, axis1=1, axis2=2) - 1) / 2, -1, 1))
-        after_ramp = slice(int(0.5 * 60), None)
-        assert np.corrcoef(q[after_ramp, k], person[after_ramp])[0, 1] > 0.85, side
-        at_limit = (np.abs(q[:, k] - retarget.lower[k]) < 1e-3) | (np.abs(q[:, k] - retarget.upper[k]) < 1e-3)
-        assert at_limit.mean() < 0.2, side
+        assert figures[f"{side} knee correlation"] > 0.85, figures
+        assert figures[f"{side} knee at a limit while the person's moves [%]"] < 20.0, figures

@@ -305,6 +305,10 @@ class RetargetNode(LifecycleNode):
                     key="commands held to a velocity or acceleration limit",
                     value=str(self.limiter.limited if self.limiter is not None else 0),
                 ),
+                KeyValue(
+                    key="poses solved afresh after a limb missed its goal",
+                    value=str(self.retarget.restarts if self.retarget is not None else 0),
+                ),
             ]
             + [KeyValue(key=k, value=v) for k, v in self._dropped.values("dropped: ").items()],
         )

@@ -80,6 +80,7 @@ class Estimated:
     local_rotations: np.ndarray  # (T, 22, 3, 3)
     contacts: np.ndarray  # (T, 2) left, right
     horizon: int = 0  # frames after its own frame each pose is of (predict_ahead), scored there
+    contact_probability: np.ndarray | None = None  # (T, 2) as published beside the contacts
 
 
 def estimate_motion(
@@ -115,7 +116,8 @@ def estimate_motion(
     if ahead and not ahead < len(motion) - 1:  # (a pose on time always has its body)
         raise ValueError(f"a horizon of {ahead} frames does not fit the {len(motion)}-frame motion {motion.name}")
     contacts = np.stack([p.contact for p in poses])
-    return Estimated(motion, view, pos, glob, local, contacts, ahead)
+    probability = np.stack([p.contact_probability for p in poses])
+    return Estimated(motion, view, pos, glob, local, contacts, ahead, probability)
 
 
 def evaluate_motion(*args, per_joint: bool = False, **options) -> dict[str, float]:

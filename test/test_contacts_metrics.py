@@ -155,3 +155,36 @@ def test_live_contacts_change_only_once_the_rule_has_held_for_50_ms():
     toes[0, 2] = 0.0
     assert [live(toes)[0] for _ in range(4)] == [False, False, False, True]  # the move down, then 3 still frames
     assert live(toes)[1]  # the right foot never moved
+
+
+def test_the_published_contact_probability_is_a_probability_that_beats_the_flags_on_a_walk():
+    """LoBSTr published only 0 or 1 (issue 73): every estimator's contact_probability is now the
+    fitted chance that the foot is on the floor, from its toe's height, speed and held state."""
+    from sparse_body.core.contacts import ToeContacts
+    from sparse_body.core.sensors import load_sensor_config
+    from sparse_body.data.synthetic import synthetic_walk
+    from sparse_body.evaluation import estimate_motion
+
+    walk = estimate_motion(synthetic_walk(6.0), "ik", load_sensor_config("six_point"))
+    p, flags = walk.contact_probability, walk.contacts.astype(float)
+    labels = contact_labels(walk.motion.positions, walk.motion.fps)
+    assert np.all((p > 0.0) & (p < 1.0)) and len(np.unique(np.round(p, 3))) > 20  # graded, not two values
+    assert np.mean((p - labels) ** 2) < np.mean((flags - labels) ** 2)  # Brier score
+    assert p[labels].mean() > p[~labels].mean() + 0.3
+    toes = ToeContacts(60.0)
+    toes(np.zeros((2, 3)))
+    low = toes.probability.copy()
+    toes(np.array([[0.0, 0.0, 0.0], [0.0, 0.3, 0.25]]))  # the right toe lifted 25 cm and swung
+    assert toes.probability[1] < low[1] - 0.3 and toes.probability[0] >= low[0] - 0.05
+
+
+def test_the_live_contact_probability_is_the_fitted_models():
+    """The live path (plain floats) and the fit's terms (arrays) are one model."""
+    from sparse_body.core.contacts import CONTACT_LOGIT, contact_probability, contact_terms
+
+    rng = np.random.default_rng(3)
+    heights, speeds, held = rng.uniform(-0.8, 0.8, 200), rng.uniform(-1, 7, 200), rng.random(200) < 0.5
+    terms = np.column_stack(np.broadcast_arrays(*contact_terms(heights, speeds, held.astype(float))))
+    fitted = 1 / (1 + np.exp(-terms @ np.array(CONTACT_LOGIT)))
+    live = [contact_probability(h, s, bool(k)) for h, s, k in zip(heights, speeds, held, strict=True)]
+    np.testing.assert_allclose(live, fitted, rtol=1e-12)

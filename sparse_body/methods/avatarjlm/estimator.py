@@ -210,4 +210,6 @@ class AvatarJlmEstimator(Estimator):
                         glob[j] = r
         toes = np.stack([pos[PARENTS[t]] + glob[PARENTS[t]] @ offsets[t] for t in TOE_JOINTS])
         contact = self._toes(toes, self.floor)
-        return BodyPose(stamp, rotations_to_quat(local), np.asarray(root, float).copy(), contact.astype(float), contact)
+        return BodyPose(
+            stamp, rotations_to_quat(local), np.asarray(root, float).copy(), self._toes.probability.copy(), contact
+        )

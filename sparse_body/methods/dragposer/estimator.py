@@ -427,4 +427,6 @@ class DragPoserEstimator(Estimator):
         _, pos = forward_kinematics(local, root, self.skeleton.offsets)
         toes = pos[list(FOOT_JOINTS)]
         contact = self._toes(toes, self.floor or 0.0)
-        return BodyPose(frame.stamp, rotations_to_quat(local), np.asarray(root, float), contact.astype(float), contact)
+        return BodyPose(
+            frame.stamp, rotations_to_quat(local), np.asarray(root, float), self._toes.probability.copy(), contact
+        )

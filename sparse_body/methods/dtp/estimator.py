@@ -181,7 +181,9 @@ class DtpEstimator(Estimator):
         # no contact model: toes low and still, as the IK judges them (toes under the ankles' final turn)
         toes = np.stack([pos[PARENTS[t]] + glob[PARENTS[t]] @ self.skeleton.offsets[t] for t in TOE_JOINTS])
         contact = self._toes(toes, self.floor)
-        return BodyPose(sample.stamp, rotations_to_quat(local), sample.root.copy(), contact.astype(float), contact)
+        return BodyPose(
+            sample.stamp, rotations_to_quat(local), sample.root.copy(), self._toes.probability.copy(), contact
+        )
 
     def _polished(self, local: np.ndarray, glob: np.ndarray, pos: np.ndarray, sample: Sample):
         """Ours, not the paper's: the network's pose with the head, the hands and the feet

@@ -57,7 +57,9 @@ class IKEstimator(Estimator):
             [pos[a] + glob[a] @ self.skeleton.offsets[f] for a, f in zip(_ANKLES, FOOT_JOINTS, strict=True)]
         )
         contact = self._toes(toes, self.floor)
-        return BodyPose(frame.stamp, rotations_to_quat(local), np.asarray(root, float), contact.astype(float), contact)
+        return BodyPose(
+            frame.stamp, rotations_to_quat(local), np.asarray(root, float), self._toes.probability.copy(), contact
+        )
 
     def solve(self, frame: TrackerFrame, start: np.ndarray | None = None, spine_tolerance: float = KEEP_BEND_TOLERANCE):
         """(local rotations, root, global rotations, positions) from this frame's trackers, or

@@ -212,7 +212,7 @@ class LobstrEstimator(Estimator):
         if self._toes is not None:  # the network's legs judged as every other method's are
             toes = forward_kinematics(local, root, self.skeleton.offsets, joints=LEG_JOINTS)[1][list(FOOT_JOINTS)]
             contact = self._toes(toes, self.floor)
-            prob = contact.astype(float)  # what is published: the contacts taken, as the others publish them
+            prob = self._toes.probability.copy()  # what is published: the rule's, as the others publish it
         if self.contacts:
             local = self.contacts.apply(local, root, contact)
         self._state, self._prev = state, (frame.stamp, pos, rot)

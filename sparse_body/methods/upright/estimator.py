@@ -162,7 +162,7 @@ class UprightEstimator(Estimator):
             return BodyPose(frame.stamp, quats, root, pose.contact_probability.copy(), pose.contact.copy())
         _, joints = forward_kinematics(quat_to_matrix(quats), root, self.skeleton.offsets)
         contact = self._toes(joints[list(FOOT_JOINTS)])  # the base's floor is not the room's
-        return BodyPose(frame.stamp, quats, root, contact.astype(float), contact)
+        return BodyPose(frame.stamp, quats, root, self._toes.probability.copy(), contact)
 
     def _handed_over(self, frame, base: BodyPose, fallback: BodyPose) -> BodyPose:
         t = self.share

@@ -24,7 +24,7 @@ from .dropped import DroppedInputs
 from .estimator_node import PARAMETERS as ESTIMATOR_PARAMETERS
 from .estimator_node import EstimatorNode
 from .estimator_node import main as estimator_main
-from .estimator_parameters import METHOD_OPTIONS
+from .estimator_parameters import METHOD_OPTIONS, method_options
 from .estimator_parameters import RANGES as ESTIMATOR_RANGES
 from .messages import to_seconds
 
@@ -109,7 +109,7 @@ class ConstraintNode(EstimatorNode):
     srv_constraint: Service | None = None
 
     def _make_estimator(self, p: dict, sensors):
-        options = {k: v for k, v in self._method_options(p, "dragposer").items() if k not in FIXED}
+        options = {k: v for k, v in method_options(p, "dragposer").items() if k not in FIXED}
         if p["model_path"]:
             options["model_path"] = p["model_path"]
         return InputRefiner(sensors, self.skeleton, p["output_rate"], options, p["input_timeout"])

@@ -17,58 +17,41 @@ from __future__ import annotations
 
 import time
 from dataclasses import replace
-from typing import TYPE_CHECKING
 
 import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rcl_interfaces.msg import SetParametersResult
-from rclpy.lifecycle import LifecycleNode, LifecyclePublisher, LifecycleState, TransitionCallbackReturn
-from rclpy.publisher import Publisher
-from rclpy.qos import DurabilityPolicy, QoSProfile
-from rclpy.qos_overriding_options import QoSOverridingOptions
+from rclpy.lifecycle import LifecycleNode, LifecycleState, TransitionCallbackReturn
 from rclpy.timer import Timer
-from sensor_msgs.msg import JointState
-from std_msgs.msg import String
-
-from sparse_body.msg import EstimateStatus, FootContacts
 
 from ..core.calibration import CalibrationError, person_body
-from ..core.rotations import matrix_to_quat
 from ..core.sensors import SensorConfigError, load_sensor_config
-from ..core.skeleton import JOINT_NAMES, standing_pose
-from ..core.tracker_filter import PREFIX as FILTER
-from ..core.types import BodyPose, BodyPoses
-from ..estimators.base import Estimator, parse_estimator_spec
+from ..core.skeleton import JOINT_NAMES
+from ..core.types import BodyPose
+from ..estimators.base import Estimator
 from ..estimators.budget import BudgetedStep
-from ..io import cdr
-from ..io.output import HELD, axis_link_name, axis_link_table, body_table, joint_angles
+from ..io.output import axis_link_name
 from ..io.tf_cache import TfGuards
-from ..io.urdf import body_urdf
 from ..methods.factory import create_estimator
 from ..methods.kernels import compile_kernels
 from ..methods.recommended import resolve_estimator
+from .estimate_outputs import EstimateOutputs
 from .estimate_stats import EstimateStats
 from .estimator_parameters import (  # noqa: F401 - PARAMETERS, method_option_parameters: the node's schema, read here
+    CHECKS,
     LIVE,
-    METHOD_OPTIONS,
     PARAMETERS,
     RANGES,
     check_parameter,
+    estimator_options,
+    fallback_options,
     method_option_parameters,
 )
-from .parameters import declare
+from .live_step import LiveStep
+from .parameters import declare, problems
 from .spin import init, start_and_spin
 from .tf_input import TfReader
 
-if TYPE_CHECKING:
-    from .live_view import LiveView
-
-
-# how estimate_status begins for a valid pose made by budget_fallback (the step over its budget)
-OVER_BUDGET = "over budget:"
-# how it begins for a valid pose of a frame the estimator says lay outside the motion it knows
-# (Estimator.out_of_depth: upright's torso tilted past upright_within), the share following
-OUT_OF_DEPTH = "out of depth"
 # seconds a fallback tick may come later than its period before the node counts itself as
 # stalled (not running) rather than the trackers as silent
 STALL = 0.25
@@ -83,14 +66,9 @@ class EstimatorNode(LifecycleNode):
     # Made in on_configure (timers in on_activate), destroyed in _release / _stop_timers.
     estimator: Estimator | None = None
     budgeted: BudgetedStep | None = None  # the estimator (and budget_fallback) as stepped live
+    live: LiveStep | None = None  # a step of it and what estimate_status says of it
     tf_in: TfReader | None = None
-    pub_joints: LifecyclePublisher | None = None
-    pub_contacts: LifecyclePublisher | None = None
-    pub_status: LifecyclePublisher | None = None
-    live_view: LiveView | None = None
-    pub_tf: LifecyclePublisher | None = None
-    pub_diag: LifecyclePublisher | None = None
-    pub_description: Publisher | None = None
+    outputs: EstimateOutputs | None = None  # every publisher (and the live view)
     timer: Timer | None = None
     diag_timer: Timer | None = None
 
@@ -124,13 +102,9 @@ class EstimatorNode(LifecycleNode):
     # -- lifecycle -------------------------------------------------------------------------
     def on_configure(self, state: LifecycleState) -> TransitionCallbackReturn:
         p = {name: self.get_parameter(name).value for name in self.PARAMETERS}
-        problems = list(self._refused_at_start.values()) + [
-            r
-            for name, (default, _) in self.PARAMETERS.items()
-            if (r := check_parameter(name, p[name], default, self.RANGES))
-        ]
-        if problems:
-            self.get_logger().error(f"configure failed: {'; '.join(problems)}")
+        wrong = list(self._refused_at_start.values()) + problems(self.PARAMETERS, p, self.RANGES, **CHECKS)
+        if wrong:
+            self.get_logger().error(f"configure failed: {'; '.join(wrong)}")
             return TransitionCallbackReturn.FAILURE
         p = {name: float(v) if isinstance(self.PARAMETERS[name][0], float) else v for name, v in p.items()}
         try:
@@ -156,6 +130,7 @@ class EstimatorNode(LifecycleNode):
             self._release()
             return TransitionCallbackReturn.FAILURE
         self.sensors, self.params = sensors, p
+        self.live = LiveStep(self.budgeted, lambda: self._stats, self._method(), self._step_budget())
         self._frames = [s.frame_id for s in sensors.sites]
         own = {p["frame_prefix"] + name for name in JOINT_NAMES}  # the body's links, as body_table names them
         own |= {axis_link_name(name, axis) for name in own for axis in ("z", "y")}  # and axis_link_table
@@ -166,35 +141,18 @@ class EstimatorNode(LifecycleNode):
             self, set(self._frames), own, self._tracker_arrived, guards, also=self._looked_up_frames(p)
         )
         self._configure_inputs()
-        overrides = QoSOverridingOptions.with_default_policies()
-        from tf2_msgs.msg import TFMessage  # here, not at import: the stand-in exists only after setup
+        from .live_view import LiveViewError
 
-        ns = self.OUTPUTS
-        # one profile object per publisher: rclpy's QoS overrides change the object they are given
-        self.pub_joints = self.create_lifecycle_publisher(
-            JointState, ns + "joint_states", QoSProfile(depth=10), qos_overriding_options=overrides
-        )
-        self.pub_contacts = self.create_lifecycle_publisher(
-            FootContacts, ns + "foot_contacts", QoSProfile(depth=10), qos_overriding_options=overrides
-        )
-        self.pub_status = self.create_lifecycle_publisher(
-            EstimateStatus, ns + "estimate_status", QoSProfile(depth=10), qos_overriding_options=overrides
-        )
-        self.pub_tf = self.create_lifecycle_publisher(TFMessage, "/tf", QoSProfile(depth=100))
-        self.pub_diag = self.create_lifecycle_publisher(DiagnosticArray, "/diagnostics", QoSProfile(depth=10))
-        latched = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL)
-        self.pub_description = self.create_publisher(String, ns + "robot_description", latched)
-        self.pub_description.publish(String(data=body_urdf(self.skeleton)))
-        if p["foxglove_port"]:
-            from .live_view import LiveView, LiveViewError
-
-            try:
-                self.live_view = LiveView(p["foxglove_host"], p["foxglove_port"], body_urdf(self.skeleton))
-            except LiveViewError as err:
-                self.get_logger().error(f"configure failed: {err}")
-                self._release()
-                return TransitionCallbackReturn.FAILURE
-            self.get_logger().info(f"live view: open ws://{p['foxglove_host']}:{self.live_view.port} in Foxglove")
+        try:
+            self.outputs = EstimateOutputs(self, self.OUTPUTS, self.skeleton, sensors.fixed_frame, p)
+        except LiveViewError as err:
+            self.get_logger().error(f"configure failed: {err}")
+            self._release()
+            return TransitionCallbackReturn.FAILURE
+        if self.outputs.live_view is not None:
+            self.get_logger().info(
+                f"live view: open ws://{p['foxglove_host']}:{self.outputs.live_view.port} in Foxglove"
+            )
         self.get_logger().info(
             f"configured: {self._method()} on {sensors.name} ({', '.join(sensors.site_names)}) "
             f"in frame {sensors.fixed_frame!r}"
@@ -202,52 +160,19 @@ class EstimatorNode(LifecycleNode):
         return TransitionCallbackReturn.SUCCESS
 
     def _make_estimator(self, p: dict, sensors):
-        """One merge order for the filter and the method's options: their defaults, then the
-        spec string's options, then the filter_* and NAME.<field> parameters a user set (those
-        not at their defaults); the estimator applies them (create_estimator), so nothing sets
-        its filter a second time."""
-        name, spec = parse_estimator_spec(p["estimator"])
-        options = dict(spec)
-        options.update(self._method_options(p, name))
-        if p["model_path"]:
-            options["model_path"] = p["model_path"]
-        options.update(self._shared_options(p))
+        name, options, overridden = estimator_options(p)
         # a parameter set wins over the spec's same option: said, so the log shows what runs
         # (the spec's predict_ahead=0.2 was logged while the parameter's 0.1 stamped the poses)
-        for key, value in spec.items():
-            if key in options and options[key] != value:
-                self.get_logger().warning(
-                    f"the parameter sets {key} to {options[key]!r} over the estimator spec's {value!r}"
-                )
+        for key, value in overridden.items():
+            said = f"the parameter sets {key} to {options[key]!r} over the estimator spec's {value!r}"
+            self.get_logger().warning(said)
         return create_estimator(name, sensors, self.skeleton, fps=p["output_rate"], **options)
-
-    def _method_options(self, p: dict, method: str) -> dict:
-        """The NAME.<field> parameters of a method that a user set (not at their defaults):
-        given over the spec's NAME:key=value options, as the filter_* parameters are."""
-        return {
-            key.partition(".")[2]: p[key]
-            for key, option in METHOD_OPTIONS.items()
-            if key.partition(".")[0] == method and p[key] != option.default
-        }
 
     def _make_budget_fallback(self, p: dict, sensors) -> Estimator | None:
-        """The estimator for frames the estimator's step misses its budget on (None: none), with
-        the same filter parameters, so both see the trackers alike."""
-        name, options = parse_estimator_spec(p["budget_fallback"]) if p["budget_fallback"] else ("", {})
-        if not name or name == parse_estimator_spec(p["estimator"])[0]:
+        fallback = fallback_options(p)
+        if fallback is None:
             return None
-        options.update(self._method_options(p, name))
-        options.update(self._shared_options(p))
-        return create_estimator(name, sensors, self.skeleton, fps=p["output_rate"], **options)
-
-    def _shared_options(self, p: dict) -> dict:
-        """What the estimator and its budget fallback are both given, so that their poses are
-        alike: the filter_* parameters a user set, foot_lock and predict_ahead."""
-        shared = {k: p[k] for k, (default, _) in self.PARAMETERS.items() if k.startswith(FILTER) and p[k] != default}
-        if p.get("predict_ahead"):
-            shared["predict_ahead"] = p["predict_ahead"]
-        shared["foot_lock"] = bool(p["foot_lock"])
-        return shared
+        return create_estimator(fallback[0], sensors, self.skeleton, fps=p["output_rate"], **fallback[1])
 
     def _step_budget(self) -> float:
         return self.params["step_budget"] or 0.75 / self.params["output_rate"]
@@ -286,10 +211,7 @@ class EstimatorNode(LifecycleNode):
         self._release()
         return TransitionCallbackReturn.SUCCESS
 
-    def on_shutdown(self, state: LifecycleState) -> TransitionCallbackReturn:
-        self._stop_timers()
-        self._release()
-        return TransitionCallbackReturn.SUCCESS
+    on_shutdown = on_cleanup
 
     def _stop_timers(self) -> None:
         if self.timer is not None:
@@ -299,22 +221,13 @@ class EstimatorNode(LifecycleNode):
         self.timer = self.diag_timer = None
 
     def _release(self) -> None:
-        for pub in (self.pub_joints, self.pub_contacts, self.pub_status, self.pub_tf, self.pub_diag):
-            if pub is not None:
-                self.destroy_lifecycle_publisher(pub)
-        if self.pub_description is not None:
-            self.destroy_publisher(self.pub_description)
+        if self.outputs is not None:
+            self.outputs.destroy()
         if self.tf_in is not None:
             self.tf_in.destroy()
-        if self.live_view is not None:
-            self.live_view.close()
-            self.live_view = None
         if self.budgeted is not None:
             self.budgeted.close()  # the late step, if any, ends first
-        self.tf_in = self.estimator = self.budgeted = None
-        self.pub_joints = self.pub_contacts = self.pub_status = self.pub_tf = self.pub_diag = None
-        self.pub_description = None
-        self._last_good: BodyPose | None = None
+        self.tf_in = self.estimator = self.budgeted = self.outputs = self.live = None
         self._ages: np.ndarray | None = None
         self._site_valid: np.ndarray | None = None
 
@@ -363,7 +276,8 @@ class EstimatorNode(LifecycleNode):
         if gathered is None:
             return
         frame, stamps, newest, no_input, silent = gathered
-        pose, reason = self._step(frame, deadline)
+        assert self.live is not None
+        pose, reason = self.live.step(frame, deadline)
         # Stamp the outputs with the newest tracker stamp used, so latency can be measured; with
         # a filter lag the pose is that much older, and so are its stamp and its latency; with
         # predict_ahead it is of a later time, and so is its stamp (latency: from the trackers).
@@ -374,8 +288,9 @@ class EstimatorNode(LifecycleNode):
             self._stats.invalid += 1
             reason = reason or self._held_reason(frame, no_input, silent)
         self._publish(pose, stamp, reason)
-        if self.live_view is not None:
-            self.live_view.log_trackers(frame, self.sensors.fixed_frame, self._frames)
+        assert self.outputs is not None
+        if self.outputs.live_view is not None:
+            self.outputs.live_view.log_trackers(frame, self.sensors.fixed_frame, self._frames)
         self._last_step = time.monotonic()
         if not no_input:
             self._last_input = newest
@@ -420,34 +335,6 @@ class EstimatorNode(LifecycleNode):
         self._ages, self._site_valid = now - stamps, frame.valid.copy()
         return frame, stamps, newest, no_input, silent if np.isfinite(newest) else np.inf
 
-    def _step(self, frame, deadline: float) -> tuple[BodyPose, str]:
-        """The estimator's pose for frame, or budget_fallback's where the step is not done by
-        the deadline (finite: a failure holds the last good pose), and what estimate_status
-        says of it: why it is held, or that the fallback made it."""
-        assert self.budgeted is not None
-        try:
-            pose, over_budget = self.budgeted.step(frame, deadline)
-            if not pose.is_finite():
-                raise FloatingPointError("estimator returned non-finite values")
-        except Exception as err:  # noqa: BLE001 - a failing step must not take the node down
-            self._stats.error(f"{type(err).__name__}: {err}")
-            self.budgeted.reset()
-            return self._held(frame.stamp), "estimator error; held"
-        if over_budget:
-            self._stats.over_budget += 1
-        if pose.valid:
-            self._last_good = pose
-        if over_budget and pose.valid:  # a held one says why it is held
-            assert self.budgeted.fallback is not None
-            return pose, (
-                f"{OVER_BUDGET} {self.budgeted.fallback.name}'s pose: {self._method()} took over "
-                f"{self._step_budget() * 1000:.1f} ms"
-            )
-        depth = self.budgeted.estimator.out_of_depth() if pose.valid else None
-        if depth is not None and depth[0] > 0.0:
-            return pose, f"{OUT_OF_DEPTH} {depth[0]:.2f}: {depth[1]}"
-        return pose, ""
-
     def _held_reason(self, frame, no_input: bool, silent: float) -> str:
         if no_input:
             if np.isfinite(silent):
@@ -461,46 +348,15 @@ class EstimatorNode(LifecycleNode):
         return f"held: no usable pose from {', '.join(missing)}" if missing else "held"
 
     def _publish(self, pose: BodyPose, stamp: float, reason: str) -> None:
-        assert self.pub_joints and self.pub_contacts and self.pub_status and self.pub_tf and self.tf_in
-        frame_id, p = self.sensors.fixed_frame, self.params
-        # the estimate bag's encoder (io/cdr.py), one pose at a time: the same bytes live and
-        # offline, without building a Python message object per field
-        quats, root = pose.local_quats[None], pose.root_position[None]
-        angles = joint_angles(quats)  # once: the JointState and the URDF's massless links
-        (joints,), (contacts,), (status,) = cdr.estimate_messages(
-            BodyPoses.of([pose]),
-            self.skeleton,
-            frame_id,
-            reason or HELD,
-            stamps=[stamp],
-            angles=angles,
-            valid_message=reason,
-        )
-        self.pub_joints.publish(joints)
-        self.pub_contacts.publish(contacts)
-        self.pub_status.publish(status)
-        links = body_table(quats, root, self.skeleton, frame_id, p["frame_prefix"], p["publish_link_tf"])
-        if p["publish_link_tf"]:  # the URDF's massless links too: RViz finds every link it draws
-            links = links + axis_link_table(angles, self.skeleton, p["frame_prefix"])
-        tf = cdr.tf_messages([stamp], links.parents, links.children, links.values)[0]
-        self.pub_tf.publish(tf)
-        self.tf_in.published(tf)
-        if self.live_view is not None:
-            for topic, data in (("/joint_states", joints), ("/foot_contacts", contacts), ("/estimate_status", status)):
-                self.live_view.log(topic, data, stamp)
-            self.live_view.log("/tf", tf, stamp)
-
-    def _held(self, stamp: float) -> BodyPose:
-        if self._last_good is None:
-            return BodyPose(stamp, matrix_to_quat(standing_pose()), np.zeros(3), valid=False)
-        return self._last_good.held(stamp)
+        assert self.outputs is not None and self.tf_in is not None
+        self.tf_in.published(self.outputs.publish(pose, stamp, reason))
 
     def _input_diagnostics(self) -> dict[str, str]:
         """What a node that reads more than trackers says of that input (the constraint node)."""
         return {}
 
     def _publish_diagnostics(self) -> None:
-        assert self.tf_in is not None and self.pub_diag is not None  # the timer exists only while active
+        assert self.tf_in is not None and self.outputs is not None  # the timer exists only while active
         rejected = self.tf_in.rejected
         level, message, values = self._stats.status(self.sensors.site_names, self._ages, self._site_valid, rejected)
         values["/tf messages caught up"] = str(self.tf_in.drained)  # taken at once by a node running behind
@@ -515,13 +371,7 @@ class EstimatorNode(LifecycleNode):
         )
         msg = DiagnosticArray(status=[status])
         msg.header.stamp = self.get_clock().now().to_msg()
-        self.pub_diag.publish(msg)
-        if self.live_view is not None:
-            from rclpy.serialization import serialize_message
-
-            now = self.get_clock().now().nanoseconds * 1e-9
-            self.live_view.log_description(now)
-            self.live_view.log("/diagnostics", serialize_message(msg), now)
+        self.outputs.publish_diagnostics(msg, self.get_clock().now().nanoseconds * 1e-9)
 
 
 def main(args=None, node_class=None) -> None:

@@ -153,6 +153,55 @@ TEXT_CHECKS = {
 }
 
 
+# how ros/parameters.py checks this node's table (problems, check_parameter)
+CHECKS = {"options": METHOD_OPTIONS, "text_checks": TEXT_CHECKS}
+
+
 def check_parameter(name: str, value, default, ranges: Ranges = RANGES) -> str | None:
     """Why value is not acceptable for the estimator's parameter name, or None."""
     return _check(name, value, default, ranges, METHOD_OPTIONS, TEXT_CHECKS)
+
+
+def method_options(p: dict, method: str) -> dict:
+    """The NAME.<field> parameters of a method that a user set (not at their defaults): given
+    over the spec's NAME:key=value options, as the filter_* parameters are."""
+    return {
+        key.partition(".")[2]: p[key]
+        for key, option in METHOD_OPTIONS.items()
+        if key.partition(".")[0] == method and p[key] != option.default
+    }
+
+
+def shared_options(p: dict) -> dict:
+    """What the estimator and its budget fallback are both given, so that their poses are
+    alike: the filter_* parameters a user set, foot_lock and predict_ahead."""
+    shared = {k: p[k] for k, (default, _) in PARAMETERS.items() if k.startswith(FILTER) and p[k] != default}
+    if p.get("predict_ahead"):
+        shared["predict_ahead"] = p["predict_ahead"]
+    shared["foot_lock"] = bool(p["foot_lock"])
+    return shared
+
+
+def estimator_options(p: dict) -> tuple[str, dict, dict]:
+    """(method, the options it is made with, the spec's options a parameter overrode). One
+    merge order for the filter and the method's options: their defaults, then the spec
+    string's options, then the filter_* and NAME.<field> parameters a user set (those not at
+    their defaults); the estimator applies them (create_estimator), so nothing sets its filter
+    a second time."""
+    name, spec = parse_estimator_spec(p["estimator"])
+    options = dict(spec)
+    options.update(method_options(p, name))
+    if p["model_path"]:
+        options["model_path"] = p["model_path"]
+    options.update(shared_options(p))
+    overridden = {key: value for key, value in spec.items() if key in options and options[key] != value}
+    return name, options, overridden
+
+
+def fallback_options(p: dict) -> tuple[str, dict] | None:
+    """(method, options) of the estimator for frames the estimator's step misses its budget
+    on (None: none), with the same filter parameters, so both see the trackers alike."""
+    name, options = parse_estimator_spec(p["budget_fallback"]) if p["budget_fallback"] else ("", {})
+    if not name or name == parse_estimator_spec(p["estimator"])[0]:
+        return None
+    return name, {**options, **method_options(p, name), **shared_options(p)}

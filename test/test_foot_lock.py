@@ -64,5 +64,5 @@ def test_foot_lock_takes_true_or_false():
     # LoBSTr's own contact IK holds its feet: not a second time, unless that is off
     assert create_estimator("lobstr", sensors, skeleton).foot_lock is None
     assert create_estimator("lobstr", sensors, skeleton, contact_ik=False).foot_lock is not None
-    with pytest.raises(ValueError, match="foot_lock must be true or false"):
+    with pytest.raises(ValueError, match="foot_lock takes true or false"):
         create_estimator("ik", sensors, skeleton, foot_lock="yes")

@@ -78,7 +78,7 @@ def test_smooth_option_cuts_shaking_of_ik_under_noise_and_is_checked(clip_index)
     assert smooth["MPJVE [cm/s]"] < 0.7 * live["MPJVE [cm/s]"]
     assert smooth["Jitter [100m/s3]"] < 0.3 * live["Jitter [100m/s3]"]
     assert smooth["MPJPE [cm]"] < live["MPJPE [cm]"] + 0.2
-    with pytest.raises(ValueError, match="smooth must be true or false"):
+    with pytest.raises(ValueError, match="smooth takes true or false"):
         create_estimator("ik", sensors, motion.skeleton, smooth="yes")
 
 

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 from ..core.options import Option, Options
 from ..core.tracker_filter import PREFIX, FilterConfig
+from ..estimators.options import SharedOptions
 from ..methods import METHODS, load
 
 HEADER = """# Options
@@ -42,6 +43,8 @@ def markdown() -> str:
         parts.append("\n".join(_rows(options)) + "\n" if options.fields() else "No options of its own.\n")
         if options.passes_on:
             parts.append("Any other option is its base estimator's.\n")
+    parts.append("## Every estimator\n")
+    parts.append("\n".join(_rows(SharedOptions)) + "\n")
     parts.append("## The tracker filter (every estimator)\n")
     parts.append("\n".join(_rows(FilterConfig, PREFIX)) + "\n")
     return "\n".join(parts)

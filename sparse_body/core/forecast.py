@@ -30,6 +30,7 @@ from scipy.spatial.transform import Rotation
 from .types import BodyPose, breaks_take
 
 MAX_AHEAD = 0.2  # s: past this a forecast is a guess (the option's range)
+FORECASTS = ("learned", "faded")  # how predict_ahead moves the root (the option forecast)
 FADE = 0.1  # s: the velocity's time constant (chosen on the held-out kind dance: docs/methods.md)
 MAX_TURN = 30.0  # rad/s a joint may turn (a fast punch's wrist: about 20)
 MAX_SPEED = 12.0  # m/s the root may move (a sprinter's: about 10)

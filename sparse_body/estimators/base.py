@@ -378,9 +378,6 @@ def parse_estimator_spec(spec: str) -> tuple[str, dict]:
     return name.strip(), options
 
 
-FORECASTS = ("learned", "faded")  # how predict_ahead moves the root (the option forecast)
-
-
 def learned_root_available() -> bool:
     """Whether the package has the learned root forecast's model (make train-forecast)."""
     from ..core.resources import models_dir

@@ -4,12 +4,12 @@ methods and the Estimator base, so neither imports the registry."""
 
 from __future__ import annotations
 
-from ..core.forecast import MAX_AHEAD
 from ..core.options import shown
 from ..core.sensors import SensorConfig
 from ..core.skeleton import JOINT_INDEX, Skeleton
 from ..core.tracker_filter import filter_config
-from ..estimators.base import FORECASTS, Estimator
+from ..estimators.base import Estimator
+from ..estimators.options import SharedOptions
 from . import METHODS, load
 from .recommended import AUTO, recommended
 
@@ -48,27 +48,13 @@ def create_estimator(name: str, sensors: SensorConfig, skeleton: Skeleton, fps: 
         name, chosen = parse_estimator_spec(recommended(sensors.name))
         options = {**chosen, **options}
     filtering = filter_config(options)
-    smooth = options.pop("smooth", False)
-    if not isinstance(smooth, bool):
-        raise ValueError(f"smooth must be true or false, got {shown(smooth)}")
-    # on by default: on the kinds of motion no model trained on it halves the four-point skate
-    # of the estimators without a contact IK of their own and moves their lower-body error by
-    # under 1 % either way (docs/methods.md, "Feet held where they touch down"); feet that wear
-    # trackers are as the trackers say, and never held
-    foot_lock = options.pop("foot_lock", True)
-    if not isinstance(foot_lock, bool):
-        raise ValueError(f"foot_lock must be true or false, got {shown(foot_lock)}")
-    ahead = options.pop("predict_ahead", 0.0)
-    if isinstance(ahead, bool) or not isinstance(ahead, (int, float)) or not 0.0 <= ahead <= MAX_AHEAD:
-        raise ValueError(f"predict_ahead must be a number of seconds from 0 to {MAX_AHEAD:g}, got {shown(ahead)}")
-    root = options.pop("forecast", "learned")
-    if root not in FORECASTS:
-        raise ValueError(f"forecast must be one of {', '.join(FORECASTS)}, got {shown(root)}")
+    shared = SharedOptions.parse(options, f"estimator {name!r}")
+    options = SharedOptions.rest(options)
     load(METHODS[name].options).parse(options, f"estimator {name!r}")  # before any model is loaded
     estimator = load(METHODS[name].estimator)(sensors, skeleton, fps=fps, **options)
-    estimator.use_filter(filtering, smooth)
-    estimator.use_forecast(float(ahead), root)
-    estimator.use_foot_lock(foot_lock and not feet_tracked(sensors))
+    estimator.use_filter(filtering, shared.smooth)
+    estimator.use_forecast(float(shared.predict_ahead), shared.forecast)
+    estimator.use_foot_lock(shared.foot_lock and not feet_tracked(sensors))
     return estimator
 
 

@@ -5,11 +5,11 @@ declares and checks them)."""
 
 from __future__ import annotations
 
-from ..core.forecast import MAX_AHEAD
 from ..core.options import Option
 from ..core.tracker_filter import PREFIX as FILTER
 from ..core.tracker_filter import FilterConfig
 from ..estimators.base import parse_estimator_spec
+from ..estimators.options import SharedOptions
 from ..io.tf_cache import TfGuards
 from ..methods import METHODS, NAMES, load
 from ..methods.recommended import AUTO
@@ -32,6 +32,11 @@ def method_option_parameters() -> dict[str, Option]:
 
 METHOD_OPTIONS = method_option_parameters()
 
+# The options every method takes (estimators/options.SharedOptions) that the node sets as its
+# own parameters (smooth is offline only; forecast rides in the estimator spec).
+SHARED = SharedOptions.fields()
+SHARED_PARAMETERS = {name: (SHARED[name].default, _text(SHARED[name])) for name in ("foot_lock", "predict_ahead")}
+
 PARAMETERS = {
     # name: (default, description)
     "sensors": ("six_point", "sensor configuration: a name under config/sensors or a YAML path"),
@@ -49,19 +54,7 @@ PARAMETERS = {
         "is the one estimated and published; empty: the canonical body at height",
     ),
     **FILTER_PARAMETERS,
-    "foot_lock": (
-        True,
-        "hold each foot where it touched down while the estimator says it is in contact (hip and "
-        "knee move, LoBSTr's contact IK): less sliding; feet that wear trackers are never "
-        "held; false: the estimator's legs as they are",
-    ),
-    "predict_ahead": (
-        0.0,
-        "seconds past the trackers' stamp the body is forecast and stamped (a teleoperation "
-        "loop cancels its own delay with it): each joint carried on at its fading velocity, the "
-        "root moved by the learned forecast (estimator option forecast=faded: at its velocity too); "
-        "0: the body at the trackers' stamp",
-    ),
+    **SHARED_PARAMETERS,
     "output_rate": (
         60.0,
         "estimates per second when the trackers do not drive them (input slow, partial or "
@@ -121,7 +114,7 @@ RANGES = {
     **{name: (o.range.low, o.range.high) for name, o in METHOD_OPTIONS.items() if o.range},
     "output_rate": (0.1, 1000.0),
     "step_budget": (0.0, 1.0),
-    "predict_ahead": (0.0, MAX_AHEAD),
+    **{name: (r.low, r.high) for name in SHARED_PARAMETERS if (r := SHARED[name].range)},
     "stale_timeout": (0.001, 10.0),
     "tracker_timeout": (0.01, 60.0),
     "clock_window": (0.0, 1e9),

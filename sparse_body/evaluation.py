@@ -69,6 +69,9 @@ def method_options(spec: str, options: dict | None = None) -> dict:
     return declared.parse(given, f"estimator {name!r}").as_dict()
 
 
+OUT_OF_DEPTH = "Out of depth [%]"  # (a metric only of estimators that say it: upright)
+
+
 @dataclass
 class Estimated:
     """One estimator's run over one motion: what evaluate_motion scores and `view` draws."""
@@ -81,6 +84,7 @@ class Estimated:
     contacts: np.ndarray  # (T, 2) left, right
     horizon: int = 0  # frames after its own frame each pose is of (predict_ahead), scored there
     contact_probability: np.ndarray | None = None  # (T, 2) as published beside the contacts
+    out_of_depth: np.ndarray | None = None  # (T,) Estimator.out_of_depth after each pose; None: it says none
 
 
 def estimate_motion(
@@ -108,7 +112,11 @@ def estimate_motion(
     view = user_view(motion, sensors, protocol, seed)
     options = {**filter_options(protocol.noise), **options}
     estimator = create_estimator(estimator_name, view.sensors, view.skeleton, fps=motion.fps, **options)
-    poses = estimator.process(view.stream)
+    poses, depth = [], []
+    for pose in estimator.stream(view.stream):  # (process(), with what it says after each pose)
+        poses.append(pose)
+        share = estimator.out_of_depth()
+        depth.append(np.nan if share is None else share[0])
     local = quat_to_matrix(np.stack([p.local_quats for p in poses]))
     root = np.stack([p.root_position for p in poses])
     glob, pos = forward_kinematics(local, root, view.skeleton.offsets)
@@ -117,7 +125,8 @@ def estimate_motion(
         raise ValueError(f"a horizon of {ahead} frames does not fit the {len(motion)}-frame motion {motion.name}")
     contacts = np.stack([p.contact for p in poses])
     probability = np.stack([p.contact_probability for p in poses])
-    return Estimated(motion, view, pos, glob, local, contacts, ahead, probability)
+    depths = np.array(depth) if np.isfinite(depth).any() else None
+    return Estimated(motion, view, pos, glob, local, contacts, ahead, probability, depths)
 
 
 def evaluate_motion(*args, per_joint: bool = False, **options) -> dict[str, float]:
@@ -147,6 +156,8 @@ def score(run: Estimated, per_joint: bool = False) -> dict[str, float]:
         run.contacts[made],
         tracked,
     )
+    if run.out_of_depth is not None:  # the share of frames the estimator said lay mostly outside what it knows
+        metrics[OUT_OF_DEPTH] = float(np.mean(np.nan_to_num(run.out_of_depth[made]) > 0.5) * 100)
     lost = run.view.stream.lost
     if lost is not None:  # a protocol that takes trackers out of view (--hand-loss)
         joints = [site.joint_index for site in run.view.sensors.sites]

@@ -121,3 +121,17 @@ def test_a_body_bent_over_with_its_pelvis_high_is_not_lying():
     assert upright.tilted > 60.0  # tilted as a lying body is
     assert shares.max() < 0.01
     assert max(np.abs(p.local_quats - q.local_quats).max() for p, q in zip(poses, alone, strict=True)) < 0.02
+
+
+def test_eval_counts_the_frames_upright_says_lie_outside_what_it_knows():
+    """Issue 73: the out-of-depth score is said in eval's output as well as on estimate_status."""
+    from sparse_body.evaluation import OUT_OF_DEPTH, estimate_motion, score
+
+    sensors = load_sensor_config("four_point")
+    walk = synthetic_walk(3.0)
+    standing = estimate_motion(walk, "upright", sensors)
+    lain = estimate_motion(lying(walk, "lying on the back"), "upright", sensors)
+    assert standing.out_of_depth is not None and lain.out_of_depth is not None
+    assert score(standing)[OUT_OF_DEPTH] < 5.0 < 80.0 < score(lain)[OUT_OF_DEPTH]
+    ik = estimate_motion(walk, "ik", sensors)
+    assert ik.out_of_depth is None and OUT_OF_DEPTH not in score(ik)  # (only upright says it)

@@ -28,6 +28,7 @@ def run(args) -> int:
     from ...core.sensors import load_sensor_config
     from ...data.field_protocol import Protocol
     from ...evaluation import (
+        OUT_OF_DEPTH,
         check_results_path,
         file_items,
         run_evaluation,
@@ -120,7 +121,8 @@ def run(args) -> int:
         print(format_groups(results, label="person", by="subject"))
     if not args.motion and len(set(results[0].categories)) > 1:  # each kind of motion, unseen ones marked
         notes = untrained_categories(mocap_root(args), results[0].categories)
-        for metric in ("MPJPE [cm]", "Lower PE [cm]", "Skate [cm/s]", "Ground [cm]", "Contact acc [%]"):
+        said = [OUT_OF_DEPTH] if any(OUT_OF_DEPTH in r.summary for r in results) else []
+        for metric in ("MPJPE [cm]", "Lower PE [cm]", "Skate [cm/s]", "Ground [cm]", "Contact acc [%]", *said):
             print(format_groups(results, metric, label="motion", by="category", notes=notes))
     print(f"written {out}")
     skipped = {s["clip"]: s["reason"] for r in results for s in r.skipped}

@@ -1102,6 +1102,63 @@ def test_the_bridge_s_diagnostics_and_waiting_end_quietly_when_a_stop_destroys_t
     assert wait(threading.Event()) is False
 
 
+TOY_SOURCE = """
+import numpy as np
+
+
+class Toy:
+    def __init__(self, context):
+        self.context = context
+
+    def start(self):  # three samples of the head tracker at once
+        frame = self.context.sensors.sites[0].frame_id
+        site = self.context.sensors.sites[0].site
+        self.context.send([(site, None, frame, self.context.now(), np.zeros(3), np.array([0.0, 0, 0, 1]))] * 3)
+
+    def stop(self):
+        pass
+
+    close = stop
+
+    def diagnostics(self):
+        return "", {"toy": "yes"}
+
+
+def make(context):
+    context.log("a toy source")
+    return Toy(context)
+"""
+
+
+def test_a_tracker_source_is_one_file_and_a_line_in_the_registry(ros_env, tmp_path, monkeypatch, capfd):
+    """Issue 76: adding a source took three Python files and two configs (an `if kind == "vmc"`
+    branch); now one module with a maker and its line in SOURCES."""
+    from rclpy.parameter import Parameter
+
+    from sparse_body.ros import tracker_sources
+    from sparse_body.ros.tracker_bridge_node import TrackerBridge
+
+    (tmp_path / "toy_source.py").write_text(TOY_SOURCE)
+    monkeypatch.syspath_prepend(str(tmp_path))
+    monkeypatch.setitem(tracker_sources.SOURCES, "toy", "toy_source:make")
+    node = TrackerBridge(parameter_overrides=[Parameter("source", value="toy")])
+    try:
+        node.trigger_configure()
+        assert type(node.source).__name__ == "Toy"
+        node.trigger_activate()
+        assert node.published == 3  # through the bridge's own /tf publisher
+    finally:
+        node.destroy_node()
+    unknown = TrackerBridge(parameter_overrides=[Parameter("source", value="carrier_pigeon")])
+    try:
+        unknown.trigger_configure()
+        assert unknown.source is None  # configure failed, in one line naming the sources
+    finally:
+        unknown.destroy_node()
+    said = capfd.readouterr().err
+    assert "a toy source" in said and "must be one of bag, vmc, serial, toy, got 'carrier_pigeon'" in said, said
+
+
 def test_a_body_lying_down_is_said_out_of_depth_on_estimate_status(ros_env, tmp_path):
     """The default four-point estimator (upright) stands a lying body up for its base and says
     so on estimate_status, valid, with the share of the tilt it took out; the joints stay finite."""

@@ -51,11 +51,10 @@ from ..io.bagio import BagError
 from .messages import to_time
 from .parameters import declare, problems
 from .spin import init, start_and_spin
-from .tracker_sources import BagSource, DeviceSource, Sample, TrackerSource
+from .tracker_sources import SOURCES, Sample, SourceContext, TrackerSource, make_source
 
-SOURCES = ("bag", "vmc", "serial")
 PARAMETERS = {
-    "source": ("bag", "where tracker poses come from: bag, vmc or serial"),
+    "source": ("bag", f"where tracker poses come from: {', '.join(SOURCES)} (ros/tracker_sources.py)"),
     "sensors": ("six_point", "sensor configuration naming the body sites' TF frames and fixed frame"),
     "bag": ("", "source bag: rosbag2 directory (or .mcap / .db3 file) holding tracker /tf"),
     "rate": (1.0, "source bag: playback speed factor"),
@@ -131,8 +130,6 @@ class TrackerBridge(LifecycleNode):
             wrong = list(self._refused_at_start.values()) + problems(PARAMETERS, p, RANGES)
             if wrong:
                 raise ValueError("; ".join(wrong))
-            if p["source"] not in SOURCES:
-                raise ValueError(f"parameter 'source' must be one of {', '.join(SOURCES)}, got {p['source']!r}")
             sensors = load_sensor_config(p["sensors"])
             self.calibration, self._tpose = None, None
             if p["calibration"] and Path(p["calibration"]).exists():
@@ -162,25 +159,9 @@ class TrackerBridge(LifecycleNode):
         return TransitionCallbackReturn.SUCCESS
 
     def _make_source(self, p: dict, sensors: SensorConfig) -> TrackerSource:
-        if p["source"] == "bag":
-            if not p["bag"]:
-                raise ValueError("parameter 'bag' is empty: name a rosbag2 of tracker TF")
-            source = BagSource(
-                p["bag"],
-                sensors,
-                self._send,
-                lambda: self.get_clock().now().nanoseconds * 1e-9,
-                p["rate"],
-                p["loop"],
-                p["restamp"],
-                self._wait_for_subscribers,
-                self.get_logger().info,
-            )
-            self.get_logger().info(f"playing {len(source.frames)} TF messages from {p['bag']}")
-            return source
-        device = DeviceSource(p["source"], p, sensors, self._send)
-        self.get_logger().info(device.where)
-        return device
+        now = lambda: self.get_clock().now().nanoseconds * 1e-9  # noqa: E731
+        context = SourceContext(p, sensors, self._send, now, self._wait_for_subscribers, self.get_logger().info)
+        return make_source(p["source"], context)
 
     def on_activate(self, state: LifecycleState) -> TransitionCallbackReturn:
         result = super().on_activate(state)  # the /tf publisher first: the source sends at once

@@ -1,9 +1,13 @@
 """Where the tracker bridge's samples come from: a recorded bag, or live devices (VMC over
 UDP, the serial tracker protocol). Each is a TrackerSource; the bridge (a lifecycle node)
-makes one at configure, starts it at activate, stops it at deactivate and closes it at
-cleanup. A source hands the bridge lists of Sample tuples; the bridge applies the
-calibration and publishes them on /tf. Sources know nothing of ROS but the clock they are
-given.
+makes one at configure (by the name its `source` parameter gives, from SOURCES), starts it at
+activate, stops it at deactivate and closes it at cleanup. A source hands the bridge lists of
+Sample tuples; the bridge applies the calibration and publishes them on /tf. Sources know
+nothing of ROS but the clock they are given.
+
+A new source is one file with a function that makes it from a SourceContext, and its line in
+SOURCES (as a method is one folder and its line in methods/__init__.py); its module is
+imported only when it is chosen.
 """
 
 from __future__ import annotations
@@ -11,6 +15,8 @@ from __future__ import annotations
 import threading
 import time
 from collections.abc import Callable
+from dataclasses import dataclass
+from importlib import import_module
 from pathlib import Path
 from typing import TYPE_CHECKING, Protocol
 
@@ -42,6 +48,67 @@ class TrackerSource(Protocol):
 
     def diagnostics(self) -> tuple[str, dict[str, str]]:
         """(a problem, or "" when there is none; figures) for /diagnostics."""
+
+
+@dataclass(frozen=True)
+class SourceContext:
+    """What the bridge gives a source's maker."""
+
+    params: dict  # the bridge's parameters (a source reads its own: bag, rate, vmc_port, ...)
+    sensors: SensorConfig
+    send: Send  # hands samples to the bridge (from any thread)
+    now: Callable[[], float]  # the node's clock [s]
+    ready: Callable[[threading.Event], bool]  # waits for the /tf subscribers (False: stopped first)
+    log: Callable[[str], object]
+
+
+# source name -> "module:function" making it from a SourceContext
+SOURCES = {
+    "bag": "sparse_body.ros.tracker_sources:bag_source",
+    "vmc": "sparse_body.ros.tracker_sources:vmc_source",
+    "serial": "sparse_body.ros.tracker_sources:serial_source",
+}
+
+
+def make_source(name: str, context: SourceContext) -> TrackerSource:
+    """The source a name in SOURCES makes (ValueError for another name)."""
+    if name not in SOURCES:
+        raise ValueError(f"parameter 'source' must be one of {', '.join(SOURCES)}, got {name!r}")
+    module, _, function = SOURCES[name].partition(":")
+    return getattr(import_module(module), function)(context)
+
+
+def bag_source(c: SourceContext) -> BagSource:
+    p = c.params
+    if not p["bag"]:
+        raise ValueError("parameter 'bag' is empty: name a rosbag2 of tracker TF")
+    source = BagSource(p["bag"], c.sensors, c.send, c.now, p["rate"], p["loop"], p["restamp"], c.ready, c.log)
+    c.log(f"playing {len(source.frames)} TF messages from {p['bag']}")
+    return source
+
+
+def vmc_source(c: SourceContext) -> DeviceSource:
+    from ..adapters.vmc import VmcReceiver
+
+    host, port = c.params["vmc_host"], c.params["vmc_port"]
+    source = DeviceSource(c, ["hmd:*=head"], lambda on_samples: VmcReceiver(on_samples, host, port))
+    assert isinstance(source.adapter, VmcReceiver)
+    address = source.adapter.address
+    c.log(f"listening for VMC on {address[0]}:{address[1]}")
+    return source
+
+
+def serial_source(c: SourceContext) -> DeviceSource:
+    from ..adapters.serial_reader import SerialTrackerReader
+
+    port, baudrate = c.params["serial_port"], c.params["serial_baudrate"]
+    source = DeviceSource(
+        c,
+        [f"serial:{i + 1}={s.site}" for i, s in enumerate(c.sensors.sites)],
+        lambda on_samples: SerialTrackerReader(port, on_samples, baudrate),
+    )
+    c.log(f"reading serial trackers from {port}")
+    return source
 
 
 class BagSource:
@@ -119,20 +186,18 @@ class BagSource:
 
 
 class DeviceSource:
-    """Live devices, VMC over UDP or the serial protocol, sent to body sites by a device map
+    """Live devices (VMC over UDP, the serial protocol: their transport), sent to body sites by a device map
     (PATTERN=SITE entries) and stamped with each sample's (device-clock corrected) time;
     samples older than stale_after when they arrive are dropped and counted. The transport
     is opened here (so a port in use fails configure); samples reach the bridge while the
     source is started."""
 
-    def __init__(self, kind: str, params: dict, sensors: SensorConfig, send: Send) -> None:
-        self.sensors, self.send, self.stale_after = sensors, send, params["stale_after"]
-        entries = [e for e in params["devices"] if e]
-        if not entries:
-            if kind == "vmc":
-                entries = ["hmd:*=head"]
-            else:
-                entries = [f"serial:{i + 1}={s.site}" for i, s in enumerate(sensors.sites)]
+    def __init__(self, context: SourceContext, default_map: list[str], open_transport: Callable) -> None:
+        """default_map: the device map where the `devices` parameter gives none; open_transport:
+        the transport (VmcReceiver, SerialTrackerReader) for a callback taking its samples."""
+        params, sensors = context.params, context.sensors
+        self.sensors, self.send, self.stale_after = sensors, context.send, params["stale_after"]
+        entries = [e for e in params["devices"] if e] or default_map
         self.device_map = parse_device_map(entries)
         unknown = {site for _, site in self.device_map} - set(sensors.site_names)
         if unknown:
@@ -144,17 +209,7 @@ class DeviceSource:
         self.unmapped: set[str] = set()
         self._lock = threading.Lock()  # the counts change on the transport's thread
         self.running = False
-        self.adapter: VmcReceiver | SerialTrackerReader
-        if kind == "vmc":
-            from ..adapters.vmc import VmcReceiver
-
-            self.adapter = VmcReceiver(self._on_samples, params["vmc_host"], params["vmc_port"])
-            self.where = f"listening for VMC on {self.adapter.address[0]}:{self.adapter.address[1]}"
-        else:
-            from ..adapters.serial_reader import SerialTrackerReader
-
-            self.adapter = SerialTrackerReader(params["serial_port"], self._on_samples, params["serial_baudrate"])
-            self.where = f"reading serial trackers from {params['serial_port']}"
+        self.adapter: VmcReceiver | SerialTrackerReader = open_transport(self._on_samples)
 
     def start(self) -> None:
         self.running = True

@@ -186,7 +186,7 @@ def test_ablation_command_writes_each_runs_validation(tmp_path, train_mocap):
     for run in report["runs"]:
         assert run["steps"] == 3 and np.isfinite(run["validation"]["lower_rot_error_deg"])
     assert not out.exists()  # ablation runs train throwaway models
-    from sparse_body.methods.lobstr.card import LOBSTR_VALIDATION
+    from sparse_body.train.lobstr.card import LOBSTR_VALIDATION
     from sparse_body.train.model_card import augmentation_table
 
     table = augmentation_table(tmp_path / "lobstr.train.json", LOBSTR_VALIDATION)

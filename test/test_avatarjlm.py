@@ -65,8 +65,8 @@ def test_streaming_onnx_step_gives_the_torch_models_output_over_the_window(tmp_p
     import torch
 
     from sparse_body.methods.avatarjlm.estimator import AvatarJlmModel
-    from sparse_body.methods.avatarjlm.model import AvatarJlmConfig, AvatarJlmNet
-    from sparse_body.methods.avatarjlm.train import export_onnx
+    from sparse_body.train.avatarjlm.model import AvatarJlmConfig, AvatarJlmNet
+    from sparse_body.train.avatarjlm.train import export_onnx
 
     config = AvatarJlmConfig(d_embed=32, d_model=16, heads=4, loops=2, feedforward=32, window=9, dropout=0.0)
     torch.manual_seed(0)
@@ -152,8 +152,8 @@ def test_legs_are_rebuilt_by_default_only_where_the_network_turns_them(tmp_path,
     them unless told not to); the four-point model and networks started from the identity
     (the shipped three-point one, tested below) do not. Tiny models trained a few steps by the
     real training code."""
-    from sparse_body.methods.avatarjlm.model import AvatarJlmConfig
-    from sparse_body.methods.avatarjlm.train import train
+    from sparse_body.train.avatarjlm.model import AvatarJlmConfig
+    from sparse_body.train.avatarjlm.train import train
     from sparse_body.train.harness import TrainRun
 
     for sensors in ("three_point", "four_point"):
@@ -171,7 +171,7 @@ def test_legs_are_rebuilt_by_default_only_where_the_network_turns_them(tmp_path,
 def test_train_avatarjlm_is_one_command(tmp_path, train_mocap):
     import onnxruntime as ort
 
-    from sparse_body.methods.avatarjlm.train import TURNED_JOINT_DEG
+    from sparse_body.train.avatarjlm.train import TURNED_JOINT_DEG
 
     out = tmp_path / "avatarjlm.onnx"
     done = subprocess.run(
@@ -214,7 +214,7 @@ def test_train_avatarjlm_is_one_command(tmp_path, train_mocap):
 def test_a_finished_training_trains_further_from_its_kept_checkpoint(tmp_path, train_mocap):
     """--keep-checkpoint then --resume: the second run starts where the first stopped and its
     report keeps the first run, which the model card shows."""
-    from sparse_body.methods.avatarjlm.card import _curve, _training
+    from sparse_body.train.avatarjlm.card import _curve, _training
 
     out = tmp_path / "avatarjlm.onnx"
     run = [
@@ -364,8 +364,8 @@ def test_leg_term_judges_the_legs_own_swing_not_the_root(clip, tmp_path):
     import torch
 
     from sparse_body.core.rotations import matrix_to_6d
-    from sparse_body.methods.avatarjlm.model import AvatarJlmConfig, AvatarJlmNet, leg_positions
-    from sparse_body.methods.avatarjlm.train import train
+    from sparse_body.train.avatarjlm.model import AvatarJlmConfig, AvatarJlmNet, leg_positions
+    from sparse_body.train.avatarjlm.train import train
     from sparse_body.train.harness import TrainRun
 
     net = AvatarJlmNet(AvatarJlmConfig.named("tiny"))
@@ -391,8 +391,8 @@ def test_rotation_loss_on_matrices_pulls_a_half_turned_joint_back(tmp_path):
     back as hard as a small turn, the vectors' length kept, and weighs a small turn as 6D's L1."""
     import torch
 
-    from sparse_body.methods.avatarjlm.model import AvatarJlmConfig, rotation_error
-    from sparse_body.methods.avatarjlm.train import train
+    from sparse_body.train.avatarjlm.model import AvatarJlmConfig, rotation_error
+    from sparse_body.train.avatarjlm.train import train
     from sparse_body.train.harness import TrainRun
 
     def sixd(degrees):  # a turn about z, the bone (6D: the first two columns)

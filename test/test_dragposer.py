@@ -39,19 +39,19 @@ def shipped_models():
 @pytest.fixture(scope="module")
 def tiny_vae(tmp_path_factory, train_mocap):
     """Tiny models trained for a few steps by the real training code (for the torch tests)."""
-    from sparse_body.methods.dragposer.vae_model import VaeConfig
-    from sparse_body.methods.dragposer.vae_train import train_vae
+    from sparse_body.train.dragposer.vae_model import VaeConfig
+    from sparse_body.train.dragposer.vae_train import train_vae
     from sparse_body.train.harness import TrainRun
 
     out = tmp_path_factory.mktemp("dragposer")
     config = VaeConfig.named("tiny")
     config.hidden, config.steps = 64, 20
     train_vae(config, TrainRun(train_mocap, out, limit=2, log=lambda *_: None))
-    from sparse_body.methods.dragposer.temporal_model import TemporalConfig
-    from sparse_body.methods.dragposer.temporal_train import train_temporal
+    from sparse_body.train.dragposer.temporal_model import TemporalConfig
+    from sparse_body.train.dragposer.temporal_train import train_temporal
 
     train_temporal(TemporalConfig.named("tiny"), TrainRun(train_mocap, out, limit=2, log=lambda *_: None))
-    from sparse_body.methods.dragposer.tracker_prior_train import TrackerPriorConfig, train_tracker_prior
+    from sparse_body.train.dragposer.tracker_prior_train import TrackerPriorConfig, train_tracker_prior
 
     train_tracker_prior(TrackerPriorConfig.named("tiny"), TrainRun(train_mocap, out, limit=2, log=lambda *_: None))
     return out
@@ -116,7 +116,7 @@ def test_constraints_give_the_same_residuals_in_numpy_and_torch(rng):
 @pytest.mark.train
 def test_gauss_newton_reaches_a_decodable_pose_like_the_autograd_reference(tiny_vae, rng):
     from sparse_body.methods.dragposer.estimator import LatentOptimizer, PoseVaeRuntime
-    from sparse_body.methods.dragposer.torch_reference import load_vae, optimise
+    from sparse_body.train.dragposer.torch_reference import load_vae, optimise
 
     skeleton = Skeleton.canonical()
     vae = PoseVaeRuntime(tiny_vae)
@@ -408,7 +408,7 @@ def test_temporal_context_ignores_where_the_person_stands_and_faces(rng):
 @pytest.mark.train
 def test_limb_noise_turns_whole_limbs_and_nothing_else(rng):
     from sparse_body.methods.dragposer.pose import LIMBS
-    from sparse_body.methods.dragposer.temporal_train import limb_noise
+    from sparse_body.train.dragposer.temporal_train import limb_noise
 
     motion = synthetic_walk(seconds=4.0)
     local = motion.local_rotations.astype(np.float32)
@@ -432,13 +432,13 @@ def test_temporal_predictor_onnx_matches_torch_and_is_causal(tiny_vae, rng):
     import onnxruntime as ort
     import torch
 
-    from sparse_body.methods.dragposer.temporal_model import TemporalConfig, TemporalPredictor
+    from sparse_body.train.dragposer.temporal_model import TemporalConfig, TemporalPredictor
 
     session = ort.InferenceSession(str(tiny_vae / "dragposer_temporal.onnx"))
     config = TemporalConfig(**json.loads(session.get_modelmeta().custom_metadata_map["config"]))
     model = TemporalPredictor(config).eval()  # random weights: the graph, not the training, is under test
     path = tiny_vae / "check_temporal.onnx"
-    from sparse_body.methods.dragposer.temporal_train import export
+    from sparse_body.train.dragposer.temporal_train import export
 
     export(model, path, {"method": "dragposer"})
     past = rng.normal(size=(1, config.past, 24)).astype(np.float32)
@@ -720,7 +720,7 @@ def test_tracker_prior_onnx_matches_torch_step_by_step(tiny_vae, rng):
     import torch
 
     from sparse_body.methods.dragposer.tracker_prior import FEATURES
-    from sparse_body.methods.dragposer.tracker_prior_train import TrackerPriorConfig, TrackerPriorNet, export
+    from sparse_body.train.dragposer.tracker_prior_train import TrackerPriorConfig, TrackerPriorNet, export
 
     net = TrackerPriorNet(TrackerPriorConfig.named("tiny")).eval()  # random weights: the graph is under test
     path = tiny_vae / "check_tracker_prior.onnx"
@@ -774,7 +774,7 @@ def test_tracker_prior_trains_through_the_shipped_decoder_as_onnx_runs_it(tiny_v
     import torch
 
     from sparse_body.methods.dragposer.estimator import PoseVaeRuntime
-    from sparse_body.methods.dragposer.tracker_prior_train import frozen_decoder
+    from sparse_body.train.dragposer.tracker_prior_train import frozen_decoder
 
     z = rng.normal(size=(5, 24)).astype(np.float32)
     decoder = frozen_decoder(tiny_vae)

@@ -64,8 +64,8 @@ def test_onnx_gives_the_torch_models_output_on_the_same_window(tmp_path, clip):
     import onnxruntime as ort
     import torch
 
-    from sparse_body.methods.dtp.model import DtpConfig, DtpNet
-    from sparse_body.methods.dtp.train import export_onnx
+    from sparse_body.train.dtp.model import DtpConfig, DtpNet
+    from sparse_body.train.dtp.train import export_onnx
 
     x = _features(clip.slice(0, 26), current=20).astype(np.float32)
     for future in (0, 5):
@@ -263,8 +263,8 @@ def test_train_dtp_is_one_command(tmp_path, train_mocap):
 
 @pytest.mark.train
 def test_resume_after_the_pre_training_goes_on_with_the_fine_tuning(tmp_path, train_mocap, monkeypatch):
-    import sparse_body.methods.dtp.train as dtp_train
-    from sparse_body.methods.dtp.model import DtpConfig
+    import sparse_body.train.dtp.train as dtp_train
+    from sparse_body.train.dtp.model import DtpConfig
     from sparse_body.train.harness import TrainRun
 
     config = replace(DtpConfig.named("tiny"), finetune_steps=4)

@@ -73,9 +73,9 @@ def test_core_imports_nothing_above_it():
 
 
 # The floors, lowest first: a module imports only from its own floor or below. A method's
-# folder spans two: its runtime (estimator, options, features, ONNX runtimes) sits on the
-# methods floor, its training side (model, train, card, *_model, *_train, the torch
-# reference, its runtime bench) on the training floor, with the harness it uses.
+# runtime (estimator, options, features, ONNX runtimes) is its folder under methods/; its
+# training side (torch model, trainer, card, the torch reference and bench) its folder under
+# train/, with the harness it uses.
 FLOORS = {
     "core": 0,
     "robot": 1,
@@ -90,18 +90,26 @@ FLOORS = {
     "apps": 9,
     "cli": 10,
 }
-TRAINING_SIDE = ("model", "train", "card", "bench", "torch_reference")
 
 
 def _floor(module: str) -> int:
     parts = module.split(".")
-    if len(parts) == 1:
-        return 0  # the package itself: its version
-    if parts[1] == "methods" and len(parts) >= 4:
-        leaf = parts[3]
-        if leaf in TRAINING_SIDE or leaf.endswith(("_model", "_train")):
-            return FLOORS["train"]
-    return FLOORS[parts[1]]
+    return 0 if len(parts) == 1 else FLOORS[parts[1]]  # (the package itself: its version)
+
+
+def test_torch_is_imported_only_under_train():
+    """What a node needs runs without torch: the training side of every method is under train/."""
+    outside = []
+    for path in PACKAGE.rglob("*.py"):
+        if path.relative_to(PACKAGE).parts[0] == "train":
+            continue
+        for node in ast.walk(ast.parse(path.read_text(), str(path))):
+            names = [a.name for a in node.names] if isinstance(node, ast.Import) else []
+            if isinstance(node, ast.ImportFrom) and node.level == 0 and node.module:
+                names = [node.module]
+            if any(n == "torch" or n.startswith("torch.") for n in names):
+                outside.append(str(path.relative_to(PACKAGE)))
+    assert outside == []
 
 
 def test_no_arrow_runs_back_up_the_floors():

@@ -121,8 +121,8 @@ def test_streaming_onnx_equals_the_recurrent_net_over_the_window(tmp_path, clip,
     import onnxruntime as ort
     import torch
 
-    from sparse_body.methods.lobstr.model import LobstrConfig, LobstrNet
-    from sparse_body.methods.lobstr.train import export_onnx
+    from sparse_body.train.lobstr.model import LobstrConfig, LobstrNet
+    from sparse_body.train.lobstr.train import export_onnx
 
     torch.manual_seed(0)
     config = LobstrConfig(hidden=32, latent=16, learned_upper=learned_upper)
@@ -372,7 +372,7 @@ def test_train_is_one_command(tmp_path, train_mocap):
 
 @pytest.mark.train
 def test_noisy_copies_wear_their_trackers_off_the_same_way_through_a_clip(clip):
-    from sparse_body.methods.lobstr.train import clip_tensors
+    from sparse_body.train.lobstr.train import clip_tensors
 
     # LoBSTr's own noise, then a 6-degree mounting turn and 2 cm mounting shift per site
     plain = clip_tensors(clip, 8, np.random.default_rng(0))

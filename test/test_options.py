@@ -158,7 +158,7 @@ def test_the_command_line_is_a_dispatcher_over_one_module_a_command():
 def test_every_card_is_a_template_and_no_card_code_imports_the_commands():
     import ast
 
-    root = Path(__file__).resolve().parents[1] / "sparse_body" / "methods"
+    root = Path(__file__).resolve().parents[1] / "sparse_body" / "train"
     for name, record in METHODS.items():
         if record.training is None:
             continue

@@ -15,7 +15,7 @@ def quiet(*_):
 
 @pytest.fixture(scope="module")
 def tiny():
-    from sparse_body.methods.lobstr.model import LobstrConfig
+    from sparse_body.train.lobstr.model import LobstrConfig
 
     return replace(LobstrConfig.named("tiny"), steps=4, steps_per_epoch=2)
 
@@ -48,8 +48,8 @@ def test_only_validation_or_the_selection_may_pick_the_weights(tmp_path, train_m
 
 @pytest.mark.train
 def test_an_interrupted_training_resumes_from_its_checkpoint(tmp_path, train_mocap, tiny):
-    from sparse_body.methods.lobstr.train import train
     from sparse_body.train.harness import TrainRun
+    from sparse_body.train.lobstr.train import train
 
     checkpoint = tmp_path / "lobstr.checkpoint.npz"
     first = train(tiny, TrainRun(train_mocap, tmp_path / "a.onnx", limit=2, log=quiet, checkpoint=checkpoint))
@@ -91,13 +91,13 @@ def test_a_resumed_training_goes_on_as_the_uninterrupted_run_would_have(tmp_path
     """The optimiser's moments, the learning-rate schedule (LoBSTr's decay, AvatarJLM's drop at
     check 2, after the kill) and the batches' draws all go on from the checkpoint."""
     if method == "lobstr":
-        from sparse_body.methods.lobstr.model import LobstrConfig as Config
-        from sparse_body.methods.lobstr.train import train
+        from sparse_body.train.lobstr.model import LobstrConfig as Config
+        from sparse_body.train.lobstr.train import train
 
         config = replace(Config.named("tiny"), steps=8, steps_per_epoch=2)
     else:
-        from sparse_body.methods.avatarjlm.model import AvatarJlmConfig as Config
-        from sparse_body.methods.avatarjlm.train import train
+        from sparse_body.train.avatarjlm.model import AvatarJlmConfig as Config
+        from sparse_body.train.avatarjlm.train import train
 
         config = replace(Config.named("tiny"), steps=8, steps_per_check=2, lr_drop_at=0.5)
     from sparse_body.train.harness import TrainRun
@@ -128,8 +128,8 @@ def test_a_resumed_training_goes_on_as_the_uninterrupted_run_would_have(tmp_path
 
 @pytest.mark.train
 def test_without_resume_a_checkpoint_is_overwritten_not_read(tmp_path, train_mocap, tiny):
-    from sparse_body.methods.lobstr.train import train
     from sparse_body.train.harness import TrainRun
+    from sparse_body.train.lobstr.train import train
 
     checkpoint = tmp_path / "lobstr.checkpoint.npz"
     train(tiny, TrainRun(train_mocap, tmp_path / "a.onnx", limit=2, log=quiet, checkpoint=checkpoint))
@@ -139,8 +139,8 @@ def test_without_resume_a_checkpoint_is_overwritten_not_read(tmp_path, train_moc
 
 @pytest.mark.train
 def test_a_checkpoint_of_another_configuration_is_refused_by_name(tmp_path, train_mocap, tiny):
-    from sparse_body.methods.lobstr.train import train
     from sparse_body.train.harness import TrainRun
+    from sparse_body.train.lobstr.train import train
 
     checkpoint = tmp_path / "lobstr.checkpoint.npz"
     train(tiny, TrainRun(train_mocap, tmp_path / "a.onnx", limit=2, log=quiet, checkpoint=checkpoint))
@@ -153,7 +153,7 @@ def test_a_checkpoint_of_another_configuration_is_refused_by_name(tmp_path, trai
 
 def test_the_dragposer_card_renders_its_runtime_choices_from_the_measured_file(tmp_path):
     from sparse_body.core.resources import models_dir
-    from sparse_body.methods.dragposer.card import RUNTIME_COMMAND, RUNTIME_METRICS
+    from sparse_body.train.dragposer.card import RUNTIME_COMMAND, RUNTIME_METRICS
     from sparse_body.train.model_card import runtime_choices_table
 
     measured = json.loads((models_dir() / "dragposer.runtime.json").read_text())
@@ -176,7 +176,7 @@ def test_the_lobstr_card_is_rendered_from_its_measured_file_alone(tmp_path):
 
     from sparse_body.core.resources import models_dir
     from sparse_body.core.results import EvalResult
-    from sparse_body.methods.lobstr.card import FIELD_RUNS, LAB_RUNS, write_lobstr_card
+    from sparse_body.train.lobstr.card import FIELD_RUNS, LAB_RUNS, write_lobstr_card
     from sparse_body.train.model_card import NOISE_SETUPS
 
     def run(spec: str, scale: float, protocol: str = "field, vr noise") -> dict:

@@ -3,8 +3,8 @@ presets, model card, paper figures, bench goals and what `eval` compares it with
 are made by name with factory.create_estimator. The commands, the nodes and the
 evaluation look methods up here and hold no per-method branches. Each method is a folder,
 methods/NAME/, whose __init__ holds its record and nothing that imports its code (so listing
-the methods imports neither torch nor ONNX Runtime); adding a method is its folder and one
-line in NAMES."""
+the methods imports neither torch nor ONNX Runtime); a learning method's training side (torch)
+is its folder train/NAME/. Adding a method is its folder(s) and one line in NAMES."""
 
 from __future__ import annotations
 

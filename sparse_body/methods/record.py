@@ -35,7 +35,7 @@ class Training:
     output: Callable[[Callable[[], Any]], str]
     # "module:function", card(out, mocap, limit, evaluate) -> the card's path: evaluate on the
     # test split into <model>.eval.json (unless evaluate=False and it is there), then render
-    # the card from it (methods/NAME/card.md filled in)
+    # the card from it (train/NAME/card.md filled in)
     card: str
     config_help: str  # the presets, for `train --config`
     out_help: str  # what --out names

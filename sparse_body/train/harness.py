@@ -47,6 +47,11 @@ class TrainRun:
 SELECT_ON = ("validation", SELECTION)
 
 
+def use_threads(count: int) -> None:
+    """Train on `count` CPU threads (torch's intra-op pool)."""
+    torch.set_num_threads(count)
+
+
 def held_out_split(select_on: str) -> str:
     """A configuration's select_on, refused before any data is read when it is not one of
     SELECT_ON (the test split never picks weights)."""

@@ -226,7 +226,7 @@ def measure_card(path: Path, jobs: list[tuple], noise: dict[str, list[tuple]], w
 
 
 def render_card(template: Path, values: dict[str, str]) -> str:
-    """A card's text: its template (methods/NAME/card.md, string.Template: ${name} where a
+    """A card's text: its template (train/NAME/card.md, string.Template: ${name} where a
     measured value goes) filled from the measured values, each already formatted."""
     from string import Template
 

@@ -108,18 +108,16 @@ def _ablate_augmentation(args, parts) -> None:
 def run(args) -> int:
     import json
 
-    import torch
-
     from ...methods import load
-    from ...train.harness import TrainRun, beside, with_earlier_runs
+    from ...train.harness import TrainRun, beside, use_threads, with_earlier_runs
 
     parts = _trainers(args)
     if args.ablate_augment:
-        torch.set_num_threads(args.threads)
+        use_threads(args.threads)
         _ablate_augmentation(args, parts)
         return 0
     if not (args.card_only or args.render_only):
-        torch.set_num_threads(args.threads)
+        use_threads(args.threads)
         configs = [_config(config_class, args) for config_class, *_ in parts]  # errors before training
         for config, (_, train, out, report_path) in zip(configs, parts, strict=True):
             checkpoint = beside(report_path, ".checkpoint.npz")

@@ -25,13 +25,13 @@ METHOD = Method(
         parts=(
             TrainPart(
                 "avatarjlm",
-                "sparse_body.methods.avatarjlm.model:AvatarJlmConfig",
-                "sparse_body.methods.avatarjlm.train:train",
+                "sparse_body.train.avatarjlm.model:AvatarJlmConfig",
+                "sparse_body.train.avatarjlm.train:train",
                 lambda out: out.with_suffix(".train.json"),
             ),
         ),
         output=_output,
-        card="sparse_body.methods.avatarjlm.card:card",
+        card="sparse_body.train.avatarjlm.card:card",
         config_help="small (three-point, 88 minutes on one core), four_point (the same with the pelvis: "
         "models/avatarjlm_four_point.onnx), paper (d1 1024, d2 512, 6 loops: for a GPU) or tiny",
         out_help="the .onnx file",

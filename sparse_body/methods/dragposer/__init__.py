@@ -30,29 +30,29 @@ METHOD = Method(
         parts=(  # the VAE first: the other two learn in its latent space
             TrainPart(
                 "vae",
-                "sparse_body.methods.dragposer.vae_model:VaeConfig",
-                "sparse_body.methods.dragposer.vae_train:train_vae",
+                "sparse_body.train.dragposer.vae_model:VaeConfig",
+                "sparse_body.train.dragposer.vae_train:train_vae",
                 lambda out: out / "dragposer.train.json",
             ),
             TrainPart(
                 "temporal",
-                "sparse_body.methods.dragposer.temporal_model:TemporalConfig",
-                "sparse_body.methods.dragposer.temporal_train:train_temporal",
+                "sparse_body.train.dragposer.temporal_model:TemporalConfig",
+                "sparse_body.train.dragposer.temporal_train:train_temporal",
                 lambda out: out / "dragposer_temporal.train.json",
             ),
             TrainPart(
                 "tracker_prior",
-                "sparse_body.methods.dragposer.tracker_prior_train:TrackerPriorConfig",
-                "sparse_body.methods.dragposer.tracker_prior_train:train_tracker_prior",
+                "sparse_body.train.dragposer.tracker_prior_train:TrackerPriorConfig",
+                "sparse_body.train.dragposer.tracker_prior_train:train_tracker_prior",
                 lambda out: out / "dragposer_tracker_prior.train.json",
             ),
         ),
         output=lambda config: "",  # the models folder itself: dragposer_{encoder,decoder,temporal,tracker_prior}.onnx
-        card="sparse_body.methods.dragposer.card:card",
+        card="sparse_body.train.dragposer.card:card",
         config_help="small (30 minutes a part) or tiny, and paper for its temporal predictor",
         out_help="the folder for its encoder, decoder, temporal predictor and tracker prior",
     ),
-    runtime_bench="sparse_body.methods.dragposer.bench:bench_dragposer",
+    runtime_bench="sparse_body.train.dragposer.bench:bench_dragposer",
     step_goal=("search, predictor, polish", 1.5),
     ratio_goal=8.0,  # issue 52
     eval_sensors="six_point",

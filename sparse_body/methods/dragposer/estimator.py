@@ -9,7 +9,7 @@ the tracker prior's guess from the trackers' recent motion (tracker_prior.py;
 ours), and near the Gaussian's centre. The Jacobian comes from
 ONE batched decoder pass over z and its 24 perturbations (forward differences), and batched
 numpy FK; the paper backpropagates through the decoder instead, one gradient step per
-iteration (methods/dragposer/torch_reference.py keeps that as the reference).
+iteration (train/dragposer/torch_reference.py keeps that as the reference).
 
 Any sensor subset works without retraining: each tracker that has a usable sample this
 frame becomes a Position and/or Orientation constraint on its joint, a missing one simply

@@ -18,13 +18,13 @@ METHOD = Method(
         parts=(
             TrainPart(
                 "dtp",
-                "sparse_body.methods.dtp.model:DtpConfig",
-                "sparse_body.methods.dtp.train:train",
+                "sparse_body.train.dtp.model:DtpConfig",
+                "sparse_body.train.dtp.train:train",
                 lambda out: out.with_suffix(".train.json"),
             ),
         ),
         output=lambda config: "dtp_lookahead.onnx" if config().future else "dtp.onnx",
-        card="sparse_body.methods.dtp.card:card",
+        card="sparse_body.train.dtp.card:card",
         config_help="small (pre-training and occlusion fine-tuning in under an hour on 2 CPU cores), "
         "lookahead (small with 5 future frames: models/dtp_lookahead.onnx), paper or tiny",
         out_help="the .onnx file",

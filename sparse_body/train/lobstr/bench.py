@@ -21,8 +21,8 @@ def bench_network(frames: int = 3000) -> None:
 
     import torch
 
-    from .estimator import LobstrModel, default_model_path
-    from .features import feature_count
+    from ...methods.lobstr.estimator import LobstrModel, default_model_path
+    from ...methods.lobstr.features import feature_count
     from .model import LobstrConfig, LobstrNet, LobstrStep
     from .train import export_onnx
 

@@ -20,8 +20,8 @@ from typing import ClassVar
 import torch
 from torch import nn
 
+from ...methods.dragposer.pose import LATENT, TEMPORAL_CONTEXT
 from ...train.presets import Presets
-from .pose import LATENT, TEMPORAL_CONTEXT
 
 
 @dataclass

@@ -23,10 +23,10 @@ from scipy.spatial.transform import Rotation
 from ...core.contacts import estimate_floor
 from ...core.skeleton import JOINT_INDEX, Skeleton, body_scale
 from ...data.catalog import load_clip, split_clips
+from ...methods.dragposer.estimator import PoseVaeRuntime
+from ...methods.dragposer.pose import HEIGHT_JOINTS, LIMBS, split_heading, temporal_context
 from ...train.augment import NO_AUGMENTATION, Augmentation, augmented
 from ...train.harness import TrainRun, export_onnx, fit
-from .estimator import PoseVaeRuntime
-from .pose import HEIGHT_JOINTS, LIMBS, split_heading, temporal_context
 from .temporal_model import TemporalConfig, TemporalPredictor, loss
 
 

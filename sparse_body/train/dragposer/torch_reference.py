@@ -16,8 +16,8 @@ import onnx
 import torch
 from onnx import numpy_helper
 
+from ...methods.dragposer.constraints import ConstraintSet
 from ...train.torch_body import forward_kinematics, sixd_to_matrix
-from .constraints import ConstraintSet
 from .vae_model import PoseVae, VaeConfig
 
 

@@ -34,7 +34,7 @@ def bench_dragposer(
     import torch
 
     from ...data.catalog import DEMO_CLIP, find_mocap_root, load_clip, read_index
-    from .estimator import END_JOINTS, DragPoserEstimator
+    from ...methods.dragposer.estimator import END_JOINTS, DragPoserEstimator
     from .torch_reference import load_vae, optimise
 
     torch.set_num_threads(1)

@@ -112,7 +112,7 @@ def write_lobstr_card(
     LoBSTr's tracker noise against none) and write <model>.md."""
     augmentation = augmentation_table(Path(onnx_path).with_suffix(".train.json"), LOBSTR_VALIDATION)
     from ...core.results import EvalResult, format_table
-    from .. import paper_figures
+    from ...methods import paper_figures
 
     measured = measured_results(Path(onnx_path), evaluate_lobstr, mocap_root, limit, evaluate)
     results = [EvalResult.from_json(r) for r in measured["field"] + measured["lab"]]

@@ -22,11 +22,11 @@ from ...core.rotations import matrix_to_6d
 from ...core.skeleton import Skeleton, body_scale
 from ...data.catalog import load_clip, split_clips
 from ...data.virtual_trackers import LOBSTR_NOISE, NOISE_MODELS, TrackerNoise, _random_rotations
+from ...methods.avatarjlm.features import input_joints, reference, sequence_features
 from ...train.augment import NO_AUGMENTATION, Augmentation, augmented
 from ...train.harness import TrainRun, fit, held_out_split
 from ...train.harness import export_onnx as export
 from ...train.torch_body import sixd_to_matrix
-from .features import input_joints, reference, sequence_features
 from .model import HANDS, ROTATION_LOSSES, TOKENS, AvatarJlmConfig, AvatarJlmNet, StreamingStep, losses, world_positions
 
 

@@ -13,9 +13,9 @@ import torch
 from torch import nn
 
 from ...core.skeleton import JOINT_INDEX, PARENTS
+from ...methods.lobstr.features import LEG_JOINTS, OUTPUTS, feature_count, output_count
 from ...train.presets import Presets
 from ...train.torch_body import sixd_to_matrix
-from .features import LEG_JOINTS, OUTPUTS, feature_count, output_count
 
 
 @dataclass

@@ -36,9 +36,9 @@ import torch
 from torch import nn
 
 from ...core.skeleton import JOINT_INDEX, LOWER_BODY, NUM_JOINTS, Skeleton, joint_indices
+from ...methods.avatarjlm.features import PER_SITE, SITES, input_joints
 from ...train.presets import Presets
 from ...train.torch_body import forward_kinematics, matrix_to_6d, sixd_to_matrix
-from .features import PER_SITE, SITES, input_joints
 
 TOKENS = 2 * NUM_JOINTS  # rotation tokens, then position tokens
 ROTATION_LOSSES = ("6d", "matrix")  # AvatarJlmConfig.rotation_loss

@@ -102,13 +102,13 @@ def write_dragposer_card(out_dir: Path, mocap_root: Path, limit: int | None = No
     ablation and the IK baseline, and the refinement of other estimators) and write
     dragposer.md."""
     from ...core.results import EvalResult, format_table
-    from .. import paper_figures
+    from ...methods import paper_figures
 
     out_dir = Path(out_dir)
     vae = json.loads((out_dir / "dragposer.train.json").read_text())
     temporal = json.loads((out_dir / "dragposer_temporal.train.json").read_text())
     tracker = json.loads((out_dir / "dragposer_tracker_prior.train.json").read_text())
-    from .options import TRACKER_PRIOR_WEIGHT
+    from ...methods.dragposer.options import TRACKER_PRIOR_WEIGHT
 
     measured = measured_results(out_dir / "dragposer.onnx", evaluate_dragposer, mocap_root, limit, evaluate)
     refined = [EvalResult.from_json(r) for r in measured["refined"]]

@@ -20,9 +20,9 @@ import torch
 from torch import nn
 
 from ...core.skeleton import JOINT_INDEX
+from ...methods.dtp.features import FEATURES, OUTPUTS
 from ...train.presets import Presets
 from ...train.torch_body import forward_kinematics, sixd_to_matrix
-from .features import FEATURES, OUTPUTS
 
 
 @dataclass

@@ -15,9 +15,9 @@ from typing import ClassVar
 import torch
 from torch import nn
 
+from ...methods.dragposer.pose import DECODER_OUTPUT, ENCODER_INPUT, LATENT
 from ...train.presets import Presets
 from ...train.torch_body import forward_kinematics, sixd_to_matrix
-from .pose import DECODER_OUTPUT, ENCODER_INPUT, LATENT
 
 
 @dataclass

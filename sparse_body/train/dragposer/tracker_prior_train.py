@@ -30,13 +30,13 @@ from ...core.sensors import SITE_JOINTS
 from ...core.skeleton import JOINT_INDEX, LOWER_BODY, Skeleton, body_scale, joint_indices
 from ...data.catalog import load_clip, split_clips
 from ...data.virtual_trackers import _random_rotations
+from ...methods.dragposer.estimator import PoseVaeRuntime
+from ...methods.dragposer.pose import LATENT, split_heading
+from ...methods.dragposer.tracker_prior import FEATURES, FILE, SITE_FEATURES, SITES, sequence_features
 from ...train.augment import NO_AUGMENTATION, Augmentation, augmented
 from ...train.harness import TrainRun, export_onnx, fit
 from ...train.presets import Presets
 from ...train.torch_body import forward_kinematics as torch_fk
-from .estimator import PoseVaeRuntime
-from .pose import LATENT, split_heading
-from .tracker_prior import FEATURES, FILE, SITE_FEATURES, SITES, sequence_features
 from .vae_model import Decoder, PoseVae, VaeConfig
 
 JOINTS = [JOINT_INDEX[SITE_JOINTS[s]] for s in SITES]

@@ -22,11 +22,7 @@ from ...core.rotations import angle_between, heading
 from ...core.skeleton import Skeleton, body_scale
 from ...data.catalog import load_clip, split_clips
 from ...data.virtual_trackers import LOBSTR_NOISE, _random_rotations
-from ...train.augment import NO_AUGMENTATION, Augmentation, augmented
-from ...train.harness import TrainRun, fit, held_out_split
-from ...train.harness import export_onnx as export
-from ...train.torch_body import sixd_to_matrix
-from .features import (
+from ...methods.lobstr.features import (
     INPUT_JOINTS,
     LEG_JOINTS,
     OUTPUTS,
@@ -36,6 +32,10 @@ from .features import (
     sequence_features,
     upper_targets,
 )
+from ...train.augment import NO_AUGMENTATION, Augmentation, augmented
+from ...train.harness import TrainRun, fit, held_out_split
+from ...train.harness import export_onnx as export
+from ...train.torch_body import sixd_to_matrix
 from .model import LobstrConfig, LobstrNet, LobstrStep, leg_positions, losses
 
 

@@ -28,11 +28,11 @@ from ...core.rotations import matrix_to_6d
 from ...core.skeleton import Skeleton, body_scale
 from ...data.catalog import load_clip, split_clips
 from ...data.virtual_trackers import LOBSTR_NOISE, _random_rotations
+from ...methods.dtp.features import FOOT_LEAVES, INPUT_JOINTS, leaf_features, window_features
 from ...train.augment import NO_AUGMENTATION, Augmentation, augmented
 from ...train.harness import TrainRun, fit, held_out_split, load_best, machine
 from ...train.harness import export_onnx as export
 from ...train.torch_body import sixd_to_matrix
-from .features import FOOT_LEAVES, INPUT_JOINTS, leaf_features, window_features
 from .model import DtpConfig, DtpNet, body_positions, losses
 
 MOUNTING_RESIDUAL_DEG = 25.0  # how far from identity an occluded tracker's calibrated rotation can be

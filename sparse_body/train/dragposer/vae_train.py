@@ -19,10 +19,10 @@ from ...core.kinematics import forward_kinematics
 from ...core.rotations import angle_between, matrix_to_6d
 from ...core.skeleton import Skeleton, body_scale
 from ...data.catalog import load_clip, split_clips
+from ...methods.dragposer.pose import dual_quaternions, split_heading
 from ...train.augment import NO_AUGMENTATION, Augmentation, augmented
 from ...train.harness import TrainRun, export_onnx, fit
 from ...train.torch_body import sixd_to_matrix
-from .pose import dual_quaternions, split_heading
 from .vae_model import Decoder, Encoder, PoseVae, VaeConfig, losses
 
 

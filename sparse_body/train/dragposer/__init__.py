@@ -1,0 +1,1 @@
+"""dragposer's training side: its torch model, trainer and card (the runtime is sparse_body/methods/dragposer)."""

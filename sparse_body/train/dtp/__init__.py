@@ -1,0 +1,1 @@
+"""dtp's training side: its torch model, trainer and card (the runtime is sparse_body/methods/dtp)."""

@@ -1,0 +1,1 @@
+"""lobstr's training side: its torch model, trainer and card (the runtime is sparse_body/methods/lobstr)."""

@@ -75,11 +75,13 @@ def test_runtime_benches_are_registered_and_load():
 
 @pytest.mark.parametrize("name", sorted(METHODS))
 def test_a_methods_code_lives_in_its_own_folder(name):
+    """Its runtime in methods/NAME/, its training side (torch) in train/NAME/."""
     method = METHODS[name]
+    assert method.estimator.startswith(f"sparse_body.methods.{name}."), method.estimator
     parts = method.training.parts if method.training else ()
-    paths = [method.estimator] + [path for part in parts for path in (part.config, part.train)]
-    assert all(path.startswith(f"sparse_body.methods.{name}.") for path in paths), paths
-    # nothing outside the folder is named after the method (the layout before the folders)
+    paths = [path for part in parts for path in (part.config, part.train)]
+    assert all(path.startswith(f"sparse_body.train.{name}.") for path in paths), paths
+    # nothing outside the folders is named after the method (the layout before the folders)
     for folder in ("estimators", "train"):
         assert not sorted((ROOT / folder).glob(f"{name}*.py"))
 

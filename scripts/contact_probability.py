@@ -97,9 +97,8 @@ def judge(data: dict[str, np.ndarray]) -> dict:
 
 
 def main() -> int:
-    from sparse_body.data.catalog import find_mocap_root, split_clips
-    from sparse_body.data.motion_inputs import find_inputs
-    from sparse_body.evaluation import file_items, split_items
+    from sparse_body.data.catalog import MocapFolderError
+    from sparse_body.evaluation import part_items
 
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("what", choices=("fit", "judge"))
@@ -107,17 +106,15 @@ def main() -> int:
     parser.add_argument("--motion", help="judge: a folder of motion files instead of a split")
     parser.add_argument("--output", type=Path)
     args = parser.parse_args()
-    root = find_mocap_root()
-    if root is None and not args.motion:
-        print("no motion capture folder found (sparse-body import-mocap)", file=sys.stderr)
+    try:
+        if args.what == "fit":  # the validation people's kinds that training has
+            held_out = {i.key for i in part_items("selection")}
+            items = [i for i in part_items("validation") if i.key not in held_out]
+        else:
+            items = part_items(args.split, args.motion)
+    except MocapFolderError as err:
+        print(err, file=sys.stderr)
         return 2
-    if args.what == "fit":
-        held_out = {c.clip_id for c in split_clips(root, "selection")}
-        items = [i for i in split_items(root, "validation") if i.key not in held_out]
-    elif args.motion:
-        items = file_items(find_inputs([args.motion]))
-    else:
-        items = split_items(root, args.split)
     data = collect(items, args.what)
     result: dict = {"command": "python " + " ".join(sys.argv), "clips": len(items)}
     if args.what == "fit":

@@ -42,21 +42,20 @@ def area_under_roc(score: np.ndarray, bad: np.ndarray) -> float:
 
 def main() -> int:
     from sparse_body.core.sensors import load_sensor_config
-    from sparse_body.data.catalog import find_mocap_root
+    from sparse_body.data.catalog import MocapFolderError
     from sparse_body.data.field_protocol import FIELD
-    from sparse_body.data.motion_inputs import find_inputs
-    from sparse_body.evaluation import estimate_motion, file_items, split_items
+    from sparse_body.evaluation import estimate_motion, part_items
 
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--split", default="selection", choices=("selection", "floor"))
     parser.add_argument("--motion", help="a folder of motion files instead of a split")
     parser.add_argument("--output", type=Path)
     args = parser.parse_args()
-    root = find_mocap_root()
-    if root is None and not args.motion:
-        print("no motion capture folder found (sparse-body import-mocap)", file=sys.stderr)
+    try:
+        items = part_items(args.split, args.motion)
+    except MocapFolderError as err:
+        print(err, file=sys.stderr)
         return 2
-    items = file_items(find_inputs([args.motion])) if args.motion else split_items(root, args.split)
     sensors = load_sensor_config("four_point")
     clips, pooled = [], {}
     for item in items:

@@ -28,9 +28,9 @@ def main() -> int:
     from sparse_body.core.rotations import matrix_to_quat
     from sparse_body.core.sensors import load_sensor_config
     from sparse_body.core.types import BodyPose
-    from sparse_body.data.catalog import find_mocap_root, split_clips
+    from sparse_body.data.catalog import MocapFolderError
     from sparse_body.data.field_protocol import FIELD
-    from sparse_body.evaluation import estimate_motion, split_items
+    from sparse_body.evaluation import estimate_motion, part_items
     from sparse_body.robot.limits import limiter_for
     from sparse_body.robot.mapping import load_mapping
     from sparse_body.robot.quality import command_quality, retarget_quality
@@ -45,16 +45,16 @@ def main() -> int:
     parser.add_argument("--limit", type=int)
     parser.add_argument("--output", type=Path)
     args = parser.parse_args()
-    root = find_mocap_root()
-    if root is None:
-        print("no motion capture folder found (sparse-body import-mocap)", file=sys.stderr)
+    try:
+        items = part_items("validation", limit=args.limit)
+    except MocapFolderError as err:
+        print(err, file=sys.stderr)
         return 2
     mapping = load_mapping(args.robot)
     model = load_urdf(args.urdf or mapping.urdf)
-    kinds = {c.clip_id: c.category for c in split_clips(root, "validation")}
     sensors = load_sensor_config(args.sensors)
     rows, steps = [], []
-    for item in split_items(root, "validation", limit=args.limit):
+    for item in items:
         est = estimate_motion(item.load(), args.estimator, sensors, FIELD, item.seed)
         retarget = HumanoidRetarget(model, mapping, est.view.skeleton)
         poses = []
@@ -72,7 +72,7 @@ def main() -> int:
         commands, velocities = (np.array([s[k] for s in sent]) for k in (0, 1))
         figures |= command_quality(commands, velocities, stamps, retarget, est.local_rotations)
         figures["solved afresh after a miss [%]"] = retarget.restarts / max(1, len(poses)) * 100
-        rows.append({"clip": item.key, "kind": kinds[item.key], **figures})
+        rows.append({"clip": item.key, "kind": item.category, **figures})
         print(f"{item.key}: {figures}", file=sys.stderr)
     keys = [k for k in rows[0] if k not in ("clip", "kind", "frames")]
     frames = np.array([r["frames"] for r in rows])

@@ -230,6 +230,19 @@ def split_items(mocap_root: Path, split: str, fps: float = DEFAULT_FPS, limit: i
     ]
 
 
+def part_items(split: str, motion: str | None = None, limit: int | None = None) -> list[EvalItem]:
+    """The clips a measuring script reads: a folder of motion files (motion), else a part of
+    the indexed CMU split (find_mocap_root); MocapFolderError, in one line, where there is none."""
+    from .data.catalog import MocapFolderError, find_mocap_root
+
+    if motion:
+        return file_items(find_inputs([motion]))
+    root = find_mocap_root()
+    if root is None:
+        raise MocapFolderError("no motion capture folder found (sparse-body import-mocap, or a folder of motion files)")
+    return split_items(root, split, limit=limit)
+
+
 def _lying(load: Callable[[], Motion], how: str) -> Motion:
     from .data.floor import lying
 

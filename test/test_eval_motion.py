@@ -238,3 +238,16 @@ def test_view_estimates_a_clip_of_a_result_again_and_gets_the_figure_the_file_ho
     out.write_text(json.dumps(stored))
     code, _, err = run_cli(capsys, "view", out, "--clip", clip["clip"], "--estimator", "ik")
     assert code != 0 and "run the eval again" in err
+
+
+def test_a_measuring_script_without_motion_capture_is_told_so_in_one_line(monkeypatch, tmp_path):
+    """part_items: the scripts' clips, a folder's files or a split's; without either, one line."""
+    from sparse_body.data import MotionFileError
+    from sparse_body.evaluation import part_items
+
+    monkeypatch.setattr(catalog, "find_mocap_root", lambda explicit=None: None)
+    with pytest.raises(catalog.MocapFolderError, match="no motion capture folder found") as caught:
+        part_items("selection")
+    assert "\n" not in str(caught.value)
+    with pytest.raises(MotionFileError, match="no motion files"):  # a folder of one's own, empty
+        part_items("selection", str(tmp_path))

@@ -48,8 +48,8 @@ GAP = 0.1  # s between two body poses over which the last solution is no longer 
 # A target further than RESTART from its goal after a frame's solve: solved afresh as well,
 # RESTART_ITERATIONS steps from the neutral pose, the closer of the two kept; where the fresh
 # one is no closer, not tried again for RESTART_WAIT. On G1 over the validation people (53
-# clips): feet 2.10 / 2.35 cm off -> 1.55 / 1.87, hands 1.88 / 1.44 -> 1.63 / 1.32, frames
-# with links overlapping 0.25 % -> 0.08 %; 12 steps did as well as 40
+# clips): feet 2.10 / 2.35 cm off -> 1.62 / 1.88, hands 1.88 / 1.44 -> 1.64 / 1.33, frames
+# with links overlapping 0.25 % -> 0.10 %; 12 steps did as well as 40
 RESTART = 0.08  # m
 RESTART_ITERATIONS = 12
 RESTART_WAIT = 0.25  # s
@@ -189,6 +189,7 @@ class HumanoidRetarget:
         if model.chain(self.base):
             raise RobotFileError(f"{mapping.source}: base {mapping.base!r} must be the URDF's root link or fixed to it")
         self.points = np.array([t.point for t in mapping.targets], float)
+        self._reaching = [k for k, t in enumerate(mapping.targets) if t.position > 0]  # (those _miss reads)
         self.joints = [JOINT_INDEX[t.joint] for t in mapping.targets]
         self.rest_q = np.clip(0.0, self.lower, self.upper)  # the zero pose: the scale and the feet's turn
         # where the solver starts and what it is pulled towards: hinges bent a little the way
@@ -355,8 +356,8 @@ class HumanoidRetarget:
 
     def _miss(self, reached: np.ndarray, goals: np.ndarray) -> float:
         """The furthest a target that has a position weight is from its goal [m]."""
-        weighted = [k for k, t in enumerate(self.mapping.targets) if t.position > 0]
-        return float(np.linalg.norm(reached[weighted] - goals[weighted], axis=-1).max(initial=0.0))
+        k = self._reaching
+        return float(np.linalg.norm(reached[k] - goals[k], axis=-1).max(initial=0.0))
 
     def _links(self) -> np.ndarray:
         return self.link_transforms(self.q, self.base_place, self.base_turn)

@@ -187,3 +187,11 @@ def _real_tf() -> bytes:
     motion = synthetic_walk(0.1)
     pose = BodyPose(0.0, motion.local_quats[0], motion.root_positions[0], valid=True)
     return bytes(_tf(1.5, body_transforms(pose, motion.skeleton, "world")))
+
+
+def test_the_bag_s_topics_are_the_pose_outputs_then_tf_and_the_description():
+    """`--topics` and the bag's defaults name what io/pose_outputs.py lists: they cannot drift."""
+    from sparse_body.io.pose_outputs import POSE_OUTPUTS
+    from sparse_body.io.topics import DESCRIPTION_TOPIC, ESTIMATE_TOPICS, TF_TOPIC
+
+    assert ESTIMATE_TOPICS == (*(o.topic for o in POSE_OUTPUTS), TF_TOPIC, DESCRIPTION_TOPIC)

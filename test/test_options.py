@@ -17,9 +17,21 @@ from sparse_body.core.tracker_filter import FilterConfig
 from sparse_body.data.synthetic import synthetic_walk
 from sparse_body.methods import METHODS, Method, load
 from sparse_body.methods.factory import create_estimator
+from sparse_body.ros.node_options import (
+    ConstraintNodeInputOptions,
+    EstimatorNodeOptions,
+    RetargetOptions,
+    TrackerBridgeOptions,
+)
 
 DOCS = Path(__file__).resolve().parents[1] / "docs" / "options.md"
-EVERY = [(name, load(record.options)) for name, record in METHODS.items()] + [("filter", FilterConfig)]
+EVERY = [(name, load(record.options)) for name, record in METHODS.items()] + [
+    ("filter", FilterConfig),
+    ("estimator node", EstimatorNodeOptions),
+    ("constraint node", ConstraintNodeInputOptions),
+    ("tracker bridge", TrackerBridgeOptions),
+    ("retarget node", RetargetOptions),
+]
 
 
 @pytest.mark.parametrize("owner,options", EVERY, ids=[name for name, _ in EVERY])
@@ -135,6 +147,28 @@ def test_a_toy_method_s_options_are_node_parameters_with_their_ranges(toy_method
         declared["toy.gain"].range.low,
         declared["toy.gain"].range.high,
     ) == (0.0, 2.0)
+
+
+@pytest.mark.ros
+def test_a_node_option_added_in_one_line_is_a_parameter_with_its_range_and_choices():
+    """A node's parameters are its options dataclass (ros/node_options.py): a field added there
+    is declared, described, ranged and checked with nothing else written."""
+    pytest.importorskip("rclpy")
+    from dataclasses import dataclass
+
+    from sparse_body.core.options import option
+    from sparse_body.ros.parameters import check_parameter, table
+
+    @dataclass(frozen=True)
+    class ToyRetargetOptions(RetargetOptions):
+        stiffness: float = option(0.5, "how hard the toy holds", 0.0, 1.0)
+        mode: str = option("soft", "how the toy holds", choices=("soft", "hard"))
+
+    parameters, ranges = table(ToyRetargetOptions)
+    assert parameters["stiffness"] == (0.5, "how hard the toy holds") and ranges["stiffness"] == (0.0, 1.0)
+    assert parameters["mode"][1] == "how the toy holds (one of soft, hard)"
+    assert check_parameter("stiffness", 1.5, 0.5, ranges) == "stiffness must be between 0 and 1, got 1.5"
+    assert parameters["robot"][0] == "" and ranges["solve_budget"] == (0.001, 10.0)  # the node's own, kept
 
 
 def test_the_options_command_is_one_line_for_an_unknown_method():

@@ -1173,3 +1173,63 @@ def test_a_body_lying_down_is_said_out_of_depth_on_estimate_status(ros_env, tmp_
     assert "degrees from upright; blend shown it stood up" in deep[-1].message, deep[-1].message
     assert max(float(s.message.split()[3].rstrip(":")) for s in deep) > 0.8, deep[-1].message
     assert all(np.all(np.isfinite(m.position)) for m in listener.received["joint_states"])
+
+
+def _pelvis_height(batch) -> list[bytes]:
+    """A toy output: std_msgs/Float64 of each pose's pelvis height (CDR: the header, a double)."""
+    import struct
+
+    return [b"\x00\x01\x00\x00" + struct.pack("<d", float(root[2])) for root in batch.poses.roots]
+
+
+def test_an_output_topic_is_one_function_and_a_line_in_the_registry(ros_env, tmp_path, monkeypatch):
+    """Issue 76: an output took five Python files and a fixed 3-tuple encoder; now a function of
+    the pose batch and its line in POSE_OUTPUTS, and both the live node and the estimate bag
+    carry it, from the same bytes."""
+    from rclpy.lifecycle import LifecycleNode
+    from std_msgs.msg import Float64
+
+    from sparse_body.core.skeleton import Skeleton
+    from sparse_body.core.types import BodyPose
+    from sparse_body.io import pose_outputs
+    from sparse_body.io.bagio import read_topic
+    from sparse_body.io.estimate_bag import write_estimate_bag
+    from sparse_body.ros.estimate_outputs import EstimateOutputs
+
+    toy = pose_outputs.PoseOutput("/pelvis_height", "std_msgs/msg/Float64", _pelvis_height)
+    monkeypatch.setattr(pose_outputs, "POSE_OUTPUTS", [*pose_outputs.POSE_OUTPUTS, toy])
+    from sparse_body.io import estimate_bag
+    from sparse_body.ros import estimate_outputs
+
+    monkeypatch.setattr(estimate_bag, "POSE_OUTPUTS", pose_outputs.POSE_OUTPUTS)
+    monkeypatch.setattr(estimate_outputs, "POSE_OUTPUTS", pose_outputs.POSE_OUTPUTS)
+    skeleton = Skeleton.canonical()
+    motion = synthetic_walk(1.0)
+    poses = [
+        BodyPose(i / motion.fps, motion.local_quats[i], motion.root_positions[i], np.zeros(2), np.zeros(2, bool))
+        for i in range(len(motion))
+    ]
+    # the bag: the toy topic among the others, a message a pose
+    bag = tmp_path / "body"
+    write_estimate_bag(bag, poses, skeleton, topics=("/joint_states", "/pelvis_height"))
+    heights = [msg.data for msg in read_topic(bag, "/pelvis_height")]
+    assert np.allclose(heights, motion.root_positions[:, 2]) and len(read_topic(bag, "/joint_states")) == len(poses)
+    # the node: a publisher of its type under the output namespace, publishing those bytes
+    node = LifecycleNode("toy_outputs")
+    received: list[float] = []
+    node.create_subscription(Float64, "pelvis_height", lambda m: received.append(m.data), 10)
+    try:
+        node.trigger_configure()
+        params = {"frame_prefix": "", "publish_link_tf": False, "foxglove_port": 0}
+        outputs = EstimateOutputs(node, "", skeleton, "world", params)
+        node.trigger_activate()
+        executor = rclpy.executors.SingleThreadedExecutor()
+        executor.add_node(node)
+        deadline = time.monotonic() + STARTUP_LIMIT
+        while not received and time.monotonic() < deadline:
+            outputs.publish(poses[3], 1.0, "")
+            executor.spin_once(timeout_sec=0.1)
+        assert received and received[0] == pytest.approx(motion.root_positions[3, 2])
+        outputs.destroy()
+    finally:
+        node.destroy_node()

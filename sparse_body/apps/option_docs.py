@@ -23,14 +23,16 @@ def _value(value: object) -> str:
         return {None: "null", True: "true", False: "false"}[value]
     if isinstance(value, float):
         return f"{value:g}"
+    if isinstance(value, tuple):  # a ROS string array
+        return "[" + ", ".join(map(_value, value)) + "]"
     return repr(value) if isinstance(value, str) else str(value)
 
 
-def _rows(options: type[Options], prefix: str = "") -> list[str]:
+def _rows(options: type[Options], prefix: str = "", head: str = "option") -> list[str]:
     def row(name: str, o: Option) -> str:
         return f"| `{prefix}{name}` | {o.takes()} | `{_value(o.default)}` | {o.help} |"
 
-    return ["| option | takes | default | what it does |", "| --- | --- | --- | --- |"] + [
+    return [f"| {head} | takes | default | what it does |", "| --- | --- | --- | --- |"] + [
         row(name, o) for name, o in options.fields().items()
     ]
 
@@ -47,7 +49,38 @@ def markdown() -> str:
     parts.append("\n".join(_rows(SharedOptions)) + "\n")
     parts.append("## The tracker filter (every estimator)\n")
     parts.append("\n".join(_rows(FilterConfig, PREFIX)) + "\n")
+    parts.append(NODES)
+    for title, options in _node_options():
+        parts.append(f"### {title}\n")
+        parts.append("\n".join(_rows(options, head="parameter")) + "\n")
     return "\n".join(parts)
+
+
+NODES = """## The nodes' own parameters
+
+Beside the options above (a method's as `NAME.<option>`, the filter's as `filter_<option>`,
+`foot_lock` and `predict_ahead`), each node declares these (ros/node_options.py); numbers
+outside their range are refused with the reason, and `ros2 param describe` shows it.
+"""
+
+
+def _node_options() -> list[tuple[str, type[Options]]]:
+    from ..ros.node_options import (
+        ConstraintNodeInputOptions,
+        EstimatorNodeOptions,
+        RetargetOptions,
+        TrackerBridgeOptions,
+    )
+
+    return [
+        ("sparse_body_estimator", EstimatorNodeOptions),
+        (
+            "sparse_body_constraint: the estimator's but those that choose or time one, and these",
+            ConstraintNodeInputOptions,
+        ),
+        ("sparse_body_tracker_bridge", TrackerBridgeOptions),
+        ("sparse_body_retarget", RetargetOptions),
+    ]
 
 
 def text(method: str) -> str:

@@ -14,8 +14,22 @@ import math
 from dataclasses import dataclass
 from typing import Any, ClassVar, TypeVar
 
-TYPES = {"float": (int, float), "int": (int,), "bool": (bool,), "str": (str,), "None": (type(None),)}
-WORDS = {"float": "a number", "int": "an integer", "bool": "true or false", "str": "a text", "None": "null"}
+TYPES = {
+    "float": (int, float),
+    "int": (int,),
+    "bool": (bool,),
+    "str": (str,),
+    "None": (type(None),),
+    "tuple[str, ...]": (tuple, list),  # a node's string array
+}
+WORDS = {
+    "float": "a number",
+    "int": "an integer",
+    "bool": "true or false",
+    "str": "a text",
+    "None": "null",
+    "tuple[str, ...]": "a list of texts",
+}
 
 AnOptions = TypeVar("AnOptions", bound="Options")
 

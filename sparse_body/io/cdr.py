@@ -19,10 +19,6 @@ from functools import lru_cache
 
 import numpy as np
 
-from ..core.skeleton import Skeleton
-from ..core.types import BodyPoses
-from .output import FOOT_NAMES, HELD, foot_points, joint_angles, joint_state_names, published_precision
-
 ENCAPSULATION = b"\x00\x01\x00\x00"  # CDR, little-endian
 
 
@@ -229,37 +225,6 @@ def same_rows(flags: np.ndarray) -> list[tuple[tuple[bool, ...], np.ndarray]]:
     patterns, inverse = np.unique(flags, axis=0, return_inverse=True)
     inverse = inverse.reshape(-1)
     return [(tuple(bool(v) for v in p), np.flatnonzero(inverse == i)) for i, p in enumerate(patterns)]
-
-
-def estimate_messages(
-    poses: BodyPoses,
-    skeleton: Skeleton,
-    fixed_frame: str,
-    held_message: str = HELD,
-    stamps=None,
-    angles: np.ndarray | None = None,
-    valid_message: str = "",
-) -> tuple[list[bytes], list[bytes], list[bytes]]:
-    """(JointState, FootContacts, EstimateStatus) per pose, stamped with the poses' stamps or
-    `stamps`: the one builder of the estimate bag and of the live node's messages. `angles`:
-    the poses' joint_angles when the caller has them already (the URDF's link TF needs them too).
-    valid_message: the valid poses' status message (live: which estimator made a pose over budget)."""
-    stamps = np.asarray(poses.stamps if stamps is None else stamps, dtype=np.float64)
-    quats = poses.local_quats
-    return (
-        joint_state_messages(
-            stamps, joint_state_names(), published_precision(joint_angles(quats) if angles is None else angles)
-        ),
-        foot_contact_messages(
-            stamps,
-            fixed_frame,
-            list(FOOT_NAMES),
-            poses.contact,
-            poses.contact_probability,
-            published_precision(foot_points(quats, poses.roots, skeleton)),
-        ),
-        status_messages(stamps, fixed_frame, poses.valid, held_message, valid_message),
-    )
 
 
 class MalformedMessage(ValueError):

@@ -1,5 +1,6 @@
-"""The estimate bag: JointState, FootContacts, EstimateStatus and /tf per pose, written a
-chunk of poses at a time, so a recording of any length is written in bounded memory."""
+"""The estimate bag: each pose output's message (io/pose_outputs.py: JointState,
+FootContacts, EstimateStatus) and /tf per pose, written a chunk of poses at a time, so a
+recording of any length is written in bounded memory."""
 
 from __future__ import annotations
 
@@ -21,15 +22,13 @@ from .output import (
     tracker_sites,
     tracker_table,
 )
+from .pose_outputs import POSE_OUTPUTS, PoseBatch, pose_messages
 from .topics import (
-    CONTACTS_TOPIC,
     DESCRIPTION_TOPIC,
     ESTIMATE_TOPICS,
-    JOINT_STATES_TOPIC,
     ROBOT_DESCRIPTION_TOPIC,
     ROBOT_JOINT_STATES_TOPIC,
     ROBOT_PREFIX,
-    STATUS_TOPIC,
     TF_TOPIC,
 )
 from .urdf import body_urdf
@@ -47,19 +46,20 @@ LATCHED = Qos(
     QosTime(0, 0),
     False,
 )
-TYPES = {
-    JOINT_STATES_TOPIC: "sensor_msgs/msg/JointState",
-    CONTACTS_TOPIC: "sparse_body/msg/FootContacts",
-    STATUS_TOPIC: "sparse_body/msg/EstimateStatus",
-    TF_TOPIC: TF_TYPE,
-}
+
+
+def topic_types() -> dict[str, str]:
+    """The message type of each topic an estimate bag writes a message a pose on: the pose
+    outputs' (io/pose_outputs.py), then /tf."""
+    return {**{o.topic: o.type_name for o in POSE_OUTPUTS}, TF_TOPIC: TF_TYPE}
 
 
 def check_topics(topics: tuple[str, ...]) -> None:
     """ValueError naming the choices for topics an estimate bag cannot hold."""
-    unknown = sorted(set(topics) - set(ESTIMATE_TOPICS))
+    known = (*topic_types(), DESCRIPTION_TOPIC)
+    unknown = sorted(set(topics) - set(known))
     if unknown or not topics:
-        raise ValueError(f"topics {', '.join(unknown) or '(none)'}: choose from {', '.join(ESTIMATE_TOPICS)}")
+        raise ValueError(f"topics {', '.join(unknown) or '(none)'}: choose from {', '.join(known)}")
 
 
 class EstimateBagWriter:
@@ -88,8 +88,8 @@ class EstimateBagWriter:
         self.sensors, self.topics, self.axis_links = sensors, tuple(topics), axis_links
         self.store = typestore()
         self.connections = {
-            topic: writer.add_connection(topic, TYPES[topic], typestore=self.store)
-            for topic in TYPES
+            topic: writer.add_connection(topic, kind, typestore=self.store)
+            for topic, kind in topic_types().items()
             if topic in topics
         }
         self._last_ns = -1  # the last receive time written: they only grow (see write)
@@ -105,7 +105,7 @@ class EstimateBagWriter:
             self.robot_links = RobotLinks(self.robot, fixed_frame, ROBOT_PREFIX)
             self.limiter = limiter_for(self.robot)  # the commands as a controller can follow them
             self.robot_connection = writer.add_connection(
-                ROBOT_JOINT_STATES_TOPIC, TYPES[JOINT_STATES_TOPIC], typestore=self.store
+                ROBOT_JOINT_STATES_TOPIC, "sensor_msgs/msg/JointState", typestore=self.store
             )
             self._robot_urdf = robot_urdf_text(robot[0], robot[1])  # on ROBOT_DESCRIPTION_TOPIC, first
 
@@ -117,8 +117,8 @@ class EstimateBagWriter:
             return
         angles = joint_angles(poses.local_quats)
         robot, robot_base = self._robot_poses(poses) if self.robot is not None else (None, None)
-        js, contacts, status = cdr.estimate_messages(poses, self.skeleton, self.fixed_frame, angles=angles)
-        per_frame = {JOINT_STATES_TOPIC: js, CONTACTS_TOPIC: contacts, STATUS_TOPIC: status}
+        batch = PoseBatch.of(poses, self.skeleton, self.fixed_frame, angles=angles)
+        per_frame = pose_messages(batch, self.topics)
         if TF_TOPIC in self.topics:
             shown = (self.sensors, trackers) if self.sensors is not None and trackers is not None else None
             per_frame[TF_TOPIC] = self._tf_messages(poses, angles if self.axis_links else None, shown, robot_base)

@@ -27,6 +27,8 @@ from .estimator_node import main as estimator_main
 from .estimator_parameters import METHOD_OPTIONS, method_options
 from .estimator_parameters import RANGES as ESTIMATOR_RANGES
 from .messages import to_seconds
+from .node_options import ConstraintNodeInputOptions
+from .parameters import table
 
 # the refiner's input is the estimate: no estimator to choose, nor one to fall back on; of the
 # methods' options, DragPoser's (dragposer.<field>) set the refiner
@@ -36,15 +38,9 @@ PARAMETERS = {
     if k not in ("estimator", "budget_fallback", "step_budget", "predict_ahead", "foot_lock")
     and (k not in METHOD_OPTIONS or k.startswith("dragposer."))
 }
-PARAMETERS.update(
-    {
-        "model_path": ("", "folder holding dragposer_encoder.onnx and dragposer_decoder.onnx; empty: the shipped"),
-        "frame_prefix": ("refined/", "prefix of the refined body's TF frames"),
-        "input_prefix": ("", "prefix of the input estimate's TF frames (its root is <input_prefix>pelvis)"),
-        "input_timeout": (0.2, "seconds after which the newest input estimate no longer counts"),
-    }
-)
-RANGES = {**ESTIMATOR_RANGES, "input_timeout": (0.01, 60.0)}
+INPUT, INPUT_RANGES = table(ConstraintNodeInputOptions)
+PARAMETERS.update(INPUT)
+RANGES = {**ESTIMATOR_RANGES, **INPUT_RANGES}
 FIXED = ("temporal_weight", "tracker_prior")  # the input pose is the refiner's prior
 
 

@@ -1,34 +1,40 @@
-"""What the estimator node publishes, made at configure and destroyed at cleanup: the joint
-states, foot contacts and estimate status (under the node's output namespace), the body on
-/tf, its URDF (latched), /diagnostics, and the live Foxglove view when a port is given.
+"""What the estimator node publishes, made at configure and destroyed at cleanup: every pose
+output (io/pose_outputs.py: joint states, foot contacts, estimate status, under the node's
+output namespace), the body on /tf, its URDF (latched), /diagnostics, and the live Foxglove
+view when a port is given.
 
-Each pose is encoded once, by the estimate bag's encoder (io/cdr.py), and the same bytes go
-to every topic and to the live view: what a node publishes and what `process` writes to a bag
-are one message builder.
+Each pose is encoded once, by the estimate bag's encoders, and the same bytes go to the topic
+and to the live view: what a node publishes and what `process` writes to a bag are one message
+builder, and an output added to POSE_OUTPUTS is published with nothing written here.
 """
 
 from __future__ import annotations
 
+from importlib import import_module
 from typing import TYPE_CHECKING
 
 from diagnostic_msgs.msg import DiagnosticArray
 from rclpy.qos import DurabilityPolicy, QoSProfile
 from rclpy.qos_overriding_options import QoSOverridingOptions
-from sensor_msgs.msg import JointState
 from std_msgs.msg import String
-
-from sparse_body.msg import EstimateStatus, FootContacts
 
 from ..core.skeleton import Skeleton
 from ..core.types import BodyPose, BodyPoses
 from ..io import cdr
 from ..io.output import HELD, axis_link_table, body_table, joint_angles
+from ..io.pose_outputs import POSE_OUTPUTS, PoseBatch, pose_messages
 from ..io.urdf import body_urdf
 
 if TYPE_CHECKING:
     from rclpy.lifecycle import LifecycleNode
 
     from .live_view import LiveView
+
+
+def message_class(type_name: str) -> type:
+    """The rclpy message class of "package/msg/Name"."""
+    package, _, name = type_name.split("/")
+    return getattr(import_module(f"{package}.msg"), name)
 
 
 class EstimateOutputs:
@@ -41,16 +47,15 @@ class EstimateOutputs:
         self.prefix, self.link_tf = params["frame_prefix"], params["publish_link_tf"]
         overrides = QoSOverridingOptions.with_default_policies()
         # one profile object per publisher: rclpy's QoS overrides change the object they are given
-        self.joints, self.contacts, self.status = (
-            node.create_lifecycle_publisher(
-                kind, namespace + topic, QoSProfile(depth=10), qos_overriding_options=overrides
+        self.outputs = {
+            o.topic: node.create_lifecycle_publisher(
+                message_class(o.type_name),
+                namespace + o.topic.lstrip("/"),
+                QoSProfile(depth=10),
+                qos_overriding_options=overrides,
             )
-            for kind, topic in (
-                (JointState, "joint_states"),
-                (FootContacts, "foot_contacts"),
-                (EstimateStatus, "estimate_status"),
-            )
-        )
+            for o in POSE_OUTPUTS
+        }
         self.tf = node.create_lifecycle_publisher(TFMessage, "/tf", QoSProfile(depth=100))
         self.diagnostics = node.create_lifecycle_publisher(DiagnosticArray, "/diagnostics", QoSProfile(depth=10))
         latched = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL)
@@ -71,25 +76,18 @@ class EstimateOutputs:
         valid pose); gives back the /tf message's bytes (the node's own, not to be read back)."""
         quats, root = pose.local_quats[None], pose.root_position[None]
         angles = joint_angles(quats)  # once: the JointState and the URDF's massless links
-        (joints,), (contacts,), (status,) = cdr.estimate_messages(
-            BodyPoses.of([pose]),
-            self.skeleton,
-            self.frame_id,
-            reason or HELD,
-            stamps=[stamp],
-            angles=angles,
-            valid_message=reason,
-        )
-        self.joints.publish(joints)
-        self.contacts.publish(contacts)
-        self.status.publish(status)
+        poses = BodyPoses.of([pose])
+        batch = PoseBatch.of(poses, self.skeleton, self.frame_id, [stamp], angles, reason or HELD, reason)
+        messages = {topic: data for topic, (data,) in pose_messages(batch).items()}
+        for topic, data in messages.items():
+            self.outputs[topic].publish(data)
         links = body_table(quats, root, self.skeleton, self.frame_id, self.prefix, self.link_tf)
         if self.link_tf:  # the URDF's massless links too: RViz finds every link it draws
             links = links + axis_link_table(angles, self.skeleton, self.prefix)
         tf = cdr.tf_messages([stamp], links.parents, links.children, links.values)[0]
         self.tf.publish(tf)
         if self.live_view is not None:
-            for topic, data in (("/joint_states", joints), ("/foot_contacts", contacts), ("/estimate_status", status)):
+            for topic, data in messages.items():
                 self.live_view.log(topic, data, stamp)
             self.live_view.log("/tf", tf, stamp)
         return tf
@@ -103,7 +101,7 @@ class EstimateOutputs:
             self.live_view.log("/diagnostics", serialize_message(msg), now)
 
     def destroy(self) -> None:
-        for pub in (self.joints, self.contacts, self.status, self.tf, self.diagnostics):
+        for pub in (*self.outputs.values(), self.tf, self.diagnostics):
             self.node.destroy_lifecycle_publisher(pub)
         self.node.destroy_publisher(self.description)
         if self.live_view is not None:

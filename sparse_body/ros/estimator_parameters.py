@@ -1,7 +1,7 @@
-"""The estimator node's parameters (and the constraint node's, which takes them too): each
-with its default and description, the ranges of its numbers, the checks of its texts, and
-every method's and the tracker filter's options as parameters of their own (ros/parameters.py
-declares and checks them)."""
+"""The estimator node's parameters (and the constraint node's, which takes them too): its own
+(ros/node_options.EstimatorNodeOptions), the checks of its texts, and every method's and the
+tracker filter's options as parameters of their own (ros/parameters.py declares and checks
+them)."""
 
 from __future__ import annotations
 
@@ -10,10 +10,10 @@ from ..core.tracker_filter import PREFIX as FILTER
 from ..core.tracker_filter import FilterConfig
 from ..estimators.base import parse_estimator_spec
 from ..estimators.options import SharedOptions
-from ..io.tf_cache import TfGuards
 from ..methods import METHODS, NAMES, load
 from ..methods.recommended import AUTO
-from .parameters import Ranges
+from .node_options import EstimatorNodeOptions
+from .parameters import Ranges, table
 from .parameters import check_parameter as _check
 from .parameters import option_text as _text
 
@@ -37,90 +37,27 @@ METHOD_OPTIONS = method_option_parameters()
 SHARED = SharedOptions.fields()
 SHARED_PARAMETERS = {name: (SHARED[name].default, _text(SHARED[name])) for name in ("foot_lock", "predict_ahead")}
 
+# The node's own (ros/node_options.EstimatorNodeOptions), the estimator's help naming every
+# estimator the registry has; then the tracker filter's, the shared options it sets and every
+# method's, each checked by its own declaration.
+OWN, OWN_RANGES = table(EstimatorNodeOptions)
+OWN["estimator"] = (
+    "auto",
+    f"estimation method: auto (the one recommended for the sensors), {', '.join(NAMES)} "
+    "(refined:base=NAME: DragPoser's refinement after another; options as NAME:key=value,...)",
+)
 PARAMETERS = {
-    # name: (default, description)
-    "sensors": ("six_point", "sensor configuration: a name under config/sensors or a YAML path"),
-    "estimator": (
-        "auto",
-        f"estimation method: auto (the one recommended for the sensors), {', '.join(NAMES)} "
-        "(refined:base=NAME: DragPoser's refinement after another; options as NAME:key=value,...)",
-    ),
-    "model_path": ("", "model file for learned estimators; empty: the shipped model"),
-    "fixed_frame": ("", "frame the trackers are looked up in; empty: the sensor configuration's"),
-    "height": (1.75, "the tracked person's height in metres (scales the canonical body; unused with a calibration)"),
-    "calibration": (
-        "",
-        "T-pose calibration YAML (the tracker bridge's ~/calibrate writes one): the body it fitted "
-        "is the one estimated and published; empty: the canonical body at height",
-    ),
+    **OWN,
     **FILTER_PARAMETERS,
     **SHARED_PARAMETERS,
-    "output_rate": (
-        60.0,
-        "estimates per second when the trackers do not drive them (input slow, partial or "
-        "absent); estimates driven by tracker input are limited to twice this",
-    ),
-    "step_budget": (
-        0.0,
-        "seconds an estimator's step may take before budget_fallback gives that frame's pose "
-        "instead (flagged on estimate_status, counted on /diagnostics), so a slow step never puts "
-        "the output behind the trackers; 0: three quarters of the output period (1/output_rate)",
-    ),
-    "budget_fallback": (
-        "ik",
-        "the cheaper estimator whose pose is published for a frame the estimator's step has not "
-        "given within step_budget; empty, or the estimator itself: every step is waited for",
-    ),
-    "stale_timeout": (
-        0.1,
-        "a tracker's newest sample no longer counts when it is this many seconds (or three of "
-        "the tracker's own sample intervals, if longer) behind the newest tracker sample",
-    ),
-    "tracker_timeout": (
-        1.0,
-        "seconds in which no new tracker sample arrived after which the estimate is held, "
-        "invalid: the trackers stopped (a node running late on a busy CPU stays valid)",
-    ),
-    "clock_window": (
-        TfGuards.clock_window,
-        "a /tf stamp further than this many seconds from this node's clock is refused and counted "
-        "(a frame stamped 0; a bag replayed with its recorded stamps without use_sim_time); 0: no check",
-    ),
-    "future_window": (
-        TfGuards.future_window,
-        "a /tf stamp more than this many seconds ahead of this node's clock is refused and counted "
-        "(a sender whose clock runs ahead: its estimates would be stamped in the future); only "
-        "while clock_window is above 0",
-    ),
-    "play_radius": (
-        TfGuards.play_radius,
-        "a tracker further than this many metres from the fixed frame's origin is refused",
-    ),
-    "frame_prefix": ("", "prefix of the body's TF frames"),
-    "publish_link_tf": (True, "publish every body link on /tf (off when robot_state_publisher does)"),
-    "autostart": (False, "configure and activate on start-up (without a lifecycle manager)"),
-    "foxglove_port": (
-        0,
-        "serve the outputs, the trackers and the URDF to the Foxglove app on this WebSocket port "
-        "(open ws://foxglove_host:PORT; needs foxglove-sdk); 0: off",
-    ),
-    "foxglove_host": ("127.0.0.1", "address the Foxglove WebSocket server listens on (0.0.0.0: every network)"),
     **{name: (o.default, _text(o)) for name, o in METHOD_OPTIONS.items()},
 }
 # Numbers outside these bounds are refused with the reason (at configure and on a live set).
 RANGES = {
-    "height": (0.5, 2.5),
+    **OWN_RANGES,
     **{FILTER + name: (o.range.low, o.range.high) for name, o in FilterConfig.fields().items() if o.range},
-    **{name: (o.range.low, o.range.high) for name, o in METHOD_OPTIONS.items() if o.range},
-    "output_rate": (0.1, 1000.0),
-    "step_budget": (0.0, 1.0),
     **{name: (r.low, r.high) for name in SHARED_PARAMETERS if (r := SHARED[name].range)},
-    "stale_timeout": (0.001, 10.0),
-    "tracker_timeout": (0.01, 60.0),
-    "clock_window": (0.0, 1e9),
-    "future_window": (0.001, 60.0),
-    "play_radius": (0.1, 1e6),
-    "foxglove_port": (0, 65535),
+    **{name: (o.range.low, o.range.high) for name, o in METHOD_OPTIONS.items() if o.range},
 }
 # What a configured node applies at once; the rest is refused until it is cleaned up.
 LIVE = {"stale_timeout", "tracker_timeout", "publish_link_tf", "autostart"}

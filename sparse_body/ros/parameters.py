@@ -1,7 +1,8 @@
-"""ROS parameters declared, described and checked the same way for every node: each node keeps
-a table of name -> (default, description) and one of name -> (low, high) for its numbers; a
-parameter that is a declared option (core/options.Option: a method's, the tracker filter's)
-is checked by its declaration. `ros2 param describe` shows the description and the range."""
+"""ROS parameters declared, described and checked the same way for every node: each node's own
+are an options dataclass (ros/node_options.py), read by `table` into name -> (default,
+description) and name -> (low, high) for its numbers; a parameter that is a declared option
+of an estimator (core/options.Option: a method's, the tracker filter's) is checked by its
+declaration. `ros2 param describe` shows the description and the range."""
 
 from __future__ import annotations
 
@@ -10,7 +11,7 @@ from collections.abc import Callable
 import numpy as np
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
 
-from ..core.options import Option
+from ..core.options import Option, Options
 
 Ranges = dict[str, tuple[float, float]]
 
@@ -20,6 +21,17 @@ def option_text(option: Option) -> str:
     unit = f" ({option.range.unit})" if option.range is not None and option.range.unit else ""
     choices = f" (one of {', '.join(option.choices)})" if option.choices else ""
     return option.help + unit + choices
+
+
+def table(options: type[Options]) -> tuple[dict[str, tuple], Ranges]:
+    """A node's options dataclass as its parameter table and the ranges of its numbers (a
+    tuple default is a ROS string array, given as a list)."""
+    fields = options.fields()
+    parameters = {
+        name: (list(o.default) if isinstance(o.default, tuple) else o.default, option_text(o))
+        for name, o in fields.items()
+    }
+    return parameters, {name: (o.range.low, o.range.high) for name, o in fields.items() if o.range}
 
 
 def parameter_descriptor(default, text: str, bounds: tuple[float, float] | None) -> ParameterDescriptor:

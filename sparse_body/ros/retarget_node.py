@@ -44,22 +44,11 @@ from ..robot.retarget import MAX_BASE, HumanoidRetarget, load_retarget, robot_ur
 from ..robot.urdf_model import RobotFileError
 from .dropped import DroppedInputs
 from .messages import to_seconds
-from .parameters import declare, problems
+from .node_options import RetargetOptions
+from .parameters import declare, problems, table
 from .spin import init, start_and_spin
 
-PARAMETERS = {
-    # name: (default, description)
-    "robot": ("", "the robot's mapping YAML (config/robots/*.yaml): which robot links follow which human joints"),
-    "robot_urdf": ("", "the robot's URDF file; empty: the one the mapping names"),
-    "fixed_frame": ("world", "the frame the body's root is looked up in and the robot's base is placed in"),
-    "input_prefix": ("", "prefix of the body's TF frames (its root is <input_prefix>pelvis)"),
-    "frame_prefix": ("robot/", "prefix of the robot's TF frames: its base link is <frame_prefix><base>"),
-    "publish_link_tf": (True, "publish every robot link on /tf (off when robot_state_publisher does)"),
-    "solve_budget": (0.1, "seconds one robot pose's solve may take; past it the last robot pose is held, counted"),
-    "warn_window": (10.0, "seconds /diagnostics says WARN after an input was dropped, then OK again (the counts stay)"),
-    "autostart": (False, "configure and activate on start-up (without a lifecycle manager)"),
-}
-RANGES = {"solve_budget": (0.001, 10.0), "warn_window": (0.1, 3600.0)}
+PARAMETERS, RANGES = table(RetargetOptions)
 
 
 def _guarded(where: str):

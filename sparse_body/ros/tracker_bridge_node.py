@@ -43,58 +43,17 @@ from rclpy.qos import QoSProfile
 from rclpy.service import Service
 from rclpy.timer import Timer
 
-from ..adapters.vmc import DEFAULT_PORT
 from ..core.calibration import Calibration, CalibrationError, calibrate_mounting, calibrate_tpose, untimed
 from ..core.file_output import OutputError
 from ..core.sensors import SensorConfig, SensorConfigError, load_sensor_config
 from ..io.bagio import BagError
 from .messages import to_time
-from .parameters import declare, problems
+from .node_options import TrackerBridgeOptions
+from .parameters import declare, problems, table
 from .spin import init, start_and_spin
-from .tracker_sources import SOURCES, Sample, SourceContext, TrackerSource, make_source
+from .tracker_sources import Sample, SourceContext, TrackerSource, make_source
 
-PARAMETERS = {
-    "source": ("bag", f"where tracker poses come from: {', '.join(SOURCES)} (ros/tracker_sources.py)"),
-    "sensors": ("six_point", "sensor configuration naming the body sites' TF frames and fixed frame"),
-    "bag": ("", "source bag: rosbag2 directory (or .mcap / .db3 file) holding tracker /tf"),
-    "rate": (1.0, "source bag: playback speed factor"),
-    "loop": (False, "source bag: start again at the end"),
-    "restamp": (True, "source bag: stamp transforms with the current time instead of the recorded one"),
-    "min_subscribers": (1, "wait until this many /tf subscribers are matched before publishing"),
-    "wait_for_nodes": (
-        [""],
-        "names of nodes whose /tf subscription playback also waits for (the launch file names "
-        "the nodes it starts that read /tf); empty: any subscribers count",
-    ),
-    "start_delay": (0.5, "seconds to wait after that, so late subscribers can connect too"),
-    "devices": (
-        [""],
-        "vmc / serial: PATTERN=SITE entries mapping device names (hmd:NAME, con:NAME, "
-        "tra:NAME, serial:ID) to body sites; empty: hmd:*=head for vmc, serial:N = "
-        "the N-th site of the sensor configuration for serial",
-    ),
-    "vmc_host": ("127.0.0.1", "vmc: address to listen on"),
-    "vmc_port": (DEFAULT_PORT, "vmc: UDP port to listen on"),
-    "serial_port": ("", "serial: device or pyserial URL (/dev/ttyUSB0, loop://, socket://host:port)"),
-    "serial_baudrate": (921600, "serial: baud rate"),
-    "stale_after": (0.25, "vmc / serial: samples older than this (s) when they arrive are dropped and counted"),
-    "calibration": ("", "T-pose calibration YAML: applied at start when it exists; where ~/calibrate saves by default"),
-    "calibration_dir": (
-        "",
-        "folder under which a ~/calibrate request's save_path may write (it must exist); "
-        "empty: requests cannot name a file, only the calibration parameter's is written",
-    ),
-    "autostart": (True, "configure and activate on start-up (false: wait for a lifecycle manager)"),
-}
-# Numbers outside these bounds are refused at configure with the reason (and shown by `ros2 param describe`).
-RANGES = {
-    "rate": (0.01, 100.0),
-    "min_subscribers": (0, 1000),
-    "start_delay": (0.0, 60.0),
-    "vmc_port": (1, 65535),
-    "serial_baudrate": (300, 10_000_000),
-    "stale_after": (0.001, 60.0),
-}
+PARAMETERS, RANGES = table(TrackerBridgeOptions)
 MAX_CALIBRATION_SECONDS = 30.0
 MOUNTING_SECONDS = 15.0  # ~/calibrate_mounting's default: three seconds for each of five movements
 

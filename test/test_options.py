@@ -67,6 +67,45 @@ def test_a_spec_s_options_are_checked_against_the_declaration_before_a_model_is_
         create_estimator("dtp", sensors, skeleton, model="x", model_path="/nowhere.onnx")
 
 
+def test_options_are_parsed_once_and_checked_together_before_anything_is_made(monkeypatch):
+    """The factory parses a spec's options once and the estimator keeps that object (the issue
+    found dtp.foot_trust parsed twice); options that do not go together are refused by the
+    parse, before an inner estimator or a model is made (a model path that does not exist would
+    have been the error otherwise)."""
+    from sparse_body.core.options import Options
+    from sparse_body.methods.dtp.options import DtpOptions
+
+    sensors, skeleton = load_sensor_config("four_point"), Skeleton.canonical()
+    parses: list[type] = []
+    parse = Options.parse.__func__
+
+    def counted(cls, given, owner=None):
+        parses.append(cls)
+        return parse(cls, given, owner)
+
+    monkeypatch.setattr(Options, "parse", classmethod(counted))
+    estimator = create_estimator("dtp", load_sensor_config("six_point"), skeleton, foot_trust=0.5)
+    assert parses.count(DtpOptions) == 1 and estimator.options.foot_trust == 0.5
+    import onnxruntime
+
+    def no_model(*args, **kwargs):
+        raise AssertionError("a model was loaded before the options were checked together")
+
+    monkeypatch.setattr(onnxruntime, "InferenceSession", no_model)
+    for spec, said in (
+        ("upright", r"lying_from \(40.0\) must be above upright_within \(45.0\)"),
+        ("blend", r"disagree_from \(0.1\) must be above agree_within \(0.15\)"),
+        ("refined", r"a refined estimator's base cannot be 'refined'"),
+    ):
+        given = {
+            "upright": {"lying_from": 40.0},
+            "blend": {"disagree_from": 0.1},
+            "refined": {"base": "refined"},
+        }[spec]
+        with pytest.raises(ValueError, match=said):
+            create_estimator(spec, sensors, skeleton, **given)
+
+
 def test_the_eval_record_holds_every_option_of_the_method_as_run():
     recorded = evaluation.method_options("lobstr:contact_ik=false", {"threads": 2, "filter_lag": 0.1})
     assert recorded["contact_ik"] is False and recorded["threads"] == 2

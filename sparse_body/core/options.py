@@ -164,7 +164,13 @@ class Options:
         own = {name: value for name, value in given.items() if name in known}
         for name, value in own.items():
             known[name].check(owner, value)
-        return cls(**own)
+        made = cls(**own)
+        made.check_together()
+        return made
+
+    def check_together(self) -> None:
+        """ValueError in one line where options that are each in range do not go together
+        (a band's top under its bottom): run by parse, so before anything is made or loaded."""
 
     @classmethod
     def rest(cls, given: dict[str, Any]) -> dict[str, Any]:

@@ -103,8 +103,18 @@ class Estimator(ABC):
         """The options a user can give, by name."""
         return cls.Options.fields()
 
-    def __init__(self, sensors: SensorConfig, skeleton: Skeleton, fps: float = 60.0, **given) -> None:
-        self.options = self.Options.parse(given, f"estimator {self.name!r}")
+    def __init__(
+        self,
+        sensors: SensorConfig,
+        skeleton: Skeleton,
+        fps: float = 60.0,
+        parsed: EstimatorOptions | None = None,
+        **given,
+    ) -> None:
+        # parsed once where the options come in (methods/factory.py); read here when made directly
+        self.options = self.Options.parse(given, f"estimator {self.name!r}") if parsed is None else parsed
+        # the options this method's own pass on to another estimator (refined's base)
+        self.passed_on = self.Options.rest(given) if self.Options.passes_on else {}
         missing = self.required_sites - set(sensors.site_names)
         if missing:
             raise ValueError(

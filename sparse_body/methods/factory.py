@@ -50,8 +50,10 @@ def create_estimator(name: str, sensors: SensorConfig, skeleton: Skeleton, fps: 
     filtering = filter_config(options)
     shared = SharedOptions.parse(options, f"estimator {name!r}")
     options = SharedOptions.rest(options)
-    load(METHODS[name].options).parse(options, f"estimator {name!r}")  # before any model is loaded
-    estimator = load(METHODS[name].estimator)(sensors, skeleton, fps=fps, **options)
+    kind = load(METHODS[name].options)
+    parsed = kind.parse(options, f"estimator {name!r}")  # once, before any model is loaded
+    passed_on = kind.rest(options) if kind.passes_on else {}
+    estimator = load(METHODS[name].estimator)(sensors, skeleton, fps=fps, parsed=parsed, **passed_on)
     estimator.use_filter(filtering, shared.smooth)
     estimator.use_forecast(float(shared.predict_ahead), shared.forecast)
     estimator.use_foot_lock(shared.foot_lock and not feet_tracked(sensors))

@@ -26,7 +26,7 @@ from ..io.pose_outputs import POSE_OUTPUTS, PoseBatch, pose_messages
 from ..io.urdf import body_urdf
 
 if TYPE_CHECKING:
-    from rclpy.lifecycle import LifecycleNode
+    from rclpy.lifecycle import LifecycleNode, LifecyclePublisher
 
     from .live_view import LiveView
 
@@ -47,7 +47,7 @@ class EstimateOutputs:
         self.prefix, self.link_tf = params["frame_prefix"], params["publish_link_tf"]
         overrides = QoSOverridingOptions.with_default_policies()
         # one profile object per publisher: rclpy's QoS overrides change the object they are given
-        self.outputs = {
+        self.outputs: dict[str, LifecyclePublisher] = {
             o.topic: node.create_lifecycle_publisher(
                 message_class(o.type_name),
                 namespace + o.topic.lstrip("/"),

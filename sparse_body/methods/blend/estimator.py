@@ -40,10 +40,6 @@ class BlendEstimator(Estimator):
         super().__init__(sensors, skeleton, fps, **options)
         o = self.options
         first, second, settle = o.first, o.second, o.settle
-        if "blend" in (first, second):
-            raise ValueError("a blend's estimators cannot be 'blend'")
-        if o.disagree_from <= o.agree_within:
-            raise ValueError(f"disagree_from ({o.disagree_from}) must be above agree_within ({o.agree_within})")
         self.weight, self.agree_within, self.disagree_from = (
             float(o.weight),
             float(o.agree_within),

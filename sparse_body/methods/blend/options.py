@@ -18,3 +18,9 @@ class BlendOptions(EstimatorOptions):
     disagree_from: float = option(0.25, "leg disagreement with no share", 0.0, 10.0, "metres")
     settle: float = option(0.1, "the share's time constant", 0.0, 10.0, "seconds")
     parallel: bool = option(True, "the first estimator steps in a worker thread beside the second")
+
+    def check_together(self) -> None:
+        if "blend" in (self.first, self.second):
+            raise ValueError("a blend's estimators cannot be 'blend'")
+        if self.disagree_from <= self.agree_within:
+            raise ValueError(f"disagree_from ({self.disagree_from}) must be above agree_within ({self.agree_within})")

@@ -37,10 +37,8 @@ class RefinedEstimator(Estimator):
         super().__init__(sensors, skeleton, fps, **options)
         o = self.options
         base = o.base
-        if base == "refined":
-            raise ValueError("a refined estimator's base cannot be 'refined'")
         # the base's legs unheld: the search moves them, and this estimator's foot_lock holds the result
-        self.base = create_estimator(base, sensors, skeleton, fps, foot_lock=False, **RefinedOptions.rest(options))
+        self.base = create_estimator(base, sensors, skeleton, fps, foot_lock=False, **self.passed_on)
         self.base.use_filter(NO_FILTER)  # this estimator's filter has done it
         self.refiner = DragPoserEstimator(
             sensors,

@@ -18,3 +18,7 @@ class RefinedOptions(EstimatorOptions):
         0.0, "the search's turn from the base pose follows with this time constant (0: at once)", 0.0, 10.0, "seconds"
     )
     only_legs: bool = option(False, "the search gives the legs only; the rest of the body stays the base's")
+
+    def check_together(self) -> None:
+        if self.base == "refined":
+            raise ValueError("a refined estimator's base cannot be 'refined'")

@@ -53,12 +53,6 @@ class UprightEstimator(Estimator):
     def __init__(self, sensors, skeleton, fps: float = 60.0, **options) -> None:
         super().__init__(sensors, skeleton, fps, **options)
         o = self.options
-        if "upright" in (o.base, o.fallback):
-            raise ValueError("upright's estimators cannot be 'upright'")
-        if o.lying_from <= o.upright_within:
-            raise ValueError(f"lying_from ({o.lying_from}) must be above upright_within ({o.upright_within})")
-        if o.high_from <= o.low_below:
-            raise ValueError(f"high_from ({o.high_from}) must be above low_below ({o.low_below})")
         self.keep = float(np.exp(-1.0 / (o.settle * fps))) if o.settle > 0 else 0.0  # of the share, a frame
         # the base reads the turned targets (_frame_targets below); a fallback the same ones untouched
         self.parts = inner_estimators(self, (o.base, o.fallback) if o.fallback else (o.base,))

@@ -22,3 +22,11 @@ class UprightOptions(EstimatorOptions):
     )
     high_from: float = option(0.7, "pelvis height (share of a standing one's) from which it never does", 0.0, 2.0)
     settle: float = option(0.2, "the time constant of the share of the tilt taken out", 0.0, 10.0, "seconds")
+
+    def check_together(self) -> None:
+        if "upright" in (self.base, self.fallback):
+            raise ValueError("upright's estimators cannot be 'upright'")
+        if self.lying_from <= self.upright_within:
+            raise ValueError(f"lying_from ({self.lying_from}) must be above upright_within ({self.upright_within})")
+        if self.high_from <= self.low_below:
+            raise ValueError(f"high_from ({self.high_from}) must be above low_below ({self.low_below})")

@@ -325,3 +325,19 @@ def test_a_number_out_of_its_range_at_start_up_fails_configure_in_one_line(ros_e
     text = done.stdout + done.stderr
     assert done.returncode == 1 and "configure failed: solve_budget must be between 0.001 and 10" in text, text
     assert "Traceback" not in text, text
+
+
+def test_the_bench_measures_trackers_to_robot_joints_through_both_nodes(tmp_path, monkeypatch):
+    """Issue 74: the end-to-end robot figure in `sparse-body bench`: tracker poses on /tf, the
+    estimator node and the retarget node as processes of their own, the robot's JointState
+    received, each matched to the tracker sample it was made from (no timing is asserted)."""
+    pytest.importorskip("rclpy", reason="rclpy is not installed (run the setup command)")
+    from ros_helpers import isolated_domain
+
+    from sparse_body.apps.bench import bench_latency
+    from sparse_body.robot.example import write_robot
+
+    domain = isolated_domain()
+    monkeypatch.setenv("ROS_DOMAIN_ID", domain)  # the bench sets it for itself: put back after
+    measured = bench_latency("ik", "six_point", seconds=3.0, robot=(str(write_robot(tmp_path)), ""), domain=domain)
+    assert measured is not None and 0.0 < measured[0] <= measured[1] < 1000.0

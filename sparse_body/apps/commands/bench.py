@@ -13,6 +13,11 @@ def run(args) -> int:
             raise ValueError(f"{args.runtime} has no runtime bench")
         load(bench)()
         return 0
+    if args.robot:
+        from ..bench import bench_latency
+
+        estimator = (args.estimator or ["ik"])[0]
+        return 0 if bench_latency(estimator, args.sensors, robot=(args.robot, args.robot_urdf or "")) else 1
     if args.estimator:
         run(args.estimator, args.sensors, latency=not args.no_latency)
     else:
@@ -32,6 +37,12 @@ def add_parser(sub) -> None:
     )
     p.add_argument("--sensors", default="six_point", help="the trackers benched: a configuration name or YAML path")
     p.add_argument("--no-latency", action="store_true", help="only the offline speed (no ROS needed)")
+    p.add_argument(
+        "--robot",
+        help="only TF in -> a humanoid robot's JointState out, through the estimator and the retarget node: "
+        "its mapping (a shipped name such as unitree_g1_29dof, or a YAML path)",
+    )
+    p.add_argument("--robot-urdf", help="the robot's URDF (with --robot; default: the file its mapping names)")
     benched = {name: m for name, m in METHODS.items() if m.runtime_bench}
     p.add_argument(
         "--runtime",

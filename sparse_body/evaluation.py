@@ -87,6 +87,13 @@ class Estimated:
     out_of_depth: np.ndarray | None = None  # (T,) Estimator.out_of_depth after each pose; None: it says none
 
 
+def floored(motion: Motion) -> Motion:
+    """The motion moved so that its floor is z = 0 (the one it says, else the toes' estimate)."""
+    floor = estimate_floor(motion.positions) if motion.floor is None else motion.floor
+    root = motion.root_positions - [0.0, 0.0, floor]
+    return Motion(motion.name, motion.fps, motion.skeleton, motion.local_quats, root, floor=0.0)
+
+
 def estimate_motion(
     motion: Motion,
     estimator_name: str,
@@ -105,10 +112,7 @@ def estimate_motion(
     avatar or robot would show them. Each pose is scored against the body `horizon` seconds
     after its frame (None: the estimator's predict_ahead): `horizon` without predict_ahead is
     the baseline a forecast must beat, the present pose given as the later one."""
-    floor = estimate_floor(motion.positions)
-    motion = Motion(
-        motion.name, motion.fps, motion.skeleton, motion.local_quats, motion.root_positions - [0.0, 0.0, floor]
-    )
+    motion = floored(motion)
     view = user_view(motion, sensors, protocol, seed)
     options = {**filter_options(protocol.noise), **options}
     estimator = create_estimator(estimator_name, view.sensors, view.skeleton, fps=motion.fps, **options)
@@ -185,10 +189,7 @@ def estimated_clips(mocap_root: Path, split: str, estimator: str, sensors_name: 
     sensors = load_sensor_config(sensors_name)
     for item in split_items(mocap_root, split, limit=limit):
         motion = item.load()
-        floor = estimate_floor(motion.positions)
-        motion = Motion(
-            motion.name, motion.fps, motion.skeleton, motion.local_quats, motion.root_positions - [0, 0, floor]
-        )
+        motion = floored(motion)
         view = user_view(motion, sensors, FIELD, item.seed)
         est = create_estimator(estimator, view.sensors, view.skeleton, fps=motion.fps, **filter_options(FIELD.noise))
         yield item, motion, view, est.process(view.stream)

@@ -194,4 +194,4 @@ def test_the_bag_s_topics_are_the_pose_outputs_then_tf_and_the_description():
     from sparse_body.io.pose_outputs import POSE_OUTPUTS
     from sparse_body.io.topics import DESCRIPTION_TOPIC, ESTIMATE_TOPICS, TF_TOPIC
 
-    assert ESTIMATE_TOPICS == (*(o.topic for o in POSE_OUTPUTS), TF_TOPIC, DESCRIPTION_TOPIC)
+    assert (*(o.topic for o in POSE_OUTPUTS), TF_TOPIC, DESCRIPTION_TOPIC) == ESTIMATE_TOPICS

@@ -296,3 +296,19 @@ def test_a_motion_lying_on_the_floor_keeps_its_limbs_and_rests_its_lowest_joint_
         # the limbs move as in the clip: the joints' local turns are the clip's
         np.testing.assert_allclose(lain.local_quats[:, 1:], walk.local_quats[:, 1:])
         assert np.ptp(p[:, 0, :2], axis=0).max() < 1e-9  # held where the clip starts
+
+
+def test_the_evaluation_puts_the_floor_where_the_lying_body_lies():
+    """A user's play space has its floor where it is; estimated from the toes, as a motion
+    capture's is, the floor part's floor sat where a lying body's lowest toe happened to be."""
+    from sparse_body.core.contacts import estimate_floor
+    from sparse_body.data.floor import FLOOR_CLEARANCE, lying
+    from sparse_body.evaluation import floored
+
+    walk = synthetic_walk(2.0)
+    lain = lying(walk, "lying on the back")
+    assert estimate_floor(lain.positions) > FLOOR_CLEARANCE + 0.02  # the toes' floor is not the floor
+    on = floored(lain)
+    np.testing.assert_allclose(on.root_positions, lain.root_positions)  # its own floor is z = 0 already
+    np.testing.assert_allclose(on.positions[..., 2].min(axis=1), FLOOR_CLEARANCE, atol=1e-9)
+    assert floored(walk).positions[:, [10, 11], 2].min() == pytest.approx(0.0, abs=0.03)  # a capture: from the toes

@@ -29,12 +29,30 @@ def _value(value: object) -> str:
 
 
 def _rows(options: type[Options], prefix: str = "", head: str = "option") -> list[str]:
-    def row(name: str, o: Option) -> str:
-        return f"| `{prefix}{name}` | {o.takes()} | `{_value(o.default)}` | {o.help} |"
+    return _table({prefix + name: o for name, o in options.fields().items() if not o.experiment}, head)
 
+
+def _table(options: dict[str, Option], head: str = "option") -> list[str]:
     return [f"| {head} | takes | default | what it does |", "| --- | --- | --- | --- |"] + [
-        row(name, o) for name, o in options.fields().items()
+        f"| `{name}` | {o.takes()} | `{_value(o.default)}` | {o.help} |" for name, o in options.items()
     ]
+
+
+LAB_NOTES = """## Kept to measure a lab note again
+
+Not for use: options a lab note (docs/experiments/) was measured with and that did not win, kept
+so that its figures can be measured again. Each is given as any other (`NAME:key=value`).
+"""
+
+
+def _experiments() -> list[str]:
+    kept = {
+        f"{name}:{key}": o
+        for name, record in METHODS.items()
+        for key, o in load(record.options).fields().items()
+        if o.experiment
+    }
+    return [LAB_NOTES, "\n".join(_table(kept)) + "\n"]
 
 
 def markdown() -> str:
@@ -42,13 +60,15 @@ def markdown() -> str:
     for name, record in METHODS.items():
         options = load(record.options)
         parts.append(f"## {name}\n")
-        parts.append("\n".join(_rows(options)) + "\n" if options.fields() else "No options of its own.\n")
+        own = [o for o in options.fields().values() if not o.experiment]
+        parts.append("\n".join(_rows(options)) + "\n" if own else "No options of its own.\n")
         if options.passes_on:
             parts.append("Any other option is its base estimator's.\n")
     parts.append("## Every estimator\n")
     parts.append("\n".join(_rows(SharedOptions)) + "\n")
     parts.append("## The tracker filter (every estimator)\n")
     parts.append("\n".join(_rows(FilterConfig, PREFIX)) + "\n")
+    parts.extend(_experiments())
     parts.append(NODES)
     for title, options in _node_options():
         parts.append(f"### {title}\n")
@@ -89,5 +109,9 @@ def text(method: str) -> str:
     if not options:
         return f"{method}: no options of its own (the filter's: filter_...)"
     width = max(map(len, options))
-    lines = [f"  {name:<{width}}  {_value(o.default):<10} {o.takes()}: {o.help}" for name, o in options.items()]
+    note = " [a lab note's]"
+    lines = [
+        f"  {name:<{width}}  {_value(o.default):<10} {o.takes()}: {o.help}" + (note if o.experiment else "")
+        for name, o in options.items()
+    ]
     return f"{method} (NAME:key=value; besides these, the filter's filter_...):\n" + "\n".join(lines)

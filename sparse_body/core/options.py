@@ -51,12 +51,15 @@ def option(
     high: float | None = None,
     unit: str = "",
     choices: tuple[str, ...] | None = None,
+    experiment: bool = False,
 ) -> Any:
     """A dataclass field that is an option: its default, what it does, for a number the closed
     interval it must lie in (a number without one is refused by the tests), and for a text
-    the values it may take, where they are fixed."""
+    the values it may take, where they are fixed. `experiment`: kept only so that a lab note's
+    figures can be measured again, not for users (docs/options.md lists these apart)."""
     bounds = None if low is None or high is None else Range(low, high, unit)
-    return dataclasses.field(default=default, metadata={"help": help, "range": bounds, "choices": choices})
+    metadata = {"help": help, "range": bounds, "choices": choices, "experiment": experiment}
+    return dataclasses.field(default=default, metadata=metadata)
 
 
 @dataclass(frozen=True)
@@ -69,6 +72,7 @@ class Option:
     help: str
     range: Range | None
     choices: tuple[str, ...] | None = None  # a text's values, where they are fixed
+    experiment: bool = False  # kept to measure a lab note's figures again, not for users
 
     @property
     def kinds(self) -> list[str]:
@@ -145,6 +149,7 @@ class Options:
                 f.metadata.get("help", ""),
                 f.metadata.get("range"),
                 f.metadata.get("choices"),
+                f.metadata.get("experiment", False),
             )
             for f in dataclasses.fields(cls)
         }

@@ -6,7 +6,11 @@ else off the feet, and another lab's lying on the floor broke the regressors tra
 The body is turned in its own frame (the root's rotation followed by the turn, so a person who
 turns while walking turns on the floor), held where the clip starts (lying, a person does not
 travel at walking speed), and raised each frame so that its lowest joint lies FLOOR_CLEARANCE
-above the floor (joints sit inside the body: a pelvis on its back is about 10 cm up).
+above the floor (joints sit inside the body: a pelvis on its back is about 10 cm up). The
+motion says where that floor is (z = 0), and the evaluation puts a user's floor there, as a
+calibrated play space would: estimated from the toes, as a motion capture's floor is, it sat
+where the lowest toe of a lying body happened to be (up to 21 cm above the floor
+the body lay on, on the floor part's clips).
 """
 
 from __future__ import annotations
@@ -40,4 +44,4 @@ def lying(motion: Motion, how: str) -> Motion:
         motion.skeleton.offsets,
     )
     roots[:, 2] = FLOOR_CLEARANCE - positions[..., 2].min(axis=1)
-    return Motion(f"{motion.name}_{how.split()[-1]}", motion.fps, motion.skeleton, quats, roots)
+    return Motion(f"{motion.name}_{how.split()[-1]}", motion.fps, motion.skeleton, quats, roots, floor=0.0)

@@ -21,6 +21,9 @@ class Motion:
     skeleton: Skeleton
     local_quats: np.ndarray  # (T, 22, 4) x y z w, the root's global
     root_positions: np.ndarray  # (T, 3) metres, REP-103
+    # the floor's height where it is known (a body laid on a floor we placed); None: a motion
+    # capture's own, which the evaluation estimates from the toes (core/contacts.estimate_floor)
+    floor: float | None = None
 
     def __post_init__(self) -> None:
         T = len(self.root_positions)
@@ -62,6 +65,7 @@ class Motion:
             self.skeleton,
             self.local_quats[start:stop].copy(),
             self.root_positions[start:stop].copy(),
+            self.floor,
         )
 
     def resampled(self, fps: float) -> Motion:
@@ -75,7 +79,7 @@ class Motion:
         dst_t = np.arange(n) / fps
         root = np.stack([np.interp(dst_t, src_t, self.root_positions[:, k]) for k in range(3)], -1)
         quats = slerp_resample(self.local_quats, src_t, dst_t)
-        return Motion(self.name, fps, self.skeleton, quats, root)
+        return Motion(self.name, fps, self.skeleton, quats, root, self.floor)
 
     def save(self, path: Path) -> None:
         np.savez(

@@ -5,7 +5,7 @@ the worst kind of motion rather than the average (docs/methods.md, "The default 
 A default must hold on every kind a user brings. The learned models do best on upright motion
 like CMU's training and break where the body leaves it: another lab's lying on the floor gave
 LoBSTr 1.57x IK's leg error (issue 73), and on the floor part here (`eval --split floor`) every
-learned four-point estimator was 1.6-2.4x IK's on some way of lying until `upright` stood the
+learned four-point estimator was 1.7-2.8x IK's on some way of lying until `upright` stood the
 body up for it. A configuration not named here (a user's YAML) gets DragPoser, which takes any
 subset of the six trackers.
 """
@@ -19,10 +19,10 @@ RECOMMENDED = {
     # worst kind 0.91x IK's MPJPE (blend), 0.93x (avatarjlm), 1.07x (dragposer: one-leg balances)
     "three_point": "blend",
     # blend (AvatarJLM and DragPoser), stood up as the body lies down: worst kind 0.97x IK's leg
-    # error (the floor part, lying on the side); blend alone 1.71x (lying on the front),
-    # DragPoser 2.40x, upright:base=lobstr,fallback=ik (the last wave's) 1.06x
+    # error (the floor part, lying on the side); blend alone 1.68x (lying on the front),
+    # DragPoser 2.45x, upright:base=lobstr,fallback=ik (the default before it) 1.39x
     "four_point": "upright",
-    "six_point": "ik",  # the feet tracked: not chosen again this wave
+    "six_point": "ik",  # the feet tracked: not measured on these sets
 }
 OTHERWISE = "dragposer"
 

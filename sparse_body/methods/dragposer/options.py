@@ -42,7 +42,9 @@ class DragPoserOptions(EstimatorOptions):
     cost_tolerance: float = option(
         1e-3, "the search ends when the next step would lower the cost by less than this share", 0.0, 1.0
     )
-    compiled: bool = option(True, "the compiled search (false: the ONNX Runtime search it is tested against)")
+    compiled: bool = option(
+        True, "the compiled search (false: the ONNX Runtime search it is tested against)", experiment=True
+    )
     # the optimiser's (LatentOptimizer)
     damping: float = option(1e-2, "the Levenberg-Marquardt damping it starts from", 1e-9, 1e6)
     prior_weight: float = option(0.001, "the pull towards the last frame's latent", 0.0, 10.0)

@@ -15,7 +15,9 @@ REACHED = 0.02
 class LobstrOptions(EstimatorOptions):
     model_path: str | None = model_path()
     ensemble_path: str | None = option(
-        None, "a second LoBSTr model stepped beside the first, their outputs averaged (null: the first alone)"
+        None,
+        "a second LoBSTr model stepped beside the first, their outputs averaged (null: the first alone)",
+        experiment=True,  # docs/experiments/lobstr-seeds.md: two seeds averaged did not win
     )
     contact_ik: bool = option(True, "hold a foot in contact where it touched down (the paper's contact IK)")
     contact_threshold: float = option(

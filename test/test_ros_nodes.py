@@ -1184,13 +1184,13 @@ def _pelvis_height(batch) -> list[bytes]:
 
 def test_an_output_topic_is_one_function_and_a_line_in_the_registry(ros_env, tmp_path, monkeypatch):
     """Issue 76: an output took five Python files and a fixed 3-tuple encoder; now a function of
-    the pose batch and its line in POSE_OUTPUTS, and both the live node and the estimate bag
-    carry it, from the same bytes."""
+    the pose batch and its line in POSE_OUTPUTS, and the live node, its Foxglove view and the
+    estimate bag carry it, from the same bytes."""
     from rclpy.lifecycle import LifecycleNode
     from std_msgs.msg import Float64
 
     from sparse_body.core.skeleton import Skeleton
-    from sparse_body.core.types import BodyPose
+    from sparse_body.core.types import BodyPose, BodyPoses
     from sparse_body.io import pose_outputs
     from sparse_body.io.bagio import read_topic
     from sparse_body.io.estimate_bag import write_estimate_bag
@@ -1233,3 +1233,14 @@ def test_an_output_topic_is_one_function_and_a_line_in_the_registry(ros_env, tmp
         outputs.destroy()
     finally:
         node.destroy_node()
+    # the live view: a channel of its own (where foxglove-sdk is installed)
+    pytest.importorskip("foxglove", reason="foxglove-sdk is not installed")
+    from sparse_body.ros.live_view import LiveView
+
+    view = LiveView("127.0.0.1", 0, "<robot name='body'/>")
+    try:
+        view.log(
+            "/pelvis_height", _pelvis_height(pose_outputs.PoseBatch.of(BodyPoses.of([poses[3]]), skeleton, "w"))[0], 1.0
+        )
+    finally:
+        view.close()

@@ -4,25 +4,23 @@ desktop opens ws://HOST:PORT in Foxglove and sees the body move with its tracker
 of both names of the protocol (foxglove.sdk.v1 and the older foxglove.websocket.v1) connect.
 
 The channels carry the node's own CDR bytes (io/cdr.py) with ROS 2 message definitions as
-their schemas ("ros2msg"), so Foxglove decodes them as it decodes a ROS bag: /joint_states,
-/foot_contacts, /estimate_status, /tf (the body's links, and the trackers the estimate used
-as `<tracker frame>_seen`), /robot_description (the URDF; sent again every second, since a client
-only receives what is logged after it subscribed) and /diagnostics (the node's own, once a
-second: its rate, latency and trackers)."""
+their schemas ("ros2msg"), so Foxglove decodes them as it decodes a ROS bag: each pose output
+(io/pose_outputs.py: /joint_states, /foot_contacts, /estimate_status), /tf (the body's links,
+and the trackers the estimate used as `<tracker frame>_seen`), /robot_description (the URDF;
+sent again every second, since a client only receives what is logged after it subscribed) and
+/diagnostics (the node's own, once a second: its rate, latency and trackers)."""
 
 from __future__ import annotations
 
 import numpy as np
 
 from ..core.types import TrackerFrame
-from ..io import cdr
+from ..io import cdr, pose_outputs
 from ..io.bagio import typestore
 from .ws_front import WebSocketFront
 
+# beside every pose output's channel (io/pose_outputs.py)
 CHANNELS = {
-    "/joint_states": "sensor_msgs/msg/JointState",
-    "/foot_contacts": "sparse_body/msg/FootContacts",
-    "/estimate_status": "sparse_body/msg/EstimateStatus",
     "/tf": "tf2_msgs/msg/TFMessage",
     "/robot_description": "std_msgs/msg/String",
     "/diagnostics": "diagnostic_msgs/msg/DiagnosticArray",
@@ -65,7 +63,7 @@ class LiveView:
                 message_encoding="cdr",
                 context=self._context,
             )
-            for topic, typename in CHANNELS.items()
+            for topic, typename in {**{o.topic: o.type_name for o in pose_outputs.POSE_OUTPUTS}, **CHANNELS}.items()
         }
         layout = cdr.Layout()
         layout.string(urdf)

@@ -92,16 +92,12 @@ def test_options_are_parsed_once_and_checked_together_before_anything_is_made(mo
         raise AssertionError("a model was loaded before the options were checked together")
 
     monkeypatch.setattr(onnxruntime, "InferenceSession", no_model)
-    for spec, said in (
-        ("upright", r"lying_from \(40.0\) must be above upright_within \(45.0\)"),
-        ("blend", r"disagree_from \(0.1\) must be above agree_within \(0.15\)"),
-        ("refined", r"a refined estimator's base cannot be 'refined'"),
+    for spec, given, said in (
+        ("upright", {"lying_from": 40.0}, r"lying_from \(40.0\) must be above upright_within \(45.0\)"),
+        ("blend", {"disagree_from": 0.1}, r"disagree_from \(0.1\) must be above agree_within \(0.15\)"),
+        ("refined", {"base": "refined"}, r"a refined estimator's base cannot be 'refined'"),
+        ("blend", {"second": "bogus"}, r"blend's second: unknown estimator 'bogus'; available: auto, "),
     ):
-        given = {
-            "upright": {"lying_from": 40.0},
-            "blend": {"disagree_from": 0.1},
-            "refined": {"base": "refined"},
-        }[spec]
         with pytest.raises(ValueError, match=said):
             create_estimator(spec, sensors, skeleton, **given)
 

@@ -19,11 +19,12 @@ def estimator_names() -> list[str]:
     return sorted(METHODS)
 
 
-def check_estimator_name(name: str) -> None:
-    """ValueError (one line, listing the estimators) unless `name` is one, or auto: checked by
-    the commands before they make anything."""
+def check_estimator_name(name: str, where: str = "") -> None:
+    """ValueError (one line, listing the estimators, after `where`: the option that names it)
+    unless `name` is one, or auto: checked by the commands before they make anything."""
     if name not in METHODS and name != AUTO:
-        raise ValueError(f"unknown estimator {shown(name)}; available: {AUTO}, {', '.join(estimator_names())}")
+        said = f"{where}: " if where else ""
+        raise ValueError(f"{said}unknown estimator {shown(name)}; available: {AUTO}, {', '.join(estimator_names())}")
 
 
 def feet_tracked(sensors: SensorConfig) -> bool:

@@ -20,6 +20,10 @@ class BlendOptions(EstimatorOptions):
     parallel: bool = option(True, "the first estimator steps in a worker thread beside the second")
 
     def check_together(self) -> None:
+        from ..factory import check_estimator_name
+
+        check_estimator_name(self.first, "blend's first")  # before either is made
+        check_estimator_name(self.second, "blend's second")
         if "blend" in (self.first, self.second):
             raise ValueError("a blend's estimators cannot be 'blend'")
         if self.disagree_from <= self.agree_within:

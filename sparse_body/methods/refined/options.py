@@ -20,5 +20,8 @@ class RefinedOptions(EstimatorOptions):
     only_legs: bool = option(False, "the search gives the legs only; the rest of the body stays the base's")
 
     def check_together(self) -> None:
+        from ..factory import check_estimator_name
+
+        check_estimator_name(self.base, "refined's base")
         if self.base == "refined":
             raise ValueError("a refined estimator's base cannot be 'refined'")

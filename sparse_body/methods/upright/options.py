@@ -29,6 +29,11 @@ class UprightOptions(EstimatorOptions):
     settle: float = option(0.2, "the time constant of the share of the tilt taken out", 0.0, 10.0, "seconds")
 
     def check_together(self) -> None:
+        from ..factory import check_estimator_name
+
+        check_estimator_name(self.base, "upright's base")  # before either is made
+        if self.fallback:
+            check_estimator_name(self.fallback, "upright's fallback")
         if "upright" in (self.base, self.fallback):
             raise ValueError("upright's estimators cannot be 'upright'")
         if self.lying_from <= self.upright_within:

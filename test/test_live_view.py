@@ -29,7 +29,7 @@ from sparse_body.io.output import joint_state_names  # noqa: E402
 from sparse_body.ros.live_view import SEEN, LiveView, LiveViewError  # noqa: E402
 
 pytestmark = pytest.mark.ros
-WANTED = ("/joint_states", "/tf", "/robot_description", "/estimate_status", "/diagnostics")
+WANTED = ("/joint_states", "/tf", "/robot_description", "/estimate_status", "/diagnostics", "/robot/robot_description")
 
 
 def free_port() -> int:
@@ -66,7 +66,11 @@ async def collect(port: int, enough, limit: float) -> tuple[dict, dict]:
     return channels, received
 
 
-def test_a_websocket_client_sees_the_body_and_trackers_live(ros_env, tmp_path):
+def test_a_websocket_client_sees_the_body_trackers_and_robot_live(ros_env, tmp_path):
+    """With a humanoid robot retargeted beside the body (issue 74), the live view shows it too:
+    its URDF and its links on /tf, from the retarget node."""
+    from sparse_body.robot.example import write_robot
+
     config = load_sensor_config("six_point")
     make_bag(synthetic_walk(4.0), config, tmp_path / "trackers")
     port = free_port()
@@ -78,6 +82,13 @@ def test_a_websocket_client_sees_the_body_and_trackers_live(ros_env, tmp_path):
         ros_env,
     )
     bridge = None
+    retarget = start_node(
+        "sparse_body.ros.retarget_node",
+        {"robot": str(write_robot(tmp_path / "robot")), "autostart": True},
+        "sparse_body_retarget",
+        tmp_path,
+        ros_env,
+    )
     log = tmp_path / "sparse_body_estimator.log"
     try:
         end = time.monotonic() + STARTUP_LIMIT
@@ -96,12 +107,20 @@ def test_a_websocket_client_sees_the_body_and_trackers_live(ros_env, tmp_path):
 
         def enough(got):  # 20 valid estimates (before the trackers come, the node publishes a held pose)
             status = [store.deserialize_cdr(m, "sparse_body/msg/EstimateStatus") for m in got["/estimate_status"]]
-            return sum(m.valid for m in status) >= 20 and got["/robot_description"] and got["/diagnostics"]
+            robot = [store.deserialize_cdr(m, "tf2_msgs/msg/TFMessage") for m in got["/tf"][-30:]]
+            robot_links = any(t.child_frame_id.startswith("robot/") for m in robot for t in m.transforms)
+            return (
+                sum(m.valid for m in status) >= 20
+                and got["/robot_description"]
+                and got["/diagnostics"]
+                and got["/robot/robot_description"]
+                and robot_links
+            )
 
         channels, received = asyncio.run(collect(port, enough, STARTUP_LIMIT))
         recorded, malformed = record_tf(f"ws://127.0.0.1:{port}", 3.0)  # `sparse-body view ws://...`
     finally:
-        stop(est, *([bridge] if bridge else []))
+        stop(est, retarget, *([bridge] if bridge else []))
     assert enough(received), log.read_text()[-2000:]
     assert {"/joint_states", "/tf", "/robot_description", "/foot_contacts", "/estimate_status"} <= set(channels)
     for topic in WANTED:
@@ -118,6 +137,9 @@ def test_a_websocket_client_sees_the_body_and_trackers_live(ros_env, tmp_path):
     assert urdf.lstrip().startswith("<") and "<robot" in urdf
     diagnostics = store.deserialize_cdr(received["/diagnostics"][-1], "diagnostic_msgs/msg/DiagnosticArray")
     assert diagnostics.status[0].name.endswith(": estimator") and diagnostics.status[0].values
+    robot_urdf = store.deserialize_cdr(received["/robot/robot_description"][0], "std_msgs/msg/String").data
+    assert "test_humanoid" in robot_urdf or "<robot" in robot_urdf
+    assert any(f.startswith("robot/") for f in frames), frames  # the robot's links beside the body
 
     positions, trackers, fps = tf_bodies(recorded, "live")  # what the page of a recorded live view draws
     assert malformed == 0 and len(positions) > 10 and np.all(np.isfinite(positions))

@@ -284,6 +284,7 @@ def test_the_foxglove_layout_shows_what_the_package_publishes():
     from sparse_body.core.resources import config_dir
     from sparse_body.core.skeleton import Skeleton
     from sparse_body.io.bagio import CONTACTS_TOPIC, DESCRIPTION_TOPIC, STATUS_TOPIC, typestore
+    from sparse_body.io.topics import ROBOT_DESCRIPTION_TOPIC
     from sparse_body.io.urdf import body_urdf
 
     layout = json.loads((config_dir() / "sparse_body.foxglove.json").read_text())
@@ -295,7 +296,8 @@ def test_the_foxglove_layout_shows_what_the_package_publishes():
     body = layout["configById"]["3D!body"]
     links = {link.get("name") for link in ET.fromstring(body_urdf(Skeleton.canonical())).iter("link")}
     assert body["followTf"] in links and body["layers"]["grid"]["frameId"] == "world"
-    assert set(body["topics"]) == {DESCRIPTION_TOPIC}
+    assert set(body["topics"]) == {DESCRIPTION_TOPIC, ROBOT_DESCRIPTION_TOPIC}  # the body, and a retargeted robot
+    assert layout["configById"]["DiagnosticSummary!nodes"]["topicToRender"] == "/diagnostics"
     assert layout["configById"]["RawMessages!status"]["topicPath"] == STATUS_TOPIC
     store = typestore()
     fields = {name for name, _ in store.fielddefs["sparse_body/msg/FootContact"][1]}

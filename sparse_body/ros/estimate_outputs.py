@@ -23,10 +23,12 @@ from ..core.types import BodyPose, BodyPoses
 from ..io import cdr
 from ..io.output import HELD, axis_link_table, body_table, joint_angles
 from ..io.pose_outputs import POSE_OUTPUTS, PoseBatch, pose_messages
+from ..io.topics import ROBOT_DESCRIPTION_TOPIC
 from ..io.urdf import body_urdf
 
 if TYPE_CHECKING:
     from rclpy.lifecycle import LifecycleNode, LifecyclePublisher
+    from rclpy.subscription import Subscription
 
     from .live_view import LiveView
 
@@ -62,6 +64,7 @@ class EstimateOutputs:
         self.description = node.create_publisher(String, namespace + "robot_description", latched)
         self.description.publish(String(data=body_urdf(skeleton)))
         self.live_view: LiveView | None = None
+        self.robot_description: Subscription | None = None  # the retarget node's URDF, for the live view
         if params["foxglove_port"]:
             from .live_view import LiveView
 
@@ -70,6 +73,9 @@ class EstimateOutputs:
             except Exception:
                 self.destroy()
                 raise
+            self.robot_description = node.create_subscription(
+                String, ROBOT_DESCRIPTION_TOPIC, lambda msg: self.live_view.robot_description(msg.data), latched
+            )
 
     def publish(self, pose: BodyPose, stamp: float, reason: str) -> bytes:
         """One pose on every output (reason: why it is held or how it was made; empty: a
@@ -100,10 +106,19 @@ class EstimateOutputs:
             self.live_view.log_description(now)
             self.live_view.log("/diagnostics", serialize_message(msg), now)
 
+    def log_robot_tf(self, data: bytes, static: bool) -> None:
+        """A /tf (or /tf_static) message of the robot's links, into the live view as it came."""
+        if self.live_view is not None:
+            now = self.node.get_clock().now().nanoseconds * 1e-9
+            self.live_view.log("/tf_static" if static else "/tf", data, now)
+
     def destroy(self) -> None:
         for pub in (*self.outputs.values(), self.tf, self.diagnostics):
             self.node.destroy_lifecycle_publisher(pub)
         self.node.destroy_publisher(self.description)
+        if self.robot_description is not None:
+            self.node.destroy_subscription(self.robot_description)
+            self.robot_description = None
         if self.live_view is not None:
             self.live_view.close()
             self.live_view = None

@@ -32,6 +32,7 @@ from ..estimators.base import Estimator
 from ..estimators.budget import BudgetedStep
 from ..io.output import axis_link_name
 from ..io.tf_cache import TfGuards
+from ..io.topics import ROBOT_PREFIX
 from ..methods.factory import create_estimator
 from ..methods.kernels import compile_kernels
 from ..methods.recommended import resolve_estimator
@@ -150,6 +151,7 @@ class EstimatorNode(LifecycleNode):
             self._release()
             return TransitionCallbackReturn.FAILURE
         if self.outputs.live_view is not None:
+            self.tf_in.forward = (ROBOT_PREFIX, self.outputs.log_robot_tf)  # a retargeted robot, shown too
             self.get_logger().info(
                 f"live view: open ws://{p['foxglove_host']}:{self.outputs.live_view.port} in Foxglove"
             )

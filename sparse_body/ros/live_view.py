@@ -8,7 +8,9 @@ their schemas ("ros2msg"), so Foxglove decodes them as it decodes a ROS bag: eac
 (io/pose_outputs.py: /joint_states, /foot_contacts, /estimate_status), /tf (the body's links,
 and the trackers the estimate used as `<tracker frame>_seen`), /robot_description (the URDF;
 sent again every second, since a client only receives what is logged after it subscribed) and
-/diagnostics (the node's own, once a second: its rate, latency and trackers)."""
+/diagnostics (the node's own, once a second: its rate, latency and trackers). With a humanoid
+robot retargeted beside it (the retarget node), the robot too: its links' /tf and /tf_static
+messages (frames under robot/) as they arrive, and its URDF on /robot/robot_description."""
 
 from __future__ import annotations
 
@@ -17,15 +19,25 @@ import numpy as np
 from ..core.types import TrackerFrame
 from ..io import cdr, pose_outputs
 from ..io.bagio import typestore
+from ..io.topics import ROBOT_DESCRIPTION_TOPIC
 from .ws_front import WebSocketFront
 
 # beside every pose output's channel (io/pose_outputs.py)
 CHANNELS = {
     "/tf": "tf2_msgs/msg/TFMessage",
+    "/tf_static": "tf2_msgs/msg/TFMessage",  # a robot's fixed links (robot_state_publisher's)
     "/robot_description": "std_msgs/msg/String",
+    ROBOT_DESCRIPTION_TOPIC: "std_msgs/msg/String",
     "/diagnostics": "diagnostic_msgs/msg/DiagnosticArray",
 }
 SEEN = "_seen"  # suffix of the tracker frames drawn beside the body (the input /tf has the originals)
+
+
+def _string(text: str) -> bytes:
+    """A std_msgs/String's CDR bytes."""
+    layout = cdr.Layout()
+    layout.string(text)
+    return bytes(layout.buf)
 
 
 class LiveViewError(RuntimeError):
@@ -65,9 +77,8 @@ class LiveView:
             )
             for topic, typename in {**{o.topic: o.type_name for o in pose_outputs.POSE_OUTPUTS}, **CHANNELS}.items()
         }
-        layout = cdr.Layout()
-        layout.string(urdf)
-        self._description = bytes(layout.buf)
+        self._description = _string(urdf)
+        self._robot_description: bytes | None = None  # a humanoid robot's, once the retarget node says it
 
     @property
     def port(self) -> int:
@@ -90,6 +101,12 @@ class LiveView:
 
     def log_description(self, stamp: float) -> None:
         self.log("/robot_description", self._description, stamp)
+        if self._robot_description is not None:
+            self.log(ROBOT_DESCRIPTION_TOPIC, self._robot_description, stamp)
+
+    def robot_description(self, urdf: str) -> None:
+        """The humanoid robot's URDF (the retarget node's, latched): sent with the body's."""
+        self._robot_description = _string(urdf)
 
     def close(self) -> None:
         self._front.stop()

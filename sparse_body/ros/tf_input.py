@@ -16,6 +16,7 @@ TFMessage are counted ("malformed message") and dropped.
 from __future__ import annotations
 
 from collections import deque
+from collections.abc import Callable
 
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 
@@ -79,6 +80,9 @@ class TfReader:
         self._own: deque[bytes] = deque(maxlen=OWN_KEPT)
         self._own_set: set[bytes] = set()
         self.own_skipped = 0
+        # (frame prefix, callback(bytes, static)): messages with a frame under the prefix are
+        # also handed there as they came (the live view shows the robot's links)
+        self.forward: tuple[str, Callable[[bytes, bool], None]] | None = None
         self._subs = [  # /tf first: _on_tf takes what waits on it
             node.create_subscription(
                 TFMessage, "/tf", lambda m: self._on_tf(m, False), tf_qos(len(tracker_frames)), raw=True
@@ -126,6 +130,8 @@ class TfReader:
         except MalformedMessage:
             self.cache.refused[Accepted.MALFORMED] += 1
             return False
+        if self.forward is not None and any(row[1].startswith(self.forward[0]) for row in rows):
+            self.forward[1](data, static)
         if self.ignore_frames:  # the node's own link TF comes back on /tf
             rows = [row for row in rows if row[1] not in self.ignore_frames]
         return self.cache.ingest_rows(rows, static, now).arrived

@@ -21,7 +21,7 @@ class UprightOptions(EstimatorOptions):
     )
     # the band chosen by the worst kind over the selection, the floor part and cmu-extra
     # (docs/methods.md, "The default estimator"): 0.55-0.75 0.97x IK's leg error on the floor
-    # part's worst kind, 0.5-0.7 1.01x, 0.4-0.6 1.14x; the selection and cmu-extra alike for all
+    # part's worst kind, 0.5-0.7 1.01x, 0.4-0.6 1.14x; the selection and cmu-extra alike for each
     low_below: float = option(
         0.55, "pelvis height (share of a standing one's) under which a tilted body counts as lying", 0.0, 2.0
     )

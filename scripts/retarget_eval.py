@@ -95,11 +95,14 @@ def main() -> int:
         lowest = min(min(r["left knee correlation"], r["right knee correlation"]) for r in knee)
         print(f"\nknee correlation with the person's, lowest clip and side: {lowest:.3f} ({len(knee)} clips)")
     print("\nby motion kind (frame-weighted; each figure the mean of both sides):\n")
-    print("| kind | clips | frames | hands [cm] | feet, not planted [cm] | feet skate [cm/s] | knee correlation |")
-    print("| --- | ---: | ---: | ---: | ---: | ---: | ---: |")
+    print(
+        "| kind | clips | frames | hands [cm] | feet, not planted [cm] | feet skate [cm/s] "
+        "| the person's feet skate [cm/s] | knee correlation |"
+    )
+    print("| --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: |")
     for kind in sorted({r["kind"] for r in rows}):
         mine = [r for r in rows if r["kind"] == kind]
-        ends = ("hand error [cm]", "foot error [cm]", "skate [cm/s]", "knee correlation")
+        ends = ("hand error [cm]", "foot error [cm]", "skate [cm/s]", "skate, the person's [cm/s]", "knee correlation")
         figures = [_kind_mean(mine, end) for end in ends]
         count = int(sum(r["frames"] for r in mine))
         print(f"| {kind} | {len(mine)} | {count} | " + " | ".join(f"{v:.2f}" for v in figures) + " |")

@@ -97,6 +97,10 @@ targets:
   left_hand: {{link: left_hand, joint: left_wrist}}
   right_hand: {{link: right_hand, joint: right_wrist}}
   head: {{link: head_link, joint: head, position: 0.5}}
+  left_thigh: {{link: left_hip_pitch_link, joint: left_hip, position: 0.0, direction: 1.0}}
+  left_shin: {{link: left_knee_link, joint: left_knee, position: 0.0, direction: 1.0}}
+  right_thigh: {{link: right_hip_pitch_link, joint: right_hip, position: 0.0, direction: 1.0}}
+  right_shin: {{link: right_knee_link, joint: right_knee, position: 0.0, direction: 1.0}}
 """
 
 

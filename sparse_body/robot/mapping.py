@@ -10,8 +10,10 @@
 A target's `point` is where on the link (metres, in the link's frame) the human joint is
 matched; `position` and `orientation` weigh how hard it is reached (an orientation turns the
 link as the human joint turns, from the robot's zero pose matched to the human T-pose; use
-it only where those two agree, as for feet, not arms); `contact` (left or right) keeps it on
-the floor, where it touched down, while that foot is planted.
+it only where those two agree, as for feet, not arms); `direction` weighs the turn of the
+human bone that leaves the joint (to its one child joint: thigh, shin) with its twist about
+the bone left free, for links the robot cannot twist as a person does; `contact` (left or
+right) keeps it on the floor, where it touched down, while that foot is planted.
 """
 
 from __future__ import annotations
@@ -19,7 +21,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from pathlib import Path
 
-from ..core.skeleton import JOINT_NAMES
+from ..core.skeleton import JOINT_INDEX, JOINT_NAMES, PARENTS
 from .urdf_model import RobotFileError
 
 KEYS = {
@@ -34,7 +36,7 @@ KEYS = {
     "max_acceleration",
     "description",
 }
-TARGET_KEYS = {"link", "joint", "point", "position", "orientation", "contact"}
+TARGET_KEYS = {"link", "joint", "point", "position", "orientation", "direction", "contact"}
 SIDES = ("left", "right")
 
 
@@ -46,6 +48,7 @@ class Target:
     point: tuple[float, float, float] = (0.0, 0.0, 0.0)
     position: float = 1.0  # weight of the position error (per metre)
     orientation: float = 0.0  # weight of the turn error (per radian); 0: the position only
+    direction: float = 0.0  # weight of the turn of the bone leaving the joint, its twist free (per radian)
     contact: str = ""  # left / right: held on the floor while that foot is planted
 
 
@@ -62,6 +65,11 @@ class RobotMapping:
     ramp: float = 0.5  # s: after a start or a hold, the robot eases from where it is to the solution
     max_acceleration: float | None = None  # rad/s^2 (m/s^2) every joint keeps to; None: the velocity limits only
     description: str = ""
+
+
+def bone_children(joint: str) -> list[int]:
+    """The joints whose parent is this one (the bones that leave it)."""
+    return [k for k, parent in enumerate(PARENTS) if parent == JOINT_INDEX[joint]]
 
 
 def load_mapping(name_or_path: str | Path) -> RobotMapping:
@@ -127,6 +135,8 @@ def _target(name: str, entry, path: Path) -> Target:
         raise RobotFileError(f"{where}: link must be a link name")
     if joint not in JOINT_NAMES:
         raise RobotFileError(f"{where}: joint {joint!r} is not a body joint ({', '.join(JOINT_NAMES)})")
+    if entry.get("direction") and len(bone_children(joint)) != 1:
+        raise RobotFileError(f"{where}: direction needs a joint with one child bone (a hip, knee, shoulder, elbow)")
     point = entry.get("point", [0.0, 0.0, 0.0])
     if not isinstance(point, list) or len(point) != 3:
         raise RobotFileError(f"{where}: point must be [x, y, z] in metres")
@@ -140,5 +150,6 @@ def _target(name: str, entry, path: Path) -> Target:
         tuple(_number(v, f"{where} point", -10.0, 10.0) for v in point),  # type: ignore[arg-type]
         _number(entry.get("position", 1.0), f"{where} position", 0.0, 100.0),
         _number(entry.get("orientation", 0.0), f"{where} orientation", 0.0, 100.0),
+        _number(entry.get("direction", 0.0), f"{where} direction", 0.0, 100.0),
         contact,
     )

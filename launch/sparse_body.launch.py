@@ -218,8 +218,8 @@ def generate_launch_description():
             DeclareLaunchArgument(
                 "robot",
                 default_value="",
-                description="a humanoid robot's mapping (unitree_h1, unitree_g1_29dof, unitree_g1_23dof or a YAML "
-                "path): its joints on robot/joint_states (empty: none)",
+                description="a humanoid robot's mapping (unitree_h1, unitree_h1_2, unitree_g1_29dof, unitree_g1_23dof "
+                "or a YAML path): its joints on robot/joint_states (empty: none)",
             ),
             DeclareLaunchArgument(
                 "robot_urdf", default_value="", description="the robot's URDF (empty: the file its mapping names)"

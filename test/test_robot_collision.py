@@ -58,13 +58,13 @@ def test_thighs_pulled_across_each_other_collide_and_the_robots_own_poses_do_not
     assert check.pairs[int(np.argmin(clearance))] == ("left_hip_pitch_link", "right_hip_pitch_link")
 
 
-@pytest.mark.parametrize("name", ["g1_29dof", "h1"])
+@pytest.mark.parametrize("name", ["g1_29dof", "h1", "h1_2_handless"])
 def test_unitree_robots_get_a_shape_for_every_limb_and_none_touching_at_rest(name):
     if not (UNITREE / f"{name}.urdf").is_file():
         pytest.skip(f"Unitree's {name}.urdf (unitree_ros, BSD-3-Clause) is not installed beside the checkout")
     model = load_urdf(UNITREE / f"{name}.urdf")
     shaped = {model.links[c.link] for c in model.capsules}
-    for side in ("left", "right"):  # meshes (G1) or primitives (H1): every limb has a shape
+    for side in ("left", "right"):  # meshes (G1, H1-2) or primitives (H1): every limb has a shape
         assert f"{side}_knee_link" in shaped and f"{side}_elbow_link" in shaped
     assert all(0.01 <= c.radius < 0.3 for c in model.capsules)
     check = _check(model)

@@ -60,7 +60,12 @@ def test_joint_states_carry_the_commands_velocities_as_rosbags_encodes_them():
 
 @pytest.mark.parametrize(
     ("robot", "urdf"),
-    [("unitree_h1", "h1.urdf"), ("unitree_g1_29dof", "g1_29dof.urdf"), ("unitree_g1_23dof", "g1_23dof.urdf")],
+    [
+        ("unitree_h1", "h1.urdf"),
+        ("unitree_h1_2", "h1_2_handless.urdf"),
+        ("unitree_g1_29dof", "g1_29dof.urdf"),
+        ("unitree_g1_23dof", "g1_23dof.urdf"),
+    ],
 )
 def test_a_real_humanoid_bends_its_knees_with_the_person_within_its_limits(robot, urdf):
     """H1's left knee sat at its -0.26 rad hyperextension limit for 84 % of a walk (knee

@@ -73,8 +73,9 @@ def bone_children(joint: str) -> list[int]:
 
 
 def load_mapping(name_or_path: str | Path) -> RobotMapping:
-    """A robot mapping by name (config/robots/NAME.yaml: unitree_h1, unitree_g1_29dof, unitree_g1_23dof) or by
-    path; RobotFileError (one line) where it cannot be one."""
+    """A robot mapping by name (config/robots/NAME.yaml: unitree_h1, unitree_h1_2,
+    unitree_g1_29dof, unitree_g1_23dof) or by path; RobotFileError (one line) where it cannot
+    be one."""
     from ..core.resources import shipped_or_path
     from ..core.sensors import read_yaml
 

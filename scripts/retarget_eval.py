@@ -126,10 +126,16 @@ def main() -> int:
 
 def _kind_mean(rows: list[dict], ending: str) -> float:
     """The frame-weighted mean over clips of the mean of a clip's figures whose name ends so."""
-    values = np.array([np.nanmean([v for k, v in r.items() if k.endswith(ending)] or [np.nan]) for r in rows])
+    values = np.array([_finite_mean([v for k, v in r.items() if k.endswith(ending)]) for r in rows])
     weight = np.array([r["frames"] for r in rows])
     ok = np.isfinite(values)
     return float(np.sum(values[ok] * weight[ok]) / weight[ok].sum()) if ok.any() else float("nan")
+
+
+def _finite_mean(values: list[float]) -> float:
+    """The mean of the finite values (NaN where none: a knee that did not move has no correlation)."""
+    finite = [v for v in values if np.isfinite(v)]
+    return float(np.mean(finite)) if finite else float("nan")
 
 
 if __name__ == "__main__":

@@ -72,6 +72,14 @@ def fit(seen: np.ndarray, label: np.ndarray) -> np.ndarray:
     return minimize(loss, np.zeros(4), jac=True, method="BFGS").x
 
 
+def _logistic(seen: np.ndarray, coefficients: np.ndarray) -> np.ndarray:
+    """The model's probability for each row of seen (height, speed, held) with these coefficients."""
+    from sparse_body.core.contacts import contact_terms
+
+    terms = np.column_stack(np.broadcast_arrays(*contact_terms(seen[:, 0], seen[:, 1], seen[:, 2])))
+    return 1.0 / (1.0 + np.exp(-(terms @ coefficients)))
+
+
 def judge(data: dict[str, np.ndarray]) -> dict:
     """Brier score and log loss of the published probability (what the estimator gave
     beside its flags) against the flags' own (0 or 1), and its calibration (the observed share
@@ -117,8 +125,10 @@ def main() -> int:
         return 2
     data = collect(items, args.what)
     result: dict = {"command": "python " + " ".join(sys.argv), "clips": len(items)}
-    if args.what == "fit":
-        result["coefficients"] = fit(data["seen"], data["label"]).tolist()
+    if args.what == "fit":  # judged in-sample with the coefficients fitted, not the shipped ones
+        coefficients = fit(data["seen"], data["label"])
+        result["coefficients"] = coefficients.tolist()
+        data["published"] = _logistic(data["seen"], coefficients)
     result["runs"] = judge(data)
     text = json.dumps(result, indent=1)
     print(text)

@@ -62,6 +62,10 @@ RESTART_WAIT = 0.25  # s
 # the validation frames (0.09 % with 6, hands and feet within 0.01 cm of 3's; 10 overshot before)
 CLEARANCE = 0.01  # m
 COLLISION = 6.0
+# a foot below its standing height (the floor) is pushed up this hard, one-sided: its goal is
+# never below the floor, but its weight alone left H1's feet up to 3.5 cm under it where the
+# legs' directions pulled
+FLOOR = 10.0
 # The farthest robot base place given (m): a body's root is refused beyond 1,000 m
 # (io/output.py) and a robot is at most 20 times a person (a mapping's scale)
 MAX_BASE = 20_000.0
@@ -433,6 +437,9 @@ class HumanoidRetarget:
                     row[:, 6 + chain] = moved.T
                     rows.append(row * weight)
                     residuals.append((goals[k] - point) * weight)
+                    if target.contact and point[2] < self.ankle_height:  # a foot through the floor
+                        rows.append(row[2:] * FLOOR)
+                        residuals.append(np.array([(self.ankle_height - point[2]) * FLOOR]))
                 if target.orientation > 0:
                     row = np.zeros((3, 6 + n))
                     row[:, 3:6] = np.eye(3)

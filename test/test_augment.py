@@ -119,7 +119,13 @@ def test_the_spliced_share_is_what_the_spec_says(walk, box):
     assert Augmentation.parse("mirror,splice=0.8").spec == "mirror,splice=0.8"
     assert Augmentation.parse("mirror,splice=0.5").spec == "mirror,splice"  # the default, said as before
     assert Augmentation.parse("mirror,splice=0.8").without("mirror").spec == "splice=0.8"  # as the ablation runs it
-    for bad, why in (("splice=1.5", "from 0 to 1"), ("splice=many", "from 0 to 1"), ("speed=2", "takes no value")):
+    assert Augmentation.parse("tilt=0.5,mirror").spec == "mirror,tilt=0.5"
+    for bad, why in (
+        ("splice=1.5", "from 0 to 1"),
+        ("splice=many", "from 0 to 1"),
+        ("tilt=-1", "from 0 to 1"),
+        ("speed=2", "takes no value"),
+    ):
         with pytest.raises(ValueError, match=why):
             Augmentation.parse(bad)
 
@@ -194,3 +200,30 @@ def test_ablation_command_writes_each_runs_validation(tmp_path, train_mocap):
         assert table.count(f"\n| {spec} |") == 1
     assert f"{report['runs'][0]['validation']['toe_error_cm']:.4g}" in table
     assert "missing" in augmentation_table(tmp_path / "other.train.json", LOBSTR_VALIDATION)
+
+
+def test_a_tilted_variant_lies_off_its_feet_on_the_floor_and_keeps_its_limbs_motion(walk):
+    """The tilt augmentation: the body turned off upright by the drawn angle, about an axis of
+    the drawn direction, held where the clip starts, its lowest joint just over the floor, the
+    limbs moving as in the clip (their local turns unchanged)."""
+    from sparse_body.core.skeleton import JOINT_INDEX
+    from sparse_body.data.floor import FLOOR_CLEARANCE
+    from sparse_body.train.augment import TILT_RANGE, tilted
+
+    for degrees, towards in ((90.0, 0.0), (45.0, 1.0), (100.0, 4.0)):
+        laid = tilted(walk, degrees, towards)
+        np.testing.assert_allclose(laid.local_quats[:, 1:], walk.local_quats[:, 1:])
+        up = laid.positions[:, JOINT_INDEX["spine3"]] - laid.positions[:, JOINT_INDEX["pelvis"]]
+        stood = walk.positions[:, JOINT_INDEX["spine3"]] - walk.positions[:, JOINT_INDEX["pelvis"]]
+        tilt = np.degrees(np.arccos(up[:, 2] / np.linalg.norm(up, axis=1)))
+        stood_tilt = np.degrees(np.arccos(stood[:, 2] / np.linalg.norm(stood, axis=1)))
+        assert np.all(np.abs(tilt - degrees) <= stood_tilt + 1.0)  # the walk's own lean, at most
+        np.testing.assert_allclose(laid.positions[..., 2].min(axis=1), FLOOR_CLEARANCE, atol=1e-9)
+        assert np.ptp(laid.root_positions[:, :2], axis=0).max() == 0.0  # held where it starts
+        assert laid.floor == 0.0
+    rng = np.random.default_rng(3)
+    share = Augmentation.parse("tilt=1")
+    drawn = [random_variant(walk, share, rng) for _ in range(6)]
+    assert all("/tilt" in v.name for v in drawn)
+    assert all(TILT_RANGE[0] - 1 <= float(v.name.rsplit("tilt", 1)[1]) <= TILT_RANGE[1] + 1 for v in drawn)
+    assert not any("/tilt" in random_variant(walk, Augmentation.parse("tilt=0"), rng).name for _ in range(6))

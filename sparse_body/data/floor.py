@@ -31,9 +31,14 @@ LYING = {
 
 def lying(motion: Motion, how: str) -> Motion:
     """The motion with its body lying on the floor as LYING[how] says."""
+    return laid(motion, LYING[how], f"{motion.name}_{how.split()[-1]}")
+
+
+def laid(motion: Motion, turn: Rotation, name: str) -> Motion:
+    """The motion with its body turned by `turn` in its own frame, held where the clip starts
+    and raised each frame so that its lowest joint is FLOOR_CLEARANCE over the floor (z = 0)."""
     from ..core.kinematics import forward_kinematics
 
-    turn = LYING[how]
     quats = np.array(motion.local_quats, dtype=float)
     quats[:, 0] = (Rotation.from_quat(quats[:, 0]) * turn).as_quat()
     roots = np.zeros_like(motion.root_positions)
@@ -44,4 +49,4 @@ def lying(motion: Motion, how: str) -> Motion:
         motion.skeleton.offsets,
     )
     roots[:, 2] = FLOOR_CLEARANCE - positions[..., 2].min(axis=1)
-    return Motion(f"{motion.name}_{how.split()[-1]}", motion.fps, motion.skeleton, quats, roots, floor=0.0)
+    return Motion(name, motion.fps, motion.skeleton, quats, roots, floor=0.0)

@@ -201,8 +201,8 @@ def add_parser(sub) -> None:
     p.add_argument(
         "--augment",
         metavar="KINDS",
-        help="augmentations of the train clips: mirror,speed,proportions,splice (any of them), all or "
-        "none (default: the configuration's)",
+        help="augmentations of the train clips: mirror,speed,proportions,splice,tilt (any of them; "
+        "splice=S and tilt=S for the share of variants), all or none (default: the configuration's)",
     )
     p.add_argument(
         "--ablate-augment",

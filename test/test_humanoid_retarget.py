@@ -423,3 +423,28 @@ def test_a_foot_the_person_puts_through_the_floor_stays_on_it(tmp_path, monkeypa
         assert below < 0.01, below
     else:
         assert below > 0.02, below
+
+
+def test_skate_is_read_once_the_start_ramp_is_over_beside_the_persons(tmp_path):
+    """IK's first frames jump (its feet 30-70 cm between the first two on the validation runs):
+    while the commands ease from the robot's pose (the mapping's ramp) a planted foot's jump is
+    not skate; the same jump after it is. The person's own skate is read on the same frames."""
+    from dataclasses import replace
+
+    robot = load_retarget(write_robot(tmp_path), None, Skeleton.canonical(1.75))
+    poses = [robot.step(_leg_pose(np.eye(3), k / 60)) for k in range(90)]
+    right = [t.name for t in robot.mapping.targets].index("right_foot")
+    contacts = np.tile([False, True], (len(poses), 1))
+
+    def jumped_at(frame: int) -> dict[str, float]:
+        moved = []
+        for k, pose in enumerate(poses):
+            reached = pose.reached.copy()
+            reached[right, 0] += 0.3 if k >= frame else 0.0
+            moved.append(replace(pose, reached=reached))
+        return retarget_quality(moved, robot, contacts, 60.0)
+
+    assert robot.mapping.ramp == 0.5
+    assert jumped_at(10)["right_foot skate [cm/s]"] < 0.5  # within the ramp's first 30 frames
+    assert jumped_at(60)["right_foot skate [cm/s]"] > 10.0  # after it: 0.3 m in a frame
+    assert jumped_at(60)["right_foot skate, the person's [cm/s]"] < 0.5  # the person's foot stood still

@@ -61,11 +61,13 @@ def retarget_quality(
         if target.contact:
             planted = contacts[:, SIDES.index(target.contact)]
             both = planted[1:] & planted[:-1] & settled[1:]
-            for whose, points in (("", reached), ("the person's ", wanted)):
+            robot_and_person = (
+                (f"{target.name} skate [cm/s]", reached),
+                (f"{target.name} skate, the person's [cm/s]", wanted),
+            )
+            for key, points in robot_and_person:
                 speed = np.linalg.norm(np.diff(points[:, k, :2], axis=0), axis=-1) * fps * 100
-                out[f"{target.name} skate, {whose}[cm/s]" if whose else f"{target.name} skate [cm/s]"] = (
-                    float(speed[both].mean()) if both.any() else 0.0
-                )
+                out[key] = float(speed[both].mean()) if both.any() else 0.0
             out[f"{target.name} below floor [cm]"] = float(
                 max(0.0, retarget.ankle_height - reached[:, k, 2].min()) * 100
             )

@@ -7,9 +7,15 @@ the last frame's solution, each step clipped to the URDF's limits (so no publish
 ever outside them). Two weak pulls keep the solution steady where the targets leave freedom:
 towards the last frame's angles (smooth in time) and towards the robot's zero pose.
 
+A target may also turn its link as the human joint turns (`orientation`), or only turn the
+bone leaving that joint as the person's, its twist left free (`direction`: thighs and shins,
+so the knees bend as the person's whatever the robot's hips' width).
+
 Feet: the fixed frame's z = 0 is the floor. A foot target below its standing height is lifted
-to it, and while the estimator says that foot is planted, its target stays where it touched
-down, so the robot's foot does not slide when the human estimate's does.
+to it (and a foot the solve puts under it is pushed up), it stands as far across from the
+pelvis as the robot's own feet do, and while the estimator says that foot is planted, its
+target stays where it touched down, so the robot's foot does not slide when the human
+estimate's does.
 """
 
 from __future__ import annotations

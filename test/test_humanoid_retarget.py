@@ -165,6 +165,7 @@ def test_huge_or_missing_urdfs_are_refused_before_reading(tmp_path, monkeypatch)
         (lambda t: "unitree", "is a YAML mapping with keys"),
         (lambda t: t.replace("base: pelvis", "base: left_knee_link"), "root link or fixed to it"),
         (lambda t: t.replace("joint: left_wrist}", "joint: left_wrist, direction: 1.0}"), "one child bone"),
+        (lambda t: t.replace("direction: 1.0", "direction: much"), "direction must be a number"),
         (lambda t: t.replace("joint: head, position", "joint: spine3, direction: 1.0, position"), "one child bone"),
     ],
 )

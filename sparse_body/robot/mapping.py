@@ -136,11 +136,12 @@ def _target(name: str, entry, path: Path) -> Target:
         raise RobotFileError(f"{where}: link must be a link name")
     if joint not in JOINT_NAMES:
         raise RobotFileError(f"{where}: joint {joint!r} is not a body joint ({', '.join(JOINT_NAMES)})")
-    if entry.get("direction") and len(bone_children(joint)) != 1:
-        raise RobotFileError(f"{where}: direction needs a joint with one child bone (a hip, knee, shoulder, elbow)")
     point = entry.get("point", [0.0, 0.0, 0.0])
     if not isinstance(point, list) or len(point) != 3:
         raise RobotFileError(f"{where}: point must be [x, y, z] in metres")
+    direction = _number(entry.get("direction", 0.0), f"{where} direction", 0.0, 100.0)
+    if direction > 0 and len(bone_children(joint)) != 1:
+        raise RobotFileError(f"{where}: direction needs a joint with one child bone (a hip, knee, shoulder, elbow)")
     contact = entry.get("contact", "")
     if contact not in ("", *SIDES):
         raise RobotFileError(f"{where}: contact must be left or right, got {contact!r}")
@@ -151,6 +152,6 @@ def _target(name: str, entry, path: Path) -> Target:
         tuple(_number(v, f"{where} point", -10.0, 10.0) for v in point),  # type: ignore[arg-type]
         _number(entry.get("position", 1.0), f"{where} position", 0.0, 100.0),
         _number(entry.get("orientation", 0.0), f"{where} orientation", 0.0, 100.0),
-        _number(entry.get("direction", 0.0), f"{where} direction", 0.0, 100.0),
+        direction,
         contact,
     )

@@ -18,9 +18,10 @@ AUTO = "auto"
 RECOMMENDED = {
     # worst kind 0.91x IK's MPJPE (blend), 0.93x (avatarjlm), 1.07x (dragposer: one-leg balances)
     "three_point": "blend",
-    # blend (AvatarJLM and DragPoser), stood up as the body lies down: worst kind 0.97x IK's leg
-    # error (the floor part, lying on the side); blend alone 1.68x (lying on the front),
-    # DragPoser 2.45x, upright:base=lobstr,fallback=ik (the default before it) 1.39x
+    # blend (AvatarJLM and DragPoser), stood up as the body lies down: worst kind 0.90x IK's leg
+    # error (the floor part, lying on the back); blend alone 1.14x (lying on the front; 1.68x
+    # before AvatarJLM trained off its feet), DragPoser 2.45x, upright:base=lobstr,fallback=ik
+    # (the default before it) 1.39x
     "four_point": "upright",
     "six_point": "ik",  # the feet tracked: not measured on these sets
 }

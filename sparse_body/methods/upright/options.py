@@ -20,8 +20,9 @@ class UprightOptions(EstimatorOptions):
         70.0, "torso tilt from which the whole tilt is taken out (or the fallback has the pose)", 0.0, 180.0, "degrees"
     )
     # the band chosen by the worst kind over the selection, the floor part and cmu-extra
-    # (docs/methods.md, "The default estimator"): 0.55-0.75 0.97x IK's leg error on the floor
-    # part's worst kind, 0.5-0.7 1.01x, 0.4-0.6 1.14x; the selection and cmu-extra alike for each
+    # (docs/methods.md, "The default estimator"), with the AvatarJLM trained off its feet too:
+    # 0.55-0.75 0.90x IK's leg error on the floor part's worst kind, 0.5-0.7 0.94x, 0.4-0.6
+    # 0.95x (0.97x, 1.01x, 1.14x before); the selection and cmu-extra alike for each
     low_below: float = option(
         0.55, "pelvis height (share of a standing one's) under which a tilted body counts as lying", 0.0, 2.0
     )

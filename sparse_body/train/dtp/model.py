@@ -41,7 +41,7 @@ class DtpConfig(Presets):
     w_rotation: float = 1.0  # paper's loss weights
     w_end_effector: float = 0.5
     w_foot_velocity: float = 0.01
-    augment: str = "mirror,speed,proportions"  # train/augment.py: any of mirror, speed, proportions, splice; all; none
+    augment: str = "mirror,speed,proportions"  # train/augment.py: any of its KINDS; all; none
     variants: int = 2
     steps_per_check: int = 200
     select_on: str = "validation"  # the split whose figures keep the best weights: validation,

@@ -44,7 +44,7 @@ class LobstrConfig(Presets):
     mounting_std: float = 0.0  # each site's translation off by this per axis (metres)
     select_on: str = "validation"  # the split whose figures keep the best weights: validation,
     #                                 or selection (its clips of kinds no train clip has)
-    augment: str = "mirror,speed,proportions"  # train/augment.py: any of mirror, speed, proportions, splice; all; none
+    augment: str = "mirror,speed,proportions"  # train/augment.py: any of its KINDS; all; none
     variants: int = 3  # augmented copies per train clip, besides the clip
     minutes: float = 0.0  # stop after this long (0: only steps counts)
     steps: int = 75_000  # paper: 1,500 epochs

@@ -451,11 +451,12 @@ class HumanoidRetarget:
                     if target.contact and point[2] < self.ankle_height:  # a foot through the floor
                         rows.append(row[2:] * FLOOR)
                         residuals.append(np.array([(self.ankle_height - point[2]) * FLOOR]))
+                if target.orientation > 0 or target.direction > 0:  # how the link turns with each joint
+                    turned = axes.copy()
+                    turned[prismatic] = 0.0
                 if target.orientation > 0:
                     row = np.zeros((3, 6 + n))
                     row[:, 3:6] = np.eye(3)
-                    turned = axes.copy()
-                    turned[prismatic] = 0.0
                     row[:, 6 + chain] = turned.T
                     rows.append(row * target.orientation)
                     residuals.append(_log(goal_turns[k] @ link[:3, :3].T) * target.orientation)
@@ -468,8 +469,6 @@ class HumanoidRetarget:
                     sine = math.sqrt(float(across @ across))
                     angle = math.atan2(sine, float(bone @ person_bone))
                     across_only = (np.eye(3) - np.outer(bone, bone)) * target.direction
-                    turned = axes.copy()
-                    turned[prismatic] = 0.0
                     row = np.zeros((3, 6 + n))
                     row[:, 3:6] = across_only
                     row[:, 6 + chain] = across_only @ turned.T

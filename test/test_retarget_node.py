@@ -92,8 +92,7 @@ def test_hostile_input_is_counted_and_the_robot_stays_finite_and_within_its_limi
     finally:
         listener.destroy()
         stop(node)
-    log = (tmp_path / "sparse_body_retarget.log").read_text()
-    assert alive and "Traceback" not in log, log
+    log = _ran_cleanly(alive, tmp_path)
     states = listener.received["robot/joint_states"]
     assert len(states) >= 0.8 * good, (len(states), good, log)
     q = np.array([m.position for m in states])
@@ -103,6 +102,13 @@ def test_hostile_input_is_counted_and_the_robot_stays_finite_and_within_its_limi
     assert any(k.startswith("dropped: joint_states: JointState or root pose holds non-finite") for k in values)
     assert any(k.startswith("dropped: robot_description:") for k in values)
     assert 0 <= int(values["published with two robot links overlapping"]) <= int(values["published"])
+
+
+def _ran_cleanly(alive: bool, tmp_path) -> str:
+    """The retarget node's log, once it is known the node stayed up and raised nothing."""
+    log = (tmp_path / "sparse_body_retarget.log").read_text()
+    assert alive and "Traceback" not in log, log
+    return log
 
 
 def _subscribed(listener) -> bool:
@@ -341,3 +347,42 @@ def test_the_bench_measures_trackers_to_robot_joints_through_both_nodes(tmp_path
     monkeypatch.setenv("ROS_DOMAIN_ID", domain)  # the bench sets it for itself: put back after
     measured = bench_latency("ik", "six_point", seconds=3.0, robot=(str(write_robot(tmp_path)), ""), domain=domain)
     assert measured is not None and 0.0 < measured[0] <= measured[1] < 1000.0
+
+
+def test_a_node_behind_answers_the_newest_body_and_counts_those_before_it(ros_env, tmp_path):
+    """Three body JointStates wait for their roots, which come in one /tf message (as to a node
+    that fell behind: its queue holds them all): the robot answers the newest only, and the two
+    before it are counted as dropped."""
+    walk = estimate_motion(synthetic_walk(2.0), "ik", load_sensor_config("six_point"))
+    robot = write_robot(tmp_path / "robot")
+    node = start_node(NODE, {"robot": str(robot), "autostart": True}, "sparse_body_retarget", tmp_path, ros_env)
+    listener = Listener(rclpy, {"robot/joint_states": JointState, "/diagnostics": DiagnosticArray})
+    pub_urdf, pub_joints, pub_tf = _body_publishers(listener)
+    names, angles = joint_state_names(), joint_angles(matrix_to_quat(walk.local_rotations))
+    try:
+        pub_urdf.publish(String(data=body_urdf(walk.view.skeleton)))
+        assert listener.spin_until(lambda: node.poll() is not None or _subscribed(listener), STARTUP_LIMIT)
+        listener.spin_for(1.0)  # (the body's URDF read)
+        start = listener.node.get_clock().now().nanoseconds * 1e-9
+        stamps = [start + k / 60 for k in range(3)]
+        for k, stamp in enumerate(stamps):
+            pub_joints.publish(_joint_state(stamp, names, angles[30 + k]))
+        listener.spin_for(1.0)  # all three wait for their roots
+        roots = TFMessage(
+            transforms=[
+                _root(stamp, walk.positions[30 + k, 0], matrix_to_quat(walk.local_rotations[30 + k, 0])).transforms[0]
+                for k, stamp in enumerate(stamps)
+            ]
+        )
+        pub_tf.publish(roots)
+        assert listener.spin_until(lambda: bool(listener.received["robot/joint_states"]), 10.0)
+        listener.spin_for(2.5)  # a diagnostics message after it
+        alive = node.poll() is None
+    finally:
+        listener.destroy()
+        stop(node)
+    _ran_cleanly(alive, tmp_path)
+    answered = [m.header.stamp.sec + m.header.stamp.nanosec * 1e-9 for m in listener.received["robot/joint_states"]]
+    assert len(answered) == 1 and abs(answered[0] - stamps[-1]) < 1e-6, (answered, stamps)
+    values = {kv.key: kv.value for d in listener.received["/diagnostics"] for s in d.status for kv in s.values}
+    assert values.get("dropped: joint_states: a newer body was ready first (the node fell behind)") == "2", values

@@ -40,7 +40,7 @@ BASE_POSITION = 1.0  # weight of the base (pelvis) place, per metre
 BASE_TURN = 0.5  # and of its turn, per radian
 REST = 1e-3  # weight of the pull to the zero pose
 DAMPING = 1e-4  # Levenberg damping of each step
-# steps of a fresh solve (the first frame, after a reset, a jump or a gap): 40 before the legs'
+# steps of a fresh solve (the first frame, after a reset, a hold or a jump): 40 before the legs'
 # directions; with them 40 ran past the node's 0.1 s solve_budget beside four burners after a
 # looped walk's jump, so the robot held its pose 4 m from the body (launch test, 3 of 10
 # runs); 24 gave the same figures on the first 12 validation clips (H1: hands 0.57 / 0.54 cm,
@@ -57,6 +57,12 @@ LET_GO = 0.15  # m (robot's): a planted foot whose human foot has gone this far 
 HYPEREXTENDED = 0.05
 MAX_TURN_STEP = 0.3  # rad: the largest joint or base turn of one step (a longer step is shortened)
 MAX_MOVE_STEP = 0.1  # m: the largest base move of one step
+# a step no joint or base coordinate of which is longer than this (rad or m) is a solve's last:
+# on the first 12 validation clips every figure as with all of a frame's steps (H1 and G1, to
+# 0.01 cm), the step's p50 8.7 -> 5.8 ms on H1 and 10.3 -> 7.4 on G1; 1e-2 let a foot 0.3 cm
+# under the floor (0.13 before), and 2 steps a frame instead of 4 G1's lowest knee correlation
+# 0.35 -> 0.28
+CONVERGED = 3e-3
 JUMP = 0.3  # m (robot's): a body whose pelvis moved this far in a frame jumped (it did not walk there)
 GAP = 0.1  # s between two body poses over which the last solution is no longer a start
 # A target further than RESTART from its goal after a frame's solve: solved afresh as well,
@@ -108,6 +114,34 @@ def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
         ],
         axis=1,
     )
+
+
+def _skews(v: np.ndarray) -> np.ndarray:
+    """(k, 3, 3) skew matrices of (k, 3) vectors (a x b = skew(a) @ b)."""
+    out = np.zeros((len(v), 3, 3))
+    out[:, 0, 1], out[:, 0, 2], out[:, 1, 2] = -v[:, 2], v[:, 1], -v[:, 0]
+    out[:, 1, 0], out[:, 2, 0], out[:, 2, 1] = v[:, 2], -v[:, 1], v[:, 0]
+    return out
+
+
+@dataclass(frozen=True)
+class _TargetWeights:
+    """A mapping's targets' weights as arrays (targets,), for the rows of all targets at once."""
+
+    position: np.ndarray
+    orientation: np.ndarray
+    direction: np.ndarray
+    contact: np.ndarray  # bool: a foot (it has a contact side)
+
+    @classmethod
+    def of(cls, mapping: RobotMapping) -> _TargetWeights:
+        targets = mapping.targets
+        return cls(
+            np.array([t.position for t in targets], float),
+            np.array([t.orientation for t in targets], float),
+            np.array([t.direction for t in targets], float),
+            np.array([bool(t.contact) for t in targets], bool),
+        )
 
 
 def _log(r: np.ndarray) -> np.ndarray:
@@ -201,11 +235,13 @@ class HumanoidRetarget:
                 f"{mapping.source}: its targets hang from {len(self.solved)} moving joints; at most "
                 f"{MAX_SOLVED_JOINTS} are solved (a humanoid has 20-60)"
             )
-        self.chains = [np.searchsorted(self.solved, chain) for chain in chains]  # columns among the solved
         moving = model.moving
-        self._axes = [np.array([moving[i].axis for i in chain]).reshape(-1, 3) for chain in chains]
-        self._prismatic = [np.array([moving[i].kind == "prismatic" for i in chain], bool) for chain in chains]
-        self._frame_of = chains  # each target's chain as indices into the moving joints (their frames)
+        self._solved_axes = np.array([moving[i].axis for i in self.solved], float).reshape(-1, 3)
+        self._solved_prismatic = np.array([moving[i].kind == "prismatic" for i in self.solved], bool)
+        self._in_chain = np.zeros((len(chains), len(self.solved)))  # 1 where a solved joint moves a target
+        for k, chain in enumerate(chains):
+            self._in_chain[k, np.searchsorted(self.solved, chain)] = 1.0
+        self._targets = _TargetWeights.of(mapping)
         if model.chain(self.base):
             raise RobotFileError(f"{mapping.source}: base {mapping.base!r} must be the URDF's root link or fixed to it")
         self.points = np.array([t.point for t in mapping.targets], float)
@@ -230,6 +266,7 @@ class HumanoidRetarget:
         self._base_in_root = to_base
         rest = [to_base @ rest_links[link] for link in self.links]
         self.rest_turns = np.array([r[:3, :3] for r in rest])  # each link's turn at the zero pose, base unturned
+        self._rest_bones = np.einsum("kba,kb->ka", self.rest_turns, self.bones)  # each bone in its link's frame
         rest_points = np.array([r[:3, :3] @ p + r[:3, 3] for r, p in zip(rest, self.points, strict=True)])
         self._scale_to(rest_points)
         self.over_budget = 0  # solves abandoned at their time budget (step's budget)
@@ -280,7 +317,8 @@ class HumanoidRetarget:
         self._locks: dict[int, np.ndarray] = {}
         self._last: RobotPose | None = None
         self._fresh = True  # the next pose is solved from its own place (FIRST_ITERATIONS)
-        self._last_goal = np.zeros(3)  # where the last body pose put the base (a jump of the body is from there)
+        self._steps_left = 0  # steps of a fresh solve still to take (one past the time budget goes on)
+        self._last_goal: np.ndarray | None = None  # where the last body pose put the base (a jump is from there)
         self._next_restart = -math.inf  # no fresh solve after a miss is tried before this stamp
 
     def step(self, pose: BodyPose, budget: float | None = None) -> RobotPose:
@@ -288,18 +326,26 @@ class HumanoidRetarget:
         robot pose, marked invalid (the zero pose before the first); so does a solve that
         takes longer than `budget` seconds (None: no limit), counted in `over_budget`."""
         if not pose.valid or not pose.is_finite():
-            self._fresh = True  # what comes after is solved afresh
+            self._fresh, self._steps_left = True, 0  # what comes after is solved afresh
             return self._held(pose.stamp)
         turns, places = forward_kinematics(quat_to_matrix(pose.local_quats), pose.root_position, self.skeleton.offsets)
         base_goal = self.to_robot(places[0])
         # the first pose, the first after invalid ones or a gap, or a body that jumped (an estimate
         # that starts over, a looped recording): solved from the body's place at once rather than
         # a trust region's steps behind; after a jump, its feet are planted again
-        jumped = self._last is None or float(np.linalg.norm(base_goal - self._last_goal)) > JUMP
-        first = jumped or self._fresh or (self._last is not None and pose.stamp - self._last.stamp > GAP)
-        self._fresh, self._last_goal = False, base_goal
-        if first:
+        jumped = self._last_goal is None or float(np.linalg.norm(base_goal - self._last_goal)) > JUMP
+        gap = self._last is not None and pose.stamp - self._last.stamp > GAP
+        first = jumped or self._fresh
+        self._last_goal = base_goal
+        if first or gap:
             self.base_place, self.base_turn = base_goal, turns[0].copy()
+        if jumped or (self._fresh and not self._steps_left):
+            self._steps_left = FIRST_ITERATIONS
+        # after a gap (a starved node drops what waits) the joints go on from the last solution,
+        # in a frame's steps: a fresh solve there made a starved node slower still (beside four
+        # burners its 24 steps took 270 ms, past the node's budget, so it held and started
+        # afresh again: the launch test's robot published 206 poses for 1940 bodies)
+        self._fresh = False
         if jumped:  # (a foot planted before a short hold or gap is still where it was)
             self._locks.clear()
         wanted = self.to_robot(places[self.joints]) + self.stance @ turns[0].T
@@ -323,17 +369,18 @@ class HumanoidRetarget:
         start = (self.q.copy(), self.base_place.copy(), self.base_turn.copy())
         deadline = math.inf if budget is None else time.perf_counter() + budget
         try:
-            done = self._solve(
-                base_goal, turns[0], goals, goal_turns, planted, FIRST_ITERATIONS if first else None, deadline
-            )
+            left = self._solve(base_goal, turns[0], goals, goal_turns, planted, self._steps_left or None, deadline)
         except np.linalg.LinAlgError:  # a singular step (bounded robot files make it rare): hold, start afresh
             self.reset()
             return self._held(pose.stamp)
-        if not done:
-            self.q, self.base_place, self.base_turn = start  # the last solution, as it was
+        if left:
             self.over_budget += 1
-            self._fresh = first  # a first solve not done is still to do
+            if self._steps_left:  # a fresh solve goes on from where it stopped, on the next frame
+                self._steps_left, self._fresh = left, True
+            else:  # a frame's steps: the last solution, as it was
+                self.q, self.base_place, self.base_turn = start
             return self._held(pose.stamp)
+        self._steps_left = 0
         reached = self._reached()
         miss = self._miss(reached, goals)
         if not first and miss > RESTART and pose.stamp >= self._next_restart:
@@ -342,7 +389,7 @@ class HumanoidRetarget:
             # limit and folded the knee, and stayed so): solved afresh as well, the closer kept
             kept = (self.q.copy(), self.base_place.copy(), self.base_turn.copy())
             self.q, self.base_place, self.base_turn = self.neutral_q.copy(), base_goal, turns[0].copy()
-            redone = self._solve(base_goal, turns[0], goals, goal_turns, planted, RESTART_ITERATIONS, deadline)
+            redone = not self._solve(base_goal, turns[0], goals, goal_turns, planted, RESTART_ITERATIONS, deadline)
             again = self._reached()
             if redone and self._miss(again, goals) < miss:
                 reached = again
@@ -404,19 +451,20 @@ class HumanoidRetarget:
 
     def _solve(
         self, base_goal, base_goal_turn, goals, goal_turns, planted, iterations: int | None, deadline: float
-    ) -> bool:
-        """Gauss-Newton steps towards the goals; False when the clock passed `deadline`
-        (time.perf_counter) before they were done."""
+    ) -> int:
+        """Gauss-Newton steps towards the goals: how many of them were left when the clock
+        passed `deadline` (time.perf_counter), 0 when all were taken."""
         solved = self.solved
         n = len(solved)
         q, lower, upper = self.q[solved], self.lower[solved], self.upper[solved]
-        targets = self.mapping.targets
         smooth = 0.0 if iterations else self.mapping.smoothing  # fresh: no last frame to stay near
         previous = q.copy()
         rest_q, ways = self.neutral_q[solved], self.hinge_ways[solved]
-        for _ in range(iterations or self.mapping.iterations):
+        steps = iterations or self.mapping.iterations
+        for taken in range(steps):
             if time.perf_counter() > deadline:
-                return False
+                self.q[solved] = q
+                return steps - taken
             base = np.eye(4)
             base[:3, :3], base[:3, 3] = self.base_turn, self.base_place
             self.q[solved] = q
@@ -432,48 +480,7 @@ class HumanoidRetarget:
                     [(base_goal - self.base_place) * BASE_POSITION, _log(base_goal_turn @ self.base_turn.T) * BASE_TURN]
                 )
             )
-            for k, target in enumerate(targets):
-                link = links[self.links[k]]
-                point = link[:3, :3] @ self.points[k] + link[:3, 3]
-                chain, prismatic, joint_frames = self.chains[k], self._prismatic[k], frames[self._frame_of[k]]
-                axes = np.einsum("kab,kb->ka", joint_frames[:, :3, :3], self._axes[k])
-                origins = joint_frames[:, :3, 3]
-                if target.position > 0:
-                    weight = target.position * (PLANTED if planted[k] else 1.0)
-                    row = np.zeros((3, 6 + n))
-                    row[:, :3] = np.eye(3)
-                    row[:, 3:6] = -_skew(point - self.base_place)
-                    moved = _cross(axes, point - origins)
-                    moved[prismatic] = axes[prismatic]
-                    row[:, 6 + chain] = moved.T
-                    rows.append(row * weight)
-                    residuals.append((goals[k] - point) * weight)
-                    if target.contact and point[2] < self.ankle_height:  # a foot through the floor
-                        rows.append(row[2:] * FLOOR)
-                        residuals.append(np.array([(self.ankle_height - point[2]) * FLOOR]))
-                if target.orientation > 0 or target.direction > 0:  # how the link turns with each joint
-                    turned = axes.copy()
-                    turned[prismatic] = 0.0
-                if target.orientation > 0:
-                    row = np.zeros((3, 6 + n))
-                    row[:, 3:6] = np.eye(3)
-                    row[:, 6 + chain] = turned.T
-                    rows.append(row * target.orientation)
-                    residuals.append(_log(goal_turns[k] @ link[:3, :3].T) * target.orientation)
-                if target.direction > 0:
-                    # the bone as the link carries it, turned to the person's; its twist left free
-                    # (only a turn across the bone moves it)
-                    bone = link[:3, :3] @ self.rest_turns[k].T @ self.bones[k]
-                    person_bone = goal_turns[k] @ self.rest_turns[k].T @ self.bones[k]
-                    across = _cross(bone[None], person_bone[None])[0]
-                    sine = math.sqrt(float(across @ across))
-                    angle = math.atan2(sine, float(bone @ person_bone))
-                    across_only = (np.eye(3) - np.outer(bone, bone)) * target.direction
-                    row = np.zeros((3, 6 + n))
-                    row[:, 3:6] = across_only
-                    row[:, 6 + chain] = across_only @ turned.T
-                    rows.append(row)
-                    residuals.append((across / sine * angle if sine > 1e-9 else np.zeros(3)) * target.direction)
+            self._target_rows(links, frames, goals, goal_turns, planted, rows, residuals)
             self._keep_apart(links, frames, rows, residuals)
             jac, res = np.vstack(rows), np.concatenate(residuals)
             normal = jac.T @ jac
@@ -497,8 +504,54 @@ class HumanoidRetarget:
             self.base_place = self.base_place + step[:3]
             self.base_turn = _exp(step[3:6]) @ self.base_turn
             q = np.clip(q + step[6:], lower, upper)
+            if np.abs(step).max() < CONVERGED:
+                break
         self.q[solved] = q
-        return True
+        return 0
+
+    def _target_rows(self, links, frames, goals, goal_turns, planted, rows: list, residuals: list) -> None:
+        """The targets' rows, all targets at once: each target point's move (targets, 3, 6 +
+        solved) and its link's turn with the base and each joint of its chain (a loop over the
+        targets, each a dozen small products, was half of a frame's solve)."""
+        n = len(self.solved)
+        t = self._targets
+        turns = links[self.links, :3, :3]
+        points = np.einsum("kab,kb->ka", turns, self.points) + links[self.links, :3, 3]
+        joint_frames = frames[self.solved]
+        axes = np.einsum("jab,jb->ja", joint_frames[:, :3, :3], self._solved_axes)
+        moved = np.cross(axes[None], points[:, None] - joint_frames[None, :, :3, 3])  # (targets, solved, 3)
+        moved[:, self._solved_prismatic] = axes[self._solved_prismatic]
+        moving = np.zeros((len(points), 3, 6 + n))
+        moving[:, :, :3] = np.eye(3)
+        moving[:, :, 3:6] = -_skews(points - self.base_place)
+        moving[:, :, 6:] = (moved * self._in_chain[..., None]).transpose(0, 2, 1)
+        weights = t.position * np.where(planted, PLANTED, 1.0)
+        reach = weights > 0
+        rows.append((moving[reach] * weights[reach, None, None]).reshape(-1, 6 + n))
+        residuals.append(((goals[reach] - points[reach]) * weights[reach, None]).ravel())
+        under = reach & t.contact & (points[:, 2] < self.ankle_height)  # a foot through the floor
+        rows.append(moving[under, 2] * FLOOR)
+        residuals.append((self.ankle_height - points[under, 2]) * FLOOR)
+        if not (t.orientation > 0).any() and not (t.direction > 0).any():
+            return
+        turned = np.where(self._solved_prismatic[:, None], 0.0, axes)
+        turning = np.zeros((len(points), 3, 6 + n))
+        turning[:, :, 3:6] = np.eye(3)
+        turning[:, :, 6:] = (turned[None] * self._in_chain[..., None]).transpose(0, 2, 1)
+        for k in np.flatnonzero(t.orientation > 0):
+            rows.append(turning[k] * t.orientation[k])
+            residuals.append(_log(goal_turns[k] @ turns[k].T) * t.orientation[k])
+        for k in np.flatnonzero(t.direction > 0):
+            # the bone as the link carries it, turned to the person's; its twist left free (only
+            # a turn across the bone moves it)
+            bone = turns[k] @ self._rest_bones[k]
+            person_bone = goal_turns[k] @ self._rest_bones[k]
+            across = _cross(bone[None], person_bone[None])[0]
+            sine = math.sqrt(float(across @ across))
+            angle = math.atan2(sine, float(bone @ person_bone))
+            across_only = (np.eye(3) - np.outer(bone, bone)) * t.direction[k]
+            rows.append(across_only @ turning[k])
+            residuals.append((across / sine * angle if sine > 1e-9 else np.zeros(3)) * t.direction[k])
 
     def _keep_apart(self, links: np.ndarray, frames: np.ndarray, rows: list, residuals: list) -> None:
         """A row for each pair of links closer than CLEARANCE: its clearance along the line

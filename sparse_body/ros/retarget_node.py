@@ -232,13 +232,23 @@ class RetargetNode(LifecycleNode):
         self._match()
 
     def _match(self) -> None:
-        """Retarget each waiting JointState whose root has come (by stamp), older ones first."""
-        for stamp in sorted(self._waiting):
-            root = self._roots.get(stamp)
-            if root is None:  # (the cache keeps seconds: a nanosecond of rounding either way)
-                root = next((r for k, r in self._roots.items() if abs(k - stamp) <= SAME), None)
-            if root is not None:
-                self._publish(self._waiting.pop(stamp), *root)
+        """Retarget the newest waiting JointState whose root has come (by stamp); those before
+        it are dropped, counted: a node that fell behind (a starved machine) answers the body
+        as it is now, not a backlog of where it was (each solve only adds to the delay)."""
+        ready = [(stamp, root) for stamp in sorted(self._waiting) if (root := self._root_at(stamp)) is not None]
+        if not ready:
+            return
+        newest, root = ready[-1]
+        for stamp in [k for k in self._waiting if k < newest]:
+            del self._waiting[stamp]
+            self._drop("joint_states: a newer body was ready first (the node fell behind)")
+        self._publish(self._waiting.pop(newest), *root)
+
+    def _root_at(self, stamp: int) -> tuple[np.ndarray, np.ndarray] | None:
+        root = self._roots.get(stamp)
+        if root is None:  # (the cache keeps seconds: a nanosecond of rounding either way)
+            root = next((r for k, r in self._roots.items() if abs(k - stamp) <= SAME), None)
+        return root
 
     def _publish(self, msg: JointState, translation, rotation) -> None:
         if self.retarget is None or self.pub_joints is None or self.pub_tf is None:

@@ -1,8 +1,8 @@
 """The launch file with `robot:=`: a six-point walk replayed by the launch file's own tracker
 bridge, the estimate retargeted onto a humanoid generated here (sparse_body/robot/example.py) by the
 retarget node, as a user of the launch file relies on it: the robot's JointState names the
-URDF's moving joints, carries one robot pose for each body estimate, never leaves a joint
-limit over the replayed bag, puts the robot's hands within 5 cm of the human hands scaled
+URDF's moving joints, answers the newest body estimate (never going back in time), never
+leaves a joint limit over the replayed bag, puts the robot's hands within 5 cm of the human hands scaled
 to the robot (the body as the estimator published it, the robot from its URDF), and puts every
 robot link on /tf where its JointState says, so a viewer draws the robot from the launch alone."""
 
@@ -47,7 +47,6 @@ from sparse_body.data.synthetic import synthetic_walk  # noqa: E402
 from sparse_body.io.output import pose_from_joint_state  # noqa: E402
 from sparse_body.msg import EstimateStatus  # noqa: E402
 from sparse_body.robot.example import write_robot  # noqa: E402
-from sparse_body.robot.limits import GAP  # noqa: E402
 from sparse_body.robot.retarget import JUMP, load_retarget  # noqa: E402
 
 os.environ["ROS_DOMAIN_ID"] = isolated_domain()
@@ -85,8 +84,8 @@ def _stamp(header) -> int:
 class _Matched:
     """The messages read so far, by stamp (each time only those new since the last), and each
     robot pose judged: steady, or eased in (the commands after a start, a held body or a jump
-    of the body ramp in over the mapping's ramp, robot/limits.py; after a gap in the commands
-    they are held to the velocity limits for a moment, and a starved node has gaps)."""
+    of the body ramp in over the mapping's ramp, robot/limits.py, and any command with a joint
+    held to its velocity limit is catching up)."""
 
     def __init__(self, retarget) -> None:
         self.retarget = retarget
@@ -95,8 +94,9 @@ class _Matched:
         self.steady: list = []  # robot JointStates whose body is matched and not eased in
         self.eased: list = []
         self.judged = 0  # robot poses judged
-        self._restarted = self._gapped = -np.inf
-        self._previous: tuple[int, np.ndarray | None] | None = None
+        self._restarted = -np.inf
+        self._previous: np.ndarray | None = None  # the last judged robot pose's body root
+        self._fastest = retarget.model.velocity_limits() * (1 - 1e-6)
 
     def update(self, wait) -> None:
         new = {}
@@ -124,21 +124,15 @@ class _Matched:
 
     def _judge(self, msg, key: int, complete: bool) -> None:
         root = self.roots[key][0] if key in self.roots else None
-        if self._previous is None or key in self.held:
+        moved = np.linalg.norm(root - self._previous) if root is not None and self._previous is not None else 0.0
+        if self.judged == 0 or key in self.held or moved * self.retarget.scale > JUMP:  # (the walk looped)
             self._restarted = key
-        else:
-            last, last_root = self._previous
-            looped = root is not None and last_root is not None
-            if looped and np.linalg.norm(root - last_root) * self.retarget.scale > JUMP:  # the walk looped
-                self._restarted = key
-            if not 0 < key - last <= GAP * 1e9:
-                self._gapped = key
-        self._previous = (key, root)
+        self._previous = root if root is not None else self._previous
         if not complete or key in self.held:
             return  # (a held body holds the robot: no hands to reach)
-        ramp = (self.retarget.mapping.ramp + 0.2) * 1e9  # the ramp, and the catch-up after it
-        eased = key - self._restarted < ramp or key - self._gapped < 0.2e9
-        (self.eased if eased else self.steady).append(msg)
+        ramping = key - self._restarted < self.retarget.mapping.ramp * 1e9
+        catching_up = np.any(np.abs(msg.velocity) >= self._fastest)
+        (self.eased if ramping or catching_up else self.steady).append(msg)
 
 
 class TestTheRobotOfALaunch(unittest.TestCase):

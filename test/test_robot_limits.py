@@ -46,6 +46,24 @@ def test_commands_ramp_from_the_start_pose_and_keep_every_velocity_and_accelerat
     assert np.abs(command - target).max() <= 200.0 / 60**2 + 1e-9
 
 
+def test_commands_a_starved_node_sends_seldom_keep_up_with_the_body_within_the_limits():
+    """Commands 8 a second (a starved node), each over the 0.1 s GAP: each moves up to GAP's
+    worth of the velocity limit, so a joint turning at 0.6 of its limit is followed (it fell
+    ever further behind when each moved only a sixtieth of a second's worth); a long gap moves
+    no further than GAP's worth either."""
+    from sparse_body.robot.limits import GAP
+
+    vmax = np.array([10.0])
+    limiter = CommandLimiter(np.array([-100.0]), np.array([100.0]), vmax, np.zeros(1), ramp=0.0)
+    limiter(0.0, np.zeros(1), fresh=False)
+    stamps = np.arange(1, 40) * 0.125
+    commands = np.array([limiter(t, np.array([6.0 * t]), fresh=False)[0] for t in stamps])[:, 0]
+    assert abs(commands[-1] - 6.0 * stamps[-1]) < 0.1
+    assert np.all(np.diff(commands) <= vmax[0] * GAP + 1e-9)
+    command, velocity = limiter(stamps[-1] + 2.0, np.array([90.0]), fresh=False)  # after 2 s without one
+    assert command[0] - commands[-1] <= vmax[0] * GAP + 1e-9 and abs(velocity[0]) <= vmax[0] + 1e-9
+
+
 def test_joint_states_carry_the_commands_velocities_as_rosbags_encodes_them():
     from rosbags.typesys import Stores, get_typestore
 

@@ -15,8 +15,8 @@ from __future__ import annotations
 
 import numpy as np
 
-NOMINAL_DT = 1.0 / 60.0  # s: the step assumed where time stood still, went back or passed a gap
-GAP = 0.1  # s: a longer time between commands is not a rate to keep (as the solver's GAP)
+NOMINAL_DT = 1.0 / 60.0  # s: the step assumed where time stood still or went back
+GAP = 0.1  # s: a longer time between commands moves as far as this one would (as the solver's GAP)
 
 
 class CommandLimiter:
@@ -50,8 +50,13 @@ class CommandLimiter:
             self._given = (stamp - NOMINAL_DT, self.start.copy(), np.zeros_like(self.start))
         last_stamp, last_q, last_v = self._given
         dt = stamp - last_stamp
-        if not 0.0 < dt <= GAP:
+        if dt <= 0.0:  # (time stood still or went back)
             dt = NOMINAL_DT
+        # over a gap, no more than GAP's worth of motion: a controller given no command for a
+        # while moves to the next at once. Reset to NOMINAL_DT instead, a starved node's 8
+        # commands a second each moved a sixtieth of a second's worth, and the robot fell ever
+        # further behind the body
+        dt = min(dt, GAP)
         if fresh and self.ramp > 0:
             self._ramp = (stamp - dt, last_q.copy())
         goal = np.asarray(target, float)
